@@ -1,0 +1,58 @@
+"""The `drem` command.
+
+One entry point; every subcommand lives in its own module and is imported only when it runs,
+so `drem status` never pays for torch, pymunk or aws-cdk. A subcommand module exposes
+`HELP: str`, `add_arguments(parser)` and `run(args) -> int`.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS: dict[str, str] = {
+    "up": "drem_local.commands.up",
+    "status": "drem_local.commands.status",
+    "build": "drem_local.commands.build",
+    "sim": "drem_sim.cli",
+    "train": "drem_sim.cli_train",
+}
+
+
+def _load(module_name: str):
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        return exc
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="drem", description="DeepRacer Event Manager")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module_name in SUBCOMMANDS.items():
+        module = _load(module_name)
+        if isinstance(module, ModuleNotFoundError):
+            p = sub.add_parser(name, help=f"(unavailable: {module.name} is not installed)")
+            p.set_defaults(_missing=module)
+            continue
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "_missing", None) is not None:
+        print(f"drem {args.command}: needs the Python module {args._missing.name!r}; "
+              "install the matching extra, e.g. pip install -e '.[sim,train,car]'", file=sys.stderr)
+        return 2
+    if getattr(args, "_run", None) is None:
+        parser.print_help()
+        return 2
+    return int(args._run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

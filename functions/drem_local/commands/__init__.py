@@ -1,0 +1,1 @@
+"""drem subcommands."""

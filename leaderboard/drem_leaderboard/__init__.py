@@ -1,0 +1,1 @@
+"""drem_leaderboard."""
