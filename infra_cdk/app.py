@@ -1,0 +1,43 @@
+"""CDK entry point: `cdk synth` / `cdk deploy` from infra_cdk/ (see cdk.json).
+
+Context:
+  stage    (default "dev")   names resources drem-{stage}-*; one stack per stage.
+  with_app (default "true")  "false" deploys only tables, buckets and the user pool (no Chalice packaging).
+Before packaging the app this vendors drem_infra, drem_leaderboard and drem_web into functions/vendor/, so a
+deployment never ships stale copies. No AWS calls happen at synth.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+os.environ.setdefault("JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION", "20")
+
+import aws_cdk as cdk  # noqa: E402
+
+from drem_infra.stack import DremStack  # noqa: E402
+
+FUNCTIONS_DIR = Path(__file__).resolve().parent.parent / "functions"
+
+
+def main() -> None:
+    app = cdk.App()
+    stage = app.node.try_get_context("stage") or "dev"
+    with_app = str(app.node.try_get_context("with_app") or "true").lower() != "false"
+    functions_dir = None
+    if with_app:
+        # Chalice packaging imports the app; that needs a region even though nothing calls AWS.
+        os.environ.setdefault("AWS_DEFAULT_REGION", os.environ.get("CDK_DEFAULT_REGION", "us-east-1"))
+        from drem_local.commands.build import vendor_packages
+        vendor_packages(FUNCTIONS_DIR)
+        functions_dir = FUNCTIONS_DIR
+        # The Chalice construct writes chalice.out/ into the working directory; keep it inside the (ignored) outdir.
+        os.chdir(app.outdir)
+    DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir,
+              env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),
+                                  region=os.environ.get("CDK_DEFAULT_REGION")))
+    app.synth()
+
+
+if __name__ == "__main__":
+    main()
