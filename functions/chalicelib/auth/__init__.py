@@ -1,0 +1,1 @@
+"""Identity and access: JWT verification, principals, sessions, CSRF and the route access declarations."""

@@ -1,0 +1,72 @@
+"""Browser sessions and bearer tokens → a verified Principal (renewing an expired session from its refresh token)."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
+from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
+from chalicelib.auth.tokens import VerifiedToken, verify_token
+from chalicelib.domain.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
+from chalicelib.settings import Settings, get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.cognito import CognitoIdentityProvider
+
+
+@dataclass
+class ResolvedCaller:
+    principal: Principal
+    # "header" (Bearer/Device: exempt from CSRF), "cookie" or "none"
+    via: str
+    set_cookies: list[str] = field(default_factory=list)
+
+
+def identity_provider(settings: Settings | None = None) -> CognitoIdentityProvider:
+    settings = settings or get_settings()
+    if not settings.user_pool_id or not settings.user_pool_client_id:
+        raise ServiceUnavailable("Sign-in is not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
+    return CognitoIdentityProvider(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
+
+
+def user_from(token: VerifiedToken) -> User:
+    return User(sub=token.sub, username=token.username, groups=token.groups)
+
+
+def resolve_caller(headers: Mapping[str, str], cookies: Mapping[str, str]) -> ResolvedCaller:
+    settings = get_settings()
+    authorization = headers.get("authorization")
+    if authorization is not None:
+        scheme, _, credential = authorization.strip().partition(" ")
+        if scheme.lower() == "bearer" and credential.strip():
+            return ResolvedCaller(user_from(verify_token(credential.strip(), settings)), "header")
+        if scheme.lower() == "device" and credential.strip():
+            return ResolvedCaller(verify_device_credential(credential.strip()), "header")
+        raise NotAuthenticated("Use 'Authorization: Bearer <access token>'.")
+    return _from_session_cookies(cookies, settings)
+
+
+def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> ResolvedCaller:
+    access, refresh = cookies.get(SESSION_COOKIE), cookies.get(REFRESH_COOKIE)
+    if not access and not refresh:
+        return ResolvedCaller(ANONYMOUS, "none")
+    if access:
+        try:
+            return ResolvedCaller(user_from(verify_token(access, settings)), "cookie")
+        except TokenExpired:
+            pass  # renew below
+        except NotAuthenticated:
+            return _signed_out(settings)
+    if not refresh:
+        return _signed_out(settings)
+    try:
+        tokens = identity_provider(settings).refresh(refresh)
+        user = user_from(verify_token(tokens.access_token, settings))
+    except NotAuthenticated:
+        return _signed_out(settings)
+    renewed = session_cookies(tokens.access_token, None, tokens.expires_in, secure=settings.cookie_secure)
+    return ResolvedCaller(user, "cookie", renewed)
+
+
+def _signed_out(settings: Settings) -> ResolvedCaller:
+    # A session that cannot be verified or renewed is dropped, so the browser stops sending it.
+    return ResolvedCaller(ANONYMOUS, "cookie", clear_session_cookies(secure=settings.cookie_secure))

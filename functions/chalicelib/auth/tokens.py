@@ -1,0 +1,108 @@
+"""Verifying Cognito JWTs in the app (API Gateway's Cognito authorizer is not enforced by `chalice local`).
+
+Accepted: RS256 only, signed by a key from the pool's JWKS (looked up by `kid`), with our issuer, the right
+`token_use`, our app client (`client_id` for access tokens, `aud` for id tokens) and an `exp` in the future.
+Every pool in moto signs with the same key, so the issuer and client checks are what tell pools apart.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import requests
+from jose import jwt
+from jose.exceptions import ExpiredSignatureError, JWTError
+
+from chalicelib.domain.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
+from chalicelib.settings import Settings
+
+_ALGORITHM = "RS256"
+_JWKS_TIMEOUT_S = 3.0
+# An unknown kid triggers at most one re-fetch per interval, so forged kids cannot hammer the JWKS endpoint.
+_MIN_REFETCH_INTERVAL_S = 30.0
+
+
+@dataclass(frozen=True)
+class VerifiedToken:
+    claims: dict[str, Any]
+
+    @property
+    def sub(self) -> str:
+        return str(self.claims["sub"])
+
+    @property
+    def username(self) -> str:
+        return str(self.claims.get("username") or self.claims.get("cognito:username") or self.claims["sub"])
+
+    @property
+    def groups(self) -> frozenset[str]:
+        groups = self.claims.get("cognito:groups") or []
+        return frozenset(str(g) for g in groups) if isinstance(groups, list) else frozenset()
+
+
+class JwksCache:
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._keys: dict[str, dict[str, dict[str, Any]]] = {}
+        self._fetched_at: dict[str, float] = {}
+
+    def key_for(self, jwks_url: str, kid: str) -> dict[str, Any] | None:
+        with self._lock:
+            if jwks_url not in self._keys:
+                self._fetch(jwks_url)
+            key = self._keys[jwks_url].get(kid)
+            if key is None and time.monotonic() - self._fetched_at[jwks_url] >= _MIN_REFETCH_INTERVAL_S:
+                self._fetch(jwks_url)  # keys rotate: one re-fetch before giving up on this kid
+                key = self._keys[jwks_url].get(kid)
+            return key
+
+    def clear(self) -> None:
+        with self._lock:
+            self._keys.clear()
+            self._fetched_at.clear()
+
+    def _fetch(self, jwks_url: str) -> None:
+        try:
+            reply = requests.get(jwks_url, timeout=_JWKS_TIMEOUT_S)
+            reply.raise_for_status()
+            keys = reply.json()["keys"]
+        except (requests.RequestException, ValueError, KeyError, TypeError) as exc:
+            raise ServiceUnavailable("The sign-in service's signing keys cannot be fetched.") from exc
+        self._keys[jwks_url] = {k["kid"]: k for k in keys if isinstance(k, dict) and "kid" in k}
+        self._fetched_at[jwks_url] = time.monotonic()
+
+
+JWKS = JwksCache()
+
+
+def verify_token(token: str, settings: Settings, token_use: Literal["access", "id"] = "access",
+                 jwks: JwksCache = JWKS) -> VerifiedToken:
+    if not settings.user_pool_id or not settings.user_pool_client_id:
+        raise ServiceUnavailable("Sign-in is not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
+    try:
+        header = jwt.get_unverified_header(token)
+    except JWTError as exc:
+        raise NotAuthenticated("The token is not a JWT.") from exc
+    if header.get("alg") != _ALGORITHM:
+        raise NotAuthenticated("The token is not signed with RS256.")
+    key = jwks.key_for(settings.jwks_url, str(header.get("kid", "")))
+    if key is None:
+        raise NotAuthenticated("The token is signed by an unknown key.")
+    try:
+        claims = jwt.decode(
+            token, key, algorithms=[_ALGORITHM], issuer=settings.issuer,
+            audience=settings.user_pool_client_id if token_use == "id" else None,
+            options={"verify_aud": token_use == "id", "verify_at_hash": False, "require_exp": True,
+                     "require_iss": True, "require_sub": True},
+        )
+    except ExpiredSignatureError as exc:
+        raise TokenExpired("The token has expired.") from exc
+    except JWTError as exc:
+        raise NotAuthenticated(f"The token is not valid ({exc}).") from exc
+    if claims.get("token_use") != token_use:
+        raise NotAuthenticated(f"An {token_use} token is required.")
+    if token_use == "access" and claims.get("client_id") != settings.user_pool_client_id:
+        raise NotAuthenticated("The token was issued to another app client.")
+    return VerifiedToken(claims)

@@ -1,0 +1,64 @@
+"""Domain errors: what went wrong, in the user's terms. `chalicelib.http_errors` is the one place that maps them to
+HTTP; storage adapters translate AWS error codes into them. Never branch on an error's message text."""
+from __future__ import annotations
+
+
+class DremError(Exception):
+    """Base of every error a user may see. `field` names the form/JSON field at fault, when there is one."""
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.field = field
+
+
+class InvalidInput(DremError):
+    """The request is malformed or a value breaks a rule (names the field)."""
+
+
+class NotAuthenticated(DremError):
+    """No credentials, or credentials that could not be verified."""
+
+
+class TokenExpired(NotAuthenticated):
+    """A well-formed, correctly signed token past its `exp` (a refresh may help)."""
+
+
+class InvalidCredentials(NotAuthenticated):
+    """Sign-in with a wrong username or password (deliberately not saying which)."""
+
+
+class AccountNotReady(DremError):
+    """The account exists but cannot sign in yet (unconfirmed, or a password reset is pending)."""
+
+
+class Forbidden(DremError):
+    """Signed in, but not allowed to do this."""
+
+
+class CsrfRejected(Forbidden):
+    """A state-changing browser request without a matching CSRF token."""
+
+
+class NotFound(DremError):
+    pass
+
+
+class Conflict(DremError):
+    pass
+
+
+class PayloadTooLarge(DremError):
+    pass
+
+
+class RateLimited(DremError):
+    pass
+
+
+class ServiceUnavailable(DremError):
+    """A backing service (storage, identity provider) cannot be reached or is not configured."""
+
+
+class UpstreamError(DremError):
+    """A backing service answered with an error drem does not know how to explain."""

@@ -1,0 +1,120 @@
+"""Sign-in, the temporary-password challenge and sign-out (browser forms; errors appear next to their field)."""
+from __future__ import annotations
+
+import base64
+import json
+
+from chalice import Blueprint, Response
+from pydantic import ValidationError
+
+from chalicelib.auth import cookies
+from chalicelib.auth.access import PUBLIC, form_fields, route
+from chalicelib.auth.principals import Principal
+from chalicelib.auth.sessions import identity_provider
+from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
+from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, password_policy_text
+from chalicelib.http_errors import status_for
+from chalicelib.routes.responses import redirect, safe_next
+from chalicelib.settings import get_settings
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+_CHALLENGE_PATH = "/login/new-password"
+_SHOWN_ON_FORM = (ValidationError, InvalidInput, NotAuthenticated, AccountNotReady, RateLimited)
+
+
+@route(bp, "/login", allow=PUBLIC)
+def login_page(principal: Principal) -> Response:
+    query = bp.current_request.query_params or {}
+    return _login_form(next_path=safe_next(query.get("next")))
+
+
+@route(bp, "/login", methods=["POST"], allow=PUBLIC)
+def login(principal: Principal) -> Response:
+    form = form_fields(bp.current_request)
+    next_path, secure = safe_next(form.get("next")), get_settings().cookie_secure
+    try:
+        credentials = SignInForm.model_validate(form)
+        result = identity_provider().sign_in(credentials.username, credentials.password)
+    except _SHOWN_ON_FORM as exc:
+        return _login_form(exc, username=form.get("username", ""), next_path=next_path)
+    if isinstance(result, NewPasswordChallenge):
+        return redirect(_CHALLENGE_PATH, cookies=[_challenge_cookie(result, secure)])
+    return redirect(next_path, cookies=cookies.session_cookies(
+        result.access_token, result.refresh_token, result.expires_in, secure=secure))
+
+
+@route(bp, _CHALLENGE_PATH, allow=PUBLIC)
+def new_password_page(principal: Principal) -> Response:
+    challenge = _challenge_from(bp.current_request.headers)
+    if challenge is None:
+        return redirect("/login")
+    return _new_password_form(challenge)
+
+
+@route(bp, _CHALLENGE_PATH, methods=["POST"], allow=PUBLIC)
+def new_password(principal: Principal) -> Response:
+    request = bp.current_request
+    challenge, secure = _challenge_from(request.headers), get_settings().cookie_secure
+    if challenge is None:
+        return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
+    try:
+        tokens = identity_provider().complete_new_password(challenge, _matching_new_password(form_fields(request)))
+    except TokenExpired:
+        return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
+    except _SHOWN_ON_FORM as exc:
+        return _new_password_form(challenge, exc)
+    done = cookies.clear_cookie(cookies.CHALLENGE_COOKIE, secure=secure, path=_CHALLENGE_PATH, same_site="Strict")
+    return redirect("/", cookies=[*cookies.session_cookies(
+        tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure), done])
+
+
+@route(bp, "/logout", methods=["POST"], allow=PUBLIC)
+def logout(principal: Principal) -> Response:
+    access_token = cookies.request_cookies(bp.current_request.headers).get(cookies.SESSION_COOKIE)
+    if principal.is_user and access_token:
+        identity_provider().sign_out_everywhere(access_token)
+    return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
+
+
+def _login_form(exc: Exception | None = None, *, username: str = "", next_path: str = "/",
+                notice: str = "") -> Response:
+    return render.page("login", status=status_for(exc) if exc else 200, errors=_field_errors(exc, "password"),
+                       username=username, next_path=next_path, notice=notice)
+
+
+def _new_password_form(challenge: NewPasswordChallenge, exc: Exception | None = None) -> Response:
+    return render.page("new_password", status=status_for(exc) if exc else 200, username=challenge.username,
+                       policy=password_policy_text(), errors=_field_errors(exc, "new_password"))
+
+
+def _matching_new_password(form: dict[str, str]) -> str:
+    passwords = NewPasswordForm.model_validate(form)
+    if passwords.new_password != passwords.confirm_password:
+        raise InvalidInput("The two passwords differ.", field="confirm_password")
+    return passwords.new_password
+
+
+def _field_errors(exc: Exception | None, default_field: str) -> dict[str, str]:
+    """{field: message} for the form; pydantic's 'missing/too short' becomes a plain 'Enter your …'."""
+    if exc is None:
+        return {}
+    if isinstance(exc, ValidationError):
+        fields = [str(err["loc"][0]) if err.get("loc") else default_field for err in exc.errors(include_url=False)]
+        return {name: f"Enter your {name.replace('_', ' ')}." for name in fields}
+    return {getattr(exc, "field", None) or default_field: getattr(exc, "message", str(exc))}
+
+
+def _challenge_cookie(challenge: NewPasswordChallenge, secure: bool) -> str:
+    value = base64.urlsafe_b64encode(challenge.model_dump_json().encode()).decode()
+    return cookies.set_cookie(cookies.CHALLENGE_COOKIE, value, secure=secure, path=_CHALLENGE_PATH,
+                              same_site="Strict", max_age=cookies.CHALLENGE_MAX_AGE_S)
+
+
+def _challenge_from(headers) -> NewPasswordChallenge | None:
+    raw = cookies.request_cookies(headers).get(cookies.CHALLENGE_COOKIE)
+    try:
+        return NewPasswordChallenge.model_validate(json.loads(base64.urlsafe_b64decode(raw or "")))
+    except (ValueError, ValidationError):
+        return None

@@ -1,0 +1,72 @@
+"""The app's configuration: one pydantic model over the environment contract, read lazily.
+
+Chalice sets `.chalice/config.json` variables only while a handler runs, so nothing here reads `os.environ` at import.
+`get_settings()` caches the first read; tests call `get_settings.cache_clear()` after changing the environment.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict
+
+from drem_infra import resources
+
+
+class Settings(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    region: str
+    stage: str = "local"
+    user_pool_id: str | None = None
+    user_pool_client_id: str | None = None
+    # Set only locally (the durable moto server); None means real AWS endpoints.
+    endpoint_url: str | None = None
+    public_url: str = "http://127.0.0.1:8000"
+    state_dir: Path = Path(".drem")
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str]) -> Settings:
+        values = {
+            "region": env.get("AWS_DEFAULT_REGION") or env.get("AWS_REGION") or "us-east-1",
+            "stage": env.get("DREM_STAGE") or "local",
+            "user_pool_id": env.get("DREM_USER_POOL_ID") or None,
+            "user_pool_client_id": env.get("DREM_USER_POOL_CLIENT_ID") or None,
+            "endpoint_url": env.get("AWS_ENDPOINT_URL") or None,
+            "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
+            "state_dir": env.get("DREM_STATE_DIR") or ".drem",
+        }
+        return cls.model_validate(values)
+
+    @property
+    def cookie_secure(self) -> bool:
+        # Browsers drop Secure cookies on plain http, which would make local sign-in impossible.
+        return self.public_url.lower().startswith("https://")
+
+    @property
+    def issuer(self) -> str:
+        # Cognito (and moto) always issue for the AWS host, even when the API is served from a local endpoint.
+        return f"https://cognito-idp.{self.region}.amazonaws.com/{self.user_pool_id}"
+
+    @property
+    def jwks_url(self) -> str:
+        if self.endpoint_url:
+            return f"{self.endpoint_url.rstrip('/')}/{self.user_pool_id}/.well-known/jwks.json"
+        return f"{self.issuer}/.well-known/jwks.json"
+
+    @property
+    def storage_label(self) -> str:
+        return self.endpoint_url or "aws"
+
+    def table(self, logical: str) -> str:
+        return resources.table_name(self.stage, logical)
+
+    def bucket(self, logical: str) -> str:
+        return resources.bucket_name(self.stage, logical)
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    return Settings.from_env(os.environ)

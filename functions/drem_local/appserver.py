@@ -1,0 +1,88 @@
+"""Serve the Chalice app over HTTP for local use and integration tests (instead of `chalice local`).
+
+Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
+for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
+No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
+
+    python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local]
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+PROJECT_DIR = Path(__file__).resolve().parent.parent
+REQUEST_QUEUE_SIZE = 1024
+
+
+def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local") -> Any:
+    """A `chalice.local.LocalDevServer` bound to host:port (port 0 picks a free one: see `.server.server_address`)."""
+    from chalice import local
+    from chalice.cli.factory import CLIFactory
+
+    _put_project_on_path()
+    local.ChaliceRequestHandler.disable_nagle_algorithm = True
+    local.ThreadedHTTPServer.request_queue_size = REQUEST_QUEUE_SIZE
+    local.ThreadedHTTPServer.daemon_threads = True
+    # The request middleware already writes one JSON line per request; drop http.server's plain-text access log.
+    local.ChaliceRequestHandler.log_message = _quiet  # type: ignore[method-assign]
+    factory = CLIFactory(str(PROJECT_DIR))
+    config = factory.create_config_obj(chalice_stage_name=stage)
+    # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
+    logging.getLogger("botocore").setLevel(logging.WARNING)
+    return factory.create_local_server(config.chalice_app, config, host, port)
+
+
+def _quiet(*_args: Any) -> None:
+    return None
+
+
+def _put_project_on_path() -> None:
+    # chalicelib is not installed: like Chalice itself, import it from the project dir.
+    if str(PROJECT_DIR) not in sys.path:
+        sys.path.insert(0, str(PROJECT_DIR))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m drem_local.appserver", description=__doc__.split("\n")[0])
+    parser.add_argument("--host", default="127.0.0.1")
+    parser.add_argument("--port", type=int, default=int(os.environ.get("DREM_APP_PORT", "8000")))
+    parser.add_argument("--stage", default=os.environ.get("DREM_STAGE", "local"))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    _put_project_on_path()
+    from chalicelib import logs
+
+    logs.configure(sys.stderr)
+    server = make_server(args.host, args.port, args.stage)
+    stopping = threading.Event()
+
+    def stop(signum: int, _frame: Any) -> None:
+        if not stopping.is_set():
+            stopping.set()
+            # shutdown() blocks until serve_forever returns, so it must run off the serving thread.
+            threading.Thread(target=server.shutdown, daemon=True).start()
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    host, port = server.server.server_address[:2]
+    logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
+    try:
+        server.server.serve_forever(poll_interval=0.2)
+    finally:
+        server.server.server_close()
+        logs.log(logging.INFO, "app server stopped")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

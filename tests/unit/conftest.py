@@ -1,0 +1,196 @@
+"""Unit-test fixtures: ONE in-process moto (`mock_aws`) for the whole run, wiped before every test, plus the drem
+stack bootstrapped from `drem_infra.resources`, a Chalice test client, and helpers for users with real moto tokens.
+
+Wiping uses `BackendDict.reset()`, not `mock_aws().reset()`: the latter also drops moto's interception of `requests`
+calls, after which the app's JWKS fetch would try the real internet.
+"""
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+from chalice.test import Client
+from moto import mock_aws
+from moto.core.base_backend import BackendDict
+
+from drem_local.bootstrap import StackOutputs, clients_for, ensure_stack
+
+STAGE = "test"
+REGION = "us-east-1"
+# Meets the pool's password policy (drem_infra.resources.PasswordPolicy).
+PASSWORD = "Correct-Horse-9"
+
+
+def _reset_app_caches() -> None:
+    from chalicelib.auth.tokens import JWKS
+    from chalicelib.settings import get_settings
+    from chalicelib.storage.clients import reset_clients
+
+    get_settings.cache_clear()
+    reset_clients()
+    JWKS.clear()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def moto_session() -> Iterator[None]:
+    mock = mock_aws()
+    mock.start()
+    yield
+    mock.stop()
+
+
+@pytest.fixture(autouse=True)
+def fresh_moto(moto_session: None) -> Iterator[None]:
+    BackendDict.reset()
+    _reset_app_caches()
+    yield
+    _reset_app_caches()
+
+
+@pytest.fixture
+def aws_clients() -> Any:
+    return clients_for(None, REGION)
+
+
+@pytest.fixture
+def stack(aws_clients: Any, monkeypatch: pytest.MonkeyPatch) -> StackOutputs:
+    """Tables, buckets, user pool, app client and groups, with the app's env pointing at them."""
+    outputs = ensure_stack(aws_clients, STAGE)
+    for name, value in outputs.to_env().items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.delenv("DREM_PUBLIC_URL", raising=False)
+    _reset_app_caches()
+    return outputs
+
+
+@pytest.fixture(scope="session")
+def chalice_app() -> Any:
+    from app import app
+
+    return app
+
+
+@pytest.fixture
+def client(stack: StackOutputs, chalice_app: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Client]:
+    # An empty project dir: the stage env vars in .chalice/config.json would override the test stack's names.
+    with Client(chalice_app, project_dir=str(tmp_path_factory.mktemp("no-chalice-config"))) as test_client:
+        yield test_client
+
+
+@dataclass
+class Users:
+    """Creates Cognito users in groups and signs them in, returning moto's real tokens."""
+    clients: Any
+    outputs: StackOutputs
+
+    def create(self, username: str, groups: tuple[str, ...] = (), password: str = PASSWORD,
+               temporary: bool = False) -> str:
+        cognito, pool = self.clients.cognito, self.outputs.user_pool_id
+        cognito.admin_create_user(UserPoolId=pool, Username=username, TemporaryPassword=password,
+                                  MessageAction="SUPPRESS",
+                                  UserAttributes=[{"Name": "email", "Value": f"{username}@example.test"}])
+        if not temporary:
+            cognito.admin_set_user_password(UserPoolId=pool, Username=username, Password=password, Permanent=True)
+        for group in groups:
+            cognito.admin_add_user_to_group(UserPoolId=pool, Username=username, GroupName=group)
+        return username
+
+    def sign_in(self, username: str, password: str = PASSWORD) -> dict[str, Any]:
+        reply = self.clients.cognito.initiate_auth(
+            AuthFlow="USER_PASSWORD_AUTH", ClientId=self.outputs.user_pool_client_id,
+            AuthParameters={"USERNAME": username, "PASSWORD": password})
+        return reply["AuthenticationResult"]
+
+    def access_token(self, username: str, groups: tuple[str, ...] = ()) -> str:
+        self.create(username, groups)
+        return self.sign_in(username)["AccessToken"]
+
+
+@pytest.fixture
+def users(aws_clients: Any, stack: StackOutputs) -> Users:
+    return Users(aws_clients, stack)
+
+
+def bearer(token: str) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}", "Accept": "application/json"}
+
+
+def set_cookie_headers(headers: Mapping[str, Any]) -> list[str]:
+    for name, value in headers.items():
+        if name.lower() == "set-cookie":
+            return [value] if isinstance(value, str) else list(value)
+    return []
+
+
+def cookie_attributes(headers: Mapping[str, Any], name: str) -> dict[str, str] | None:
+    """The Set-Cookie for `name` as {"value": ..., "path": ..., "samesite": ..., "httponly": "", ...}."""
+    for header in set_cookie_headers(headers):
+        first, *attributes = [part.strip() for part in header.split(";")]
+        cookie_name, _, value = first.partition("=")
+        if cookie_name == name:
+            parsed = {"value": value}
+            for attribute in attributes:
+                key, _, attribute_value = attribute.partition("=")
+                parsed[key.lower()] = attribute_value
+            return parsed
+    return None
+
+
+@dataclass
+class Browser:
+    """A cookie jar over the Chalice test client, behaving like a browser that honours Max-Age=0 deletions."""
+    client: Client
+    cookies: dict[str, str] = field(default_factory=dict)
+
+    def request(self, method: str, path: str, *, form: Mapping[str, str] | None = None,
+                headers: Mapping[str, str] | None = None) -> Any:
+        all_headers = {"Accept": "text/html", **(headers or {})}
+        if self.cookies:
+            all_headers["Cookie"] = "; ".join(f"{k}={v}" for k, v in self.cookies.items())
+        body = b""
+        if form is not None:
+            from urllib.parse import urlencode
+
+            body = urlencode(form).encode()
+            all_headers["Content-Type"] = "application/x-www-form-urlencoded"
+        response = getattr(self.client.http, method.lower())(path, headers=all_headers, body=body)
+        for header in set_cookie_headers(response.headers):
+            first, *attributes = [part.strip() for part in header.split(";")]
+            name, _, value = first.partition("=")
+            if "Max-Age=0" in attributes or value == "":
+                self.cookies.pop(name, None)
+            else:
+                self.cookies[name] = value
+        return response
+
+    def get(self, path: str, **kwargs: Any) -> Any:
+        return self.request("GET", path, **kwargs)
+
+    def post(self, path: str, form: Mapping[str, str] | None = None, **kwargs: Any) -> Any:
+        return self.request("POST", path, form=form, **kwargs)
+
+    @property
+    def csrf_token(self) -> str:
+        return self.cookies["drem_csrf"]
+
+
+@pytest.fixture
+def browser(client: Client) -> Browser:
+    return Browser(client)
+
+
+def jwt_parts(token: str) -> tuple[dict[str, Any], dict[str, Any], str]:
+    header, payload, signature = token.split(".")
+    return _b64json(header), _b64json(payload), signature
+
+
+def _b64json(segment: str) -> dict[str, Any]:
+    return json.loads(base64.urlsafe_b64decode(segment + "=" * (-len(segment) % 4)))
+
+
+def b64url(data: bytes) -> str:
+    return base64.urlsafe_b64encode(data).rstrip(b"=").decode()
