@@ -1,0 +1,72 @@
+"""JSON API for racers' model archives, and the S3 upload-complete event handler (registered in app.py).
+
+Per-object rule (chalicelib.domain.models): a racer sees, completes and deletes only their own models (another
+racer's model answers 403); admins and operators see and act on every model.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from chalice import BadRequestError, Blueprint, Response
+
+from chalicelib import logs
+from chalicelib.auth.access import SIGNED_IN, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.models import ListQuery, UploadRequest
+from chalicelib.settings import get_settings
+from chalicelib.storage.models import build_model_service
+
+bp = Blueprint(__name__)
+
+
+@route(bp, "/api/models", methods=["POST"], allow=SIGNED_IN)
+def request_upload(principal: User) -> Response:
+    ticket = build_model_service().request_upload(principal, UploadRequest.model_validate(_json_body()))
+    return Response(body=ticket.public(), status_code=201)
+
+
+@route(bp, "/api/models/{model_id}/complete", methods=["POST"], allow=SIGNED_IN)
+def complete_upload(principal: User, model_id: str) -> dict:
+    return {"model": build_model_service().complete(principal, model_id).public()}
+
+
+@route(bp, "/api/models", allow=SIGNED_IN)
+def list_models(principal: User) -> dict:
+    page = build_model_service().list_models(principal, ListQuery.model_validate(_query()))
+    return {"models": [model.public() for model in page.models], "next": page.next_token}
+
+
+@route(bp, "/api/models/{model_id}", allow=SIGNED_IN)
+def get_model(principal: User, model_id: str) -> dict:
+    return {"model": build_model_service().get(principal, model_id).public()}
+
+
+@route(bp, "/api/models/{model_id}", methods=["DELETE"], allow=SIGNED_IN)
+def delete_model(principal: User, model_id: str) -> dict:
+    return {"model": build_model_service().delete(principal, model_id).public()}
+
+
+def handle_upload_complete_event(event: dict[str, Any]) -> dict[str, Any]:
+    """EventBridge "Object Created" (models bucket, uploads/ prefix) → validate the upload, exactly like /complete."""
+    detail = event.get("detail") or {}
+    bucket = (detail.get("bucket") or {}).get("name")
+    key = (detail.get("object") or {}).get("key")
+    if bucket != get_settings().bucket("models") or not isinstance(key, str):
+        logs.log(logging.WARNING, "upload event for another bucket ignored", bucket=bucket, key=key)
+        return {"ignored": True}
+    record = build_model_service().complete_upload_key(key)
+    return {"model_id": record.model_id, "status": record.status.value} if record else {"ignored": True}
+
+
+def _json_body() -> Any:
+    try:
+        body = bp.current_request.json_body
+    except BadRequestError:
+        raise InvalidInput("The request body is not valid JSON.", field="body") from None
+    return body if body is not None else {}
+
+
+def _query() -> dict[str, str]:
+    return dict(bp.current_request.query_params or {})

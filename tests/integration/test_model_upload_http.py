@@ -1,0 +1,68 @@
+"""Model upload over real HTTP: the app serves the API, the durable moto server takes the presigned POST."""
+from __future__ import annotations
+
+import argparse
+import hashlib
+from pathlib import Path
+
+import pytest
+import requests
+
+from drem_local.api_client import ApiClient, ApiError
+from tests.unit.models_helpers import archive_without_metadata, onnx_archive, onnx_policy
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture(scope="module")
+def admin_api(live_stack) -> ApiClient:
+    api = ApiClient(live_stack.url)
+    api.token = api.sign_in(live_stack.admin_username, live_stack.admin_password)
+    return api
+
+
+def upload(api: ApiClient, filename: str, data: bytes) -> dict:
+    ticket = api.post("/api/models", {"filename": filename})
+    assert ticket["upload"]["url"].startswith("http://127.0.0.1:"), "locally the browser posts to the moto server"
+    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
+                           files={"file": (filename, data)}, timeout=30)
+    assert posted.status_code in (200, 204), posted.text
+    return api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
+
+
+def test_presigned_post_then_complete_makes_the_model_available(admin_api: ApiClient) -> None:
+    archive = onnx_archive(0.125)
+    model = upload(admin_api, "http_model.tar.gz", archive)
+
+    assert model["status"] == "AVAILABLE"
+    assert model["model_md5"] == hashlib.md5(onnx_policy(0.125)).hexdigest()
+    assert model["archive_md5"] == hashlib.md5(archive).hexdigest()
+    listed = admin_api.get("/api/models")["models"]
+    assert model["model_id"] in [m["model_id"] for m in listed]
+    again = admin_api.post(f"/api/models/{model['model_id']}/complete")["model"]
+    assert again == model
+
+
+def test_an_invalid_archive_is_not_valid_with_a_reason(admin_api: ApiClient) -> None:
+    model = upload(admin_api, "no_metadata.tar.gz", archive_without_metadata())
+    assert model["status"] == "NOT_VALID"
+    assert "model_metadata.json" in model["reason"]
+
+
+def test_cli_upload_prints_the_verdict(live_stack, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from drem_local.commands import models as command
+
+    archive = tmp_path / "cli_model.tar.gz"
+    archive.write_bytes(onnx_archive(0.375))
+    parser = argparse.ArgumentParser()
+    command.add_arguments(parser)
+    args = parser.parse_args(["--api", live_stack.url, "--username", live_stack.admin_username,
+                              "--password", live_stack.admin_password, "upload", str(archive)])
+    assert command.run(args) == 0
+    printed = capsys.readouterr().out
+    assert "cli_model" in printed and "AVAILABLE" in printed
+
+
+def test_wrong_password_is_refused(live_stack) -> None:
+    with pytest.raises(ApiError):
+        ApiClient(live_stack.url).sign_in(live_stack.admin_username, "Not-the-password-1")

@@ -1,0 +1,195 @@
+"""Giving models to cars: staff assign, the car downloads with a presigned GET and reports, staff watch the status."""
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import requests
+from chalice.test import Client
+
+from chalicelib.auth import principals
+from tests.unit.models_helpers import (ModelsApi, activate_device, bearer, device_headers, ensure_model_routes,
+                                       make_fleet, onnx_archive, traversal_archive)
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture
+def app_client(chalice_app: Any, request: pytest.FixtureRequest) -> Iterator[Client]:
+    from chalicelib.routes.devices import verify_device_credential
+
+    ensure_model_routes(chalice_app)
+    principals.set_device_credential_verifier(verify_device_credential)
+    yield request.getfixturevalue("client")
+    principals.set_device_credential_verifier(principals.reject_all_device_credentials)
+
+
+@pytest.fixture
+def racer(app_client: Client, users: Any) -> ModelsApi:
+    return ModelsApi(app_client, bearer(users.access_token("alice", ("racer",))))
+
+
+@pytest.fixture
+def operator(app_client: Client, users: Any) -> ModelsApi:
+    return ModelsApi(app_client, bearer(users.access_token("olga", ("operator",))))
+
+
+@pytest.fixture
+def commentator(app_client: Client, users: Any) -> ModelsApi:
+    return ModelsApi(app_client, bearer(users.access_token("chris", ("commentator",))))
+
+
+@pytest.fixture
+def fleet(app_client: Client) -> str:
+    return make_fleet("fleet-1")
+
+
+@pytest.fixture
+def car_x(fleet: str, app_client: Client) -> tuple[str, ModelsApi]:
+    issued = activate_device("car-x", fleet)
+    return issued.device_id, ModelsApi(app_client, device_headers(issued.credential))
+
+
+@pytest.fixture
+def car_y(fleet: str, app_client: Client) -> tuple[str, ModelsApi]:
+    issued = activate_device("car-y", fleet)
+    return issued.device_id, ModelsApi(app_client, device_headers(issued.credential))
+
+
+def assign(caller: ModelsApi, device_id: str, model_ids: list[str]) -> Any:
+    return caller.call("PUT", f"/api/cars/{device_id}/models", {"model_ids": model_ids})
+
+
+def report(car: ModelsApi, model_id: str, status: str, **extra: Any) -> Any:
+    return car.call("POST", "/api/devices/self/assignment/status", {"model_id": model_id, "status": status, **extra})
+
+
+def test_car_downloads_its_assigned_model_with_a_short_lived_url(racer: ModelsApi, operator: ModelsApi,
+                                                                 car_x: tuple[str, ModelsApi]) -> None:
+    archive = onnx_archive(0.25)
+    model = racer.upload_and_complete("fast.tar.gz", archive)
+    device_id, car = car_x
+
+    assigned = assign(operator, device_id, [model["model_id"]])
+    assert assigned.status_code == 200, assigned.json_body
+
+    view = car.call("GET", "/api/devices/self/assignment").json_body
+    assert view["device_id"] == device_id
+    [entry] = view["models"]
+    assert (entry["model_id"], entry["name"], entry["folder"]) == (model["model_id"], "fast", "alice-fast")
+    assert entry["md5"] == hashlib.md5(archive).hexdigest() and entry["model_md5"] == model["model_md5"]
+    assert entry["expires_in"] <= 300
+    downloaded = requests.get(entry["url"], timeout=10)
+    assert downloaded.status_code == 200 and downloaded.content == archive
+    assert "X-Amz-Expires=300" in entry["url"]
+
+
+def test_only_available_models_can_be_assigned(racer: ModelsApi, operator: ModelsApi,
+                                               car_x: tuple[str, ModelsApi]) -> None:
+    device_id, car = car_x
+    quarantined = racer.upload_and_complete("evil.tar.gz", traversal_archive())
+    pending = racer.upload("pending.tar.gz", onnx_archive())
+
+    for model in (quarantined, pending):
+        refused = assign(operator, device_id, [model["model_id"]])
+        assert refused.status_code == 409 and refused.json_body["error"]["field"] == "model_ids"
+    assert assign(operator, device_id, ["nope"]).status_code == 404
+    assert car.call("GET", "/api/devices/self/assignment").json_body["models"] == []
+
+
+def test_assignment_needs_a_real_car_and_staff(racer: ModelsApi, operator: ModelsApi, fleet: str,
+                                               car_x: tuple[str, ModelsApi]) -> None:
+    model = racer.upload_and_complete("m.tar.gz", onnx_archive())
+    timer = activate_device("timer-1", fleet, kind="timer")
+    device_id, car = car_x
+
+    assert assign(operator, "car-unknown", [model["model_id"]]).status_code == 404
+    assert assign(operator, timer.device_id, [model["model_id"]]).status_code == 404
+    assert assign(racer, device_id, [model["model_id"]]).status_code == 403
+    assert assign(car, device_id, [model["model_id"]]).status_code == 403
+    assert assign(operator, device_id, [model["model_id"], model["model_id"]]).status_code == 400
+
+
+def test_car_reports_are_visible_to_staff_per_car_and_per_event(
+        racer: ModelsApi, operator: ModelsApi, commentator: ModelsApi, fleet: str,
+        car_x: tuple[str, ModelsApi], car_y: tuple[str, ModelsApi]) -> None:
+    archive = onnx_archive(0.75)
+    model = racer.upload_and_complete("steady.tar.gz", archive)
+    (x_id, car), (y_id, _) = car_x, car_y
+    assign(operator, x_id, [model["model_id"]])
+
+    assert report(car, model["model_id"], "downloading").status_code == 200
+    verified = report(car, model["model_id"], "verified", md5=hashlib.md5(archive).hexdigest())
+    assert verified.json_body["progress"]["status"] == "verified"
+    assert report(car, model["model_id"], "loaded").status_code == 200
+
+    staff_view = commentator.call("GET", f"/api/cars/{x_id}/models").json_body["assignment"]
+    assert staff_view["models"][0]["progress"]["status"] == "loaded"
+
+    event_id = create_event(fleet)  # through the events area's own service
+    rows = commentator.call("GET", f"/api/events/{event_id}/model-status").json_body["rows"]
+    by_car = {row["device_id"]: row for row in rows}
+    assert set(by_car) == {x_id, y_id}
+    assert (by_car[x_id]["model_name"], by_car[x_id]["owner_username"], by_car[x_id]["status"]) == \
+        ("steady", "alice", "loaded")
+    assert by_car[x_id]["updated_at"]
+    assert by_car[y_id]["status"] == "unassigned"
+    assert racer.call("GET", f"/api/events/{event_id}/model-status").status_code == 403
+
+
+def test_a_wrong_checksum_is_recorded_as_failed(racer: ModelsApi, operator: ModelsApi,
+                                                car_x: tuple[str, ModelsApi]) -> None:
+    model = racer.upload_and_complete("m.tar.gz", onnx_archive())
+    device_id, car = car_x
+    assign(operator, device_id, [model["model_id"]])
+
+    reply = report(car, model["model_id"], "verified", md5="0" * 32)
+    assert reply.json_body["progress"]["status"] == "failed"
+    assert "checksum mismatch" in reply.json_body["progress"]["reason"]
+    assert report(car, model["model_id"], "failed").status_code == 400, "a failure needs a reason"
+
+
+def test_a_car_reports_only_on_its_own_assignment(racer: ModelsApi, operator: ModelsApi,
+                                                  car_x: tuple[str, ModelsApi], car_y: tuple[str, ModelsApi]) -> None:
+    model = racer.upload_and_complete("m.tar.gz", onnx_archive())
+    (x_id, car_x_api), (_, car_y_api) = car_x, car_y
+    assign(operator, x_id, [model["model_id"]])
+
+    assert report(car_y_api, model["model_id"], "loaded").status_code == 404
+    assert car_y_api.call("GET", "/api/devices/self/assignment").json_body["models"] == []
+    assert racer.call("GET", "/api/devices/self/assignment").status_code == 403
+    x_view = operator.call("GET", f"/api/cars/{x_id}/models").json_body["assignment"]
+    assert x_view["models"][0]["progress"]["status"] == "assigned"
+
+
+def test_clearing_a_car_and_deleting_a_model_withdraw_it(racer: ModelsApi, operator: ModelsApi,
+                                                         car_x: tuple[str, ModelsApi]) -> None:
+    first = racer.upload_and_complete("one.tar.gz", onnx_archive(1))
+    second = racer.upload_and_complete("two.tar.gz", onnx_archive(2))
+    device_id, car = car_x
+    assign(operator, device_id, [first["model_id"], second["model_id"]])
+
+    racer.delete(second["model_id"])
+    view = car.call("GET", "/api/devices/self/assignment").json_body
+    assert [m["model_id"] for m in view["models"]] == [first["model_id"]]
+    assert view["withdrawn"] == [second["model_id"]]
+
+    assert assign(operator, device_id, []).status_code == 200
+    assert car.call("GET", "/api/devices/self/assignment").json_body["models"] == []
+    assert report(car, first["model_id"], "loaded").status_code == 404
+
+
+def create_event(fleet_id: str) -> str:
+    from chalicelib.auth.principals import User
+    from chalicelib.domain.events import EventInput
+    from chalicelib.routes.events import event_service
+
+    operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))
+    event = event_service().create_event(operator, EventInput.model_validate_json(json.dumps({
+        "name": "Summit", "event_type": "AWS_SUMMIT", "date": datetime.date.today().isoformat(),
+        "country_code": "GB", "tracks": [{"fleet_id": fleet_id}]})))
+    return event.event_id
