@@ -1,0 +1,161 @@
+"""Racer profiles: highlight colour, avatar choice and the country copied from the account, keyed by Cognito sub.
+
+A deleted user's profile becomes a tombstone `{deleted: true}`: past race results keep the sub, and renderers show
+`anonymised_name(sub)` with no country, colour or avatar in place of the person.
+"""
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Literal, Protocol
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from chalicelib.auth.principals import Role, User
+from chalicelib.domain.avatars import identicon_svg
+from chalicelib.domain.errors import InvalidInput, NotFound
+from chalicelib.domain.ownership import require_owner_or_role
+
+# DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.
+HIGHLIGHT_PALETTE: tuple[str, ...] = ("#0000FF", "#FF0000", "#FF8200", "#800080",
+                                      "#1E90FF", "#7CFC00", "#FF00FF", "#FFFF00")
+AvatarChoice = Literal["identicon", "none"]
+
+
+def anonymised_name(sub: str) -> str:
+    """What results show for a deleted racer: stable per person, reveals nothing about them."""
+    return f"Deleted racer {sub.replace('-', '')[:4]}"
+
+
+def check_highlight_colour(value: str) -> str:
+    colour = value.strip().upper()
+    if colour not in HIGHLIGHT_PALETTE:
+        raise InvalidInput(f"Pick a highlight colour from the palette: {' '.join(HIGHLIGHT_PALETTE)} "
+                           "(white is reserved for the car's stop light).", field="highlight_colour")
+    return colour
+
+
+class Profile(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    sub: str
+    username: str | None = None
+    country_code: str | None = None
+    highlight_colour: str | None = None
+    avatar: AvatarChoice = "identicon"
+    deleted: bool = False
+    updated_at: str | None = None
+
+
+class ProfileUpdate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    highlight_colour: str | None = Field(default=None, max_length=16)
+    avatar: AvatarChoice | None = None
+
+    @field_validator("highlight_colour")
+    @classmethod
+    def _palette(cls, value: str | None) -> str | None:
+        return None if value is None else check_highlight_colour(value)
+
+
+class PublicProfile(BaseModel):
+    """The only profile fields anyone may see (leaderboards, overlays, GET /api/profiles/{username})."""
+    username: str
+    country_code: str | None = None
+    highlight_colour: str | None = None
+    avatar_url: str | None = None
+    deleted: bool = False
+
+
+def public_view(profile: Profile) -> PublicProfile:
+    if profile.deleted or not profile.username:
+        return PublicProfile(username=anonymised_name(profile.sub), deleted=profile.deleted)
+    avatar = f"/api/profiles/{profile.username}/avatar.svg" if profile.avatar == "identicon" else None
+    return PublicProfile(username=profile.username, country_code=profile.country_code,
+                         highlight_colour=profile.highlight_colour, avatar_url=avatar)
+
+
+class ProfileStore(Protocol):
+    def get(self, sub: str) -> Profile | None: ...
+    def put(self, profile: Profile) -> None: ...
+    def sub_for_username(self, username: str) -> str | None: ...
+    def link_username(self, username: str, sub: str) -> None: ...
+    def unlink_username(self, username: str) -> None: ...
+
+
+class AccountLookup(Protocol):
+    """Finds an account's sub and country when a profile does not exist yet (e.g. the default admin)."""
+    def get_user(self, username: str) -> object: ...
+
+
+class ProfileService:
+    def __init__(self, store: ProfileStore, accounts: AccountLookup | None = None) -> None:
+        self._store = store
+        self._accounts = accounts
+
+    def create_for(self, sub: str, username: str, country_code: str | None) -> Profile:
+        profile = Profile(sub=sub, username=username, country_code=country_code, updated_at=_now())
+        self._store.put(profile)
+        self._store.link_username(username, sub)
+        return profile
+
+    def own(self, caller: User) -> Profile:
+        profile = self._store.get(caller.sub)
+        if profile is not None and profile.deleted:
+            # A token issued before the deletion must not bring the profile back.
+            raise NotFound("This account has been deleted.")
+        if profile is not None:
+            return profile
+        country = getattr(self._account(caller.username), "country_code", None) if self._accounts else None
+        return self.create_for(caller.sub, caller.username, country)
+
+    def update_own(self, caller: User, update: ProfileUpdate) -> Profile:
+        return self._save(self.own(caller), update)
+
+    def update_for(self, caller: User, username: str, update: ProfileUpdate) -> Profile:
+        try:
+            profile = self._by_username(username)
+        except NotFound:
+            # Accounts made outside drem (the default admin) get their profile on first use.
+            account = self._account(username)
+            if account is None:
+                raise
+            profile = self.create_for(account.sub, account.username, account.country_code)  # type: ignore[attr-defined]
+        require_owner_or_role(caller, profile.sub, {Role.ADMIN})
+        return self._save(profile, update)
+
+    def public(self, username: str) -> PublicProfile:
+        return public_view(self._by_username(username))
+
+    def public_by_sub(self, sub: str) -> PublicProfile | None:
+        """For leaderboard/race renderers: one GetItem; a deleted racer comes back anonymised."""
+        profile = self._store.get(sub)
+        return None if profile is None else public_view(profile)
+
+    def avatar_svg(self, username: str) -> str:
+        profile = self._by_username(username)
+        if profile.avatar != "identicon":
+            raise NotFound(f"{profile.username} has no avatar.", field="username")
+        return identicon_svg(profile.sub, profile.highlight_colour, profile.username or "")
+
+    def tombstone(self, sub: str, username: str) -> None:
+        self._store.put(Profile(sub=sub, deleted=True, avatar="none", updated_at=_now()))
+        self._store.unlink_username(username)
+
+    def _by_username(self, username: str) -> Profile:
+        sub = self._store.sub_for_username(username)
+        profile = self._store.get(sub) if sub else None
+        if profile is None or profile.deleted:
+            raise NotFound(f"There is no racer {username!r}.", field="username")
+        return profile
+
+    def _account(self, username: str) -> object:
+        return self._accounts.get_user(username) if self._accounts else None
+
+    def _save(self, profile: Profile, update: ProfileUpdate) -> Profile:
+        changes = {k: v for k, v in update.model_dump(exclude_unset=True).items() if v is not None}
+        saved = profile.model_copy(update={**changes, "updated_at": _now()})
+        self._store.put(saved)
+        return saved
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")

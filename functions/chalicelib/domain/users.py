@@ -1,0 +1,302 @@
+"""User accounts: self sign-up, staff registration, listing, roles, enabling and self-deletion.
+
+Pure: the account directory (Cognito) and the profile store arrive as protocols, so the rules are testable and the
+storage adapters stay the only code that talks to AWS.
+"""
+from __future__ import annotations
+
+import re
+import secrets
+import string
+from typing import Protocol
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from chalicelib.auth.principals import USER_ROLES, Role, User
+from chalicelib.domain.countries import normalise_country_code
+from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput
+from chalicelib.domain.identity import password_policy_text
+from drem_infra import resources
+
+_SELF_SIGN_UP_CHARS = re.compile(r"^[a-zA-Z0-9._]+$")
+_STAFF_USERNAME = re.compile(r"^[a-zA-Z0-9_-]+$")
+# Deliberately simple: the directory sends a code to it, which is the real check.
+_EMAIL = re.compile(r"^[^@\s<>\"']+@[^@\s<>\"']+\.[^@\s<>\"']+$")
+_PASSWORD_SYMBOLS = "!#%*+-=?@^_"
+MAX_PAGE = 60
+
+
+def check_sign_up_username(username: str) -> str:
+    """DREM's self sign-up rule, one message per broken rule."""
+    if not 2 <= len(username) <= 20:
+        raise InvalidInput("A username has 2 to 20 characters.", field="username")
+    if not _SELF_SIGN_UP_CHARS.match(username):
+        raise InvalidInput("A username may contain only letters, digits, '.' and '_'.", field="username")
+    if username[0] in "._" or username[-1] in "._":
+        raise InvalidInput("A username cannot start or end with '.' or '_'.", field="username")
+    if re.search(r"[._]{2}", username):
+        raise InvalidInput("A username cannot have two '.' or '_' in a row.", field="username")
+    return username
+
+
+def check_staff_username(username: str) -> str:
+    """DREM's staff registration rule (differs from self sign-up: '-' allowed, '.' not)."""
+    if not 1 <= len(username) <= 128 or not _STAFF_USERNAME.match(username):
+        raise InvalidInput("A username may contain only letters, digits, '-' and '_'.", field="username")
+    return username
+
+
+def check_email(email: str) -> str:
+    email = email.strip()
+    if len(email) > 254 or not _EMAIL.match(email):
+        raise InvalidInput("Enter a valid email address, like racer@example.com.", field="email")
+    return email
+
+
+def check_password(password: str, field: str = "password") -> str:
+    policy = resources.USER_POOL.password_policy
+    missing = (len(password) < policy.minimum_length
+               or (policy.require_lowercase and not re.search(r"[a-z]", password))
+               or (policy.require_uppercase and not re.search(r"[A-Z]", password))
+               or (policy.require_digits and not re.search(r"[0-9]", password))
+               or (policy.require_symbols and not re.search(r"[^a-zA-Z0-9\s]", password)))
+    if missing:
+        raise InvalidInput(f"This password is too weak. {password_policy_text()}", field=field)
+    return password
+
+
+def temporary_password(length: int = 16) -> str:
+    """Random, meets the pool policy (one of each required class)."""
+    classes = [string.ascii_lowercase, string.ascii_uppercase, string.digits, _PASSWORD_SYMBOLS]
+    chars = [secrets.choice(c) for c in classes]
+    alphabet = "".join(classes)
+    chars += [secrets.choice(alphabet) for _ in range(length - len(chars))]
+    secrets.SystemRandom().shuffle(chars)
+    return "".join(chars)
+
+
+class SignUpForm(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    username: str = Field(max_length=128)
+    email: str = Field(max_length=254)
+    country_code: str = Field(max_length=8)
+    password: str = Field(max_length=256)
+
+    # The checks raise InvalidInput (not ValueError) so the 400 carries DREM's own wording for each rule.
+    @field_validator("username")
+    @classmethod
+    def _username(cls, value: str) -> str:
+        return check_sign_up_username(value.strip())
+
+    @field_validator("email")
+    @classmethod
+    def _email(cls, value: str) -> str:
+        return check_email(value)
+
+    @field_validator("country_code")
+    @classmethod
+    def _country(cls, value: str) -> str:
+        return normalise_country_code(value)
+
+    @field_validator("password")
+    @classmethod
+    def _password(cls, value: str) -> str:
+        return check_password(value)
+
+
+class ConfirmSignUpForm(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    username: str = Field(min_length=1, max_length=128)
+    code: str = Field(min_length=1, max_length=32, pattern=r"^\s*[0-9A-Za-z]+\s*$")
+
+
+class StaffRegistrationForm(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    username: str = Field(max_length=128)
+    email: str = Field(max_length=254)
+    country_code: str = Field(max_length=8)
+
+    @field_validator("username")
+    @classmethod
+    def _username(cls, value: str) -> str:
+        return check_staff_username(value.strip())
+
+    @field_validator("email")
+    @classmethod
+    def _email(cls, value: str) -> str:
+        return check_email(value)
+
+    @field_validator("country_code")
+    @classmethod
+    def _country(cls, value: str) -> str:
+        return normalise_country_code(value)
+
+
+class RoleChange(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    role: Role
+
+    @field_validator("role")
+    @classmethod
+    def _user_role(cls, role: Role) -> Role:
+        if role not in USER_ROLES:
+            raise ValueError(f"Choose one of: {', '.join(sorted(r.value for r in USER_ROLES))}.")
+        return role
+
+
+class DeleteSelfForm(BaseModel):
+    """Typing the username (or the password) proves the click was meant."""
+    model_config = ConfigDict(extra="forbid")
+    confirm: str = Field(min_length=1, max_length=256)
+
+
+class DirectoryUser(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    username: str
+    sub: str
+    email: str | None = None
+    country_code: str | None = None
+    enabled: bool = True
+    status: str = "CONFIRMED"
+    created_at: str | None = None
+
+
+class UserPage(BaseModel):
+    users: list[DirectoryUser]
+    next_token: str | None = None
+
+
+class SignUpResult(BaseModel):
+    username: str
+    sub: str
+    confirmed: bool
+    message: str
+
+
+class RegisteredUser(BaseModel):
+    username: str
+    sub: str
+    email: str
+    country_code: str
+    role: Role = Role.RACER
+    # Shown once: drem does not store it and Cognito will not return it again.
+    temporary_password: str
+
+
+class UserDirectory(Protocol):
+    def sign_up(self, username: str, password: str, email: str, country_code: str) -> str: ...
+    def confirm_sign_up(self, username: str, code: str) -> None: ...
+    def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str: ...
+    def get_user(self, username: str) -> DirectoryUser: ...
+    def list_users(self, prefix: str | None, limit: int, next_token: str | None) -> UserPage: ...
+    def set_only_group(self, username: str, group: str) -> None: ...
+    def set_enabled(self, username: str, enabled: bool) -> None: ...
+    def delete_user(self, username: str) -> None: ...
+    def password_matches(self, username: str, password: str) -> bool: ...
+
+
+class ProfileKeeper(Protocol):
+    """What account changes need from profiles (satisfied by `chalicelib.domain.profiles.ProfileService`)."""
+    def create_for(self, sub: str, username: str, country_code: str | None) -> object: ...
+    def tombstone(self, sub: str, username: str) -> None: ...
+
+
+class OwnedDataEraser(Protocol):
+    """Removes or anonymises what a user owns (their models) when they delete themselves; returns how many items."""
+    def erase_owned_by(self, sub: str) -> int: ...
+
+
+class ModelsEraser:
+    """Satisfies OwnedDataEraser over `chalicelib.domain.models.ModelService`: every model the user owns is deleted
+    (its archive removed, the record kept as DELETED under an anonymised owner name, so race history stays whole).
+    Best moved into the models service as `erase_owned_by` — it reaches into the service's store and files."""
+
+    def __init__(self, service: object) -> None:
+        self._service = service
+
+    def erase_owned_by(self, sub: str) -> int:
+        from chalicelib.domain.models import ModelChanged, ModelStatus
+        from chalicelib.domain.profiles import anonymised_name
+
+        store, files = self._service.store, self._service.files  # type: ignore[attr-defined]
+        erased, token = 0, None
+        while True:
+            page = store.list_owner(sub, limit=100, next_token=token)  # lists models not yet DELETED
+            for record in page.models:
+                for key in {record.s3_key, record.upload_key} - {None}:
+                    files.delete(key)
+                gone = record.model_copy(update={"status": ModelStatus.DELETED, "owner_username": anonymised_name(sub)})
+                try:
+                    store.replace(gone, expected_status=record.status)
+                except ModelChanged as exc:
+                    raise Conflict("A model changed while your account was being deleted; try again.") from exc
+                erased += 1
+            token = page.next_token
+            if not token:
+                return erased
+
+
+class UserService:
+    def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
+                 erasers: tuple[OwnedDataEraser, ...] = ()) -> None:
+        self._directory = directory
+        self._profiles = profiles
+        self._erasers = erasers
+
+    def sign_up(self, form: SignUpForm) -> SignUpResult:
+        sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
+        self._directory.set_only_group(form.username, Role.RACER.value)
+        self._profiles.create_for(sub, form.username, form.country_code)
+        return SignUpResult(username=form.username, sub=sub, confirmed=False,
+                            message=f"Check {form.email} for a confirmation code, then confirm your account.")
+
+    def confirm_sign_up(self, form: ConfirmSignUpForm) -> dict[str, str]:
+        self._directory.confirm_sign_up(form.username.strip(), form.code.strip())
+        return {"username": form.username.strip(), "message": "Your account is confirmed; you can sign in now."}
+
+    def register_racer(self, form: StaffRegistrationForm) -> RegisteredUser:
+        password = temporary_password()
+        sub = self._directory.create_user(form.username, form.email, form.country_code, password)
+        self._directory.set_only_group(form.username, Role.RACER.value)
+        self._profiles.create_for(sub, form.username, form.country_code)
+        return RegisteredUser(username=form.username, sub=sub, email=form.email, country_code=form.country_code,
+                              temporary_password=password)
+
+    def list_users(self, prefix: str | None = None, limit: int = MAX_PAGE, next_token: str | None = None) -> UserPage:
+        prefix = (prefix or "").strip() or None
+        if prefix is not None and not re.fullmatch(r"[a-zA-Z0-9._-]{1,128}", prefix):
+            raise InvalidInput("Search with the start of a username (letters, digits, '.', '_', '-').",
+                               field="prefix")
+        if not 1 <= limit <= MAX_PAGE:
+            raise InvalidInput(f"limit is between 1 and {MAX_PAGE}.", field="limit")
+        return self._directory.list_users(prefix, limit, next_token or None)
+
+    def change_role(self, caller: User, username: str, change: RoleChange) -> dict[str, str]:
+        self._not_self(caller, username, "change your own role")
+        target = self._directory.get_user(username)
+        self._directory.set_only_group(target.username, change.role.value)
+        return {"username": target.username, "role": change.role.value}
+
+    def set_enabled(self, caller: User, username: str, enabled: bool) -> DirectoryUser:
+        self._not_self(caller, username, "disable or enable yourself")
+        target = self._directory.get_user(username)
+        self._directory.set_enabled(target.username, enabled)
+        return target.model_copy(update={"enabled": enabled})
+
+    def delete_self(self, caller: User, form: DeleteSelfForm) -> dict[str, object]:
+        confirmed = (form.confirm.strip().casefold() == caller.username.casefold()
+                     or self._directory.password_matches(caller.username, form.confirm))
+        if not confirmed:
+            raise InvalidInput("Type your username (or your password) to confirm deleting your account.",
+                               field="confirm")
+        erased = sum(eraser.erase_owned_by(caller.sub) for eraser in self._erasers)
+        self._profiles.tombstone(caller.sub, caller.username)
+        # Last, so a failure above leaves an account the user can retry the deletion with.
+        self._directory.delete_user(caller.username)
+        return {"deleted": caller.username, "items_erased": erased}
+
+    @staticmethod
+    def _not_self(caller: User, username: str, what: str) -> None:
+        # An admin locking themselves out could leave the event with no admin at all.
+        if caller.username.casefold() == username.casefold():
+            raise Forbidden(f"You cannot {what}; ask another admin.")

@@ -1,0 +1,52 @@
+"""Racer profiles (JSON): your own, anyone's public view and identicon, and admins editing a racer's profile."""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
+from chalicelib.auth.principals import Principal, User
+from chalicelib.domain.profiles import ProfileService, ProfileUpdate, public_view
+from chalicelib.routes.users import json_object, user_directory
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.profiles import DynamoProfileStore
+
+bp = Blueprint(__name__)
+
+
+def profile_service() -> ProfileService:
+    settings = get_settings()
+    store = DynamoProfileStore(clients.dynamodb(), settings.table("profiles"))
+    return ProfileService(store, user_directory(settings))
+
+
+@route(bp, "/api/me/profile", allow=SIGNED_IN)
+def own_profile(principal: User) -> dict:
+    return profile_service().own(principal).model_dump()
+
+
+@route(bp, "/api/me/profile", methods=["PUT"], allow=SIGNED_IN)
+def update_own_profile(principal: User) -> dict:
+    update = ProfileUpdate.model_validate(json_object(bp.current_request))
+    return profile_service().update_own(principal, update).model_dump()
+
+
+@route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN})
+def update_user_profile(principal: User, username: str) -> dict:
+    update = ProfileUpdate.model_validate(json_object(bp.current_request))
+    return public_view(profile_service().update_for(principal, username, update)).model_dump()
+
+
+@route(bp, "/api/profiles/{username}", allow=PUBLIC)
+def public_profile(principal: Principal, username: str) -> dict:
+    return profile_service().public(username).model_dump()
+
+
+@route(bp, "/api/profiles/{username}/avatar.svg", allow=PUBLIC)
+def avatar(principal: Principal, username: str) -> Response:
+    svg = profile_service().avatar_svg(username)
+    return Response(body=svg, status_code=200, headers={
+        "Content-Type": "image/svg+xml", "Cache-Control": "public, max-age=300",
+        # An SVG opened directly must not run script, whatever it contains.
+        "Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'",
+        "X-Content-Type-Options": "nosniff"})

@@ -1,0 +1,64 @@
+"""DynamoDB adapter for racer profiles (`profiles` table): `USER#{sub}`/`PROFILE` plus a username alias item
+`USERNAME#{lower(username)}`/`SUB` so public look-ups by name are one GetItem each, with no Cognito call."""
+from __future__ import annotations
+
+from typing import Any
+
+from botocore.exceptions import BotoCoreError, ClientError
+
+from chalicelib.domain.profiles import Profile
+from chalicelib.storage.aws_errors import translate_common
+
+_SERVICE = "The profile store"
+_FIELDS = ("username", "country_code", "highlight_colour", "avatar", "updated_at")
+
+
+def _profile_key(sub: str) -> dict[str, Any]:
+    return {"pk": {"S": f"USER#{sub}"}, "sk": {"S": "PROFILE"}}
+
+
+def _alias_key(username: str) -> dict[str, Any]:
+    # Cognito usernames are case-insensitive in drem's pool, so the alias is too.
+    return {"pk": {"S": f"USERNAME#{username.casefold()}"}, "sk": {"S": "SUB"}}
+
+
+class DynamoProfileStore:
+    def __init__(self, client: Any, table: str) -> None:
+        self._client = client
+        self._table = table
+
+    def get(self, sub: str) -> Profile | None:
+        item = self._get(_profile_key(sub))
+        if item is None:
+            return None
+        values = {name: item[name]["S"] for name in _FIELDS if name in item}
+        return Profile(sub=sub, deleted=item.get("deleted", {}).get("BOOL", False), **values)
+
+    def put(self, profile: Profile) -> None:
+        item = {**_profile_key(profile.sub), "sub": {"S": profile.sub}, "deleted": {"BOOL": profile.deleted}}
+        for name in _FIELDS:
+            value = getattr(profile, name)
+            if value is not None and not profile.deleted:
+                item[name] = {"S": value}
+        if profile.deleted and profile.updated_at:
+            item["updated_at"] = {"S": profile.updated_at}
+        self._call("put_item", TableName=self._table, Item=item)
+
+    def sub_for_username(self, username: str) -> str | None:
+        item = self._get(_alias_key(username))
+        return item["sub"]["S"] if item else None
+
+    def link_username(self, username: str, sub: str) -> None:
+        self._call("put_item", TableName=self._table, Item={**_alias_key(username), "sub": {"S": sub}})
+
+    def unlink_username(self, username: str) -> None:
+        self._call("delete_item", TableName=self._table, Key=_alias_key(username))
+
+    def _get(self, key: dict[str, Any]) -> dict[str, Any] | None:
+        return self._call("get_item", TableName=self._table, Key=key, ConsistentRead=True).get("Item")
+
+    def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
+        try:
+            return getattr(self._client, operation)(**kwargs)
+        except (ClientError, BotoCoreError) as exc:
+            raise translate_common(exc, _SERVICE) from exc

@@ -1,0 +1,113 @@
+"""Self sign-up: DREM's username rules, countries, passwords, the unconfirmed → confirmed journey, code errors."""
+from __future__ import annotations
+
+import pytest
+from botocore.exceptions import ClientError
+from botocore.stub import Stubber
+
+from chalicelib.domain.countries import COUNTRY_CODES, normalise_country_code
+from chalicelib.domain.errors import AccountNotReady, InvalidInput
+from chalicelib.storage.users import CognitoUserDirectory, translate_account_error
+from tests.unit.conftest import PASSWORD
+from tests.unit.users_helpers import api, call, error_message, groups_claim, sign_up_body  # noqa: F401
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.mark.parametrize(("username", "message"), [
+    ("a", "A username has 2 to 20 characters."),
+    ("a" * 21, "A username has 2 to 20 characters."),
+    ("fast-racer", "A username may contain only letters, digits, '.' and '_'."),
+    ("fast racer", "A username may contain only letters, digits, '.' and '_'."),
+    ("<script>", "A username may contain only letters, digits, '.' and '_'."),
+    (".racer", "A username cannot start or end with '.' or '_'."),
+    ("racer_", "A username cannot start or end with '.' or '_'."),
+    ("fast._racer", "A username cannot have two '.' or '_' in a row."),
+    ("fast__racer", "A username cannot have two '.' or '_' in a row."),
+])
+def test_each_sign_up_username_rule_has_its_own_message(api, username, message):
+    status, body = call(api, "POST", "/api/signup", sign_up_body(username))
+    assert status == 400
+    assert error_message(body) == message
+    assert body["error"]["field"] == "username"
+
+
+def test_usernames_that_follow_every_rule_are_accepted(api):
+    for username in ("ab", "Fast.Racer_9", "a" * 20):
+        status, body = call(api, "POST", "/api/signup", sign_up_body(username))
+        assert status == 201, body
+
+
+def test_country_must_be_a_real_iso_code(api):
+    assert len(COUNTRY_CODES) == 249
+    assert normalise_country_code(" gb ") == "GB"
+    status, body = call(api, "POST", "/api/signup", sign_up_body(country_code="UK"))
+    assert status == 400
+    assert body["error"]["field"] == "country_code"
+    assert "'UK' is not an ISO 3166-1 alpha-2 country code" in error_message(body)
+
+
+def test_weak_password_and_bad_email_are_explained(api):
+    status, body = call(api, "POST", "/api/signup", sign_up_body(password="alllowercase"))
+    assert (status, body["error"]["field"]) == (400, "password")
+    assert "At least 8 characters" in error_message(body)
+    status, body = call(api, "POST", "/api/signup", sign_up_body(email="not-an-email"))
+    assert (status, body["error"]["field"]) == (400, "email")
+
+
+def test_sign_up_then_confirm_then_sign_in_as_racer(api, users):
+    from chalicelib.auth.sessions import identity_provider
+
+    status, body = call(api, "POST", "/api/signup", sign_up_body("new.racer", country_code="de"))
+    assert status == 201, body
+    assert body["confirmed"] is False and "confirmation code" in body["message"]
+
+    with pytest.raises(AccountNotReady, match="not confirmed"):
+        identity_provider().sign_in("new.racer", PASSWORD)
+
+    # moto accepts any code: this proves the flow, not Cognito's code check (see the Stubber test below).
+    status, body = call(api, "POST", "/api/signup/confirm", {"username": "new.racer", "code": "123456"})
+    assert status == 200, body
+    tokens = users.sign_in("new.racer")
+    assert groups_claim(tokens["AccessToken"]) == ["racer"]
+
+    status, profile = call(api, "GET", "/api/me/profile", token=tokens["AccessToken"])
+    assert status == 200 and profile["country_code"] == "DE" and profile["username"] == "new.racer"
+
+
+def test_taken_name_is_a_conflict(api):
+    assert call(api, "POST", "/api/signup", sign_up_body("taken"))[0] == 201
+    status, body = call(api, "POST", "/api/signup", sign_up_body("taken"))
+    assert status == 409
+    assert error_message(body) == "The user name 'taken' is taken."
+
+
+def _client_error(code: str) -> ClientError:
+    return ClientError({"Error": {"Code": code, "Message": "whatever Cognito says"}}, "ConfirmSignUp")
+
+
+def test_wrong_and_expired_codes_get_clear_messages():
+    wrong = translate_account_error(_client_error("CodeMismatchException"), "new.racer")
+    expired = translate_account_error(_client_error("ExpiredCodeException"), "new.racer")
+    assert isinstance(wrong, InvalidInput) and wrong.field == "code"
+    assert wrong.message == "That confirmation code is wrong; check the latest email and try again."
+    assert isinstance(expired, InvalidInput) and "expired" in expired.message
+
+
+def test_confirm_with_a_wrong_code_through_the_adapter():
+    import boto3
+
+    cognito = boto3.client("cognito-idp", region_name="us-east-1")
+    directory = CognitoUserDirectory(cognito, "us-east-1_pool", "client-id")
+    with Stubber(cognito) as stub:
+        stub.add_client_error("confirm_sign_up", service_error_code="CodeMismatchException",
+                              expected_params={"ClientId": "client-id", "Username": "new.racer",
+                                               "ConfirmationCode": "000000"})
+        with pytest.raises(InvalidInput, match="confirmation code is wrong") as raised:
+            directory.confirm_sign_up("new.racer", "000000")
+    assert raised.value.field == "code"
+
+
+def test_confirm_needs_a_code(api):
+    status, body = call(api, "POST", "/api/signup/confirm", {"username": "x"})
+    assert status == 400 and body["error"]["field"] == "code"

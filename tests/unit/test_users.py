@@ -1,0 +1,177 @@
+"""Staff registration, user listing, roles, disabling and self-delete, through the JSON API with real moto tokens."""
+from __future__ import annotations
+
+import pytest
+
+from chalicelib.domain.errors import InvalidCredentials
+from tests.unit.conftest import PASSWORD
+from tests.unit.users_helpers import api, call, error_message, groups_claim, sign_up_body  # noqa: F401
+
+pytestmark = pytest.mark.unit
+
+
+def _register(api, token, username="walk_in-1", **changes):
+    body = {"username": username, "email": f"{username}@example.test", "country_code": "NL", **changes}
+    return call(api, "POST", "/api/users", body, token=token)
+
+
+def test_registration_staff_create_a_racer_with_a_temporary_password(api, users, aws_clients, stack):
+    staff = users.access_token("desk", ("registration",))
+    status, body = _register(api, staff)
+    assert status == 201, body
+    assert body["username"] == "walk_in-1" and body["role"] == "racer"
+    temporary = body["temporary_password"]
+
+    reply = aws_clients.cognito.initiate_auth(
+        AuthFlow="USER_PASSWORD_AUTH", ClientId=stack.user_pool_client_id,
+        AuthParameters={"USERNAME": "walk_in-1", "PASSWORD": temporary})
+    assert reply["ChallengeName"] == "NEW_PASSWORD_REQUIRED"
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="walk_in-1")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+
+    status, profile = call(api, "GET", "/api/profiles/walk_in-1")
+    assert status == 200 and profile["country_code"] == "NL"
+
+
+def test_racers_and_anonymous_cannot_register_others(api, users):
+    racer = users.access_token("racer1", ("racer",))
+    assert _register(api, racer)[0] == 403
+    assert call(api, "POST", "/api/users", {"username": "x", "email": "x@example.test", "country_code": "NL"})[0] \
+        in (401, 403)
+
+
+def test_a_taken_name_is_a_409_that_says_so(api, users):
+    admin = users.access_token("boss", ("admin",))
+    assert _register(api, admin, "dup")[0] == 201
+    status, body = _register(api, admin, "dup")
+    assert status == 409
+    assert error_message(body) == "The user name 'dup' is taken."
+
+
+def test_staff_username_rule_and_country_are_checked(api, users):
+    admin = users.access_token("boss", ("admin",))
+    status, body = _register(api, admin, "dot.name")
+    assert status == 400 and body["error"]["field"] == "username"
+    assert "letters, digits, '-' and '_'" in error_message(body)
+    status, body = _register(api, admin, "ok-name", country_code="XX")
+    assert status == 400 and body["error"]["field"] == "country_code"
+
+
+def test_listing_searches_by_prefix_and_pages(api, users):
+    admin = users.access_token("boss", ("admin",))
+    for name in ("team-a1", "team-a2", "team-a3", "other"):
+        users.create(name, ("racer",))
+    status, body = call(api, "GET", "/api/users?prefix=team-", token=admin)
+    assert status == 200
+    assert sorted(u["username"] for u in body["users"]) == ["team-a1", "team-a2", "team-a3"]
+    assert "temporary_password" not in body["users"][0]
+
+    seen, next_token = [], None
+    for _ in range(5):
+        query = "/api/users?limit=2" + (f"&next={next_token}" if next_token else "")
+        status, body = call(api, "GET", query, token=admin)
+        assert status == 200 and len(body["users"]) <= 2
+        seen += [u["username"] for u in body["users"]]
+        next_token = body["next_token"]
+        if not next_token:
+            break
+    assert sorted(seen) == ["boss", "other", "team-a1", "team-a2", "team-a3"]
+
+
+def test_who_may_list_users(api, users):
+    for name, group in (("op", "operator"), ("desk", "registration")):
+        assert call(api, "GET", "/api/users", token=users.access_token(name, (group,)))[0] == 200
+    for name, group in (("mic", "commentator"), ("r1", "racer")):
+        assert call(api, "GET", "/api/users", token=users.access_token(name, (group,)))[0] == 403
+    status, body = call(api, "GET", "/api/users?prefix=%22%20or", token=users.access_token("boss", ("admin",)))
+    assert status == 400 and body["error"]["field"] == "prefix"
+
+
+def test_role_change_leaves_exactly_one_group_and_the_new_token_carries_it(api, users, aws_clients, stack):
+    admin = users.access_token("boss", ("admin",))
+    users.create("multi", ("racer", "commentator"))
+    status, body = call(api, "PUT", "/api/users/multi/role", {"role": "operator"}, token=admin)
+    assert status == 200, body
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="multi")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["operator"]
+    assert groups_claim(users.sign_in("multi")["AccessToken"]) == ["operator"]
+
+
+def test_role_change_rules(api, users):
+    admin = users.access_token("boss", ("admin",))
+    users.create("someone", ("racer",))
+    status, body = call(api, "PUT", "/api/users/someone/role", {"role": "car"}, token=admin)
+    assert status == 400 and body["error"]["field"] == "role"
+    assert call(api, "PUT", "/api/users/boss/role", {"role": "racer"}, token=admin)[0] == 403
+    assert call(api, "PUT", "/api/users/nobody/role", {"role": "racer"}, token=admin)[0] == 404
+    operator = users.access_token("op", ("operator",))
+    assert call(api, "PUT", "/api/users/someone/role", {"role": "admin"}, token=operator)[0] == 403
+
+
+def test_disabled_users_cannot_sign_in_until_enabled(api, users):
+    from chalicelib.auth.sessions import identity_provider
+
+    admin = users.access_token("boss", ("admin",))
+    users.create("troublemaker", ("racer",))
+    status, body = call(api, "POST", "/api/users/troublemaker/disable", token=admin)
+    assert status == 200 and body["enabled"] is False
+    with pytest.raises(InvalidCredentials):
+        identity_provider().sign_in("troublemaker", PASSWORD)
+    assert call(api, "POST", "/api/users/troublemaker/enable", token=admin)[0] == 200
+    assert identity_provider().sign_in("troublemaker", PASSWORD).access_token
+    assert call(api, "POST", "/api/users/boss/disable", token=admin)[0] == 403
+
+
+def test_self_delete_needs_the_username_or_password(api, users):
+    token = users.access_token("careful", ("racer",))
+    status, body = call(api, "DELETE", "/api/me", {"confirm": "not me"}, token=token)
+    assert status == 400 and body["error"]["field"] == "confirm"
+    assert users.sign_in("careful")["AccessToken"]
+    status, body = call(api, "DELETE", "/api/me", {"confirm": PASSWORD}, token=token)
+    assert status == 200 and body["deleted"] == "careful"
+
+
+def test_self_delete_removes_the_account_and_anonymises_the_profile(api, users, aws_clients, stack):
+    from chalicelib.routes.profiles import profile_service
+
+    call(api, "POST", "/api/signup", sign_up_body("leaving"))
+    call(api, "POST", "/api/signup/confirm", {"username": "leaving", "code": "1"})
+    token = users.sign_in("leaving")["AccessToken"]
+    status, own = call(api, "PUT", "/api/me/profile", {"highlight_colour": "#FF0000"}, token=token)
+    assert status == 200
+    sub = own["sub"]
+
+    status, body = call(api, "DELETE", "/api/me", {"confirm": "Leaving"}, token=token)
+    assert status == 200, body
+    with pytest.raises(aws_clients.cognito.exceptions.UserNotFoundException):
+        aws_clients.cognito.admin_get_user(UserPoolId=stack.user_pool_id, Username="leaving")
+    assert call(api, "GET", "/api/profiles/leaving")[0] == 404
+    assert call(api, "GET", "/api/profiles/leaving/avatar.svg")[0] == 404
+    # The access token still verifies until it expires; it must not resurrect the profile.
+    assert call(api, "GET", "/api/me/profile", token=token)[0] == 404
+
+    shown = profile_service().public_by_sub(sub)
+    assert shown.deleted and shown.username == f"Deleted racer {sub.replace('-', '')[:4]}"
+    assert (shown.country_code, shown.highlight_colour, shown.avatar_url) == (None, None, None)
+
+
+def test_self_delete_removes_the_racers_models(api, users, aws_clients, stack):
+    from chalicelib.domain.models import ModelRecord, ModelStatus, model_key
+    from chalicelib.storage.models import build_model_service
+
+    token = users.access_token("modeller", ("racer",))
+    sub = call(api, "GET", "/api/me", token=token)[1]["sub"]
+    service = build_model_service()
+    key = model_key(sub, "m1")
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=key, Body=b"archive")
+    service.store.create(ModelRecord(model_id="m1", owner_sub=sub, owner_username="modeller", name="fast",
+                                     status=ModelStatus.AVAILABLE, uploaded_at="2026-01-01T00:00:00Z",
+                                     updated_at="2026-01-01T00:00:00Z", upload_key=f"uploads/{sub}/m1.tar.gz",
+                                     s3_key=key))
+
+    status, body = call(api, "DELETE", "/api/me", {"confirm": "modeller"}, token=token)
+    assert status == 200 and body["items_erased"] == 1
+    record = service.store.get(sub, "m1")
+    assert record.status is ModelStatus.DELETED and record.owner_username.startswith("Deleted racer ")
+    listed = aws_clients.s3.list_objects_v2(Bucket=stack.buckets["models"]).get("Contents", [])
+    assert listed == []
