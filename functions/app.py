@@ -1,13 +1,21 @@
-"""The drem API and web app. This file only wires things together: middleware and one Blueprint per URL area."""
+"""The drem API and web app. This file only wires things together: middleware, one Blueprint per URL area, and the
+Lambda entry points that are not HTTP routes."""
 from __future__ import annotations
 
 from chalice import Chalice
 
 from chalicelib import logs
-from chalicelib.routes import accounts, health, login, pages
+from chalicelib.routes import accounts, assignments, health, login, models, pages, profiles, users
+from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
 
-for blueprint_module in (pages, health, login, accounts):
+for blueprint_module in (pages, health, login, accounts, users, profiles, models, assignments):
     app.register_blueprint(blueprint_module.bp)
+
+
+@app.lambda_function(name=UPLOAD_COMPLETE_FUNCTION)
+def upload_complete(event, context):
+    """On AWS: the models bucket's EventBridge "Object Created" rule for uploads/ lands here."""
+    return models.handle_upload_complete_event(event)

@@ -14,6 +14,11 @@ SUBCOMMANDS: dict[str, str] = {
     "up": "drem_local.commands.up",
     "status": "drem_local.commands.status",
     "build": "drem_local.commands.build",
+    "users": "drem_local.commands.users",
+    "events": "drem_local.commands.events",
+    "fleets": "drem_local.commands.fleets",
+    "cars": "drem_local.commands.cars",
+    "models": "drem_local.commands.models",
     "sim": "drem_sim.cli",
     "train": "drem_sim.cli_train",
 }

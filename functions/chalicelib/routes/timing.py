@@ -1,0 +1,37 @@
+"""Timing-strip posts from devices (cars and timers): `POST /api/timing/strip-events`."""
+from __future__ import annotations
+
+from chalice import Blueprint
+
+from chalicelib.auth.access import CAR, TIMER, route
+from chalicelib.auth.principals import Device
+from chalicelib.domain.timing import StripPost, TimingService
+from chalicelib.routes.races import now_ms, race_service, race_store
+from chalicelib.routes.users import json_object
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.devices import DynamoDeviceStore
+
+bp = Blueprint(__name__)
+
+
+class DeviceFleetLookup:
+    """Which fleet a device is in, from the device registry."""
+
+    def __init__(self, devices: DynamoDeviceStore) -> None:
+        self._devices = devices
+
+    def fleet_of(self, device_id: str) -> str | None:
+        record = self._devices.get_device(device_id)
+        return record.fleet_id if record else None
+
+
+def timing_service() -> TimingService:
+    devices = DynamoDeviceStore(clients.dynamodb(), get_settings().table("fleet"))
+    return TimingService(race_service(), race_store(), DeviceFleetLookup(devices), now_ms)
+
+
+@route(bp, "/api/timing/strip-events", methods=["POST"], allow={CAR, TIMER})
+def strip_event(principal: Device) -> dict:
+    post = StripPost.model_validate(json_object(bp.current_request))
+    return timing_service().strip_event(principal, post).model_dump(mode="json")

@@ -1,0 +1,217 @@
+"""DynamoDB adapter for the `races` table: race items, the live-race pointer of each track, and the stored outcomes
+of timing-strip posts (idempotency).
+
+| item | pk | sk |
+|---|---|---|
+| race (the whole `RaceRecord` as JSON in `doc`, plus `track_id`, `racer_sub`, `status`, `version` to filter on) | `EVENT#{eventId}` | `RACE#{raceId}` |
+| live race of a track (`race_id`, `racer`) | `EVENT#{eventId}` | `LIVE#{trackId}` |
+| stored strip outcome (`outcome` JSON) | `IDEMPOTENCY#{deviceId}` | `{key}` |
+
+The race body is a JSON string rather than a DynamoDB map: no float/Decimal round trips, and one attribute to parse.
+Every race write is conditional on the race's `version` (optimistic concurrency); a lost race raises `StaleRace` so
+the service can reload and retry. Writes that must happen together (race + live pointer, race + stored outcome) are
+one transaction, so a retried strip post can never produce a second lap.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from botocore.exceptions import BotoCoreError, ClientError
+
+from chalicelib.domain.errors import Conflict
+from chalicelib.domain.races import RaceRecord, StaleRace
+from chalicelib.storage.aws_errors import error_code, translate_common
+
+_SERVICE = "The races table"
+
+
+def _s(value: str) -> dict[str, str]:
+    return {"S": value}
+
+
+def _n(value: int) -> dict[str, str]:
+    return {"N": str(value)}
+
+
+def race_key(event_id: str, race_id: str) -> dict[str, Any]:
+    return {"pk": _s(f"EVENT#{event_id}"), "sk": _s(f"RACE#{race_id}")}
+
+
+def live_key(event_id: str, track_id: str) -> dict[str, Any]:
+    return {"pk": _s(f"EVENT#{event_id}"), "sk": _s(f"LIVE#{track_id}")}
+
+
+def outcome_key(device_id: str, key: str) -> dict[str, Any]:
+    return {"pk": _s(f"IDEMPOTENCY#{device_id}"), "sk": _s(key)}
+
+
+def _race_item(record: RaceRecord) -> dict[str, Any]:
+    race = record.race
+    return {**race_key(race.event_id, race.race_id), "race_id": _s(race.race_id), "event_id": _s(race.event_id),
+            "track_id": _s(race.track_id), "racer_sub": _s(race.racer.sub), "status": _s(race.status.value),
+            "version": _n(race.version), "created_at_ms": _n(race.created_at_ms), "doc": _s(record.model_dump_json())}
+
+
+def _record(item: dict[str, Any]) -> RaceRecord:
+    return RaceRecord.model_validate_json(item["doc"]["S"])
+
+
+def _version_condition(expected_version: int | None) -> tuple[str, dict[str, Any]]:
+    if expected_version is None:
+        return "attribute_not_exists(pk)", {}
+    return "version = :expected", {":expected": _n(expected_version)}
+
+
+class DynamoRaceStore:
+    def __init__(self, client: Any, table: str) -> None:
+        self._client = client
+        self._table = table
+
+    # --- reads ---------------------------------------------------------------------------------------------------
+
+    def get(self, event_id: str, race_id: str) -> RaceRecord | None:
+        item = self._call("get_item", TableName=self._table, Key=race_key(event_id, race_id),
+                          ConsistentRead=True).get("Item")
+        return _record(item) if item else None
+
+    def live_race_id(self, event_id: str, track_id: str) -> str | None:
+        item = self._call("get_item", TableName=self._table, Key=live_key(event_id, track_id),
+                          ConsistentRead=True).get("Item")
+        return item["race_id"]["S"] if item else None
+
+    def live_racer(self, event_id: str, track_id: str) -> str | None:
+        item = self._call("get_item", TableName=self._table, Key=live_key(event_id, track_id),
+                          ConsistentRead=True).get("Item")
+        return item.get("racer", {}).get("S") if item else None
+
+    def list_event(self, event_id: str, *, track_id: str | None = None, racer_sub: str | None = None,
+                   ) -> list[RaceRecord]:
+        # An occasional listing (race admin, recompute, max-runs check): a Query on the event's partition.
+        filters, values = [], {":pk": _s(f"EVENT#{event_id}"), ":prefix": _s("RACE#")}
+        if track_id is not None:
+            filters.append("track_id = :track")
+            values[":track"] = _s(track_id)
+        if racer_sub is not None:
+            filters.append("racer_sub = :sub")
+            values[":sub"] = _s(racer_sub)
+        kwargs: dict[str, Any] = {"TableName": self._table, "ConsistentRead": True,
+                                  "KeyConditionExpression": "pk = :pk AND begins_with(sk, :prefix)",
+                                  "ExpressionAttributeValues": values}
+        if filters:
+            kwargs["FilterExpression"] = " AND ".join(filters)
+        return [_record(item) for item in self._pages("query", kwargs)]
+
+    def list_racer(self, racer_sub: str) -> list[RaceRecord]:
+        """Every race of one racer, all events (their own "my races" page; occasional, so a filtered Scan)."""
+        kwargs = {"TableName": self._table, "FilterExpression": "racer_sub = :sub AND begins_with(sk, :prefix)",
+                  "ExpressionAttributeValues": {":sub": _s(racer_sub), ":prefix": _s("RACE#")}}
+        return [_record(item) for item in self._pages("scan", kwargs)]
+
+    def get_outcome(self, device_id: str, key: str) -> str | None:
+        item = self._call("get_item", TableName=self._table, Key=outcome_key(device_id, key),
+                          ConsistentRead=True).get("Item")
+        return item["outcome"]["S"] if item else None
+
+    # --- writes --------------------------------------------------------------------------------------------------
+
+    def create_live(self, record: RaceRecord) -> None:
+        """Store a new race and make it the live race of its track, or raise Conflict naming the race in the way."""
+        race = record.race
+        pointer = {**live_key(race.event_id, race.track_id), "race_id": _s(race.race_id),
+                   "racer": _s(race.racer.username)}
+        try:
+            self._client.transact_write_items(TransactItems=[
+                {"Put": {"TableName": self._table, "Item": _race_item(record),
+                         "ConditionExpression": "attribute_not_exists(pk)"}},
+                {"Put": {"TableName": self._table, "Item": pointer,
+                         "ConditionExpression": "attribute_not_exists(pk)"}},
+            ])
+        except ClientError as exc:
+            if error_code(exc) == "TransactionCanceledException":
+                racer = self.live_racer(race.event_id, race.track_id)
+                raise Conflict(f"Track {race.track_id} already has a live race"
+                               f"{f' ({racer})' if racer else ''}; submit or discard it first.",
+                               field="track_id") from exc
+            raise translate_common(exc, _SERVICE) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
+
+    def save(self, record: RaceRecord, expected_version: int) -> None:
+        condition, values = _version_condition(expected_version)
+        try:
+            self._client.put_item(TableName=self._table, Item=_race_item(record), ConditionExpression=condition,
+                                  ExpressionAttributeValues=values)
+        except ClientError as exc:
+            if error_code(exc) == "ConditionalCheckFailedException":
+                raise StaleRace(record.race.race_id) from exc
+            raise translate_common(exc, _SERVICE) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
+
+    def finalise(self, record: RaceRecord, expected_version: int) -> None:
+        """Save a submitted/discarded race and clear its track's live pointer, together."""
+        race = record.race
+        self._transact([
+            {"Put": {"TableName": self._table, "Item": _race_item(record),
+                     "ConditionExpression": "version = :expected",
+                     "ExpressionAttributeValues": {":expected": _n(expected_version)}}},
+            {"Delete": {"TableName": self._table, "Key": live_key(race.event_id, race.track_id),
+                        "ConditionExpression": "race_id = :rid",
+                        "ExpressionAttributeValues": {":rid": _s(race.race_id)}}},
+        ], race.race_id)
+
+    def save_with_outcome(self, record: RaceRecord | None, expected_version: int | None, device_id: str, key: str,
+                          outcome_json: str) -> bool:
+        """Store a strip outcome under its key, together with the race it changed (if any).
+
+        Returns False when the key was already stored (a concurrent retry won): the caller replays the stored one.
+        Raises StaleRace when the race changed meanwhile (the caller reloads and decides again).
+        """
+        items: list[dict[str, Any]] = [{"Put": {
+            "TableName": self._table, "Item": {**outcome_key(device_id, key), "outcome": _s(outcome_json)},
+            "ConditionExpression": "attribute_not_exists(pk)"}}]
+        if record is not None and expected_version is not None:
+            items.append({"Put": {"TableName": self._table, "Item": _race_item(record),
+                                  "ConditionExpression": "version = :expected",
+                                  "ExpressionAttributeValues": {":expected": _n(expected_version)}}})
+        try:
+            self._client.transact_write_items(TransactItems=items)
+        except ClientError as exc:
+            if error_code(exc) != "TransactionCanceledException":
+                raise translate_common(exc, _SERVICE) from exc
+            if self.get_outcome(device_id, key) is not None:
+                return False
+            raise StaleRace(record.race.race_id if record else key) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
+        return True
+
+    def delete(self, event_id: str, race_id: str) -> None:
+        self._call("delete_item", TableName=self._table, Key=race_key(event_id, race_id))
+
+    # --- plumbing ------------------------------------------------------------------------------------------------
+
+    def _transact(self, items: list[dict[str, Any]], race_id: str) -> None:
+        try:
+            self._client.transact_write_items(TransactItems=items)
+        except ClientError as exc:
+            if error_code(exc) == "TransactionCanceledException":
+                raise StaleRace(race_id) from exc
+            raise translate_common(exc, _SERVICE) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
+
+    def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
+        try:
+            return getattr(self._client, operation)(**kwargs)
+        except (ClientError, BotoCoreError) as exc:
+            raise translate_common(exc, _SERVICE) from exc
+
+    def _pages(self, operation: str, kwargs: dict[str, Any]) -> list[dict[str, Any]]:
+        items, start = [], None
+        while True:
+            page = self._call(operation, **kwargs, **({"ExclusiveStartKey": start} if start else {}))
+            items.extend(page.get("Items", []))
+            start = page.get("LastEvaluatedKey")
+            if not start:
+                return items

@@ -1,0 +1,164 @@
+"""Shared fixtures for the race, timing and leaderboard API tests (imported by those test modules, not a conftest).
+
+`race_app` is the app with the blueprints these tests drive (events, fleets, devices, races, timing, leaderboards)
+registered if app.py does not do it yet, and `device_verifier` installs the real device-credential verifier.
+`desk` is a staff-side driver over the Chalice test client with real Cognito tokens and real activated devices.
+`clock` replaces the server clock so manual lap times are exact.
+"""
+from __future__ import annotations
+
+import json
+import secrets
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+from chalice import Chalice
+from chalice.test import Client
+
+from tests.unit.conftest import Users, bearer
+
+
+def _app_with_race_routes() -> Chalice:
+    """The real app, with any of the blueprints these tests need that app.py does not register (yet) added.
+
+    A Chalice blueprint can be registered only once per process (registration consumes its route options), so the
+    tests add to the one app instead of building another, and skip what is already there.
+    """
+    from app import app
+    from chalicelib.routes import devices, events, fleets, leaderboards, races, timing
+
+    needed = ((events, "/api/events"), (fleets, "/api/fleets"), (devices, "/api/devices"),
+              (races, "/api/events/{event_id}/races"), (timing, "/api/timing/strip-events"),
+              (leaderboards, "/api/leaderboard/{event_id}"))
+    for module, marker in needed:
+        if marker not in app.routes:
+            app.register_blueprint(module.bp)
+    return app
+
+
+@pytest.fixture
+def race_app() -> Chalice:
+    return _app_with_race_routes()
+
+
+@pytest.fixture
+def device_verifier() -> Iterator[None]:
+    from chalicelib.auth import principals
+    from chalicelib.routes.devices import verify_device_credential
+
+    previous = principals._device_verifier
+    principals.set_device_credential_verifier(verify_device_credential)
+    yield
+    principals.set_device_credential_verifier(previous)
+
+
+@dataclass
+class FakeClock:
+    now: int = 1_800_000_000_000
+
+    def __call__(self) -> int:
+        return self.now
+
+    def advance(self, ms: int) -> int:
+        self.now += ms
+        return self.now
+
+
+@pytest.fixture
+def clock(monkeypatch: pytest.MonkeyPatch) -> FakeClock:
+    from chalicelib.routes import races, timing
+
+    fake = FakeClock()
+    monkeypatch.setattr(races, "now_ms", fake)
+    monkeypatch.setattr(timing, "now_ms", fake)
+    return fake
+
+
+@pytest.fixture
+def race_client(stack: Any, race_app: Chalice, device_verifier: None,
+                tmp_path_factory: pytest.TempPathFactory) -> Iterator[Client]:
+    with Client(race_app, project_dir=str(tmp_path_factory.mktemp("no-chalice-config"))) as test_client:
+        yield test_client
+
+
+@dataclass
+class Desk:
+    """Drives the API as staff (operator token) and as devices; every call returns the test client's response."""
+    client: Client
+    users: Users
+    tokens: dict[str, str] = field(default_factory=dict)
+
+    def token(self, username: str, *groups: str) -> str:
+        if username not in self.tokens:
+            self.tokens[username] = self.users.access_token(username, tuple(groups))
+        return self.tokens[username]
+
+    def call(self, method: str, path: str, body: Any = None, *, as_user: str = "op",
+             headers: dict[str, str] | None = None) -> Any:
+        all_headers = {**bearer(self.tokens[as_user]), "Content-Type": "application/json", **(headers or {})}
+        payload = b"" if body is None else json.dumps(body).encode()
+        return getattr(self.client.http, method.lower())(path, headers=all_headers, body=payload)
+
+    def anonymous_get(self, path: str, headers: dict[str, str] | None = None) -> Any:
+        return self.client.http.get(path, headers={"Accept": "application/json", **(headers or {})})
+
+    # --- setup -------------------------------------------------------------------------------------------------
+
+    def fleet(self, name: str = "Track fleet") -> str:
+        reply = self.call("POST", "/api/fleets", {"name": name})
+        assert reply.status_code == 201, reply.body
+        return json.loads(reply.body)["fleet_id"]
+
+    def event(self, *, tracks: list[dict[str, Any]] | None = None, name: str = "Summit Stockholm 2026",
+              **race_config: Any) -> dict[str, Any]:
+        body = {"name": name, "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
+                "race_config": race_config, "tracks": tracks or [{"track_id": "1"}]}
+        reply = self.call("POST", "/api/events", body)
+        assert reply.status_code == 201, reply.body
+        return json.loads(reply.body)
+
+    def device(self, fleet_id: str, hostname: str, kind: str = "timer") -> str:
+        """Activate a real device in `fleet_id`; returns its `Authorization: Device` credential."""
+        issued = self.call("POST", "/api/devices/activation-codes",
+                           {"fleet_id": fleet_id, "hostname": hostname, "device_kind": kind})
+        assert issued.status_code == 201, issued.body
+        exchange = {"code": json.loads(issued.body)["code"], "hostname": hostname, "device_kind": kind}
+        # Anonymous POST: pass the double-submit CSRF check as any non-browser client can (same token twice).
+        token = secrets.token_urlsafe(32)
+        reply = self.client.http.post("/api/devices/activate", body=json.dumps(exchange).encode(), headers={
+            "Content-Type": "application/json", "Accept": "application/json", "Cookie": f"drem_csrf={token}",
+            "X-CSRF-Token": token})
+        assert reply.status_code in (200, 201), reply.body
+        return json.loads(reply.body)["credential"]
+
+    # --- racing ------------------------------------------------------------------------------------------------
+
+    def create_race(self, event_id: str, racer: str, track_id: str = "1", **extra: Any) -> Any:
+        return self.call("POST", f"/api/events/{event_id}/races", {"track_id": track_id, "racer_username": racer,
+                                                                   **extra})
+
+    def command(self, event_id: str, race_id: str, kind: str, **extra: Any) -> Any:
+        return self.call("POST", f"/api/events/{event_id}/races/{race_id}/commands", {"kind": kind, **extra})
+
+    def ok(self, reply: Any, status: int = 200) -> dict[str, Any]:
+        assert reply.status_code == status, reply.body
+        return json.loads(reply.body)
+
+    def strip(self, credential: str, event_id: str, timestamp_ms: int, key: str, *, sensor: int = 17,
+              track_id: str = "1") -> Any:
+        body = {"event_id": event_id, "track_id": track_id, "timestamp_ms": timestamp_ms, "sensor": sensor,
+                "idempotency_key": key}
+        return self.client.http.post("/api/timing/strip-events", body=json.dumps(body).encode(), headers={
+            "Authorization": f"Device {credential}", "Content-Type": "application/json", "Accept": "application/json"})
+
+    def board(self, event_id: str, track: str = "1") -> dict[str, Any]:
+        return self.ok(self.anonymous_get(f"/api/leaderboard/{event_id}?track={track}"))
+
+
+@pytest.fixture
+def desk(race_client: Client, users: Users) -> Desk:
+    desk = Desk(race_client, users)
+    desk.token("op", "operator")
+    return desk

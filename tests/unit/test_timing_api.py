@@ -1,0 +1,103 @@
+"""Timing-strip posts from real activated devices: the first crossing starts the race, laps come from device
+timestamps, a retried post (same idempotency key) gets the same answer and never a second lap, debounce, and only
+devices in the track's fleet may post."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+
+pytestmark = pytest.mark.unit
+
+T0 = 1_700_000_000_000  # device clock
+
+
+@pytest.fixture
+def timed_track(desk: Desk, clock: FakeClock) -> tuple[str, str, str]:
+    """(event id, race id, timer credential): a live race on track 1, whose fleet holds the timer."""
+    fleet = desk.fleet()
+    credential = desk.device(fleet, "timer-1")
+    desk.users.create("tia", ("racer",))
+    eid = desk.event(tracks=[{"track_id": "1", "fleet_id": fleet}])["event_id"]
+    rid = desk.ok(desk.create_race(eid, "tia"), 201)["race_id"]
+    return eid, rid, credential
+
+
+def _race(desk: Desk, eid: str, rid: str) -> dict:
+    return desk.ok(desk.call("GET", f"/api/events/{eid}/races/{rid}"))
+
+
+def test_first_crossing_starts_and_laps_come_from_device_timestamps(desk: Desk, clock: FakeClock,
+                                                                   timed_track) -> None:
+    eid, rid, timer = timed_track
+    start = desk.ok(desk.strip(timer, eid, T0, "k1"))
+    assert (start["action"], start["status"], start["race_id"]) == ("start", "RUNNING", rid)
+    clock.advance(9_000)  # the server clock does not matter for timer laps
+    lap = desk.ok(desk.strip(timer, eid, T0 + 10_250, "k2"))
+    assert lap["action"] == "lap" and lap["lap"]["time_ms"] == 10_250 and lap["lap"]["source"] == "timer"
+    desk.ok(desk.strip(timer, eid, T0 + 19_000, "k3", sensor=27))
+    race = _race(desk, eid, rid)
+    assert [l["time_ms"] for l in race["laps"]] == [10_250, 8_750]
+    assert desk.board(eid)["entries"][0]["fastest_lap_ms"] == 8_750
+
+
+def test_repeated_idempotency_key_replays_the_answer_without_a_second_lap(desk: Desk, clock: FakeClock,
+                                                                         timed_track) -> None:
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "a"))
+    first = desk.ok(desk.strip(timer, eid, T0 + 11_000, "b"))
+    again = desk.ok(desk.strip(timer, eid, T0 + 11_000, "b"))
+    assert again == {**first, "replayed": True} and first["replayed"] is False
+    assert len(_race(desk, eid, rid)["laps"]) == 1
+    # Even a retry with a different body is answered from the store: the key is what identifies the crossing.
+    assert desk.ok(desk.strip(timer, eid, T0 + 30_000, "b"))["lap"]["time_ms"] == 11_000
+    assert len(_race(desk, eid, rid)["laps"]) == 1
+
+
+def test_debounce_and_both_strips_are_one_crossing(desk: Desk, clock: FakeClock, timed_track) -> None:
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "s", sensor=17))
+    bounce = desk.ok(desk.strip(timer, eid, T0 + 500, "s-bounce", sensor=17))
+    assert (bounce["action"], bounce["reason"]) == ("ignore", "sensor_debounce")
+    other_strip = desk.ok(desk.strip(timer, eid, T0 + 400, "s-other", sensor=27))
+    assert (other_strip["action"], other_strip["reason"]) == ("ignore", "same_crossing")
+    lap = desk.ok(desk.strip(timer, eid, T0 + 12_000, "lap", sensor=17))
+    assert lap["lap"]["time_ms"] == 12_000
+    assert len(_race(desk, eid, rid)["laps"]) == 1
+
+
+def test_crossing_while_paused_resumes_and_after_end_is_ignored(desk: Desk, clock: FakeClock, timed_track) -> None:
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "1"))
+    desk.ok(desk.command(eid, rid, "pause"))
+    assert desk.ok(desk.strip(timer, eid, T0 + 20_000, "2"))["action"] == "resume"
+    desk.ok(desk.command(eid, rid, "end"))
+    late = desk.ok(desk.strip(timer, eid, T0 + 40_000, "3"))
+    assert (late["action"], late["reason"]) == ("ignore", "race_not_live")
+    desk.ok(desk.command(eid, rid, "submit"))
+    after = desk.ok(desk.strip(timer, eid, T0 + 60_000, "4"))
+    assert (after["action"], after["reason"], after["race_id"]) == ("ignore", "no_live_race", None)
+
+
+def test_devices_outside_the_track_fleet_are_refused(desk: Desk, clock: FakeClock, timed_track) -> None:
+    eid, _rid, _timer = timed_track
+    stranger = desk.device(desk.fleet("Other fleet"), "timer-2")
+    refused = desk.strip(stranger, eid, T0, "x")
+    assert refused.status_code == 403
+    assert "not in the fleet of track 1" in json.loads(refused.body)["error"]["message"]
+    bogus = desk.strip("dev-unknown.secret", eid, T0, "x")
+    assert bogus.status_code == 401
+    desk.token("ursula", "racer")
+    as_user = desk.call("POST", "/api/timing/strip-events", {"event_id": eid, "track_id": "1", "timestamp_ms": T0,
+                                                             "sensor": 17, "idempotency_key": "x"}, as_user="ursula")
+    assert as_user.status_code == 403
+
+
+def test_bad_strip_post_names_the_field(desk: Desk, clock: FakeClock, timed_track) -> None:
+    eid, _rid, timer = timed_track
+    reply = desk.client.http.post("/api/timing/strip-events", body=json.dumps(
+        {"event_id": eid, "track_id": "1", "timestamp_ms": -5, "sensor": 17, "idempotency_key": "k"}).encode(),
+        headers={"Authorization": f"Device {timer}", "Content-Type": "application/json"})
+    assert reply.status_code == 400 and json.loads(reply.body)["error"]["field"] == "timestamp_ms"
