@@ -1,0 +1,144 @@
+"""JSON API for cars and timers.
+
+Staff: activation codes, the device list/status board, moving devices between fleets, deregistering (admins only),
+queueing commands and reading their outcome. Devices (`Authorization: Device <id>.<secret>`): activate (public: the
+code is the credential), heartbeat, rotate their own secret, fetch and acknowledge their own commands. Every `self`
+route acts on the caller's own device id, taken from its verified credential.
+
+`verify_device_credential` is what `chalicelib.auth.principals.set_device_credential_verifier` must be given.
+"""
+from __future__ import annotations
+
+import time
+from typing import TypeVar
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel
+
+from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
+from chalicelib.auth.principals import Device, Principal, User
+from chalicelib.domain.activation import ActivationCodeRequest, ActivationExchange, ActivationService
+from chalicelib.domain.devices import CommandAck, CommandRequest, DeviceService, MoveToFleet, Telemetry
+from chalicelib.domain.errors import InvalidInput
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.devices import DynamoDeviceStore
+from chalicelib.storage.fleets import DynamoFleetStore
+
+bp = Blueprint(__name__)
+
+DEVICE_STAFF = {ADMIN, OPERATOR}
+DEVICES = {CAR, TIMER}
+
+
+def now_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
+def _stores() -> tuple[DynamoDeviceStore, DynamoFleetStore]:
+    table, dynamodb = get_settings().table("fleet"), clients.dynamodb()
+    return DynamoDeviceStore(dynamodb, table), DynamoFleetStore(dynamodb, table)
+
+
+def device_service() -> DeviceService:
+    return DeviceService(*_stores(), clock_ms=now_ms)
+
+
+def activation_service() -> ActivationService:
+    return ActivationService(*_stores(), clock_ms=now_ms)
+
+
+def verify_device_credential(credential: str) -> Device:
+    return activation_service().verify(credential)
+
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+def _body(model: type[ModelT]) -> ModelT:
+    return model.model_validate_json(bp.current_request.raw_body or b"{}")
+
+
+# --- staff ---
+@route(bp, "/api/devices/activation-codes", methods=["POST"], allow=DEVICE_STAFF)
+def create_activation_code(principal: User) -> Response:
+    issued = activation_service().issue_code(principal, _body(ActivationCodeRequest))
+    return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
+
+
+@route(bp, "/api/devices", methods=["GET"], allow=DEVICE_STAFF)
+def list_devices(principal: User) -> dict:
+    query = bp.current_request.query_params or {}
+    devices = device_service().list_devices(online=_flag(query.get("online")), fleet_id=query.get("fleet_id"))
+    return {"devices": [d.model_dump(mode="json") for d in devices]}
+
+
+@route(bp, "/api/devices/{device_id}", methods=["GET"], allow=DEVICE_STAFF)
+def get_device(principal: User, device_id: str) -> dict:
+    return device_service().get_device(device_id).model_dump(mode="json")
+
+
+@route(bp, "/api/devices/{device_id}/fleet", methods=["PUT"], allow=DEVICE_STAFF)
+def move_device(principal: User, device_id: str) -> dict:
+    move = _body(MoveToFleet)
+    return device_service().move_to_fleet(device_id, move.fleet_id).model_dump(mode="json")
+
+
+@route(bp, "/api/devices/{device_id}", methods=["DELETE"], allow={ADMIN})
+def deregister_device(principal: User, device_id: str) -> Response:
+    device_service().deregister(device_id)
+    return Response(body="", status_code=204)
+
+
+@route(bp, "/api/devices/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF)
+def queue_command(principal: User, device_id: str) -> Response:
+    command = device_service().queue_command(principal, device_id, _body(CommandRequest))
+    return Response(command.model_dump(mode="json"), status_code=201)
+
+
+@route(bp, "/api/devices/{device_id}/commands", methods=["GET"], allow=DEVICE_STAFF)
+def device_commands(principal: User, device_id: str) -> dict:
+    return {"commands": [c.model_dump(mode="json") for c in device_service().device_commands(device_id)]}
+
+
+# --- the device itself ---
+@route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC)
+def activate_device(principal: Principal) -> Response:
+    issued = activation_service().activate(_body(ActivationExchange))
+    return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
+
+
+@route(bp, "/api/devices/self", methods=["GET"], allow=DEVICES)
+def own_device(principal: Device) -> dict:
+    return device_service().get_device(principal.device_id).model_dump(mode="json")
+
+
+@route(bp, "/api/devices/self/rotate", methods=["POST"], allow=DEVICES)
+def rotate_credential(principal: Device) -> Response:
+    issued = activation_service().rotate(principal)
+    return Response(issued.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
+
+
+@route(bp, "/api/devices/self/heartbeat", methods=["POST"], allow=DEVICES)
+def heartbeat(principal: Device) -> dict:
+    return device_service().heartbeat(principal, _body(Telemetry)).model_dump(mode="json")
+
+
+@route(bp, "/api/devices/self/commands", methods=["GET"], allow=DEVICES)
+def pending_commands(principal: Device) -> dict:
+    return {"commands": [c.model_dump(mode="json") for c in device_service().pending_commands(principal)]}
+
+
+@route(bp, "/api/devices/self/commands/{command_id}/ack", methods=["POST"], allow=DEVICES)
+def acknowledge_command(principal: Device, command_id: str) -> dict:
+    return device_service().acknowledge(principal, command_id, _body(CommandAck)).model_dump(mode="json")
+
+
+def _flag(value: str | None) -> bool | None:
+    if value is None or value == "":
+        return None
+    if value.lower() in {"true", "1", "yes"}:
+        return True
+    if value.lower() in {"false", "0", "no"}:
+        return False
+    raise InvalidInput("online must be true or false.", field="online")

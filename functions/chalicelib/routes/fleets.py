@@ -1,0 +1,52 @@
+"""JSON API for fleets (admins and operators)."""
+from __future__ import annotations
+
+import time
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.fleets import FleetInput, FleetService
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.devices import DynamoDeviceStore
+from chalicelib.storage.fleets import DynamoFleetStore
+
+bp = Blueprint(__name__)
+
+FLEET_STAFF = {ADMIN, OPERATOR}
+
+
+def fleet_service() -> FleetService:
+    table, dynamodb = get_settings().table("fleet"), clients.dynamodb()
+    return FleetService(DynamoFleetStore(dynamodb, table), DynamoDeviceStore(dynamodb, table),
+                        lambda: time.time_ns() // 1_000_000)
+
+
+@route(bp, "/api/fleets", methods=["GET"], allow=FLEET_STAFF)
+def list_fleets(principal: User) -> dict:
+    return {"fleets": [f.model_dump(mode="json") for f in fleet_service().list_fleets()]}
+
+
+@route(bp, "/api/fleets", methods=["POST"], allow=FLEET_STAFF)
+def create_fleet(principal: User) -> Response:
+    data = FleetInput.model_validate_json(bp.current_request.raw_body or b"{}")
+    return Response(fleet_service().create_fleet(principal, data).model_dump(mode="json"), status_code=201)
+
+
+@route(bp, "/api/fleets/{fleet_id}", methods=["GET"], allow=FLEET_STAFF)
+def get_fleet(principal: User, fleet_id: str) -> dict:
+    return fleet_service().get_fleet(fleet_id).model_dump(mode="json")
+
+
+@route(bp, "/api/fleets/{fleet_id}", methods=["PUT"], allow=FLEET_STAFF)
+def update_fleet(principal: User, fleet_id: str) -> dict:
+    data = FleetInput.model_validate_json(bp.current_request.raw_body or b"{}")
+    return fleet_service().update_fleet(principal, fleet_id, data).model_dump(mode="json")
+
+
+@route(bp, "/api/fleets/{fleet_id}", methods=["DELETE"], allow=FLEET_STAFF)
+def delete_fleet(principal: User, fleet_id: str) -> Response:
+    fleet_service().delete_fleet(principal, fleet_id)
+    return Response(body="", status_code=204)

@@ -1,0 +1,119 @@
+"""A small HTTP client for the drem API, shared by the CLI subcommands (and HTTP tests) that act like any API client.
+
+    parser: add_connection_arguments(parser)   → --api, --token, --username, --password
+    run:    api = ApiClient.from_args(args); api.get("/api/events"); api.post("/api/fleets", json={...})
+
+The token comes from --token (or $DREM_TOKEN); otherwise the client signs in through the app's own sign-in form with
+--username/--password (or $DREM_USERNAME/$DREM_PASSWORD) and sends the access token it is issued as a Bearer token,
+so the same client works against a laptop stack or a deployed API.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from typing import Any
+
+import requests
+
+DEFAULT_API = "http://127.0.0.1:8000"
+SESSION_COOKIE = "drem_session"
+CSRF_COOKIE = "drem_csrf"
+
+
+class ApiError(Exception):
+    """The API refused a request (or could not be reached); the message is the API's own explanation."""
+
+    def __init__(self, status: int, message: str, field: str | None = None) -> None:
+        super().__init__(f"{message} (HTTP {status}" + (f", field {field})" if field else ")") if status else message)
+        self.status = status
+        self.message = message
+        self.field = field
+
+
+def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("connection")
+    group.add_argument("--api", default=os.environ.get("DREM_API", DEFAULT_API),
+                       help=f"base URL of the drem API (default {DEFAULT_API}, or $DREM_API)")
+    group.add_argument("--token", default=os.environ.get("DREM_TOKEN"), help="an access token (or $DREM_TOKEN)")
+    group.add_argument("--username", default=os.environ.get("DREM_USERNAME"), help="sign in as (or $DREM_USERNAME)")
+    group.add_argument("--password", default=os.environ.get("DREM_PASSWORD"), help="password (or $DREM_PASSWORD)")
+
+
+# The same, under the name some modules use.
+add_api_arguments = add_connection_arguments
+
+
+class ApiClient:
+    def __init__(self, base_url: str = DEFAULT_API, token: str | None = None, *, timeout_s: float = 30.0) -> None:
+        self.base_url = base_url.rstrip("/")
+        self.token = token
+        self.timeout_s = timeout_s
+        self._http = requests.Session()
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> ApiClient:
+        client = cls(args.api, getattr(args, "token", None))
+        if not client.token:
+            if not (args.username and args.password):
+                raise ApiError(0, "give --token, or --username and --password (or $DREM_USERNAME/$DREM_PASSWORD)")
+            client.login(args.username, args.password)
+        return client
+
+    def login(self, username: str, password: str) -> str:
+        """Sign in through the web form (GET /login sets the CSRF cookie, POST checks it); keep the access token."""
+        try:
+            page = self._http.get(f"{self.base_url}/login", timeout=self.timeout_s)
+            csrf = page.cookies.get(CSRF_COOKIE) or self._http.cookies.get(CSRF_COOKIE) or ""
+            reply = self._http.post(f"{self.base_url}/login", timeout=self.timeout_s, allow_redirects=False,
+                                    data={"username": username, "password": password, "csrf_token": csrf, "next": "/"},
+                                    headers={"Accept": "text/html"})
+        except requests.RequestException as exc:
+            raise _unreachable(self.base_url, exc) from None
+        token = reply.cookies.get(SESSION_COOKIE)
+        # Only the token is kept: later calls are Bearer calls, not a browser session.
+        self._http.cookies.clear()
+        if reply.status_code != 303 or not token:
+            raise ApiError(401, f"could not sign in as {username!r}: wrong username or password, or a new password "
+                                "is needed (sign in once in the browser)")
+        self.token = token
+        return token
+
+    # Both names are in use by callers.
+    sign_in = login
+
+    def get(self, path: str, params: dict[str, Any] | None = None) -> Any:
+        return self.request("GET", path, params=params)
+
+    def post(self, path: str, json: Any = None, params: dict[str, Any] | None = None) -> Any:
+        return self.request("POST", path, json={} if json is None else json, params=params)
+
+    def put(self, path: str, json: Any = None) -> Any:
+        return self.request("PUT", path, json={} if json is None else json)
+
+    def delete(self, path: str) -> Any:
+        return self.request("DELETE", path)
+
+    def request(self, method: str, path: str, *, json: Any = None, params: dict[str, Any] | None = None) -> Any:
+        headers = {"Accept": "application/json"}
+        if self.token:
+            headers["Authorization"] = f"Bearer {self.token}"
+        try:
+            reply = self._http.request(method, f"{self.base_url}{path}", json=json, params=params, headers=headers,
+                                       timeout=self.timeout_s)
+        except requests.RequestException as exc:
+            raise _unreachable(self.base_url, exc) from None
+        if reply.status_code >= 400:
+            raise _api_error(reply)
+        return reply.json() if reply.content else None
+
+
+def _api_error(reply: requests.Response) -> ApiError:
+    try:
+        error = reply.json().get("error", {})
+    except (ValueError, AttributeError):
+        error = {}
+    return ApiError(reply.status_code, error.get("message") or reply.reason or "request failed", error.get("field"))
+
+
+def _unreachable(base_url: str, exc: Exception) -> ApiError:
+    return ApiError(0, f"cannot reach {base_url} ({exc.__class__.__name__}); is `drem up` running?")

@@ -1,0 +1,148 @@
+"""Car/timer activation and device credentials: one-time codes, binding, expiry, rotation and deregistration."""
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from tests.unit.device_api import Api, api, f2_app  # noqa: F401  (fixtures)
+
+pytestmark = pytest.mark.unit
+
+
+def activate_with(api: Api, code: str, hostname: str = "car-01", kind: str = "car") -> Any:
+    return api.post("/api/devices/activate", {"code": code, "hostname": hostname, "device_kind": kind}, as_=None)
+
+
+def test_code_is_single_use_and_gives_a_working_credential(api: Api) -> None:
+    fleet_id = api.fleet()
+    code = api.activation_code(fleet_id, "car-01")
+    first = activate_with(api, code)
+    assert first.status_code == 201
+    assert first.data["fleet_id"] == fleet_id
+    credential = first.data["credential"]
+    assert credential.startswith(first.data["device_id"] + ".")
+
+    again = activate_with(api, code)
+    assert again.status_code == 400
+    assert again.data["error"]["field"] == "code"
+    assert "already been used" in again.data["error"]["message"]
+
+    me = api.get("/api/devices/self", device=credential)
+    assert me.status_code == 200
+    assert (me.data["device_id"], me.data["kind"], me.data["hostname"]) == (first.data["device_id"], "car", "car-01")
+    # Exactly one device came of it.
+    assert [d["hostname"] for d in api.get("/api/devices").data["devices"]] == ["car-01"]
+
+
+def test_code_is_typed_loosely_but_only_the_hash_is_stored(api: Api, aws_clients: Any) -> None:
+    from chalicelib.settings import get_settings
+
+    code = api.activation_code(api.fleet(), "car-01")
+    items = aws_clients.dynamodb.scan(TableName=get_settings().table("fleet"))["Items"]
+    assert not any(code.replace("-", "") in str(item) or code in str(item) for item in items)
+    assert activate_with(api, code.lower().replace("-", " ")).status_code == 201
+
+
+def test_code_bound_to_kind_and_hostname_and_not_spent_by_a_mismatch(api: Api) -> None:
+    code = api.activation_code(api.fleet(), "timer-a", kind="timer")
+    wrong_kind = activate_with(api, code, hostname="timer-a", kind="car")
+    assert wrong_kind.status_code == 400
+    assert wrong_kind.data["error"]["field"] == "device_kind"
+    wrong_host = activate_with(api, code, hostname="timer-b", kind="timer")
+    assert wrong_host.status_code == 400
+    assert wrong_host.data["error"]["field"] == "hostname"
+    right = activate_with(api, code, hostname="timer-a", kind="timer")
+    assert right.status_code == 201
+    assert right.data["device_kind"] == "timer"
+
+
+def test_expired_code_is_refused(api: Api, monkeypatch: pytest.MonkeyPatch) -> None:
+    from chalicelib.routes import devices
+
+    code = api.activation_code(api.fleet(), "car-01", ttl_minutes=5)
+    issued_at = devices.now_ms()
+    monkeypatch.setattr(devices, "now_ms", lambda: issued_at + 5 * 60_000 + 1_000)
+    expired = activate_with(api, code)
+    assert expired.status_code == 400
+    assert "expired" in expired.data["error"]["message"]
+    assert api.get("/api/devices").data["devices"] == []
+
+
+def test_code_request_is_validated(api: Api) -> None:
+    fleet_id = api.fleet()
+    codes = "/api/devices/activation-codes"
+    bad_kind = api.post(codes, {"fleet_id": fleet_id, "hostname": "c1", "device_kind": "drone"})
+    assert bad_kind.data["error"]["field"] == "device_kind"
+    bad_host = api.post("/api/devices/activation-codes", {"fleet_id": fleet_id, "hostname": "-x", "device_kind": "car"})
+    assert bad_host.data["error"]["field"] == "hostname"
+    no_fleet = api.post("/api/devices/activation-codes", {"fleet_id": "nope", "hostname": "c1", "device_kind": "car"})
+    assert (no_fleet.status_code, no_fleet.data["error"]["field"]) == (400, "fleet_id")
+    too_long = api.post("/api/devices/activation-codes",
+                        {"fleet_id": fleet_id, "hostname": "c1", "device_kind": "car", "ttl_minutes": 100_000})
+    assert too_long.data["error"]["field"] == "ttl_minutes"
+    racer = api.post("/api/devices/activation-codes", {"fleet_id": fleet_id, "hostname": "c1", "device_kind": "car"},
+                     as_="racer")
+    assert racer.status_code == 403
+
+
+def test_redeeming_is_conditional_so_a_race_for_one_code_registers_one_device(api: Api) -> None:
+    """Two devices that both read the code before either redeemed it: only the first transaction goes through."""
+    from chalicelib.domain.activation import ActivationExchange, normalise_code, sha256_hex
+    from chalicelib.domain.devices import DeviceRecord
+    from chalicelib.routes import devices
+
+    code = api.activation_code(api.fleet(), "car-01")
+    store, _ = devices._stores()
+    code_hash = sha256_hex(normalise_code(code))
+    assert store.get_activation(code_hash) is not None
+    exchange = ActivationExchange(code=code, hostname="car-01", device_kind="car")
+
+    def record(device_id: str) -> DeviceRecord:
+        return DeviceRecord(device_id=device_id, kind="car", hostname="car-01", secret_hash="0" * 64,
+                            registered_at_ms=devices.now_ms())
+
+    assert store.redeem(code_hash, exchange, devices.now_ms(), record("car-first")) is True
+    assert store.redeem(code_hash, exchange, devices.now_ms(), record("car-second")) is False
+    assert store.get_device("car-first") is not None
+    assert store.get_device("car-second") is None
+
+
+def test_rotation_invalidates_the_old_secret_at_once(api: Api) -> None:
+    old = api.activate(api.fleet(), "car-01")["credential"]
+    rotated = api.post("/api/devices/self/rotate", device=old)
+    assert rotated.status_code == 200
+    new = rotated.data["credential"]
+    assert new != old and new.split(".")[0] == old.split(".")[0]
+    assert api.get("/api/devices/self", device=old).status_code == 401
+    assert api.get("/api/devices/self", device=new).status_code == 200
+
+
+def test_deregistration_is_admin_only_and_stops_the_device_at_once(api: Api) -> None:
+    device = api.activate(api.fleet(), "car-01")
+    device_id, credential = device["device_id"], device["credential"]
+    assert api.post("/api/devices/self/heartbeat", {}, device=credential).status_code == 200
+
+    assert api.delete(f"/api/devices/{device_id}", as_="operator").status_code == 403
+    assert api.delete(f"/api/devices/{device_id}", as_="admin").status_code == 204
+    assert api.post("/api/devices/self/heartbeat", {}, device=credential).status_code == 401
+    assert api.get("/api/devices/self/commands", device=credential).status_code == 401
+    assert api.get("/api/devices").data["devices"] == []
+    assert api.get(f"/api/devices/{device_id}").status_code == 404
+
+
+@pytest.mark.parametrize("credential", ["", "no-dot", "car-unknown.secret", ".secret", "car-x."])
+def test_malformed_or_unknown_device_credentials_are_refused(api: Api, credential: str) -> None:
+    assert api.get("/api/devices/self", device=credential).status_code == 401
+
+
+def test_forged_secret_for_a_real_device_is_refused(api: Api) -> None:
+    device = api.activate(api.fleet(), "car-01")
+    assert api.get("/api/devices/self", device=f"{device['device_id']}.guessed-secret").status_code == 401
+
+
+def test_users_cannot_call_device_routes_and_devices_cannot_call_staff_routes(api: Api) -> None:
+    credential = api.activate(api.fleet(), "car-01")["credential"]
+    assert api.post("/api/devices/self/heartbeat", {}, as_="admin").status_code == 403
+    assert api.get("/api/devices", device=credential).status_code == 403
+    assert api.post("/api/events", {}, device=credential).status_code == 403
