@@ -15,8 +15,20 @@ and calls the view with the Principal first and the URL parameters as keywords. 
 are mapped there too. Whether the caller may touch a particular object (racer A vs racer B) is the service's
 decision: see `chalicelib.domain.ownership`.
 
-`declared_routes(app)` lists every (path, method, allow) for the authorization-matrix test; `undeclared_routes(app)`
-lists any route registered without this wrapper.
+Optional keywords document the route (for `chalicelib.openapi`) and validate its input:
+
+    @route(bp, "/api/events", methods=["POST"], allow={ADMIN, OPERATOR}, body=NewEvent, response=Event,
+           status_code=201, summary="Create an event", tags=("events",))
+    def create_event(principal: User, body: NewEvent) -> Response: ...
+
+`body=Model` validates the JSON (or urlencoded form) body into Model after the caller is authorised (invalid → 400
+naming the field) and passes it as keyword `body`; `query=Model` does the same for the query string → keyword
+`query`. `response` (a model or `list[Model]`), `status_code` (documented success status, default 200),
+`conditional` (answers 304 to `If-None-Match`), `summary` (default: the view docstring's first line) and `tags`
+are documentation only.
+
+`declared_routes(app)` lists every (path, method, allow, ...) for the authorization-matrix test and the OpenAPI
+document; `undeclared_routes(app)` lists any route registered without this wrapper.
 """
 from __future__ import annotations
 
@@ -29,6 +41,7 @@ from urllib.parse import parse_qs
 
 from chalice import Blueprint, Chalice, Response
 from chalice.app import Request
+from pydantic import BaseModel
 
 from chalicelib import http_errors, logs
 from chalicelib.auth import csrf
@@ -94,9 +107,23 @@ def as_allow(allow: Allow | Iterable[Role]) -> Allow:
 
 
 @dataclass(frozen=True)
+class RouteDocs:
+    """What a route says about its input and output (documentation; `body`/`query` are also validated)."""
+    body: type[BaseModel] | None = None
+    query: type[BaseModel] | None = None
+    response: Any = None
+    status_code: int = 200
+    conditional: bool = False
+    summary: str = ""
+    description: str = ""
+    tags: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class RouteAccess:
     allow: Allow
     view_name: str
+    docs: RouteDocs = RouteDocs()
 
 
 @dataclass(frozen=True)
@@ -105,6 +132,7 @@ class DeclaredRoute:
     method: str
     allow: Allow
     view_name: str
+    docs: RouteDocs = RouteDocs()
 
 
 @dataclass
@@ -118,18 +146,28 @@ class RequestScope:
 
 
 def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], methods: Iterable[str] = ("GET",),
-          content_types: list[str] | None = None, **route_kwargs: Any) -> Callable[[Callable[..., Any]], Callable]:
+          content_types: list[str] | None = None, body: type[BaseModel] | None = None,
+          query: type[BaseModel] | None = None, response: Any = None, status_code: int = 200,
+          conditional: bool = False, summary: str | None = None, tags: Iterable[str] = (),
+          **route_kwargs: Any) -> Callable[[Callable[..., Any]], Callable]:
     declared = as_allow(allow)
     methods = [m.upper() for m in methods]
     if content_types is None and set(methods) & csrf.STATE_CHANGING_METHODS:
         content_types = FORM_CONTENT_TYPES
+    for name, model in (("body", body), ("query", query)):
+        if model is not None and not (isinstance(model, type) and issubclass(model, BaseModel)):
+            raise TypeError(f"{name}= must be a pydantic model class, not {model!r}")
 
     def decorator(view: Callable[..., Any]) -> Callable[..., Any]:
         @functools.wraps(view)
         def handler(**params: Any) -> Response:
-            return _handle(bp.current_request, declared, view, params)
+            return _handle(bp.current_request, declared, view, params, docs)
 
-        access = RouteAccess(declared, f"{view.__module__}.{view.__qualname__}")
+        doc_lines = (view.__doc__ or "").strip().splitlines()
+        docs = RouteDocs(body=body, query=query, response=response, status_code=status_code,
+                         conditional=conditional, summary=summary or _summary_from(doc_lines, view.__name__),
+                         description="\n".join(line.strip() for line in doc_lines[1:]).strip(), tags=tuple(tags))
+        access = RouteAccess(declared, f"{view.__module__}.{view.__qualname__}", docs)
         handler.drem_access = access  # type: ignore[attr-defined]
         extra = {"content_types": content_types} if content_types else {}
         bp.route(path, methods=methods, **extra, **route_kwargs)(handler)
@@ -144,7 +182,7 @@ def declared_routes(app: Chalice) -> list[DeclaredRoute]:
         for method, entry in sorted(by_method.items()):
             access: RouteAccess | None = getattr(entry.view_function, "drem_access", None)
             if access is not None:
-                found.append(DeclaredRoute(path, method, access.allow, access.view_name))
+                found.append(DeclaredRoute(path, method, access.allow, access.view_name, access.docs))
     return found
 
 
@@ -174,7 +212,28 @@ def current_scope() -> RequestScope:
 _local = threading.local()
 
 
-def _handle(request: Request, declared: Allow, view: Callable[..., Any], params: dict[str, Any]) -> Response:
+def _summary_from(doc_lines: list[str], view_name: str) -> str:
+    if doc_lines and doc_lines[0].strip():
+        return doc_lines[0].strip()
+    return view_name.replace("_", " ").strip().capitalize()
+
+
+def _validated_input(request: Request, docs: RouteDocs | None) -> dict[str, BaseModel]:
+    """The declared body/query models, validated (a pydantic ValidationError → 400 naming the field)."""
+    if docs is None:
+        return {}
+    found: dict[str, BaseModel] = {}
+    if docs.body is not None:
+        form = form_fields(request)
+        found["body"] = (docs.body.model_validate(form) if form
+                         else docs.body.model_validate_json(request.raw_body or b"{}"))
+    if docs.query is not None:
+        found["query"] = docs.query.model_validate(dict(request.query_params or {}))
+    return found
+
+
+def _handle(request: Request, declared: Allow, view: Callable[..., Any], params: dict[str, Any],
+            docs: RouteDocs | None = None) -> Response:
     settings = get_settings()
     cookies = request_cookies(request.headers)
     scope = RequestScope(request=request, csrf_token=cookies.get(CSRF_COOKIE, ""))
@@ -193,7 +252,7 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         declared.decide(caller.principal)
         if request.method in csrf.STATE_CHANGING_METHODS and caller.via != "header":
             csrf.require_matching_token(cookies.get(CSRF_COOKIE), request.headers, form_fields(request))
-        response = view(caller.principal, **params)
+        response = view(caller.principal, **params, **_validated_input(request, docs))
     except Exception as exc:  # every failure, expected or not, leaves through the one error→HTTP module
         response = http_errors.to_response(exc, request)
     finally:

@@ -1,0 +1,170 @@
+"""THE authorization matrix: for every route, who may call it — one entry per (METHOD, path) of the app.
+
+Outcomes per principal: "allow" (answer is not 401/403), "deny" (401 or 403), "deny404" (401, 403 or 404: the route
+hides other people's objects). A route added to the app without an entry here fails test_authz_matrix, and so does
+an entry for a route that no longer exists.
+
+`build(world, caller)` prepares what one call needs (objects owned by someone, path parameters, a body) and runs for
+every call, so each principal meets a fresh object. `consumes_caller` runs the call as a freshly minted principal of
+the same kind (the call deletes the account or rotates the secret it is made with).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from tests.unit.authz_principals import PRINCIPALS, World
+
+USERS = ("racer_a", "racer_b", "registration", "commentator", "operator", "admin")
+RACERS = ("racer_a", "racer_b")
+CARS = ("car_x", "car_y")
+STAFF = ("registration", "commentator", "operator", "admin")
+EVERYONE = PRINCIPALS
+
+
+def allow(*who: str, deny404: tuple[str, ...] = ()) -> dict[str, str]:
+    unknown = (set(who) | set(deny404)) - set(PRINCIPALS)
+    assert not unknown, f"unknown principals {unknown}"
+    return {p: "allow" if p in who else "deny404" if p in deny404 else "deny" for p in PRINCIPALS}
+
+
+@dataclass(frozen=True)
+class Call:
+    params: dict[str, str] = field(default_factory=dict)
+    body: Any = None
+
+
+@dataclass(frozen=True)
+class Case:
+    expect: dict[str, str]
+    build: Callable[[World, str], Call] | None = None
+    consumes_caller: bool = False
+
+
+# --- scenarios ------------------------------------------------------------------------------------------------------
+
+def racer_a_model(world: World, caller: str) -> Call:
+    """A model owned by racer A (racer B, and staff without model rights, must not reach it)."""
+    ticket = world.ok("POST", "/api/models", "racer_a", {"filename": "matrix-model.tar.gz"})
+    return Call({"model_id": ticket["model"]["model_id"]})
+
+
+def car_x_command(world: World, caller: str) -> Call:
+    """A command queued for car X: only car X may acknowledge it (car Y simply does not find it)."""
+    command = world.ok("POST", f"/api/devices/{world.device_ids['car_x']}/commands", "admin",
+                       {"type": "RESTART_SERVICE"})
+    return Call({"command_id": command["command_id"]}, {"result": "ok"})
+
+
+def car_x_device(world: World, caller: str) -> Call:
+    return Call({"device_id": world.device_ids["car_x"]})
+
+
+def disposable_car(world: World, caller: str) -> Call:
+    return Call({"device_id": world.device_ids[world.mint("car_x")]})
+
+
+def disposable_racer(world: World, caller: str) -> Call:
+    return Call({"username": world.usernames[world.mint("racer_a")]})
+
+
+def racer_a_username(world: World, caller: str) -> Call:
+    return Call({"username": world.usernames["racer_a"]})
+
+
+def matrix_fleet(world: World, caller: str) -> Call:
+    return Call({"fleet_id": world.fleet_id})
+
+
+PUBLIC = Case(allow(*EVERYONE))
+SIGNED_IN = Case(allow(*USERS))
+ADMIN_ONLY = Case(allow("admin"))
+ADMIN_OPERATOR = Case(allow("admin", "operator"))
+ALL_STAFF = Case(allow(*STAFF))
+DEVICES = Case(allow(*CARS))
+
+TABLE: dict[tuple[str, str], Case] = {
+    # pages, static files, sign-in forms: public (they carry their own CSRF protection)
+    ("GET", "/"): PUBLIC,
+    ("GET", "/static/{name}"): Case(allow(*EVERYONE), lambda w, c: Call({"name": "drem.css"})),
+    ("GET", "/static/vendor/{name}"): Case(allow(*EVERYONE), lambda w, c: Call({"name": "htmx.min.js"})),
+    ("GET", "/login"): PUBLIC,
+    ("POST", "/login"): PUBLIC,
+    ("GET", "/login/new-password"): PUBLIC,
+    ("POST", "/login/new-password"): PUBLIC,
+    ("POST", "/logout"): PUBLIC,
+    ("GET", "/healthz"): PUBLIC,
+    ("GET", "/api/openapi.json"): PUBLIC,
+    ("GET", "/api/docs"): PUBLIC,
+    # accounts and users
+    ("GET", "/api/me"): SIGNED_IN,
+    ("DELETE", "/api/me"): Case(allow(*USERS), consumes_caller=True),
+    ("GET", "/api/users/{username}/groups"): Case(allow("admin"), racer_a_username),
+    ("POST", "/api/signup"): PUBLIC,
+    ("POST", "/api/signup/confirm"): PUBLIC,
+    ("POST", "/api/users"): Case(allow("admin", "registration")),
+    ("GET", "/api/users"): Case(allow("admin", "operator", "registration")),
+    ("PUT", "/api/users/{username}/role"): Case(allow("admin"), disposable_racer),
+    ("POST", "/api/users/{username}/disable"): Case(allow("admin"), disposable_racer),
+    ("POST", "/api/users/{username}/enable"): Case(allow("admin"), disposable_racer),
+    # profiles
+    ("GET", "/api/me/profile"): SIGNED_IN,
+    ("PUT", "/api/me/profile"): SIGNED_IN,
+    ("PUT", "/api/users/{username}/profile"): Case(allow("admin"), racer_a_username),
+    ("GET", "/api/profiles/{username}"): Case(allow(*EVERYONE), racer_a_username),
+    ("GET", "/api/profiles/{username}/avatar.svg"): Case(allow(*EVERYONE), racer_a_username),
+    # events
+    ("GET", "/api/events"): ALL_STAFF,
+    ("POST", "/api/events"): ADMIN_OPERATOR,
+    ("GET", "/api/events/{event_id}"): ALL_STAFF,
+    ("PUT", "/api/events/{event_id}"): ADMIN_OPERATOR,
+    ("DELETE", "/api/events/{event_id}"): ADMIN_OPERATOR,
+    # fleets
+    ("GET", "/api/fleets"): ADMIN_OPERATOR,
+    ("POST", "/api/fleets"): ADMIN_OPERATOR,
+    ("GET", "/api/fleets/{fleet_id}"): Case(allow("admin", "operator"), matrix_fleet),
+    ("PUT", "/api/fleets/{fleet_id}"): ADMIN_OPERATOR,
+    ("DELETE", "/api/fleets/{fleet_id}"): ADMIN_OPERATOR,
+    # devices: staff side
+    ("POST", "/api/devices/activation-codes"): ADMIN_OPERATOR,
+    ("GET", "/api/devices"): ADMIN_OPERATOR,
+    ("GET", "/api/devices/{device_id}"): Case(allow("admin", "operator"), car_x_device),
+    ("PUT", "/api/devices/{device_id}/fleet"): ADMIN_OPERATOR,
+    ("DELETE", "/api/devices/{device_id}"): Case(allow("admin"), disposable_car),
+    ("POST", "/api/devices/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
+    ("GET", "/api/devices/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
+    # devices: the device itself (acts on its own id only)
+    ("POST", "/api/devices/activate"): PUBLIC,
+    ("GET", "/api/devices/self"): DEVICES,
+    ("POST", "/api/devices/self/rotate"): Case(allow(*CARS), consumes_caller=True),
+    ("POST", "/api/devices/self/heartbeat"): DEVICES,
+    ("GET", "/api/devices/self/commands"): DEVICES,
+    ("POST", "/api/devices/self/commands/{command_id}/ack"): Case(allow("car_x", deny404=("car_y",)), car_x_command),
+    # models: racer A's model — racer B is refused, model staff (admin, operator) may act for racers
+    ("POST", "/api/models"): SIGNED_IN,
+    ("GET", "/api/models"): SIGNED_IN,
+    ("GET", "/api/models/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("DELETE", "/api/models/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("POST", "/api/models/{model_id}/complete"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    # model assignments to cars
+    ("PUT", "/api/cars/{device_id}/models"): Case(allow("admin", "operator"), car_x_device),
+    ("GET", "/api/cars/{device_id}/models"): Case(allow(*STAFF), car_x_device),
+    ("GET", "/api/devices/self/assignment"): Case(allow("car_x", "car_y")),
+    ("POST", "/api/devices/self/assignment/status"): Case(allow("car_x", "car_y")),
+    ("GET", "/api/events/{event_id}/model-status"): ALL_STAFF,
+    # races and timing
+    ("POST", "/api/events/{event_id}/races"): ADMIN_OPERATOR,
+    ("GET", "/api/events/{event_id}/races"): Case(allow("admin", "operator", "commentator")),
+    ("GET", "/api/events/{event_id}/races/{race_id}"): SIGNED_IN,
+    ("GET", "/api/me/races"): SIGNED_IN,
+    ("POST", "/api/events/{event_id}/races/{race_id}/commands"): ADMIN_OPERATOR,
+    ("PUT", "/api/events/{event_id}/races/{race_id}/laps/{lap_id}"): ADMIN_OPERATOR,
+    ("DELETE", "/api/events/{event_id}/races/{race_id}"): ADMIN_OPERATOR,
+    ("POST", "/api/events/{event_id}/recompute"): ADMIN_OPERATOR,
+    ("GET", "/api/events/{event_id}/export/{file_name}"): ADMIN_OPERATOR,
+    ("POST", "/api/timing/strip-events"): DEVICES,
+    # public polls
+    ("GET", "/api/leaderboard/{event_id}"): PUBLIC,
+    ("GET", "/api/overlay/{event_id}"): PUBLIC,
+}

@@ -1,0 +1,88 @@
+"""The authorization matrix: every route × the nine principals, called with real credentials, against
+`tests/unit/authz_table.py`. deny ⇔ 401/403 (deny404: 401/403/404); allow ⇔ neither 401 nor 403."""
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from tests.unit.authz_principals import PRINCIPALS, World, full_app
+from tests.unit.authz_principals import fresh_moto, world  # noqa: F401 - one stack per module (overrides the wipe)
+from tests.unit.authz_table import TABLE, Call
+
+pytestmark = pytest.mark.unit
+
+DENIED = {"deny": {401, 403}, "deny404": {401, 403, 404}}
+_PARAM = re.compile(r"{([^}]+)}")
+
+
+def concrete_path(template: str, params: dict[str, str]) -> str:
+    return _PARAM.sub(lambda m: params.get(m.group(1), f"matrix-{m.group(1)}"), template)
+
+
+def table_mismatch(app, table) -> str:
+    """"" when the table has exactly the app's routes; else a message naming the missing and stale ones."""
+    app_routes = {(method, path) for path, by_method in app.routes.items() for method in by_method}
+    missing, stale = sorted(app_routes - table.keys()), sorted(table.keys() - app_routes)
+    if not missing and not stale:
+        return ""
+    return ("tests/unit/authz_table.py must have exactly one entry per route.\n"
+            f"Routes without an entry (add who may call them): {missing}\n"
+            f"Entries for routes that do not exist (remove them): {stale}")
+
+
+def test_the_table_lists_exactly_the_app_routes(chalice_app):
+    assert table_mismatch(full_app(chalice_app), TABLE) == ""
+
+
+def test_a_new_route_without_an_entry_and_a_stale_entry_are_both_named():
+    from chalice import Blueprint, Chalice
+
+    from chalicelib.auth.access import PUBLIC, route
+
+    app, bp = Chalice(app_name="authz-table-check"), Blueprint(__name__)
+
+    @route(bp, "/api/listed", allow=PUBLIC)
+    def listed(principal):
+        return {}
+
+    @route(bp, "/api/brand-new", methods=["POST"], allow=PUBLIC)
+    def brand_new(principal):
+        return {}
+
+    app.register_blueprint(bp)
+    message = table_mismatch(app, {("GET", "/api/listed"): None, ("GET", "/api/gone"): None})
+
+    assert "without an entry (add who may call them): [('POST', '/api/brand-new')]" in message
+    assert "do not exist (remove them): [('GET', '/api/gone')]" in message
+
+
+def test_every_entry_names_an_outcome_for_each_principal():
+    for key, case in TABLE.items():
+        assert set(case.expect) == set(PRINCIPALS), key
+        assert set(case.expect.values()) <= {"allow", "deny", "deny404"}, key
+
+
+def test_the_principals_are_who_they_claim_to_be(world: World):
+    for name, groups in {"racer_a": ["racer"], "operator": ["operator"], "admin": ["admin"]}.items():
+        me = world.ok("GET", "/api/me", name)
+        assert (me["username"], me["roles"]) == (world.usernames[name], groups)
+    for car in ("car_x", "car_y"):
+        assert world.ok("GET", "/api/devices/self", car)["device_id"] == world.device_ids[car]
+    assert world.call("GET", "/api/me", "anonymous").status == 401
+
+
+@pytest.mark.parametrize("principal", PRINCIPALS)
+@pytest.mark.parametrize(("method", "path"), sorted(TABLE), ids=[f"{m} {p}" for m, p in sorted(TABLE)])
+def test_authz_matrix(world: World, method: str, path: str, principal: str):
+    case = TABLE[(method, path)]
+    expected = case.expect[principal]
+    call = case.build(world, principal) if case.build else Call()
+    caller = world.mint(principal) if case.consumes_caller else principal
+    body = call.body if call.body is not None else ({} if method in {"POST", "PUT", "PATCH"} else None)
+
+    reply = world.call(method, concrete_path(path, call.params), caller, body)
+
+    denied = reply.status in DENIED.get(expected, {401, 403})
+    assert denied == (expected != "allow"), (
+        f"{method} {path} as {principal}: expected {expected}, got {reply.status} {reply.body[:300]!r}")
