@@ -1,1 +1,133 @@
-"""Fixtures that start real local stacks (moto server subprocess, app over HTTP) for integration and browser tests."""
+"""Fixtures that start real local stacks (moto server subprocess, app over HTTP) for integration and browser tests.
+
+- `durable_server_factory`: start / `kill -9` / restart durable moto servers on free ports in tmp state dirs.
+- `live_stack`: the whole `drem up` stack (durable moto + bootstrap + app server) once per test session.
+Subprocess logs are printed when something fails to start, so a red test says why.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drem_local import stack as local_stack
+
+
+@dataclass
+class DurableServer:
+    """One durable moto server subprocess bound to a state dir; restart keeps the dir and the port."""
+
+    state_dir: Path
+    port: int
+    snapshot_interval: float
+    process: local_stack.ManagedProcess | None = None
+
+    @property
+    def config(self) -> local_stack.StackConfig:
+        return local_stack.StackConfig(state_dir=self.state_dir, storage_port=self.port,
+                                       snapshot_interval=self.snapshot_interval)
+
+    @property
+    def url(self) -> str:
+        return self.config.storage_url
+
+    def start(self) -> DurableServer:
+        try:
+            self.process = local_stack.start_storage(self.config, timeout=30.0)
+        except local_stack.StackError as exc:
+            pytest.fail(f"durable server did not start: {exc}")
+        return self
+
+    def kill9(self) -> None:
+        if self.process is not None:
+            self.process.kill_hard()
+
+    def stop(self) -> int | None:
+        return self.process.stop(timeout=30.0) if self.process is not None else None
+
+    def restart(self) -> DurableServer:
+        self.stop()
+        return self.start()
+
+    def health(self) -> dict[str, Any]:
+        import json
+
+        answer = local_stack.http_get(self.url + local_stack.HEALTH_PATH)
+        assert answer is not None and answer[0] == 200, f"no health answer from {self.url}"
+        return json.loads(answer[1])
+
+    def clients(self, *, retries: int = 1) -> Any:
+        """boto3 clients that fail fast (no retries) so a killed server shows up as an error, not a wait."""
+        import boto3
+        from botocore.config import Config
+
+        config = Config(account_id_endpoint_mode="disabled", retries={"total_max_attempts": retries},
+                        connect_timeout=2, read_timeout=10, signature_version="s3v4",
+                        s3={"addressing_style": "path"})
+        session = boto3.session.Session(region_name=local_stack.REGION, aws_access_key_id="testing",
+                                        aws_secret_access_key="testing")
+        return _Clients(*(session.client(name, endpoint_url=self.url, config=config)
+                          for name in ("dynamodb", "s3", "cognito-idp")))
+
+
+@dataclass(frozen=True)
+class _Clients:
+    dynamodb: Any
+    s3: Any
+    cognito: Any
+
+
+@dataclass
+class DurableServerFactory:
+    base_dir: Path
+    servers: list[DurableServer] = field(default_factory=list)
+
+    def start(self, name: str = "server", *, snapshot_interval: float = 5.0) -> DurableServer:
+        state_dir = self.base_dir / f"{name}-{len(self.servers)}"
+        server = DurableServer(state_dir, local_stack.free_port(), snapshot_interval)
+        self.servers.append(server)
+        return server.start()
+
+    def close(self) -> None:
+        for server in self.servers:
+            server.stop()
+
+
+@pytest.fixture(scope="session")
+def durable_server_factory(tmp_path_factory: pytest.TempPathFactory):
+    factory = DurableServerFactory(tmp_path_factory.mktemp("durable"))
+    yield factory
+    factory.close()
+
+
+@dataclass(frozen=True)
+class LiveStack:
+    url: str
+    storage_url: str
+    outputs: Any  # drem_local.bootstrap.StackOutputs
+    env: dict[str, str]
+    admin_username: str
+    admin_password: str
+    state_dir: Path
+    running: local_stack.RunningStack
+
+
+@pytest.fixture(scope="session")
+def live_stack(tmp_path_factory: pytest.TempPathFactory):
+    from drem_local.bootstrap import generate_password
+
+    state_dir = tmp_path_factory.mktemp("live-stack") / "state"
+    config = local_stack.StackConfig(state_dir=state_dir, app_port=local_stack.free_port(),
+                                     storage_port=local_stack.free_port())
+    password = generate_password()
+    try:
+        running = local_stack.start_stack(config, "admin", password, timeout=60.0)
+    except local_stack.StackError as exc:
+        pytest.fail(f"the local stack did not start: {exc}")
+    yield LiveStack(url=config.app_url, storage_url=config.storage_url, outputs=running.outputs, env=running.env,
+                    admin_username="admin", admin_password=password, state_dir=state_dir, running=running)
+    _app_code, storage_code = running.stop()
+    if storage_code not in (0, None):
+        print(f"storage server exited with {storage_code}:\n{running.storage.log_tail()}")

@@ -1,0 +1,86 @@
+"""`drem up`: the whole local stack in one command, state kept in a directory across restarts."""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+HELP = "start the local stack (durable storage + app) and keep it running until Ctrl-C"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--state-dir", type=Path, default=Path(os.environ.get("DREM_STATE_DIR", ".drem")),
+                        help="where all local data lives (default .drem, or $DREM_STATE_DIR)")
+    parser.add_argument("--port", type=int, default=8000, help="app port on 127.0.0.1 (default 8000)")
+    parser.add_argument("--storage-port", type=int, default=8001,
+                        help="durable moto (AWS API) port on 127.0.0.1 (default 8001)")
+
+
+class _Stop(Exception):
+    pass
+
+
+def _raise_stop(signum: int, _frame: object) -> None:
+    raise _Stop(signal.Signals(signum).name)
+
+
+def run(args: argparse.Namespace) -> int:
+    from drem_local.stack import StackConfig, StackError, start_stack
+
+    config = StackConfig(state_dir=args.state_dir, app_port=args.port, storage_port=args.storage_port)
+    username = os.environ.get("DREM_ADMIN_USERNAME", "admin")
+    password = os.environ.get("DREM_ADMIN_PASSWORD") or None
+    signal.signal(signal.SIGTERM, _raise_stop)
+    signal.signal(signal.SIGINT, _raise_stop)
+    print(f"Starting drem with its data in {config.state_dir.resolve()} ...", flush=True)
+    try:
+        stack = start_stack(config, username, password)
+    except StackError as exc:
+        print(f"drem up: could not start. {exc}", file=sys.stderr)
+        return 1
+    except _Stop:
+        print("drem up: interrupted while starting; everything started so far was stopped.", file=sys.stderr)
+        return 1
+
+    try:
+        _print_ready(stack)
+        while stack.app.alive() and stack.storage.alive():
+            time.sleep(0.5)
+    except _Stop:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the snapshot short
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        print("\nStopping: app first, then storage (it saves a snapshot) ...", flush=True)
+        app_code, storage_code = stack.stop()
+        if storage_code not in (0, None):
+            print(f"The storage server exited with code {storage_code}; see {stack.storage.log_path}. "
+                  "Its journal still holds every acknowledged write.", file=sys.stderr)
+            return 1
+        print("drem stopped cleanly. Your data is in " f"{config.state_dir.resolve()}.")
+        return 0
+
+    died = stack.app if not stack.app.alive() else stack.storage
+    print(f"drem up: the {died.name} stopped unexpectedly (exit code {died.popen.returncode}). "
+          f"Last lines of {died.log_path}:\n{died.log_tail()}", file=sys.stderr)
+    stack.stop()
+    return 1
+
+
+def _print_ready(stack) -> None:
+    config, admin = stack.config, stack.admin
+    lines = [
+        f"drem is running (ready in {stack.timings['total_s']:.1f}s).",
+        f"  Open the app:        {config.app_url}",
+        f"  AWS API (moto):      {config.storage_url}   (health: {config.storage_url}/_drem/health)",
+        f"  Data directory:      {config.state_dir.resolve()}",
+        f"  Logs:                {config.log_dir.resolve()}",
+    ]
+    if admin.created and admin.password and not os.environ.get("DREM_ADMIN_PASSWORD"):
+        lines.append(f"  Admin login:         {admin.username} / {admin.password}")
+        lines.append("  (This password is shown only now. Write it down; it is not stored anywhere readable.)")
+    else:
+        lines.append(f"  Admin login:         {admin.username} (password unchanged)")
+    lines.append("Press Ctrl-C to stop. `drem status` in another terminal shows what is running.")
+    print("\n".join(lines), flush=True)

@@ -1,0 +1,89 @@
+"""`python -m drem_local.durable --state-dir DIR --host 127.0.0.1 --port N`: the durable moto server."""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from pathlib import Path
+
+log = logging.getLogger("drem.durable")
+
+# Stable pool/client ids (a hash of the name) so a pool re-created from the journal keeps its id.
+STABLE_ID_ENV = {
+    "MOTO_COGNITO_IDP_USER_POOL_ID_STRATEGY": "HASH",
+    "MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY": "HASH",
+}
+EXIT_VERSION_MISMATCH = 3
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m drem_local.durable", description=__doc__)
+    parser.add_argument("--state-dir", type=Path, required=True)
+    parser.add_argument("--host", default="127.0.0.1")
+    parser.add_argument("--port", type=int, default=8001)
+    parser.add_argument("--snapshot-interval", type=float, default=5.0,
+                        help="seconds between snapshots while something changed (default 5)")
+    parser.add_argument("--no-fsync", action="store_true", help="skip fsync of the journal (faster, not crash-safe)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    os.environ.update(STABLE_ID_ENV)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)
+
+    from werkzeug.serving import make_server
+
+    from drem_local.durable.server import DurableApp
+    from drem_local.durable.state import DurableState, MotoVersionMismatch
+
+    try:
+        state = DurableState(args.state_dir, fsync=not args.no_fsync)
+    except MotoVersionMismatch as exc:
+        print(f"drem durable server: refusing to start. {exc}", file=sys.stderr)
+        return EXIT_VERSION_MISMATCH
+
+    from moto.moto_server.werkzeug_app import DomainDispatcherApplication, MotoRequestHandler, create_backend_app
+
+    os.environ.setdefault("MOTO_PORT", str(args.port))
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), state)
+    report = app.recover()
+    log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
+             "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,
+             report.replayed, report.skipped, report.failed, report.torn_bytes, report.seconds)
+
+    server = make_server(args.host, args.port, app, threaded=True, request_handler=MotoRequestHandler)
+    stopping = threading.Event()
+
+    def snapshot_loop() -> None:
+        while not stopping.wait(args.snapshot_interval):
+            try:
+                app.snapshot_if_dirty()
+            except Exception:
+                log.exception("periodic snapshot failed; the journal still holds every change")
+
+    def stop(signum: int, _frame: object) -> None:
+        stopping.set()
+        threading.Thread(target=server.shutdown, daemon=True).start()
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    threading.Thread(target=snapshot_loop, name="snapshots", daemon=True).start()
+    log.info("durable moto %s listening on http://%s:%d, state in %s", state.moto_version, args.host,
+             server.server_port, args.state_dir)
+    try:
+        server.serve_forever()
+    finally:
+        stopping.set()
+        app.snapshot_if_dirty()
+        state.close()
+        log.info("stopped; state snapshotted to %s", args.state_dir)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`."""
+from __future__ import annotations
+
+import io
+import json
+import logging
+import threading
+from collections.abc import Iterable
+from typing import Any, Callable
+
+from werkzeug.test import run_wsgi_app
+
+from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.journal import JournalRecord
+from drem_local.durable.state import DurableState, replay_environ
+
+log = logging.getLogger("drem.durable")
+
+HEALTH_PATH = "/_drem/health"
+
+
+def read_body(environ: dict[str, Any]) -> bytes:
+    stream = environ["wsgi.input"]
+    length = environ.get("CONTENT_LENGTH") or ""
+    if length.strip().isdigit():
+        return stream.read(int(length)) if int(length) else b""
+    if environ.get("wsgi.input_terminated"):
+        return stream.read()
+    return b""
+
+
+class DurableApp:
+    """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
+
+    def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState) -> None:
+        self.moto_app = moto_app
+        self.state = state
+        self.lock = threading.Lock()
+
+    def recover(self):
+        with self.lock:
+            return self.state.recover(self._replay)
+
+    def _replay(self, record: JournalRecord) -> int:
+        app_iter, status, _headers = run_wsgi_app(self.moto_app, replay_environ(record), buffered=True)
+        try:
+            b"".join(app_iter)
+        finally:
+            getattr(app_iter, "close", lambda: None)()
+        return int(status.split(" ", 1)[0])
+
+    def snapshot_if_dirty(self, *, force: bool = False) -> bool:
+        with self.lock:
+            return self.state.snapshot_all(force=force)
+
+    def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
+        if environ.get("PATH_INFO") == HEALTH_PATH:
+            return self._health(start_response)
+        body = read_body(environ)
+        environ["wsgi.input"] = io.BytesIO(body)  # moto's dispatcher and Flask may each read it
+        environ["CONTENT_LENGTH"] = str(len(body))
+        service = service_of(environ)
+        changing = is_state_changing(environ)
+        captured: dict[str, Any] = {}
+
+        def capture(status: str, headers: list[tuple[str, str]], exc_info: Any = None) -> Callable[[bytes], None]:
+            captured["status"], captured["headers"] = status, headers
+            return lambda data: None
+
+        with self.lock:
+            if changing and service in PERSISTED:
+                self.state.record(service, environ, body)
+            app_iter = self.moto_app(environ, capture)
+            try:
+                payload = b"".join(app_iter)
+            finally:
+                getattr(app_iter, "close", lambda: None)()
+            if changing and service in PERSISTED and needs_immediate_snapshot(environ, service):
+                self._snapshot_service(service)
+            elif changing and service == MOTO_API:
+                self.state.after_moto_api_call()
+        start_response(captured["status"], captured["headers"])
+        return [payload]
+
+    def _snapshot_service(self, service: str) -> None:
+        try:
+            self.state.snapshot_service(service)
+        except Exception:
+            # The journal still holds the request, so nothing acknowledged is lost; only its random ids may change.
+            log.exception("immediate snapshot of %s failed", service)
+
+    def _health(self, start_response: Callable[..., Any]) -> Iterable[bytes]:
+        body = json.dumps(self.state.health()).encode()
+        start_response("200 OK", [("Content-Type", "application/json"), ("Content-Length", str(len(body)))])
+        return [body]

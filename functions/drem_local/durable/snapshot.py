@@ -1,0 +1,122 @@
+"""Per-service pickle snapshots of moto's backends, committed together by one manifest.
+
+Layout under `<state-dir>/snapshots/`: `<service>-<seq>.pickle` files plus `manifest.json`, which names the
+current file of each service and the journal sequence number that file already contains. Writing a new file
+never touches the old one; replacing the manifest is the single commit point.
+"""
+from __future__ import annotations
+
+import copyreg
+import json
+import os
+import pickle
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drem_local.durable.classify import COGNITO, DYNAMODB, S3
+
+# moto backends per persisted service group
+BACKENDS: dict[str, tuple[str, ...]] = {
+    DYNAMODB: ("dynamodb", "dynamodbstreams"),
+    S3: ("s3",),
+    COGNITO: ("cognito-idp",),
+}
+MANIFEST = "manifest.json"
+
+
+def register_picklers() -> None:
+    """Cognito pools hold a joserfc RSAKey whose cryptography key object cannot be pickled as is."""
+    from joserfc import jwk
+
+    copyreg.pickle(jwk.RSAKey, lambda key: (jwk.RSAKey.import_key, (key.as_dict(private=True),)))
+
+
+@dataclass
+class Manifest:
+    seq: int = 0  # every journal record up to here is in the snapshots
+    files: dict[str, dict[str, Any]] = field(default_factory=dict)  # service -> {"file", "seq", "bytes"}
+    written_at: float = 0.0
+
+    def service_seq(self, service: str) -> int:
+        entry = self.files.get(service)
+        return int(entry["seq"]) if entry else 0
+
+    def total_bytes(self) -> int:
+        return sum(int(entry.get("bytes", 0)) for entry in self.files.values())
+
+
+def fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomically(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
+
+
+class SnapshotStore:
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.directory.mkdir(parents=True, exist_ok=True)
+
+    def read_manifest(self) -> Manifest:
+        path = self.directory / MANIFEST
+        if not path.exists():
+            return Manifest()
+        raw = json.loads(path.read_text())
+        return Manifest(seq=int(raw["seq"]), files=raw["files"], written_at=float(raw["written_at"]))
+
+    def load_into_moto(self, manifest: Manifest) -> None:
+        from moto.backends import get_backend
+
+        for service, entry in manifest.files.items():
+            state = pickle.loads((self.directory / entry["file"]).read_bytes())
+            for backend_name, accounts in state.items():
+                live = get_backend(backend_name)
+                for account_id, regions in accounts.items():
+                    account_backends = live[account_id]
+                    for region, backend in regions.items():
+                        dict.__setitem__(account_backends, region, backend)
+
+    def write(self, manifest: Manifest, services: list[str], seq: int, *, full: bool) -> Manifest:
+        """Pickle `services` as of journal `seq` and commit a new manifest. Caller holds the request lock."""
+        files = dict(manifest.files)
+        for service in services:
+            data = pickle.dumps(_capture(service), protocol=pickle.HIGHEST_PROTOCOL)
+            name = f"{service}-{seq:012d}.pickle"
+            write_atomically(self.directory / name, data)
+            files[service] = {"file": name, "seq": seq, "bytes": len(data)}
+        new = Manifest(seq=seq if full else manifest.seq, files=files, written_at=time.time())
+        write_atomically(self.directory / MANIFEST, json.dumps(
+            {"seq": new.seq, "files": new.files, "written_at": new.written_at}, indent=1).encode())
+        fsync_dir(self.directory)
+        self._remove_unreferenced(new)
+        return new
+
+    def _remove_unreferenced(self, manifest: Manifest) -> None:
+        keep = {entry["file"] for entry in manifest.files.values()} | {MANIFEST}
+        for path in self.directory.iterdir():
+            if path.name not in keep:
+                path.unlink(missing_ok=True)
+
+
+def _capture(service: str) -> dict[str, dict[str, dict[str, Any]]]:
+    from moto.backends import get_backend
+
+    state: dict[str, dict[str, dict[str, Any]]] = {}
+    for backend_name in BACKENDS[service]:
+        accounts: dict[str, dict[str, Any]] = {}
+        for account_id, region, backend in get_backend(backend_name).iter_backends():
+            accounts.setdefault(account_id, {})[region] = backend
+        state[backend_name] = accounts
+    return state

@@ -1,0 +1,344 @@
+"""Start, watch and stop the local stack: the durable moto server, the bootstrap, and the app server.
+
+Shared by `drem up`, `drem status`, the integration-test fixtures and `bench/startup.py`, so all of them run the
+stack the same way. Child processes get their own session (a Ctrl-C reaches only `drem up`, which then stops them
+in order) and a parent-death signal (if `drem up` itself is killed they get SIGTERM and the storage snapshots).
+"""
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+STACK_FILE = "stack.json"
+LOG_DIR = "logs"
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_APP_PORT = 8000
+DEFAULT_STORAGE_PORT = 8001
+REGION = "us-east-1"
+HEALTH_PATH = "/_drem/health"
+APP_HEALTH_PATH = "/healthz"
+_FAKE_KEY = "testing"
+_PR_SET_PDEATHSIG = 1
+
+
+class StackError(RuntimeError):
+    """The stack could not start; the message says why in plain words."""
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    state_dir: Path
+    host: str = DEFAULT_HOST
+    app_port: int = DEFAULT_APP_PORT
+    storage_port: int = DEFAULT_STORAGE_PORT
+    stage: str = "local"
+    region: str = REGION
+    snapshot_interval: float = 5.0
+
+    @property
+    def storage_url(self) -> str:
+        return f"http://{self.host}:{self.storage_port}"
+
+    @property
+    def app_url(self) -> str:
+        return f"http://{self.host}:{self.app_port}"
+
+    @property
+    def log_dir(self) -> Path:
+        return self.state_dir / LOG_DIR
+
+
+# --- processes ------------------------------------------------------------------------------------------------
+
+@dataclass
+class ManagedProcess:
+    name: str
+    popen: subprocess.Popen
+    log_path: Path
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def alive(self) -> bool:
+        return self.popen.poll() is None
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGTERM, wait, then SIGKILL if it will not go."""
+        if self.alive():
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+        return self.popen.returncode
+
+    def kill_hard(self) -> None:
+        """kill -9: what a crash or power cut looks like to the state dir."""
+        if self.alive():
+            self.popen.kill()
+        self.popen.wait(5)
+
+    def log_tail(self, lines: int = 40) -> str:
+        try:
+            text = self.log_path.read_text(errors="replace")
+        except OSError:
+            return ""
+        return "\n".join(text.splitlines()[-lines:])
+
+
+def _die_with_parent() -> None:
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass  # not Linux: children then outlive a killed parent, and `drem up` reports their pids next time
+
+
+def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None = None) -> ManagedProcess:
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    log = open(log_path, "ab")
+    log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
+    log.flush()
+    popen = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
+                             start_new_session=True, preexec_fn=_die_with_parent)
+    log.close()
+    return ManagedProcess(name, popen, log_path)
+
+
+def port_in_use(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return True
+    return False
+
+
+def free_port(host: str = DEFAULT_HOST) -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind((host, 0))
+        return probe.getsockname()[1]
+
+
+_NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+
+
+def http_get(url: str, timeout: float = 2.0) -> tuple[int, bytes] | None:
+    """(status, body), or None when nothing answers. Never goes through a proxy: everything here is local."""
+    try:
+        with _NO_PROXY.open(url, timeout=timeout) as response:
+            return response.status, response.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read()
+    except (OSError, ValueError):
+        return None
+
+
+def wait_for_ok(url: str, process: ManagedProcess, timeout: float) -> float:
+    """Poll `url` until it answers 200; seconds it took. Fails early, with the log tail, if the process dies."""
+    started = time.perf_counter()
+    deadline = started + timeout
+    while time.perf_counter() < deadline:
+        answer = http_get(url, timeout=1.0)
+        if answer is not None and answer[0] == 200:
+            return time.perf_counter() - started
+        if not process.alive():
+            raise StackError(f"the {process.name} exited with code {process.popen.returncode} before {url} "
+                             f"answered. Last lines of {process.log_path}:\n{process.log_tail()}")
+        time.sleep(0.02)
+    raise StackError(f"the {process.name} did not answer {url} within {timeout:.0f}s. "
+                     f"Last lines of {process.log_path}:\n{process.log_tail()}")
+
+
+# --- the three steps ------------------------------------------------------------------------------------------
+
+def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
+    _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
+    process = spawn("storage server", [
+        sys.executable, "-m", "drem_local.durable", "--state-dir", str(config.state_dir),
+        "--host", config.host, "--port", str(config.storage_port),
+        "--snapshot-interval", str(config.snapshot_interval),
+    ], config.log_dir / "storage.log", env=_child_env())
+    try:
+        wait_for_ok(config.storage_url + HEALTH_PATH, process, timeout)
+    except BaseException:
+        process.stop(2)
+        raise
+    return process
+
+
+def bootstrap(config: StackConfig, admin_username: str, admin_password: str | None):
+    """Create the tables, buckets, user pool and admin (idempotent). Returns (StackOutputs, AdminCredentials)."""
+    from drem_local.bootstrap import clients_for, ensure_admin, ensure_stack
+
+    clients = clients_for(config.storage_url, config.region)
+    outputs = ensure_stack(clients, config.stage)
+    admin = ensure_admin(clients, outputs, admin_username, admin_password)
+    return outputs, admin
+
+
+def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
+    env = _child_env()
+    env.update(outputs.to_env())
+    env.update(
+        AWS_ENDPOINT_URL=config.storage_url,
+        AWS_ACCESS_KEY_ID=_FAKE_KEY,
+        AWS_SECRET_ACCESS_KEY=_FAKE_KEY,
+        AWS_DEFAULT_REGION=config.region,
+        AWS_REGION=config.region,
+        AWS_ACCOUNT_ID_ENDPOINT_MODE="disabled",
+        DREM_STAGE=config.stage,
+        DREM_STATE_DIR=str(config.state_dir.resolve()),
+        DREM_PUBLIC_URL=config.app_url,
+    )
+    return env
+
+
+def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -> ManagedProcess:
+    _require_free_port(config.host, config.app_port, "app server", "--port")
+    process = spawn("app server", [
+        sys.executable, "-m", "drem_local.appserver", "--host", config.host, "--port", str(config.app_port),
+    ], config.log_dir / "app.log", env=env)
+    try:
+        wait_for_ok(config.app_url + APP_HEALTH_PATH, process, timeout)
+    except BaseException:
+        process.stop(2)
+        raise
+    return process
+
+
+def _child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("AWS_PROFILE", None)  # a profile from the shell must never steer local calls
+    env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _require_free_port(host: str, port: int, what: str, flag: str) -> None:
+    if port_in_use(host, port):
+        raise StackError(f"port {port} on {host} is already in use, so the {what} cannot start there. "
+                         f"Stop whatever uses it (`drem status` shows whether it is an older drem), "
+                         f"or pick another port with {flag}.")
+
+
+# --- the whole stack ------------------------------------------------------------------------------------------
+
+@dataclass
+class RunningStack:
+    config: StackConfig
+    storage: ManagedProcess
+    app: ManagedProcess
+    outputs: Any
+    admin: Any
+    env: dict[str, str]
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def stop(self) -> tuple[int | None, int | None]:
+        """App first (it may still be writing), then storage, which snapshots on SIGTERM."""
+        app_code = self.app.stop()
+        storage_code = self.storage.stop(timeout=30.0)
+        stack_file = self.config.state_dir / STACK_FILE
+        info = read_stack_file(self.config.state_dir)
+        if info is not None and info.get("pids", {}).get("storage") == self.storage.pid:
+            info["stopped_at"] = time.time()
+            _write_json(stack_file, info)
+        return app_code, storage_code
+
+
+def start_stack(config: StackConfig, admin_username: str = "admin", admin_password: str | None = None,
+                *, timeout: float = 30.0) -> RunningStack:
+    refuse_if_running(config.state_dir)
+    _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
+    _require_free_port(config.host, config.app_port, "app server", "--port")
+    config.state_dir.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    storage = start_storage(config, timeout)
+    storage_ready = time.perf_counter()
+    app = None
+    try:
+        outputs, admin = bootstrap(config, admin_username, admin_password)
+        bootstrapped = time.perf_counter()
+        env = app_environment(config, outputs)
+        write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
+        app = start_app(config, env, timeout)
+    except BaseException:
+        if app is not None:
+            app.stop(5)
+        storage.stop(30)
+        raise
+    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid)
+    ready = time.perf_counter()
+    timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
+               "app_s": ready - bootstrapped, "total_s": ready - started}
+    return RunningStack(config, storage, app, outputs, admin, env, timings)
+
+
+# --- stack.json -----------------------------------------------------------------------------------------------
+
+def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, storage_pid: int,
+                     app_pid: int | None) -> None:
+    _write_json(config.state_dir / STACK_FILE, {
+        "outputs": json.loads(outputs.to_json()),
+        "admin_username": admin_username,
+        "host": config.host,
+        "ports": {"app": config.app_port, "storage": config.storage_port},
+        "urls": {"app": config.app_url, "storage": config.storage_url},
+        "pids": {"storage": storage_pid, "app": app_pid, "drem_up": os.getpid()},
+        "started_at": time.time(),
+        "stopped_at": None,
+    })
+
+
+def read_stack_file(state_dir: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads((state_dir / STACK_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True))
+    os.replace(tmp, path)
+
+
+def pid_is_drem(pid: int | None) -> bool:
+    """True when `pid` is alive and is one of ours (a stale pid may have been reused by something else)."""
+    if not pid:
+        return False
+    try:
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ")
+    except OSError:
+        try:
+            os.kill(pid, 0)
+        except OSError:
+            return False
+        return True  # no /proc: alive is the best we can tell
+    return b"drem" in cmdline
+
+
+def refuse_if_running(state_dir: Path) -> None:
+    """A stack.json left by a crashed run is fine; one whose processes still run means a second `drem up`."""
+    info = read_stack_file(state_dir)
+    if not info:
+        return
+    running = {name: pid for name, pid in info.get("pids", {}).items() if name != "drem_up" and pid_is_drem(pid)}
+    if running:
+        listing = ", ".join(f"{name} pid {pid}" for name, pid in running.items())
+        raise StackError(f"drem is already running on the state dir {state_dir} ({listing}). Open "
+                         f"{info.get('urls', {}).get('app', 'the app')} or stop it first (Ctrl-C in its terminal, "
+                         f"or `kill {' '.join(str(p) for p in running.values())}`).")

@@ -1,0 +1,137 @@
+"""Recovery of the durable moto server: version pin, and snapshots + journal replayed exactly once, in order.
+
+These drive moto's real WSGI app in-process through the durable middleware (no socket, no botocore), then
+throw the in-memory backends away and recover from the state dir, as a restarted server would.
+"""
+from __future__ import annotations
+
+import json
+
+import pytest
+from moto.core.base_backend import BackendDict
+from werkzeug.test import Client
+
+from drem_local.durable.__main__ import EXIT_VERSION_MISMATCH, main as durable_main
+from drem_local.durable.server import DurableApp
+from drem_local.durable.state import DurableState, MotoVersionMismatch, running_moto_version
+
+pytestmark = pytest.mark.unit
+
+_DDB_AUTH = "AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/dynamodb/aws4_request, SignedHeaders=host, Signature=0"
+TABLE = "counters"
+
+
+@pytest.fixture
+def fresh_moto(monkeypatch):
+    monkeypatch.setenv("MOTO_COGNITO_IDP_USER_POOL_ID_STRATEGY", "HASH")
+    monkeypatch.setenv("MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY", "HASH")
+    BackendDict.reset()
+    yield
+    BackendDict.reset()
+
+
+def _server(state_dir) -> tuple[DurableApp, Client]:
+    from moto.moto_server.werkzeug_app import DomainDispatcherApplication, create_backend_app
+
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), DurableState(state_dir, fsync=False))
+    app.recover()
+    return app, Client(app)
+
+
+def _dynamodb(client: Client, operation: str, payload: dict) -> dict:
+    response = client.post("/", data=json.dumps(payload), headers={
+        "X-Amz-Target": f"DynamoDB_20120810.{operation}", "Content-Type": "application/x-amz-json-1.0",
+        "Authorization": _DDB_AUTH})
+    assert response.status_code == 200, response.get_data(as_text=True)
+    return json.loads(response.get_data())
+
+
+def _cognito(client: Client, operation: str, payload: dict) -> dict:
+    response = client.post("/", data=json.dumps(payload), headers={
+        "X-Amz-Target": f"AWSCognitoIdentityProviderService.{operation}",
+        "Content-Type": "application/x-amz-json-1.1"})
+    assert response.status_code == 200, response.get_data(as_text=True)
+    return json.loads(response.get_data())
+
+
+def _create_table(client: Client) -> None:
+    _dynamodb(client, "CreateTable", {
+        "TableName": TABLE, "BillingMode": "PAY_PER_REQUEST",
+        "KeySchema": [{"AttributeName": "pk", "KeyType": "HASH"}],
+        "AttributeDefinitions": [{"AttributeName": "pk", "AttributeType": "S"}]})
+
+
+def _add_hit(client: Client) -> int:
+    answer = _dynamodb(client, "UpdateItem", {
+        "TableName": TABLE, "Key": {"pk": {"S": "c"}}, "UpdateExpression": "ADD hits :one",
+        "ExpressionAttributeValues": {":one": {"N": "1"}}, "ReturnValues": "ALL_NEW"})
+    return int(answer["Attributes"]["hits"]["N"])
+
+
+def _hits(client: Client) -> int:
+    return int(_dynamodb(client, "GetItem", {"TableName": TABLE, "Key": {"pk": {"S": "c"}}})["Item"]["hits"]["N"])
+
+
+def test_snapshot_then_journal_tail_is_replayed_once_in_order(tmp_path, fresh_moto):
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    assert app.snapshot_if_dirty()  # hits=1 now in the snapshot, journal emptied
+    _add_hit(client)
+    _add_hit(client)  # hits=3: two increments only in the journal
+    app.state.close()
+    BackendDict.reset()  # the process dies; memory is gone
+
+    app, client = _server(tmp_path)
+
+    assert _hits(client) == 3
+    report = app.state.recovery
+    assert (report.replayed, report.skipped, report.failed) == (2, 0, 0)
+
+
+def test_a_service_snapshotted_early_does_not_get_its_journal_records_twice(tmp_path, fresh_moto):
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    pool_id = _cognito(client, "CreateUserPool", {"PoolName": "racers"})["UserPool"]["Id"]  # snapshots cognito only
+    _cognito(client, "CreateGroup", {"UserPoolId": pool_id, "GroupName": "admin"})
+    _add_hit(client)
+    app.state.close()
+    BackendDict.reset()
+
+    app, client = _server(tmp_path)
+
+    assert _hits(client) == 2  # both increments replayed (DynamoDB had no snapshot)
+    groups = _cognito(client, "ListGroups", {"UserPoolId": pool_id})["Groups"]
+    assert [g["GroupName"] for g in groups] == ["admin"]  # pool from the snapshot, group from the journal
+    assert app.state.recovery.skipped == 1  # CreateUserPool is in the cognito snapshot: not replayed again
+
+
+def test_state_written_by_another_moto_version_is_refused_with_both_versions_named(tmp_path):
+    (tmp_path / "moto-version").write_text("4.2.0\n")
+    (tmp_path / "journal.bin").write_bytes(b"")
+
+    with pytest.raises(MotoVersionMismatch) as refused:
+        DurableState(tmp_path)
+
+    message = str(refused.value)
+    assert "4.2.0" in message and running_moto_version() in message
+    assert "drem export" in message and f"rm -rf {tmp_path}" in message
+    assert (tmp_path / "moto-version").read_text() == "4.2.0\n"  # nothing was overwritten
+
+
+def test_the_server_command_exits_with_a_clear_message_on_a_version_mismatch(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("MOTO_COGNITO_IDP_USER_POOL_ID_STRATEGY", "")
+    monkeypatch.setenv("MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY", "")
+    (tmp_path / "moto-version").write_text("4.2.0\n")
+
+    code = durable_main(["--state-dir", str(tmp_path), "--port", "1"])
+
+    assert code == EXIT_VERSION_MISMATCH
+    assert "refusing to start" in capsys.readouterr().err
+
+
+def test_a_fresh_state_dir_is_pinned_to_the_running_moto(tmp_path):
+    DurableState(tmp_path / "new").close()
+
+    assert (tmp_path / "new" / "moto-version").read_text().strip() == running_moto_version()
