@@ -19,6 +19,8 @@ SUBCOMMANDS: dict[str, str] = {
     "fleets": "drem_local.commands.fleets",
     "cars": "drem_local.commands.cars",
     "models": "drem_local.commands.models",
+    "export": "drem_local.commands.export",
+    "import": "drem_local.commands.import_",
     "sim": "drem_sim.cli",
     "train": "drem_sim.cli_train",
 }

@@ -1,0 +1,247 @@
+"""`drem export` / `drem import` between two real local stacks (durable moto + app server each).
+
+The source is the session's `live_stack`; the target is a second, fresh stack started here. A realistic event is
+built through the JSON API, exported, imported into the target, and exported again: the two exports must hold the
+same content except `exported_at` and the subs Cognito assigned anew (compared through the import report's mapping).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import secrets
+from pathlib import Path
+
+import boto3
+import pytest
+import requests
+from botocore.config import Config
+
+from chalicelib.domain.event_transfer import ITEM_FILES, MANIFEST, remap_items
+from chalicelib.storage.event_archive import StackLocation, connect
+from drem_local import stack as local_stack
+from drem_local.api_client import ApiClient
+from drem_local.bootstrap import generate_password
+from tests.unit.models_helpers import onnx_archive
+
+pytestmark = pytest.mark.integration
+
+
+def _cli(module, argv: list[str]) -> int:
+    parser = argparse.ArgumentParser()
+    module.add_arguments(parser)
+    return module.run(parser.parse_args(argv))
+
+
+def _export(event_id: str, out: Path, state_dir: Path) -> int:
+    from drem_local.commands import export
+
+    return _cli(export, [event_id, "--out", str(out), "--state-dir", str(state_dir)])
+
+
+def _import(folder: Path, state_dir: Path, *extra: str) -> int:
+    from drem_local.commands import import_
+
+    return _cli(import_, [str(folder), "--state-dir", str(state_dir), *extra])
+
+
+def _cognito(storage_url: str):
+    return boto3.session.Session(region_name=local_stack.REGION, aws_access_key_id="testing",
+                                 aws_secret_access_key="testing").client(
+        "cognito-idp", endpoint_url=storage_url, config=Config(account_id_endpoint_mode="disabled"))
+
+
+@pytest.fixture(scope="module")
+def target_stack(tmp_path_factory: pytest.TempPathFactory):
+    state_dir = tmp_path_factory.mktemp("transfer-target") / "state"
+    config = local_stack.StackConfig(state_dir=state_dir, app_port=local_stack.free_port(),
+                                     storage_port=local_stack.free_port())
+    try:
+        running = local_stack.start_stack(config, "admin", generate_password(), timeout=60.0)
+    except local_stack.StackError as exc:
+        pytest.fail(f"the target stack did not start: {exc}")
+    yield running
+    running.stop()
+
+
+@pytest.fixture(scope="module")
+def source_event(live_stack) -> dict:
+    """Two tracks, a fleet with a car, two racers with profiles, a validated model, submitted races incl. an
+    invalid lap, and the materialised boards — all through the API."""
+    admin = ApiClient(live_stack.url)
+    admin.sign_in(live_stack.admin_username, live_stack.admin_password)
+    suffix = secrets.token_hex(3)
+    fleet_id = admin.post("/api/fleets", {"name": f"Transfer fleet {suffix}"})["fleet_id"]
+    event = admin.post("/api/events", {
+        "name": f"Transfer Cup {suffix}", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-01",
+        "country_code": "SE", "race_config": {"resets_per_lap": 0, "min_lap_ms": 0, "debounce_ms": 0},
+        "tracks": [{"track_id": "1", "fleet_id": fleet_id, "leaderboard_title": "Main"}, {"track_id": "2"}]})
+    code = admin.post("/api/devices/activation-codes",
+                      {"fleet_id": fleet_id, "hostname": f"car-{suffix}", "device_kind": "car"})["code"]
+    activated = requests.post(f"{live_stack.url}/api/devices/activate", timeout=30,
+                              json={"code": code, "hostname": f"car-{suffix}", "device_kind": "car"})
+    assert activated.status_code in (200, 201), activated.text
+
+    racers = {}
+    cognito = _cognito(live_stack.storage_url)
+    for name, colour, country in (("ada", "#FF0000", "GB"), ("linus", "#0000FF", "FI")):
+        username = f"{name}{suffix}"
+        admin.post("/api/users", {"username": username, "email": f"{username}@example.com", "country_code": country})
+        admin.put(f"/api/users/{username}/profile", {"highlight_colour": colour})
+        racers[name] = username
+
+    ada = ApiClient(live_stack.url)
+    ada.sign_in(racers["ada"], _set_password(cognito, live_stack.outputs.user_pool_id, racers["ada"]))
+    ticket = ada.post("/api/models", {"filename": "transfer_model.tar.gz"})
+    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"], timeout=30,
+                           files={"file": ("transfer_model.tar.gz", onnx_archive(0.25))})
+    assert posted.status_code in (200, 204), posted.text
+    model = ada.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
+    assert model["status"] == "AVAILABLE"
+
+    eid = event["event_id"]
+    laps = []
+    for racer, track, commands in ((racers["ada"], "1", ["start", "capture_lap", "reset_add", "capture_lap",
+                                                         "capture_lap", "end", "submit"]),
+                                   (racers["linus"], "2", ["start", "capture_lap", "capture_lap", "end", "submit"])):
+        race = admin.post(f"/api/events/{eid}/races", {"track_id": track, "racer_username": racer,
+                                                        "car": f"car-{suffix}"})
+        for kind in commands:
+            last = admin.post(f"/api/events/{eid}/races/{race['race_id']}/commands", {"kind": kind})
+        assert last["status"] == "SUBMITTED"
+        laps += last["laps"]
+    assert any(not lap["is_valid"] for lap in laps), "the reset made one lap invalid"
+    return {"event_id": eid, "racers": racers, "model_id": model["model_id"], "fleet_id": fleet_id}
+
+
+def _set_password(cognito, pool_id: str, username: str) -> str:
+    password = generate_password()
+    cognito.admin_set_user_password(UserPoolId=pool_id, Username=username, Password=password, Permanent=True)
+    return password
+
+
+def _boards(url: str, event_id: str) -> dict[str, dict]:
+    boards = {}
+    for track in ("1", "2", "combined"):
+        reply = requests.get(f"{url}/api/leaderboard/{event_id}", params={"track": track}, timeout=30)
+        assert reply.status_code == 200, reply.text
+        boards[track] = reply.json()
+    return boards
+
+
+def _comparable(folder: Path, sub_map: dict[str, str]) -> dict[str, object]:
+    """Everything in an export, subs mapped, and the manifest without `exported_at` and the checksums of the files
+    that hold subs (those checksums follow from the content compared here)."""
+    content: dict[str, object] = {}
+    for path in sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()):
+        data = (folder / path).read_bytes()
+        if path in ITEM_FILES:
+            document = json.loads(data)
+            content[path] = {"table": document["table"], "items": remap_items(document["items"], sub_map)}
+        elif path == "users.json":
+            content[path] = [{**u, "sub": sub_map.get(u["sub"], u["sub"])} for u in json.loads(data)]
+        elif path == "archives.json":
+            content[path] = json.loads(remap_text(data.decode(), sub_map))
+        elif path == MANIFEST:
+            manifest = json.loads(data)
+            manifest.pop("exported_at")
+            manifest["files"] = sorted(manifest["files"])
+            content[path] = manifest
+        else:
+            content[path] = data
+    return content
+
+
+def remap_text(text: str, sub_map: dict[str, str]) -> str:
+    for old, new in sub_map.items():
+        text = text.replace(old, new)
+    return text
+
+
+def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    eid = source_event["event_id"]
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert _export(eid, first, live_stack.state_dir) == 0
+    manifest = json.loads((first / MANIFEST).read_text())
+    assert manifest["counts"]["races"] == 2 and manifest["counts"]["archives"] == 1
+    assert (first / "archives" / f"{source_event['model_id']}.tar.gz").read_bytes() == onnx_archive(0.25)
+    capsys.readouterr()
+
+    report_path = tmp_path / "report.json"
+    assert _import(first, target_stack.config.state_dir, "--report", str(report_path)) == 0
+    printed = capsys.readouterr().out
+    report = json.loads(report_path.read_text())
+    actions = {a["username"]: a["action"] for a in report["accounts"]}
+    assert actions[source_event["racers"]["ada"]] == "created"
+    assert actions[live_stack.admin_username] == "matched existing"  # the target's own admin, by username
+
+    assert _export(eid, second, target_stack.config.state_dir) == 0
+    assert _comparable(second, {}) == _comparable(first, report["sub_map"])
+    assert set(report["sub_map"].values()).isdisjoint(set(report["sub_map"]) - set(report["sub_map"].values()))
+
+    # The public board reads the same on both stacks.
+    assert _boards(target_stack.config.app_url, eid) == _boards(live_stack.url, eid)
+
+    # A created racer signs in on the target with the temporary password printed once (and never stored).
+    ada = source_event["racers"]["ada"]
+    password = next(line.split("temporary password ")[1].split()[0] for line in printed.splitlines()
+                    if f"account {ada}:" in line)
+    assert password not in report_path.read_text()
+    challenge = requests.post(f"{target_stack.config.app_url}/api/auth/token", timeout=30,
+                              json={"username": ada, "password": password}).json()
+    assert challenge["challenge"] == "NEW_PASSWORD_REQUIRED"
+    new_password = generate_password()
+    _cognito(target_stack.config.storage_url).respond_to_auth_challenge(
+        ClientId=target_stack.outputs.user_pool_client_id, ChallengeName="NEW_PASSWORD_REQUIRED",
+        Session=challenge["session"], ChallengeResponses={"USERNAME": ada, "NEW_PASSWORD": new_password})
+    racer = ApiClient(target_stack.config.app_url)
+    racer.sign_in(ada, new_password)
+    assert racer.get("/api/me")["username"] == ada
+    mine = racer.get("/api/models")["models"]
+    assert [m["model_id"] for m in mine] == [source_event["model_id"]]  # the model moved with its new owner sub
+
+    # Importing the same event again into the now non-empty stack is refused, naming the event.
+    capsys.readouterr()
+    assert _import(first, target_stack.config.state_dir) == 1
+    assert f"already has event {eid}" in capsys.readouterr().err
+
+
+def test_import_under_another_event_id_reuses_matched_accounts(live_stack, source_event, tmp_path: Path) -> None:
+    eid = source_event["event_id"]
+    folder = tmp_path / "export"
+    assert _export(eid, folder, live_stack.state_dir) == 0
+    new_id = f"{eid}-copy"
+    report_path = tmp_path / "copy-report.json"
+    assert _import(folder, live_stack.state_dir, "--event-id", new_id, "--report", str(report_path)) == 0
+    report = json.loads(report_path.read_text())
+    assert {a["action"] for a in report["accounts"]} == {"matched existing"}
+    assert all(old == new for old, new in report["sub_map"].items())  # same stack: nobody recreated
+
+    original, copy = _boards(live_stack.url, eid), _boards(live_stack.url, new_id)
+    assert [(e["username"], e["fastest_lap_ms"]) for e in copy["combined"]["entries"]] == \
+        [(e["username"], e["fastest_lap_ms"]) for e in original["combined"]["entries"]]
+    event = requests.get(f"{live_stack.url}/api/leaderboard/{new_id}", params={"track": "1"}, timeout=30)
+    assert event.status_code == 200
+    assert any("model" in line for line in report["kept_existing"])  # the model already exists here: kept
+
+
+def test_a_corrupted_file_is_refused_before_anything_is_written(live_stack, target_stack, source_event,
+                                                                 tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "export"
+    assert _export(source_event["event_id"], folder, live_stack.state_dir) == 0
+    races = folder / "races.json"
+    races.write_text(races.read_text().replace('"status"', '"statuz"', 1))
+    users_before = _cognito(target_stack.config.storage_url).list_users(
+        UserPoolId=target_stack.outputs.user_pool_id)["Users"]
+    capsys.readouterr()
+
+    assert _import(folder, target_stack.config.state_dir, "--event-id", "never-written") == 1
+    err = capsys.readouterr().err
+    assert "races.json: checksum mismatch" in err and "Nothing was written" in err
+    target = connect(StackLocation.from_state_dir(target_stack.config.state_dir))
+    assert target.get_item("events", "EVENT#never-written", "META") is None
+    assert target.partition("races", "EVENT#never-written") == []
+    users_after = _cognito(target_stack.config.storage_url).list_users(
+        UserPoolId=target_stack.outputs.user_pool_id)["Users"]
+    assert len(users_after) == len(users_before)
