@@ -27,6 +27,7 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local")
     from chalice.cli.factory import CLIFactory
 
     _put_project_on_path()
+    _prefer_installed_packages()
     local.ChaliceRequestHandler.disable_nagle_algorithm = True
     local.ThreadedHTTPServer.request_queue_size = REQUEST_QUEUE_SIZE
     local.ThreadedHTTPServer.daemon_threads = True
@@ -47,6 +48,21 @@ def _put_project_on_path() -> None:
     # chalicelib is not installed: like Chalice itself, import it from the project dir.
     if str(PROJECT_DIR) not in sys.path:
         sys.path.insert(0, str(PROJECT_DIR))
+
+
+def _prefer_installed_packages() -> None:
+    # Chalice appends functions/vendor/ to sys.path, and a path entry beats the editable-install finder: a stale
+    # `drem build` copy would silently replace current code. Importing the packages first, with vendor/ off the path,
+    # pins them (and so all their submodules) to the source tree.
+    vendor = os.path.abspath(PROJECT_DIR / "vendor")
+    saved = sys.path[:]
+    sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or ".") != vendor]
+    try:
+        import drem_infra.resources  # noqa: F401
+        import drem_leaderboard  # noqa: F401
+        import drem_web  # noqa: F401
+    finally:
+        sys.path[:] = saved
 
 
 def build_parser() -> argparse.ArgumentParser:
