@@ -1,0 +1,60 @@
+"""The commentator view (`/commentator/{event}`): the racer on track, gap to fastest, current and projected position,
+lap table and lap-time chart. Staff only (commentator, operator, admin); it polls `…/live` like the public pages
+(204 while nothing changed)."""
+from __future__ import annotations
+
+from typing import Any
+from urllib.parse import quote
+
+from chalice import Blueprint, Response
+from pydantic import Field
+
+from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain import public_views as views
+from chalicelib.routes import races as race_routes
+from chalicelib.routes.public_pages import (PageOptions, event_or_404, fragment_headers, live_race, live_url,
+                                            read_live, unchanged)
+from drem_web import i18n, render
+
+bp = Blueprint(__name__)
+
+COMMENTATORS = {COMMENTATOR, OPERATOR, ADMIN}
+
+
+class CommentatorQuery(PageOptions):
+    track: str = Field(default="1", max_length=32, pattern=r"^[A-Za-z0-9_-]+$")
+
+
+def commentator_live(event_id: str, query: CommentatorQuery) -> tuple[str, Any]:
+    now_ms = race_routes.now_ms()
+    items = read_live(event_id, query.track, [query.track])
+    token = views.version_token(items.board.version, items.overlay.version)
+
+    def context() -> dict[str, Any]:
+        t = i18n.translator(query.lang)
+        view = views.commentator_view(items.overlay, items.board, live_race(event_id, items.overlay), now_ms, t)
+        poll = live_url(f"/commentator/{quote(event_id, safe='')}/live",
+                        {"track": query.track, "lang": query.lang, "v": token})
+        return {"view": view, "poll_url": poll, "token": token, "t": t}
+
+    return token, context
+
+
+@route(bp, "/commentator/{event_id}", allow=COMMENTATORS, query=CommentatorQuery)
+def commentator_page(principal: User, event_id: str, query: CommentatorQuery) -> Response:
+    """Live racer statistics for the commentator"""
+    event = event_or_404(event_id)
+    event.track(query.track)
+    _token, context = commentator_live(event_id, query)
+    return render.page("commentator", title=event.name, track=query.track, tracks=[t.track_id for t in event.tracks],
+                       lang=i18n.resolve_language(query.lang), **context())
+
+
+@route(bp, "/commentator/{event_id}/live", allow=COMMENTATORS, query=CommentatorQuery)
+def commentator_fragment(principal: User, event_id: str, query: CommentatorQuery) -> Response:
+    """The commentator view's live region; 204 while `v` is current"""
+    token, context = commentator_live(event_id, query)
+    if_none_match = bp.current_request.headers.get("if-none-match")
+    return unchanged(token, query.v, if_none_match) or render.fragment(
+        "commentator_live", headers=fragment_headers(token), **context())

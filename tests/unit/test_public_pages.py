@@ -1,0 +1,240 @@
+"""The public leaderboard page, the stream overlay and the commentator view over the real app (moto, real tokens):
+what a viewer sees, escaping of hostile names, the query switches, the QR code, and cheap unchanged polls."""
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.unit.race_helpers import Desk, FakeClock, clock, device_verifier, race_app, race_client  # noqa: F401
+
+pytestmark = pytest.mark.unit
+
+HOSTILE_NAME = "<script>alert('pwned')</script>"
+
+
+@pytest.fixture
+def desk(race_app: Any, race_client: Any, users: Any) -> Desk:
+    """race_helpers' desk, with the public-page blueprints on the app (until app.py registers them)."""
+    from chalicelib.routes import commentator, public_pages
+
+    for module, marker in ((public_pages, "/leaderboard/{event_id}"), (commentator, "/commentator/{event_id}")):
+        if marker not in race_app.routes:
+            race_app.register_blueprint(module.bp)
+    desk = Desk(race_client, users)
+    desk.token("op", "operator")
+    return desk
+
+
+def html_get(desk: Desk, path: str, headers: dict[str, str] | None = None) -> Any:
+    return desk.client.http.get(path, headers={"Accept": "text/html", **(headers or {})})
+
+
+def racing(desk: Desk, clock: FakeClock, racer: str = "vera", laps: tuple[int, ...] = (10_000,),
+           event_name: str = "Summit Stockholm 2026") -> tuple[str, str]:
+    desk.users.create(racer, ("racer",))
+    eid = desk.event(name=event_name)["event_id"]
+    rid = desk.ok(desk.create_race(eid, racer), 201)["race_id"]
+    desk.ok(desk.command(eid, rid, "start"))
+    for lap_ms in laps:
+        clock.advance(lap_ms)
+        desk.ok(desk.command(eid, rid, "capture_lap"))
+    return eid, rid
+
+
+def hostile_profile(desk: Desk, username: str, *, display: str, colour: str, country: str | None = "DE") -> None:
+    from chalicelib.domain.profiles import Profile
+    from chalicelib.settings import get_settings
+    from chalicelib.storage import clients
+    from chalicelib.storage.profiles import DynamoProfileStore
+
+    sub = next(a["Value"] for a in desk.users.clients.cognito.admin_get_user(
+        UserPoolId=desk.users.outputs.user_pool_id, Username=username)["UserAttributes"] if a["Name"] == "sub")
+    DynamoProfileStore(clients.dynamodb(), get_settings().table("profiles")).put(
+        Profile(sub=sub, username=display, country_code=country, highlight_colour=colour))
+
+
+def live_region_url(html: str, region_id: str) -> str:
+    match = re.search(rf'id="{region_id}"[^>]*hx-get="([^"]+)"', html, re.S)
+    assert match, f"no polling region #{region_id}"
+    return match.group(1).replace("&amp;", "&")
+
+
+# --- leaderboard ---------------------------------------------------------------------------------------------------
+
+
+def test_leaderboard_page_shows_rows_flag_time_and_live_footer_without_sign_in(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock, "vera", laps=(10_000, 9_876))
+    hostile_profile(desk, "vera", display="vera", colour="#FF0000", country="SE")
+    desk.ok(desk.call("POST", f"/api/events/{eid}/recompute"))
+
+    page = html_get(desk, f"/leaderboard/{eid}")
+
+    assert page.status_code == 200 and page.headers["Content-Type"].startswith("text/html")
+    html = page.body.decode()
+    assert "Summit Stockholm 2026" in html
+    row = re.search(r'<li class="board-row gold" data-racer="vera" data-time="9876"(.*?)</li>', html, re.S)
+    assert row, html
+    assert "\U0001F1F8\U0001F1EA" in row.group(1) and "0:09.876" in row.group(1)  # Swedish flag, best lap
+    assert "--racer-colour: #ff0000" in row.group(1)
+    footer = re.search(r'data-testid="race-footer".*?</div>', html, re.S).group(0)
+    assert "Now racing" in footer and "vera" in footer and "1:41" in footer  # 100.124 s left, rounded up
+    assert 'data-running="true"' in footer
+
+
+def test_hostile_racer_name_title_and_colour_are_escaped_everywhere(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock, "mallory", event_name="<img src=x onerror=alert(1)> Cup")
+    hostile_profile(desk, "mallory", display=HOSTILE_NAME, colour="red;background:url(https://evil.example/x)")
+    desk.ok(desk.call("POST", f"/api/events/{eid}/recompute"))
+
+    for path in (f"/leaderboard/{eid}", f"/overlay/{eid}", f"/leaderboard/{eid}/live?track=1&tracks=1"):
+        html = html_get(desk, path).body.decode()
+        assert "<script>alert" not in html and "<img src=x" not in html, path
+        assert "evil.example" not in html, path
+    board = html_get(desk, f"/leaderboard/{eid}").body.decode()
+    assert "&lt;script&gt;alert(&#39;pwned&#39;)&lt;/script&gt;" in board
+    assert "&lt;img src=x onerror=alert(1)&gt; Cup" in board
+    assert "--racer-colour: #0000ff" in board  # the hostile colour fell back to the default blue
+
+
+def test_language_switch_translates_the_page(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock)
+    german = html_get(desk, f"/leaderboard/{eid}?lang=de").body.decode()
+    english = html_get(desk, f"/leaderboard/{eid}?lang=en").body.decode()
+    unknown = html_get(desk, f"/leaderboard/{eid}?lang=xx").body.decode()
+    assert "Jetzt auf der Strecke" in german and "Restzeit" in german and 'lang="de"' in german
+    assert "Now racing" in english and "Time left" in english and "Restzeit" not in english
+    assert "Now racing" in unknown
+    assert "lang=de" in live_region_url(german, "board-live")  # the live region keeps the language
+
+
+def test_format_and_flag_switches(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock, "vera", laps=(10_000,))
+    hostile_profile(desk, "vera", display="vera", colour="#00ff00", country="SE")
+    desk.ok(desk.call("POST", f"/api/events/{eid}/recompute"))
+    with_flags = html_get(desk, f"/leaderboard/{eid}").body.decode()
+    without = html_get(desk, f"/leaderboard/{eid}?flag=false").body.decode()
+    assert "\U0001F1F8\U0001F1EA" in with_flags and "\U0001F1F8\U0001F1EA" not in without
+    average = html_get(desk, f"/leaderboard/{eid}?format=average").body.decode()
+    assert re.search(r'data-racer="vera" data-time=""', average) and "DNF" in average  # one lap: no 3-lap average
+    assert html_get(desk, f"/leaderboard/{eid}?format=slowest").status_code == 400
+    assert html_get(desk, f"/leaderboard/{eid}?track=9").status_code == 404
+    assert html_get(desk, "/leaderboard/no-such-event").status_code == 404
+
+
+def _qr_matrix(svg: str) -> np.ndarray:
+    """qrcode's SvgPathImage draws one `Mx,yH…V…H…z` square per dark module: rebuild the module grid from it."""
+    size = int(re.search(r'viewBox="0 0 (\d+) \d+"', svg).group(1))
+    grid = np.zeros((size, size), dtype=bool)
+    for x, y in re.findall(r"M(\d+),(\d+)H", svg):
+        grid[int(y), int(x)] = True
+    return grid
+
+
+def test_qr_code_is_inline_svg_that_decodes_to_the_page_url(desk: Desk, clock: FakeClock) -> None:
+    import cv2
+
+    eid, _ = racing(desk, clock)
+    html = html_get(desk, f"/leaderboard/{eid}?lang=de").body.decode()
+    svg = re.search(r'data-testid="qr"><svg.*?</svg>', html, re.S).group(0)
+    grid = _qr_matrix(svg[svg.index("<svg"):])
+    image = np.pad(np.kron(~grid, np.ones((8, 8), dtype=bool)).astype(np.uint8) * 255, 32,
+                   constant_values=255)  # 8 px per module, dark = 0, on a white margin
+    decoded, _points, _ = cv2.QRCodeDetector().detectAndDecode(image)
+    assert decoded == f"http://127.0.0.1:8000/leaderboard/{eid}?track=1&lang=de"
+    inside = svg[svg.index("<svg"):].split(">", 1)[1]
+    assert "<script" not in inside and "http" not in inside  # module squares only: no script, no URL text
+    assert 'data-testid="qr"' not in html_get(desk, f"/leaderboard/{eid}?qr=none").body.decode()
+
+
+def test_unchanged_poll_answers_204_and_a_new_lap_renders_the_row(desk: Desk, clock: FakeClock) -> None:
+    eid, rid = racing(desk, clock, "vera", laps=(10_000,))
+    poll = live_region_url(html_get(desk, f"/leaderboard/{eid}").body.decode(), "board-live")
+
+    unchanged = html_get(desk, poll, {"HX-Request": "true"})
+    assert unchanged.status_code == 204 and unchanged.body == b""
+
+    clock.advance(8_500)
+    desk.ok(desk.command(eid, rid, "capture_lap"))
+    changed = html_get(desk, poll, {"HX-Request": "true"})
+    assert changed.status_code == 200
+    fragment = changed.body.decode()
+    assert fragment.startswith('<section id="board-live"') and 'data-time="8500"' in fragment
+    etag = changed.headers["ETag"]
+    next_poll = live_region_url(fragment, "board-live")
+    assert next_poll != poll and html_get(desk, next_poll, {"HX-Request": "true"}).status_code == 204
+    assert html_get(desk, f"/leaderboard/{eid}/live?track=1&tracks=1",
+                    {"If-None-Match": etag}).status_code == 304
+
+
+# --- overlay -------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("colour, expected", [
+    ("red;background:url(x)", "#00ff00"), ("ff00ff", "#ff00ff"), ("%23abc", "#abc"), ("12345", "#00ff00"),
+    ("0000ff\"><script>", "#00ff00"), ("", "#00ff00"),
+])
+def test_chroma_colour_is_hex_or_green(desk: Desk, clock: FakeClock, colour: str, expected: str) -> None:
+    eid, _ = racing(desk, clock)
+    html = html_get(desk, f"/overlay/{eid}?chroma=1&chromaColor={colour}").body.decode()
+    assert re.search(r'<body class="overlay-body chroma" style="--chroma: ([^"]*)"', html).group(1) == expected
+    assert "url(x)" not in html and "<script>" not in html
+
+
+def test_overlay_without_chroma_is_transparent_and_shows_lower_third_with_f1_colours(desk: Desk,
+                                                                                     clock: FakeClock) -> None:
+    eid, rid = racing(desk, clock, "vera", laps=(10_000, 9_000, 9_500))
+    html = html_get(desk, f"/overlay/{eid}").body.decode()
+    assert '<body class="overlay-body" data-testid="overlay">' in html and "topbar" not in html
+    lower = re.search(r'data-testid="lower-third".*?</section>', html, re.S).group(0)
+    assert "vera" in lower
+    assert re.search(r'lap-purple" data-testid="best-lap">0:09.000<', lower)  # fastest of the event
+    assert re.search(r'lap-yellow" data-testid="previous-lap">0:09.500<', lower)  # valid, not the best
+    desk.ok(desk.call("POST", f"/api/events/{eid}/races/{rid}/commands",
+                      {"kind": "set_lap_validity", "lap_id": 2, "is_valid": False}))
+    html = html_get(desk, f"/overlay/{eid}").body.decode()
+    assert re.search(r'lap-red" data-testid="previous-lap">0:09.500<', html)
+
+
+def test_overlay_after_the_race_highlights_the_racer_then_shows_the_top_four(desk: Desk, clock: FakeClock) -> None:
+    eid, rid = racing(desk, clock, "vera", laps=(10_000,))
+    desk.ok(desk.command(eid, rid, "end"))
+    desk.ok(desk.command(eid, rid, "submit"))
+    html = html_get(desk, f"/overlay/{eid}").body.decode()
+    assert "Just finished" in html and re.search(r'standings-row highlighted" data-racer="vera"', html)
+    poll = live_region_url(html, "overlay-live")
+    assert html_get(desk, poll, {"HX-Request": "true"}).status_code == 204
+
+    clock.advance(31_000)  # the post-race highlight is over: the phase changes, so the poll renders
+    later = html_get(desk, poll, {"HX-Request": "true"})
+    assert later.status_code == 200 and "Top racers" in later.body.decode() and "highlighted" not in later.body.decode()
+
+
+# --- commentator ---------------------------------------------------------------------------------------------------
+
+
+def test_commentator_view_is_refused_to_anonymous_and_racers(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock)
+    anonymous = html_get(desk, f"/commentator/{eid}")
+    assert anonymous.status_code == 303 and anonymous.headers["Location"].startswith("/login")
+    racer = desk.token("rita", "racer")
+    for path in (f"/commentator/{eid}", f"/commentator/{eid}/live?track=1"):
+        assert desk.client.http.get(path, headers={"Authorization": f"Bearer {racer}"}).status_code == 403
+    assert html_get(desk, f"/commentator/{eid}/live?track=1", {"HX-Request": "true"}).status_code == 401
+
+
+def test_commentator_sees_stats_lap_table_and_chart(desk: Desk, clock: FakeClock) -> None:
+    eid, _ = racing(desk, clock, "vera", laps=(10_000, 9_000, 9_500))
+    caster = desk.token("cora", "commentator")
+    reply = desk.client.http.get(f"/commentator/{eid}", headers={"Authorization": f"Bearer {caster}",
+                                                                  "Accept": "text/html"})
+    assert reply.status_code == 200
+    html = reply.body.decode()
+    assert re.search(r'data-testid="position-now">1<', html)
+    assert re.findall(r'<tr class="lap-(\w+)"><td>(\d)</td><td class="lap-time">([\d:.]+)<', html) == [
+        ("yellow", "1", "0:10.000"), ("purple", "2", "0:09.000"), ("yellow", "3", "0:09.500")]
+    chart = re.search(r'<svg class="lap-chart".*?</svg>', html, re.S).group(0)
+    assert chart.count('<rect class="bar') == 3 and 'stroke-dasharray="8 6"' in chart
+    assert "Event best 0:09.000" in chart
