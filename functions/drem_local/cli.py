@@ -21,6 +21,8 @@ SUBCOMMANDS: dict[str, str] = {
     "models": "drem_local.commands.models",
     "export": "drem_local.commands.export",
     "import": "drem_local.commands.import_",
+    "car": "drem_cars.cli",
+    "timer": "drem_cars.cli_timer",
     "sim": "drem_sim.cli",
     "train": "drem_sim.cli_train",
 }

@@ -1,0 +1,93 @@
+"""`drem car`: activate this device, run the car agent (simulator or hardware), show its state."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import socket
+import sys
+
+HELP = "car agent: activate this car, run it (--sim for the simulator), show its status"
+EXIT_REVOKED = 3  # the same code as drem_cars.runner.EXIT_REVOKED (kept here so --help stays light)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config-dir", default=os.environ.get("DREM_CAR_CONFIG"),
+                        help="where the credential, outbox and models live (default ~/.config/drem-car/)")
+    sub = parser.add_subparsers(dest="car_command", metavar="ACTION", required=True)
+    activate = sub.add_parser("activate", help="exchange a one-time activation code for this device's credential")
+    activate.add_argument("--code", required=True, help="the code staff created for this car")
+    activate.add_argument("--api", required=True, help="drem API base URL, e.g. http://127.0.0.1:8000")
+    activate.add_argument("--hostname", default=socket.gethostname().split(".")[0],
+                          help="this car's hostname as staff entered it (default: this machine's)")
+    activate.add_argument("--kind", choices=("car", "timer"), default="car")
+    run = sub.add_parser("run", help="run the agent and the drive loop")
+    run.add_argument("--sim", action="store_true", help="drive the simulator instead of hardware")
+    run.add_argument("--track", default="reinvent_base", help="simulator track (default reinvent_base)")
+    run.add_argument("--event", help="event id: the sim's timing line posts strip events to it")
+    run.add_argument("--race-track", default="1", help="the event's track id for strip events (default 1)")
+    run.add_argument("--rate-hz", type=float, default=15.0, help="drive loop rate (sim: >15 runs faster than life)")
+    run.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
+    run.add_argument("--heartbeat-limit", type=float, default=60.0,
+                     help="stop the car after this many seconds without reaching the server (default 60)")
+    run.add_argument("--deepracer", metavar="URL", help="drive an AWS DeepRacer through its device console at URL")
+    run.add_argument("--deepracer-password", default=os.environ.get("DEEPRACER_PASSWORD"),
+                     help="device console password (or $DEEPRACER_PASSWORD)")
+    sub.add_parser("status", help="show this device's activation and local state")
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if args.car_command == "activate":
+        return _activate(args)
+    if args.car_command == "status":
+        return _status(args)
+    return _run(args)
+
+
+def _activate(args: argparse.Namespace) -> int:
+    from drem_cars.client import DeviceApiError, activate
+    from drem_cars.credentials import CredentialStore
+
+    try:
+        credential = activate(args.api, args.code, args.hostname, args.kind)
+    except DeviceApiError as exc:
+        print(f"activation failed: {exc}", file=sys.stderr)
+        return 1
+    store = CredentialStore(args.config_dir)
+    store.save(credential)
+    print(f"activated {credential.device_kind} {credential.hostname} as {credential.device_id} "
+          f"(fleet {credential.fleet_id}); credential saved to {store.path} (mode 0600)")
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    from drem_cars.client import DeviceApiError, DeviceClient
+    from drem_cars.credentials import CredentialStore, NotActivated
+    from drem_cars.model_store import ModelStore
+    from drem_cars.outbox import Outbox
+
+    store = CredentialStore(args.config_dir)
+    try:
+        client = DeviceClient(store)
+    except NotActivated as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    outbox = Outbox(store.directory / "outbox.sqlite3")
+    local = {"device_id": client.device_id, "api": client.api, "hostname": client.credential.hostname,
+             "fleet_id": client.credential.fleet_id, "outbox_pending": outbox.count("pending"),
+             "outbox_rejected": outbox.count("rejected"),
+             "models": sorted(m.folder for m in ModelStore(store.directory / "models").installed().values())}
+    try:
+        local["server"] = client.request("GET", "/api/devices/self", what="status")
+    except DeviceApiError as exc:
+        local["server"] = f"unavailable: {exc}"
+    print(json.dumps(local, indent=2))
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from drem_cars.runner import run_agent
+
+    return run_agent(args)

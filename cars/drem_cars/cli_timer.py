@@ -1,0 +1,57 @@
+"""`drem timer`: a Raspberry Pi with two timing strips posts lap crossings to drem (durably, in order)."""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import time
+
+HELP = "timing-strip agent for a Raspberry Pi: GPIO17/27 crossings → strip events (activate with `drem car activate --kind timer`)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config-dir", default=os.environ.get("DREM_CAR_CONFIG"),
+                        help="credential + outbox directory (default ~/.config/drem-car/)")
+    parser.add_argument("--api", help="override the API URL saved at activation")
+    parser.add_argument("--event", required=True, help="event id")
+    parser.add_argument("--track", default="1", help="the event's track id (default 1)")
+    parser.add_argument("--pins", default="17,27", help="BCM pins of the strips (default 17,27)")
+    parser.add_argument("--seconds", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from drem_cars.agent import CarAgent
+    from drem_cars.client import DeviceClient
+    from drem_cars.credentials import CredentialStore, NotActivated
+    from drem_cars.drivers.timer_device import TimerDriver
+    from drem_cars.drivers.timing_strips import TimingStrips
+    from drem_cars.outbox import Outbox
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    store = CredentialStore(args.config_dir)
+    try:
+        client = DeviceClient(store, api=args.api)
+    except NotActivated as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    outbox = Outbox(store.directory / "outbox.sqlite3")
+    pins = tuple(int(p) for p in args.pins.split(","))
+    strips = TimingStrips(outbox, args.event, args.track, client.device_id, pins)
+    agent = CarAgent(client, TimerDriver(), outbox, store=None)
+    agent.start()
+    deadline = time.monotonic() + args.seconds if args.seconds else None
+    try:
+        while not agent.wait(0.5):
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+    except KeyboardInterrupt:
+        pass
+    agent.stop()
+    agent.flush_outbox()
+    strips.close()
+    print(f"crossings queued {strips.queued}, ignored {strips.ignored}, outbox pending {outbox.count()}")
+    if agent.revoked:
+        print(f"stopped: {agent.revoked}", file=sys.stderr)
+        return 3
+    return 0

@@ -1,0 +1,1 @@
+"""Vehicle parts: each has run(*inputs) -> outputs and optionally shutdown()."""

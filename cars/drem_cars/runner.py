@@ -1,0 +1,100 @@
+"""`drem car run`: wire the agent to a driver and run until stopped, revoked or asked to restart."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+from drem_cars.agent import CarAgent
+from drem_cars.client import DeviceClient
+from drem_cars.credentials import CredentialStore, NotActivated
+from drem_cars.model_store import ModelStore
+from drem_cars.outbox import Outbox
+
+EXIT_REVOKED = 3
+
+
+def open_agent_files(config_dir: Path) -> tuple[Outbox, ModelStore]:
+    return Outbox(config_dir / "outbox.sqlite3"), ModelStore(config_dir / "models")
+
+
+def run_agent(args: argparse.Namespace) -> int:
+    store = CredentialStore(args.config_dir)
+    try:
+        client = DeviceClient(store)
+    except NotActivated as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    outbox, models = open_agent_files(store.directory)
+    deadline = time.monotonic() + args.seconds if args.seconds else None
+    if args.deepracer:
+        return _run_deepracer(args, client, outbox, models, deadline)
+    if not args.sim:
+        print("drem car run: hardware driving needs --sim or --deepracer URL on this build (camera + PWM parts "
+              "exist in drem_cars.drivers; see docs/cars.md)", file=sys.stderr)
+        return 2
+    from drem_cars.parts.safety import Safety
+    from drem_cars.sim_car import build_sim_car
+
+    car = build_sim_car(args.track, safety=Safety(heartbeat_limit_s=args.heartbeat_limit), outbox=outbox,
+                        event_id=args.event, track_id=args.race_track, device_id=client.device_id)
+    agent = CarAgent(client, car.driver, outbox, models)
+    agent.start()
+    watcher = threading.Thread(target=_stop_vehicle_when, args=(agent, car.vehicle, deadline), daemon=True)
+    watcher.start()
+    try:
+        stats = car.vehicle.start(rate_hz=args.rate_hz)
+    except KeyboardInterrupt:
+        stats = car.vehicle.stats
+    agent.stop()
+    agent.flush_outbox()
+    print(f"drive loop: {stats.summary()}; sim laps crossed: {car.strips.queued if car.strips else 0}; "
+          f"outbox pending {outbox.count()}")
+    return _finish(agent)
+
+
+def _stop_vehicle_when(agent: CarAgent, vehicle, deadline: float | None) -> None:  # type: ignore[no-untyped-def]
+    while not agent.wait(0.2):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+    vehicle.stop()
+
+
+def _run_deepracer(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,
+                   deadline: float | None) -> int:
+    from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver
+
+    if not args.deepracer_password:
+        print("--deepracer needs --deepracer-password (or $DEEPRACER_PASSWORD)", file=sys.stderr)
+        return 2
+    try:
+        console = DeepRacerConsole(args.deepracer, args.deepracer_password)
+        console.login()
+    except ConsoleError as exc:
+        print(f"DeepRacer console: {exc}", file=sys.stderr)
+        return 1
+    agent = CarAgent(client, DeepRacerConsoleDriver(console), outbox, models)
+    agent.start()
+    try:
+        while not agent.wait(0.5):
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+    except KeyboardInterrupt:
+        pass
+    agent.stop()
+    return _finish(agent)
+
+
+def _finish(agent: CarAgent) -> int:
+    if agent.revoked:
+        print(f"stopped: {agent.revoked}. Ask staff for a new activation code and run `drem car activate`.",
+              file=sys.stderr)
+        return EXIT_REVOKED
+    if agent.restart_requested:
+        print("restart requested by staff: restarting the agent", file=sys.stderr)
+        if os.environ.get("DREM_CAR_NO_REEXEC") != "1":
+            os.execv(sys.executable, [sys.executable, *sys.argv])
+    return 0

@@ -1,0 +1,216 @@
+"""The car agent against the real local stack (durable moto + app over HTTP): activation, model pull, and a race
+whose API goes away for 30 s while the simulated car keeps lapping."""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import stat
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import requests
+
+from drem_cars import cli as car_cli
+from drem_cars.agent import AgentTiming, CarAgent
+from drem_cars.client import DeviceClient
+from drem_cars.credentials import CredentialStore
+from drem_cars.model_store import ModelStore
+from drem_cars.outbox import Outbox
+from drem_cars.parts.safety import Safety
+from drem_cars.sim_car import build_sim_car
+from drem_local import stack as local_stack
+from drem_local.api_client import ApiClient
+from tests.cars.onnx_models import CONTINUOUS_SPACE, mean_brightness_policy
+from tests.unit.models_helpers import onnx_archive, tar_gz
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture(scope="module")
+def admin(live_stack) -> ApiClient:
+    api = ApiClient(live_stack.url)
+    api.sign_in(live_stack.admin_username, live_stack.admin_password)
+    return api
+
+
+def activate_car(live_stack, admin: ApiClient, config_dir: Path, hostname: str) -> tuple[str, str]:
+    """(fleet id, device id) of a car activated with `drem car activate`."""
+    fleet_id = admin.post("/api/fleets", {"name": f"fleet of {hostname}"})["fleet_id"]
+    code = admin.post("/api/devices/activation-codes",
+                      {"fleet_id": fleet_id, "hostname": hostname, "device_kind": "car"})["code"]
+    parser = argparse.ArgumentParser()
+    car_cli.add_arguments(parser)
+    args = parser.parse_args(["--config-dir", str(config_dir), "activate", "--code", code, "--api", live_stack.url,
+                              "--hostname", hostname])
+    assert car_cli.run(args) == 0
+    return fleet_id, CredentialStore(config_dir).load().device_id
+
+
+def upload_model(admin: ApiClient, filename: str, data: bytes) -> dict:
+    ticket = admin.post("/api/models", {"filename": filename})
+    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
+                           files={"file": (filename, data)}, timeout=30)
+    assert posted.status_code in (200, 204), posted.text
+    model = admin.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
+    assert model["status"] == "AVAILABLE", model
+    return model
+
+
+def car_runtime(config_dir: Path, safety: Safety | None = None, event_id: str | None = None):
+    client = DeviceClient(CredentialStore(config_dir))
+    outbox = Outbox(config_dir / "outbox.sqlite3")
+    car = build_sim_car("reinvent_base", safety=safety, outbox=outbox, event_id=event_id,
+                        device_id=client.device_id)
+    agent = CarAgent(client, car.driver, outbox, ModelStore(config_dir / "models"), AgentTiming())
+    return car, agent, outbox
+
+
+def statuses(admin: ApiClient, device_id: str) -> dict[str, dict | None]:
+    assignment = admin.get(f"/api/cars/{device_id}/models")["assignment"]
+    return {m["name"]: m["progress"] for m in assignment["models"]}
+
+
+def test_activation_stores_a_private_credential_and_status_reads_the_server(live_stack, admin, tmp_path,
+                                                                          capsys) -> None:
+    _fleet, device_id = activate_car(live_stack, admin, tmp_path, "car-status")
+    mode = stat.S_IMODE(os.stat(tmp_path / "credential.json").st_mode)
+    assert mode == 0o600
+    parser = argparse.ArgumentParser()
+    car_cli.add_arguments(parser)
+    assert car_cli.run(parser.parse_args(["--config-dir", str(tmp_path), "status"])) == 0
+    printed = capsys.readouterr().out
+    assert device_id in printed and '"hostname": "car-status"' in printed
+
+
+def test_assigned_models_are_pulled_verified_loaded_and_reported(live_stack, admin, tmp_path) -> None:
+    _fleet, device_id = activate_car(live_stack, admin, tmp_path, "car-models")
+    # Built by the models tests' helper: an ONNX file of IR version 14, newer than this onnxruntime reads.
+    too_new = upload_model(admin, "too_new.tar.gz", onnx_archive(0.25))
+    runnable_bytes = tar_gz([("model.onnx", mean_brightness_policy([0.0, 0.0], [0.0, 0.0])),
+                             ("model_metadata.json", __import__("json").dumps(
+                                 {"action_space": CONTINUOUS_SPACE, "action_space_type": "continuous",
+                                  "sensor": ["FRONT_FACING_CAMERA"], "neural_network": "DREM_SMALL_CNN",
+                                  "training_algorithm": "behaviour_cloning", "version": "1"}).encode())])
+    runnable = upload_model(admin, "runnable.tar.gz", runnable_bytes)
+    car, agent, _outbox = car_runtime(tmp_path)
+    agent.start()
+    try:
+        assigned_at = time.monotonic()
+        admin.put(f"/api/cars/{device_id}/models", {"model_ids": [too_new["model_id"], runnable["model_id"]]})
+        deadline = assigned_at + 30
+        while time.monotonic() < deadline:
+            seen = statuses(admin, device_id)
+            if (seen.get("runnable") or {}).get("status") == "loaded":
+                break
+            time.sleep(0.1)
+        loaded_after = time.monotonic() - assigned_at
+        print(f"\nassigned → loaded (as staff see it): {loaded_after:.2f} s")
+        seen = statuses(admin, device_id)
+        assert seen["runnable"]["status"] == "loaded", seen
+        assert seen["runnable"]["md5"] == hashlib.md5(runnable_bytes).hexdigest()
+        assert seen["too_new"]["status"] == "failed" and "cannot load" in seen["too_new"]["reason"], seen
+        assert car.driver.pilot.pilot is not None and car.driver.pilot.pilot.action_space.kind == "continuous"
+        installed = ModelStore(tmp_path / "models").installed()
+        assert {m.name for m in installed.values()} == {"too_new", "runnable"}, "both verified and unpacked"
+        assert not any((tmp_path / "models" / ".staging").iterdir()), "no half-finished download is left"
+        agent.heartbeat()
+        device = admin.get(f"/api/devices/{device_id}")
+        assert device["online"] and device["telemetry"]["model"]["name"] == "runnable"
+
+        admin.post(f"/api/devices/{device_id}/commands", {"type": "SET_THROTTLE_CAP", "throttle_cap_pct": 35})
+        admin.post(f"/api/devices/{device_id}/commands", {"type": "DELETE_ALL_MODELS"})
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline:
+            commands = admin.get(f"/api/devices/{device_id}/commands")["commands"]
+            if all(c["status"] != "pending" for c in commands):
+                break
+            time.sleep(0.2)
+        assert {c["type"]: c["status"] for c in commands} == {"SET_THROTTLE_CAP": "ok", "DELETE_ALL_MODELS": "ok"}
+        assert car.safety.throttle_cap_pct == 35 and car.driver.pilot.pilot is None
+    finally:
+        agent.stop()
+
+
+def laps_of(admin: ApiClient, event_id: str, race_id: str) -> list[dict]:
+    view = admin.get(f"/api/events/{event_id}/races/{race_id}")
+    race = view.get("race", view)
+    return race["laps"]
+
+
+def test_laps_survive_a_30_second_api_outage_exactly_once_and_in_order(live_stack, admin, tmp_path) -> None:
+    fleet_id, _device_id = activate_car(live_stack, admin, tmp_path, "car-race")
+    event = admin.post("/api/events", {"name": "Outage Cup", "event_type": "AWS_SUMMIT", "date": "2026-05-14",
+                                       "country_code": "SE", "race_config": {"race_time_min": 10},
+                                       "tracks": [{"track_id": "1", "fleet_id": fleet_id}]})
+    event_id = event["event_id"]
+    race_id = admin.post(f"/api/events/{event_id}/races", {"track_id": "1",
+                                                           "racer_username": live_stack.admin_username})["race_id"]
+    car, agent, outbox = car_runtime(tmp_path, Safety(heartbeat_limit_s=60), event_id)
+    agent.start()
+    driving = threading.Thread(target=car.vehicle.start, kwargs={"rate_hz": 15}, daemon=True)
+    driving.start()
+    running = live_stack.running
+    try:
+        time.sleep(15)
+        assert car.strips.queued >= 2, "the car is lapping before the outage"
+        running.app.stop()  # the API is really gone: its process has exited
+        outage_started_with = car.strips.queued
+        time.sleep(30)
+        assert car.strips.queued >= outage_started_with + 2, "laps kept coming while the API was down"
+        assert outbox.count() >= 2, "and they waited in the outbox"
+        running.app = local_stack.start_app(running.config, running.env)
+        time.sleep(12)
+        car.vehicle.stop()
+        driving.join(10)
+        deadline = time.monotonic() + 30
+        while outbox.count() and time.monotonic() < deadline:
+            time.sleep(0.5)
+        assert outbox.count() == 0 and outbox.count("rejected") == 0, outbox.rejected()
+    finally:
+        car.vehicle.stop()
+        agent.stop()
+        if not running.app.alive():
+            running.app = local_stack.start_app(running.config, running.env)
+    crossings = [item["timestamp_ms"] for item in _delivered_bodies(outbox)]
+    laps = laps_of(admin, event_id, race_id)
+    expected = [b - a for a, b in zip(crossings, crossings[1:])]
+    print(f"\n{len(crossings)} crossings, {len(laps)} laps: {[lap['time_ms'] for lap in laps]}")
+    assert [lap["time_ms"] for lap in laps] == expected, "every lap once, in order (first crossing starts the race)"
+    assert [lap["lap_id"] for lap in laps] == list(range(len(expected)))
+
+
+def _delivered_bodies(outbox: Outbox) -> list[dict]:
+    import json
+    import sqlite3
+
+    with sqlite3.connect(outbox.path) as db:
+        rows = db.execute("SELECT body FROM outbox WHERE kind = 'strip_event' AND state = 'delivered' "
+                          "ORDER BY seq").fetchall()
+    return [json.loads(body) for (body,) in rows]
+
+
+def test_drem_car_run_sim_drives_then_stops_cleanly_when_the_device_is_revoked(live_stack, admin, tmp_path,
+                                                                               capsys, monkeypatch) -> None:
+    _fleet, device_id = activate_car(live_stack, admin, tmp_path, "car-revoked")
+    monkeypatch.setenv("DREM_CAR_NO_REEXEC", "1")
+    parser = argparse.ArgumentParser()
+    car_cli.add_arguments(parser)
+    args = parser.parse_args(["--config-dir", str(tmp_path), "run", "--sim", "--track", "reinvent_base",
+                              "--seconds", "60"])
+    result: dict[str, int] = {}
+    runner = threading.Thread(target=lambda: result.update(code=car_cli.run(args)), daemon=True)
+    started = time.monotonic()
+    runner.start()
+    deadline = started + 20
+    while time.monotonic() < deadline and not admin.get(f"/api/devices/{device_id}")["online"]:
+        time.sleep(0.3)
+    assert admin.get(f"/api/devices/{device_id}")["online"], "the running agent's heartbeats reach the server"
+    admin.delete(f"/api/devices/{device_id}")
+    runner.join(30)
+    assert result.get("code") == car_cli.EXIT_REVOKED
+    assert time.monotonic() - started < 40, "it stopped on the revocation, not at --seconds"
+    err = capsys.readouterr().err
+    assert "no longer accepts this device" in err and "drem car activate" in err

@@ -1,0 +1,56 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from drem_cars.drivers.pwm import MOTOR_DEFAULT, SERVO_DEFAULT, PwmActuator, PwmChannel, load_calibration
+
+pytestmark = pytest.mark.unit
+
+
+def sysfs_tree(root: Path, chip: int = 0, channels: int = 2) -> Path:
+    """A temp stand-in for /sys/class/pwm: exporting creates the channel folder, as the kernel does."""
+    chip_dir = root / f"pwmchip{chip}"
+    chip_dir.mkdir(parents=True)
+    (chip_dir / "npwm").write_text(str(channels))
+    return root
+
+
+def read(root: Path, channel: int, name: str) -> str:
+    return (root / "pwmchip0" / f"pwm{channel}" / name).read_text()
+
+
+def exported_channel(root: Path, channel: int) -> None:
+    (root / "pwmchip0" / f"pwm{channel}").mkdir()
+
+
+def test_deepracer_defaults_map_unit_values_to_duty_cycles() -> None:
+    assert SERVO_DEFAULT.duty_ns(-1) == 1_200_000 and SERVO_DEFAULT.duty_ns(0) == 1_450_000
+    assert SERVO_DEFAULT.duty_ns(1) == 1_700_000 and SERVO_DEFAULT.duty_ns(0.5) == 1_575_000
+    # motor polarity −1: full forward throttle is the *min* pulse
+    assert MOTOR_DEFAULT.duty_ns(1) == 1_311_000 and MOTOR_DEFAULT.duty_ns(-1) == 1_603_500
+    assert MOTOR_DEFAULT.duty_ns(0) == 1_446_000 and MOTOR_DEFAULT.duty_ns(7) == 1_311_000, "clipped to ±1"
+
+
+def test_actuator_writes_50hz_period_duty_and_enable_then_goes_neutral_on_shutdown(tmp_path: Path) -> None:
+    root = sysfs_tree(tmp_path)
+    exported_channel(root, 0)
+    exported_channel(root, 1)
+    actuator = PwmActuator(PwmChannel(0, 0, SERVO_DEFAULT, root), PwmChannel(0, 1, MOTOR_DEFAULT, root))
+    assert read(root, 0, "period") == "20000000" and read(root, 0, "enable") == "1"
+    assert read(root, 1, "duty_cycle") == "1446000", "motor starts neutral"
+    assert actuator.run(-1.0, 0.5) == (1_200_000, 1_378_500)
+    assert read(root, 0, "duty_cycle") == "1200000" and read(root, 1, "duty_cycle") == "1378500"
+    actuator.shutdown()
+    assert read(root, 1, "duty_cycle") == "1446000" and read(root, 1, "enable") == "0"
+
+
+def test_calibration_json_from_the_car_is_read(tmp_path: Path) -> None:
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps({"Calibration": {
+        "Servo": {"min": 1_250_000, "mid": 1_460_000, "max": 1_690_000, "polarity": 1},
+        "Motor": {"min": 1_300_000, "mid": 1_450_000, "max": 1_600_000, "polarity": -1}, "version": 1}}))
+    servo, motor = load_calibration(path)
+    assert servo.duty_ns(1) == 1_690_000 and motor.duty_ns(1) == 1_300_000
