@@ -1,0 +1,110 @@
+"""Operator console: race admin. The races of an event (filter by track), lap edits (time, resets, validity), delete
+with confirmation, and the CSV downloads of the JSON API. Same `RaceService` as the JSON API."""
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from decimal import Decimal, InvalidOperation
+from typing import Any
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.races import LapEdit
+from chalicelib.domain.timekeeper_desk import clock_text
+from chalicelib.routes.console_common import checkbox, form, redirect, render_or_errors
+from chalicelib.routes.events import event_service
+from chalicelib.routes.races import race_service
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+RACE_ADMINS = {ADMIN, OPERATOR}
+
+
+class RaceFilter(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    event_id: str = Field(default="", max_length=64)
+    track: str = Field(default="", max_length=32)
+
+
+@route(bp, "/console/races", allow=RACE_ADMINS, query=RaceFilter)
+def races_page(principal: User, query: RaceFilter) -> Response:
+    events = event_service().list_events()
+    event = next((e for e in events if e.event_id == query.event_id), events[0] if events else None)
+    races = race_service().list_races(event.event_id, query.track or None) if event else []
+    return render.page("console/races", events=events, event=event, track=query.track,
+                       races=[_race_row(r) for r in reversed(races)])
+
+
+@route(bp, "/console/races/{event_id}/{race_id}", allow=RACE_ADMINS)
+def race_edit_page(principal: User, event_id: str, race_id: str) -> Response:
+    return _edit_page(principal, event_id, race_id, {})
+
+
+@route(bp, "/console/races/{event_id}/{race_id}/laps/{lap_id}", methods=["POST"], allow=RACE_ADMINS)
+def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> Response:
+    fields = form(bp.current_request)
+
+    def save() -> Response:
+        race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields))
+        return redirect(f"/console/races/{event_id}/{race_id}")
+
+    return render_or_errors(save, lambda errors, status: _edit_page(
+        principal, event_id, race_id, {f"lap-{lap_id}-{name}": message for name, message in errors.items()}, status),
+        rename=lambda name: "time_s" if name == "time_ms" else name)
+
+
+@route(bp, "/console/races/{event_id}/{race_id}/delete", allow=RACE_ADMINS)
+def confirm_delete_page(principal: User, event_id: str, race_id: str) -> Response:
+    race = race_service().get_race(principal, event_id, race_id)
+    return render.page("console/race_delete", race=race, errors={})
+
+
+@route(bp, "/console/races/{event_id}/{race_id}/delete", methods=["POST"], allow=RACE_ADMINS)
+def delete_race(principal: User, event_id: str, race_id: str) -> Response:
+    def delete() -> Response:
+        race_service().delete_race(event_id, race_id)
+        return redirect(f"/console/races?event_id={event_id}")
+
+    return render_or_errors(delete, lambda errors, status: render.page(
+        "console/race_delete", status=status, race=race_service().get_race(principal, event_id, race_id),
+        errors=errors))
+
+
+def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, str], status: int = 200) -> Response:
+    race = race_service().get_race(principal, event_id, race_id)
+    laps = [{**lap, "seconds": f"{Decimal(lap['time_ms']) / 1000:.3f}", "time": clock_text(lap["time_ms"])}
+            for lap in race["laps"]]
+    return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors,
+                       created=_when(race["created_at_ms"]))
+
+
+def _lap_number(lap_id: str) -> int:
+    if not lap_id.isdigit():
+        raise InvalidInput("The lap id is a whole number (0 is the first lap).", field="lap_id")
+    return int(lap_id)
+
+
+def _lap_edit(fields: dict[str, str]) -> LapEdit:
+    try:
+        seconds = Decimal(fields.get("time_s", "").strip())
+    except InvalidOperation:
+        raise InvalidInput("Write the lap time in seconds, e.g. 12.345.", field="time_s") from None
+    if not seconds.is_finite() or seconds < 0:
+        raise InvalidInput("Write the lap time in seconds, e.g. 12.345.", field="time_s")
+    resets = fields.get("resets", "").strip()
+    if not resets.isdigit():
+        raise InvalidInput("Resets is a whole number (0 or more).", field="resets")
+    return LapEdit(time_ms=int(seconds * 1000), resets=int(resets), is_valid=checkbox(fields, "is_valid"))
+
+
+def _race_row(race: dict[str, Any]) -> dict[str, Any]:
+    return {**race, "created": _when(race["created_at_ms"]),
+            "fastest": clock_text(race["fastest_lap_ms"]) if race["fastest_lap_ms"] is not None else "—"}
+
+
+def _when(ms: int) -> str:
+    return datetime.fromtimestamp(ms / 1000, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")

@@ -1,0 +1,55 @@
+"""Set-up for the console journeys through the same doors a real client uses: Cognito (the local stack's durable
+moto) for accounts and tokens, the JSON API over HTTP for everything else, and a device's own activation call."""
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import requests
+
+PASSWORD = "Journey-Pass-9"
+
+
+def cognito(live_stack: Any) -> Any:
+    import boto3
+
+    return boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
+                        aws_access_key_id="testing", aws_secret_access_key="testing")
+
+
+def create_user(live_stack: Any, username: str, group: str) -> str:
+    client, pool = cognito(live_stack), live_stack.outputs.user_pool_id
+    client.admin_create_user(UserPoolId=pool, Username=username, TemporaryPassword=PASSWORD, MessageAction="SUPPRESS",
+                             UserAttributes=[{"Name": "email", "Value": f"{username}@example.test"}])
+    client.admin_set_user_password(UserPoolId=pool, Username=username, Password=PASSWORD, Permanent=True)
+    client.admin_add_user_to_group(UserPoolId=pool, Username=username, GroupName=group)
+    return username
+
+
+def access_token(live_stack: Any, username: str) -> str:
+    reply = cognito(live_stack).initiate_auth(AuthFlow="USER_PASSWORD_AUTH",
+                                              ClientId=live_stack.outputs.user_pool_client_id,
+                                              AuthParameters={"USERNAME": username, "PASSWORD": PASSWORD})
+    return reply["AuthenticationResult"]["AccessToken"]
+
+
+def call(url: str, method: str, path: str, *, token: str | None = None, device: str | None = None,
+         body: Any = None, expect: int | tuple[int, ...] = (200, 201)) -> Any:
+    headers = {"Accept": "application/json", "Content-Type": "application/json"}
+    if token:
+        headers["Authorization"] = f"Bearer {token}"
+    if device:
+        headers["Authorization"] = f"Device {device}"
+    reply = requests.request(method, url + path, headers=headers, timeout=15,
+                             data=json.dumps(body).encode() if body is not None else None)
+    expected = (expect,) if isinstance(expect, int) else expect
+    assert reply.status_code in expected, f"{method} {path}: {reply.status_code} {reply.text}"
+    return reply.json() if reply.content else None
+
+
+def sign_in(page: Any, url: str, username: str) -> None:
+    page.goto(url + "/login")
+    page.fill("#username", username)
+    page.fill("#password", PASSWORD)
+    page.get_by_role("button", name="Sign in").click()
+    page.wait_for_url(url + "/")

@@ -1,0 +1,98 @@
+"""Journey 4: an operator runs a whole race from the timekeeper screen with the keyboard (start, laps, a reset, a
+DNF, an undo of a false finish, end), submits it, and finds it in race admin and in the CSV download."""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import pytest
+
+from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.browser.console_stack import console_url  # noqa: F401 - fixture
+
+pytestmark = pytest.mark.browser
+
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+
+
+def _laps(page) -> int:
+    return page.locator("[data-testid=laps] tr[data-lap]").count()
+
+
+def _wait_laps(page, count: int) -> None:
+    page.wait_for_function(f"document.querySelectorAll('[data-testid=laps] tr[data-lap]').length === {count}")
+
+
+def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin(live_stack, console_url, page):
+    create_user(live_stack, "keys-op", "operator")
+    create_user(live_stack, "keys-racer", "racer")
+    token = access_token(live_stack, "keys-op")
+    fleet = call(console_url, "POST", "/api/fleets", token=token, body={"name": "Keyboard fleet"}, expect=201)
+    event = call(console_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Keyboard Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-07-01", "country_code": "GB",
+        "race_config": {"race_time_min": 3, "resets_per_lap": 0},
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"], "leaderboard_title": "Keyboard track"}]})
+    event_id = event["event_id"]
+
+    sign_in(page, console_url, "keys-op")
+    page.goto(f"{console_url}/console/timekeeper/{event_id}/1")
+    assert "No timer in this track's fleet" in page.get_by_test_id("timer-status").inner_text()
+    page.fill("#racer_username", "keys-racer")
+    page.get_by_role("button", name="Ready race").click()
+    status = page.get_by_test_id("race-status")
+    status.wait_for()
+    assert status.inner_text() == "Ready to start"
+    assert page.get_by_test_id("time-left").inner_text() == "3:00.000"
+
+    page.keyboard.press("Space")  # start
+    page.wait_for_function("document.querySelector('[data-testid=race-status]').textContent === 'Running'")
+    page.wait_for_timeout(1200)
+    assert page.get_by_test_id("time-left").inner_text() < "2:59.000"  # ticking down between polls
+
+    page.keyboard.press("l")  # lap 1, clean
+    _wait_laps(page, 1)
+    page.keyboard.press("r")  # a reset on lap 2 ...
+    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
+    page.keyboard.press("r")
+    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '2 / 0'")
+    page.keyboard.press("Shift+R")  # ... one taken back
+    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
+    page.wait_for_timeout(300)
+    page.keyboard.press("Enter")  # lap 2: one reset, over the limit of 0 → invalid
+    _wait_laps(page, 2)
+    page.keyboard.press("l")  # a false finish (lap 3) ...
+    _wait_laps(page, 3)
+    page.keyboard.press("u")  # ... undone
+    _wait_laps(page, 2)
+    page.keyboard.press("d")  # DNF: an invalid lap 3, and the race pauses
+    _wait_laps(page, 3)
+    page.wait_for_function("document.querySelector('[data-testid=race-status]').textContent === 'Paused'")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "timekeeper.png"), full_page=True)
+
+    laps = page.get_by_test_id("laps")
+    assert "✔ valid" in laps.locator("tr[data-lap='1']").inner_text()
+    assert "✘ invalid" in laps.locator("tr[data-lap='2']").inner_text()
+    assert "DNF" in laps.locator("tr[data-lap='3']").inner_text()
+
+    # A second screen (another tablet) shows the same race.
+    other = page.context.new_page()
+    other.goto(f"{console_url}/console/timekeeper/{event_id}/1")
+    assert other.get_by_test_id("racer").inner_text() == "keys-racer"
+    assert other.locator("[data-testid=laps] tr[data-lap]").count() == 3
+    other.close()
+
+    page.keyboard.press("e")  # end
+    page.get_by_role("button", name="Submit race").click()
+    page.get_by_role("button", name="Ready race").wait_for()  # back to the next racer
+
+    page.goto(f"{console_url}/console/races?event_id={event_id}")
+    row = page.locator("[data-testid=races-table] tr", has_text="keys-racer")
+    assert "SUBMITTED" in row.inner_text() and "3 (1)" in row.inner_text()
+
+    download = page.request.get(console_url + page.get_by_test_id("csv-laps").get_attribute("href"))
+    assert download.ok and download.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(download.text())))
+    assert [(r["Username"], r["Lap #"], r["Resets"], r["Valid"]) for r in rows] == [
+        ("keys-racer", "1", "0", "true"), ("keys-racer", "2", "1", "false"), ("keys-racer", "3", "0", "false")]

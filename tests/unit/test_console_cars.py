@@ -1,0 +1,86 @@
+"""The fleets, activation and cars screens: a code and the command to run, car actions queued as device commands,
+admin-only deregistration, errors next to the field."""
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
+from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture
+
+pytestmark = pytest.mark.unit
+
+
+def _commands(console, device_id: str) -> list[dict]:
+    return json.loads(console.desk.call("GET", f"/api/devices/{device_id}/commands").body)["commands"]
+
+
+def _car(console, fleet: str, hostname: str = "car-1") -> str:
+    console.desk.device(fleet, hostname, kind="car")
+    devices = json.loads(console.desk.call("GET", "/api/devices").body)["devices"]
+    return next(d["device_id"] for d in devices if d["hostname"] == hostname)
+
+
+def test_a_fleet_made_on_screen_then_an_activation_code_with_the_command_to_run(console):
+    console.sign_in("op-web", "operator")
+    assert console.post("/console/fleets", {"name": "Track 1 cars"}).status_code == 303
+    fleet_id = json.loads(console.desk.call("GET", "/api/fleets").body)["fleets"][0]["fleet_id"]
+
+    page = console.post("/console/cars/activate", {"device_kind": "timer", "hostname": "timer-a",
+                                                   "fleet_id": fleet_id, "ttl_minutes": "30"}).body.decode()
+
+    code = re.search(r'data-testid="activation-code">([A-Z0-9-]+)<', page).group(1)
+    assert f"drem timer activate --code {code} --api http://127.0.0.1:8000" in page
+    exchange = {"code": code, "hostname": "timer-a", "device_kind": "timer"}
+    activated = console.desk.client.http.post("/api/devices/activate", body=json.dumps(exchange).encode(),
+                                              headers={"Content-Type": "application/json"})
+    assert activated.status_code == 201
+    assert "timer-a" in text_of(console.web.get("/console/cars").body.decode())
+
+
+def test_bad_activation_input_is_named_next_to_the_field(console):
+    console.desk.fleet()
+    console.sign_in("op-web", "operator")
+    reply = console.post("/console/cars/activate", {"device_kind": "car", "hostname": "bad host!", "fleet_id": "x"})
+    assert reply.status_code == 400
+    assert field_error(reply.body.decode(), "hostname")
+    assert console.post("/console/fleets", {"name": "  "}).status_code == 400
+
+
+def test_car_actions_become_device_commands(console):
+    fleet = console.desk.fleet()
+    car = _car(console, fleet)
+    console.sign_in("op-web", "operator")
+
+    for form in ({"type": "RESTART_SERVICE"}, {"type": "EMERGENCY_STOP"},
+                 {"type": "SET_TAIL_LIGHT", "colour": "sky blue"}, {"type": "DELETE_ALL_MODELS"}):
+        reply = console.post(f"/console/cars/{car}/commands", form)
+        assert reply.status_code == 303, reply.body
+
+    queued = [(c["type"], c["parameters"]) for c in _commands(console, car)]
+    assert queued == [("RESTART_SERVICE", {}), ("EMERGENCY_STOP", {}), ("SET_TAIL_LIGHT", {"colour": "#87CEEB"}),
+                      ("DELETE_ALL_MODELS", {"with_system_logs": False})]
+
+    bad = console.post(f"/console/cars/{car}/commands", {"type": "SET_TAIL_LIGHT", "colour": "plaid"})
+    assert bad.status_code == 400 and "colour must be" in text_of(bad.body.decode())
+
+
+def test_moving_a_car_and_only_an_admin_may_deregister_it(console):
+    fleet = console.desk.fleet()
+    other = console.desk.fleet("Spare cars")
+    car = _car(console, fleet)
+    console.sign_in("op-web", "operator")
+
+    assert console.post(f"/console/cars/{car}/fleet", {"fleet_id": other}).status_code == 303
+    assert json.loads(console.desk.call("GET", f"/api/devices/{car}").body)["fleet_id"] == other
+    page = console.web.get("/console/cars").body.decode()
+    assert "Deregister" not in page
+    assert console.post(f"/console/cars/{car}/deregister", {}).status_code == 403
+
+    console.web.cookies.clear()
+    console.sign_in("boss", "admin")
+    assert "Deregister" in console.web.get("/console/cars").body.decode()
+    assert console.post(f"/console/cars/{car}/deregister", {}).status_code == 303
+    assert console.desk.call("GET", f"/api/devices/{car}").status_code == 404

@@ -1,0 +1,91 @@
+"""The events screens: create with two tracks and fleets, errors next to the field, edit, delete with confirmation."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
+from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture
+
+pytestmark = pytest.mark.unit
+
+FORM = {"name": "Summit Stockholm", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "se",
+        "sponsor": "", "race_time_min": "3", "resets_per_lap": "", "track_type": "REINVENT_2018",
+        "ranking_method": "BEST_LAP_TIME", "lap_count_target": "", "max_runs_per_racer": "3", "average_window": "3",
+        "landing_page_links": "Upload | /upload | Upload a model",
+        "track-1-use": "on", "track-1-track_id": "", "track-1-title": "Main track", "track-1-footer": "",
+        "track-2-use": "on", "track-2-track_id": "", "track-2-title": "Second track", "track-2-footer": ""}
+
+
+def _events(console) -> list[dict]:
+    return json.loads(console.desk.call("GET", "/api/events").body)["events"]
+
+
+def test_an_operator_creates_an_event_with_two_tracks_and_sees_it_listed(console):
+    fleet = console.desk.fleet("Track 2 cars")
+    console.sign_in("eve", "operator")
+
+    reply = console.post("/console/events", {**FORM, "track-1-fleet_id": "", "track-2-fleet_id": fleet})
+
+    assert reply.status_code == 303 and reply.headers["Location"] == "/console/events"
+    [event] = _events(console)
+    assert event["country_code"] == "SE" and event["race_config"]["race_time_min"] == 3
+    assert event["race_config"]["resets_per_lap"] is None
+    assert [(t["track_id"], t["fleet_id"], t["leaderboard_title"]) for t in event["tracks"]] == [
+        ("1", None, "Main track"), ("2", fleet, "Second track")]
+    listing = console.web.get("/console/events").body.decode()
+    assert "Summit Stockholm" in listing and "Second track" in listing
+    assert f'href="/leaderboard/{event["event_id"]}"' in listing
+    assert f'href="/overlay/{event["event_id"]}"' in listing and f'href="/commentator/{event["event_id"]}"' in listing
+
+
+def test_bad_input_is_shown_next_to_each_field_and_nothing_typed_is_lost(console):
+    console.sign_in("eve", "operator")
+
+    reply = console.post("/console/events", {**FORM, "country_code": "XX", "race_time_min": "99",
+                                             "track-2-fleet_id": "no-such-fleet", "track-1-fleet_id": ""})
+
+    assert reply.status_code == 400
+    html = reply.body.decode()
+    assert "ISO" in field_error(html, "country_code")
+    assert field_error(html, "race_time_min")
+    assert 'value="Summit Stockholm"' in html and 'value="Second track"' in html
+    assert _events(console) == []
+
+
+def test_an_unknown_fleet_is_named_next_to_its_track(console):
+    console.sign_in("eve", "operator")
+    reply = console.post("/console/events", {**FORM, "track-1-fleet_id": "", "track-2-fleet_id": "gone"})
+    assert reply.status_code == 400
+    assert field_error(reply.body.decode(), "track-2-fleet_id") == "There is no fleet gone."
+
+
+def test_edit_keeps_track_ids_and_delete_asks_first(console):
+    console.sign_in("eve", "operator")
+    console.post("/console/events", {**FORM, "track-1-fleet_id": "", "track-2-fleet_id": ""})
+    [event] = _events(console)
+    event_id = event["event_id"]
+
+    form_page = console.web.get(f"/console/events/{event_id}/edit").body.decode()
+    assert 'value="Main track"' in form_page and "Save event" in form_page
+    edited = {**FORM, "name": "Summit Stockholm 2026", "track-1-track_id": "1", "track-1-existing": "1",
+              "track-2-track_id": "2", "track-2-existing": "1", "track-1-fleet_id": "", "track-2-fleet_id": "",
+              "track-2-use": ""}
+    assert console.post(f"/console/events/{event_id}", edited).status_code == 303
+    [after] = _events(console)
+    assert after["name"] == "Summit Stockholm 2026" and [t["track_id"] for t in after["tracks"]] == ["1"]
+
+    confirm = console.web.get(f"/console/events/{event_id}/delete").body.decode()
+    assert "Delete “Summit Stockholm 2026”?" in confirm
+    assert console.post(f"/console/events/{event_id}/delete", {}).status_code == 303
+    assert _events(console) == []
+
+
+def test_only_operators_and_admins_see_the_events_screens(console):
+    web = console.sign_in("reg", "registration")
+    assert web.get("/console/events").status_code == 403
+    anonymous = console.web
+    anonymous.cookies.clear()
+    reply = anonymous.get("/console/events")
+    assert reply.status_code == 303 and reply.headers["Location"].startswith("/login")
