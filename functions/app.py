@@ -6,8 +6,8 @@ from chalice import Chalice
 
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
-from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_races,
-                                console_timekeeper, devices, events, fleets, health, leaderboards, login, models, pages,
+from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
+                                console_racer, console_races, console_registration, console_timekeeper, console_users, devices, events, fleets, health, leaderboards, login, models, pages,
                                 profiles, public_pages, races, timing, users)
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
@@ -16,7 +16,8 @@ app.register_middleware(logs.request_log_middleware, "http")
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,
-                         console_timekeeper, console_races):
+                         console_timekeeper, console_races, console_racer, console_registration, console_users,
+                         console_models):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

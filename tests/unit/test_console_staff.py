@@ -1,0 +1,150 @@
+"""Staff screens over HTTP (Chalice test client + moto): registration desk, user admin, all models and giving
+models to cars. Each test checks what the page shows, what changed behind it, and who is refused."""
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from chalicelib.auth import principals
+from tests.unit.models_helpers import (ModelsApi, activate_device, archive_without_metadata, bearer, device_headers,
+                                       ensure_model_routes, make_fleet, onnx_archive)
+from tests.unit.racer_console_helpers import body, console, field_error, post, signed_in, text  # noqa: F401
+
+pytestmark = pytest.mark.unit
+
+STAFF_PAGES = {"/console/registration": {"admin", "registration"}, "/console/users": {"admin"},
+               "/console/models": {"admin", "operator"}}
+
+
+@pytest.fixture
+def app(console: Any, chalice_app: Any) -> Any:
+    from chalicelib.routes.devices import verify_device_credential
+
+    ensure_model_routes(chalice_app)
+    principals.set_device_credential_verifier(verify_device_credential)
+    yield console
+    principals.set_device_credential_verifier(principals.reject_all_device_credentials)
+
+
+@pytest.mark.parametrize("role", ["racer", "registration", "commentator", "operator", "admin"])
+def test_each_staff_page_opens_for_its_roles_and_is_a_403_page_for_the_others(app: Any, users: Any, role: str) -> None:
+    person = signed_in(app, users, f"{role}-person", role)
+    nav = body(person.get("/")).split('data-testid="nav-links">')[1].split("</ul>")[0]
+    for path, allowed in STAFF_PAGES.items():
+        reply = person.get(path)
+        if role in allowed:
+            assert reply.status_code == 200, path
+            assert f'href="{path}"' in nav
+        else:
+            assert reply.status_code == 403, path
+            assert "Not allowed" in text(reply) and "This needs the role" in text(reply)
+            assert f'href="{path}"' not in nav
+
+
+def test_desk_creates_a_racer_shows_the_password_once_and_resets_the_form(app: Any, users: Any, aws_clients: Any,
+                                                                          stack: Any) -> None:
+    desk = signed_in(app, users, "dana", "registration")
+    reply = post(desk, "/console/registration", {"username": "kim-1", "email": "kim@example.test",
+                                                 "country_code": "de"}, htmx=True)
+    assert reply.status_code == 201 and reply.headers["Cache-Control"] == "no-store"
+    assert "<html" not in body(reply)  # htmx gets the desk fragment only
+    password = body(reply).split('data-testid="temporary-password">')[1].split("<")[0]
+    assert "Account kim-1 is ready." in text(reply) and len(password) == 16
+    assert 'name="username" type="text" value=""' in body(reply) and "autofocus" in body(reply)
+    assert '<option value="DE" selected>' in body(reply)  # the country stays for the next racer
+    reply = users.clients.cognito.admin_initiate_auth(
+        UserPoolId=stack.user_pool_id, ClientId=stack.user_pool_client_id, AuthFlow="ADMIN_USER_PASSWORD_AUTH",
+        AuthParameters={"USERNAME": "kim-1", "PASSWORD": password})
+    assert reply["ChallengeName"] == "NEW_PASSWORD_REQUIRED"  # the racer must choose their own
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="kim-1")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+    assert password not in body(desk.get("/console/registration"))  # shown once
+
+
+def test_desk_refusals_sit_next_to_their_field(app: Any, users: Any) -> None:
+    desk = signed_in(app, users, "dana", "registration")
+    post(desk, "/console/registration", {"username": "kim", "email": "kim@example.test", "country_code": "SE"})
+    taken = post(desk, "/console/registration", {"username": "kim", "email": "k2@example.test", "country_code": "SE"})
+    assert taken.status_code == 409 and field_error(taken, "username") == "The user name &#39;kim&#39; is taken."
+    assert 'value="k2@example.test"' in body(taken)
+    bad = post(desk, "/console/registration", {"username": "lee", "email": "not-an-email", "country_code": "SE"})
+    assert bad.status_code == 400 and field_error(bad, "email").startswith("Enter a valid email address")
+    dotted = post(desk, "/console/registration", {"username": "a.b", "email": "ab@example.test", "country_code": "SE"})
+    assert field_error(dotted, "username") == ("A username may contain only letters, digits, &#39;-&#39; and "
+                                               "&#39;_&#39;.")
+
+
+def test_admin_searches_changes_a_role_and_disables_a_user(app: Any, users: Any, aws_clients: Any,
+                                                           stack: Any) -> None:
+    admin = signed_in(app, users, "root", "admin")
+    for name in ("sam", "sara", "tom"):
+        users.create(name, ("racer",))
+    rows = admin.get("/console/users/rows?q=sa")
+    assert [r.split('"')[0] for r in body(rows).split('data-username="')[1:]] == ["sam", "sara"]
+    refused = admin.get("/console/users/rows?q=%3Cscript%3E")
+    assert refused.status_code == 400 and "Search with the start of a username" in text(refused)
+
+    changed = post(admin, "/console/users/sam/role", {"role": "operator"}, htmx=True)
+    assert changed.status_code == 200 and '<option value="operator" selected>' in body(changed)
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="sam")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["operator"]
+    nonsense = post(admin, "/console/users/sam/role", {"role": "car"}, htmx=True)
+    assert nonsense.status_code == 400 and "Choose one of" in text(nonsense)
+
+    disabled = post(admin, "/console/users/tom/disable", htmx=True)
+    assert "disabled" in text(disabled) and ">Enable</button>" in body(disabled)
+    assert not aws_clients.cognito.admin_get_user(UserPoolId=stack.user_pool_id, Username="tom")["Enabled"]
+    enabled = post(admin, "/console/users/tom/enable", htmx=True)
+    assert "enabled" in text(enabled) and ">Disable</button>" in body(enabled)
+
+    self_change = post(admin, "/console/users/root/role", {"role": "racer"}, htmx=True)
+    assert self_change.status_code == 403 and "You cannot change your own role" in text(self_change)
+
+
+def test_operator_filters_all_models_by_racer_and_status(app: Any, users: Any) -> None:
+    operator = signed_in(app, users, "olga", "operator")
+    ada = ModelsApi(app, bearer(users.access_token("ada", ("racer",))))
+    bob = ModelsApi(app, bearer(users.access_token("bob", ("racer",))))
+    ada.upload_and_complete("ada-fast.tar.gz", onnx_archive())
+    ada.upload_and_complete("ada-broken.tar.gz", archive_without_metadata())
+    bob.upload_and_complete("bob-fast.tar.gz", onnx_archive(bias=0.5))
+
+    def names(reply: Any) -> list[str]:
+        return [r.split('"')[0] for r in body(reply).split('data-model-name="')[1:]]
+
+    assert sorted(names(operator.get("/console/models/rows"))) == ["ada-broken", "ada-fast", "bob-fast"]
+    assert sorted(names(operator.get("/console/models/rows?racer=ad"))) == ["ada-broken", "ada-fast"]
+    assert names(operator.get("/console/models/rows?status=AVAILABLE&racer=bob")) == ["bob-fast"]
+    wrong = operator.get("/console/models/rows?status=SHINY")
+    assert wrong.status_code == 400 and "Input should be" in text(wrong)
+
+
+def test_operator_gives_models_to_a_car_and_sees_its_progress(app: Any, users: Any) -> None:
+    operator = signed_in(app, users, "olga", "operator")
+    ada = ModelsApi(app, bearer(users.access_token("ada", ("racer",))))
+    good = ada.upload_and_complete("ada-fast.tar.gz", onnx_archive())
+    broken = ada.upload_and_complete("ada-broken.tar.gz", archive_without_metadata())
+    car = activate_device("car-7", make_fleet("fleet-1"))
+
+    page = operator.get("/console/models")
+    assert "car-7 (offline)" in text(page) and f'value="{good["model_id"]}"' in body(page)
+    assert f'value="{broken["model_id"]}"' not in body(page)  # only AVAILABLE models are offered
+
+    no_car = post(operator, "/console/models/assign", {"model_ids": good["model_id"]}, htmx=True)
+    assert no_car.status_code == 400 and "Choose a car." in text(no_car)
+    not_valid = post(operator, "/console/models/assign", {"device_id": car.device_id,
+                                                          "model_ids": broken["model_id"]}, htmx=True)
+    assert not_valid.status_code == 409 and "only AVAILABLE models can be given to a car" in text(not_valid)
+
+    sent = post(operator, "/console/models/assign", {"device_id": car.device_id, "model_ids": good["model_id"]},
+                htmx=True)
+    assert sent.status_code == 200 and "Models sent to the car." in text(sent)
+    assert "ada-fast ada assigned" in text(sent) and 'hx-trigger="every 2s"' in body(sent)
+
+    car_api = ModelsApi(app, device_headers(car.credential))
+    reported = car_api.call("POST", "/api/devices/self/assignment/status",
+                            {"model_id": good["model_id"], "status": "failed", "reason": "disk full"})
+    assert reported.status_code == 200
+    status = operator.get(f"/console/models/car-status?device_id={car.device_id}")
+    assert "ada-fast ada failed disk full" in text(status)
