@@ -7,8 +7,9 @@ from chalice import Chalice
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
 from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
-                                console_racer, console_races, console_registration, console_timekeeper, console_users, devices, events, fleets, health, leaderboards, login, models, pages,
-                                profiles, public_pages, races, timing, users)
+                                console_racer, console_races, console_registration, console_timekeeper, console_users,
+                                devices, events, fleets, health, leaderboards, login, models, pages, profiles, public_pages,
+                                races, timing, users)
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")
