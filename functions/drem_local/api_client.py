@@ -3,9 +3,9 @@
     parser: add_connection_arguments(parser)   → --api, --token, --username, --password
     run:    api = ApiClient.from_args(args); api.get("/api/events"); api.post("/api/fleets", json={...})
 
-The token comes from --token (or $DREM_TOKEN); otherwise the client signs in through the app's own sign-in form with
---username/--password (or $DREM_USERNAME/$DREM_PASSWORD) and sends the access token it is issued as a Bearer token,
-so the same client works against a laptop stack or a deployed API.
+The token comes from --token (or $DREM_TOKEN); otherwise the client exchanges --username/--password (or
+$DREM_USERNAME/$DREM_PASSWORD) for tokens at `POST /api/auth/token` and sends the access token it is issued as a
+Bearer token, so the same client works against a laptop stack or a deployed API.
 """
 from __future__ import annotations
 
@@ -16,8 +16,6 @@ from typing import Any
 import requests
 
 DEFAULT_API = "http://127.0.0.1:8000"
-SESSION_COOKIE = "drem_session"
-CSRF_COOKIE = "drem_csrf"
 
 
 class ApiError(Exception):
@@ -60,23 +58,19 @@ class ApiClient:
         return client
 
     def login(self, username: str, password: str) -> str:
-        """Sign in through the web form (GET /login sets the CSRF cookie, POST checks it); keep the access token."""
+        """Exchange username and password for tokens at /api/auth/token; keep the access token for Bearer calls."""
         try:
-            page = self._http.get(f"{self.base_url}/login", timeout=self.timeout_s)
-            csrf = page.cookies.get(CSRF_COOKIE) or self._http.cookies.get(CSRF_COOKIE) or ""
-            reply = self._http.post(f"{self.base_url}/login", timeout=self.timeout_s, allow_redirects=False,
-                                    data={"username": username, "password": password, "csrf_token": csrf, "next": "/"},
-                                    headers={"Accept": "text/html"})
-        except requests.RequestException as exc:
-            raise _unreachable(self.base_url, exc) from None
-        token = reply.cookies.get(SESSION_COOKIE)
-        # Only the token is kept: later calls are Bearer calls, not a browser session.
-        self._http.cookies.clear()
-        if reply.status_code != 303 or not token:
-            raise ApiError(401, f"could not sign in as {username!r}: wrong username or password, or a new password "
-                                "is needed (sign in once in the browser)")
-        self.token = token
-        return token
+            grant = self.request("POST", "/api/auth/token", json={"username": username, "password": password},
+                                 authenticated=False)
+        except ApiError as exc:
+            if exc.status == 401:
+                raise ApiError(401, f"could not sign in as {username!r}: {exc.message}") from None
+            raise
+        if not isinstance(grant, dict) or not grant.get("access_token"):
+            raise ApiError(401, f"could not sign in as {username!r}: a new password is needed (sign in once in the "
+                                "browser to set it)")
+        self.token = grant["access_token"]
+        return self.token
 
     # Both names are in use by callers.
     sign_in = login
@@ -93,9 +87,10 @@ class ApiClient:
     def delete(self, path: str) -> Any:
         return self.request("DELETE", path)
 
-    def request(self, method: str, path: str, *, json: Any = None, params: dict[str, Any] | None = None) -> Any:
+    def request(self, method: str, path: str, *, json: Any = None, params: dict[str, Any] | None = None,
+                authenticated: bool = True) -> Any:
         headers = {"Accept": "application/json"}
-        if self.token:
+        if self.token and authenticated:
             headers["Authorization"] = f"Bearer {self.token}"
         try:
             reply = self._http.request(method, f"{self.base_url}{path}", json=json, params=params, headers=headers,

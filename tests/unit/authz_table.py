@@ -94,6 +94,9 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/login/new-password"): PUBLIC,
     ("POST", "/login/new-password"): PUBLIC,
     ("POST", "/logout"): PUBLIC,
+    # JSON sign-in for API clients: public, CSRF-exempt (the password / refresh token in the body is the credential)
+    ("POST", "/api/auth/token"): PUBLIC,
+    ("POST", "/api/auth/refresh"): PUBLIC,
     ("GET", "/healthz"): PUBLIC,
     ("GET", "/api/openapi.json"): PUBLIC,
     ("GET", "/api/docs"): PUBLIC,

@@ -16,7 +16,6 @@ from chalice.test import Client
 
 from tests.unit.conftest import Users, bearer
 
-ANONYMOUS_CSRF = "device-without-session-" + "x" * 20
 JSON = {"Content-Type": "application/json", "Accept": "application/json"}
 
 
@@ -52,11 +51,6 @@ class Api:
             headers["Authorization"] = f"Device {device}"
         elif as_ is not None:
             headers.update(bearer(self.token(as_)))
-        elif method != "GET":
-            # An anonymous POST (device activation) passes the route wrapper's double-submit CSRF check the way any
-            # non-browser client can: the same random token as cookie and header. See the lead's note on a per-route
-            # CSRF exemption for POST /api/devices/activate.
-            headers.update({"Cookie": f"drem_csrf={ANONYMOUS_CSRF}", "X-CSRF-Token": ANONYMOUS_CSRF})
         payload = b"" if body is None else json.dumps(body).encode()
         response = getattr(self.client.http, method.lower())(path, headers=headers, body=payload)
         response.data = json.loads(response.body) if response.body else None

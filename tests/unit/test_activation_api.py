@@ -1,6 +1,7 @@
 """Car/timer activation and device credentials: one-time codes, binding, expiry, rotation and deregistration."""
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -146,3 +147,18 @@ def test_users_cannot_call_device_routes_and_devices_cannot_call_staff_routes(ap
     assert api.post("/api/devices/self/heartbeat", {}, as_="admin").status_code == 403
     assert api.get("/api/devices", device=credential).status_code == 403
     assert api.post("/api/events", {}, device=credential).status_code == 403
+
+
+def test_activation_needs_no_csrf_token_and_a_session_cookie_riding_along_changes_nothing(api: Api) -> None:
+    code = api.activation_code(api.fleet(), "car-01")
+    staff_session = api.token("admin")
+    exchange = {"code": code, "hostname": "car-01", "device_kind": "car"}
+
+    # No drem_csrf cookie, no X-CSRF-Token header: a device has neither, and no session to protect.
+    plain = api.client.http.post("/api/devices/activate", body=json.dumps(exchange).encode(),
+                                 headers={"Content-Type": "application/json", "Accept": "application/json"})
+    assert plain.status_code == 201, plain.body
+    # A forged cross-site post with someone's session cookie gets no further than an anonymous one.
+    replay = api.client.http.post("/api/devices/activate", body=json.dumps(exchange).encode(), headers={
+        "Content-Type": "application/json", "Accept": "application/json", "Cookie": f"drem_session={staff_session}"})
+    assert replay.status_code == 400 and "already been used" in json.loads(replay.body)["error"]["message"]

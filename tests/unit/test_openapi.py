@@ -179,3 +179,52 @@ def test_the_docs_page_lists_body_fields():
     assert add_race["allow"] == "admin, operator"
     assert "<code>racer</code> string <strong>required</strong> — who drives" in html
     assert "<code>limit</code>" in html
+
+
+REQUEST_BODIES = {  # a representative write of every area → a field its request schema must list as required
+    ("post", "/api/events"): "name",
+    ("post", "/api/fleets"): "name",
+    ("post", "/api/devices/activation-codes"): "fleet_id",
+    ("post", "/api/devices/activate"): "code",
+    ("post", "/api/devices/self/heartbeat"): None,
+    ("post", "/api/models"): "filename",
+    ("put", "/api/cars/{device_id}/models"): "model_ids",
+    ("post", "/api/events/{event_id}/races"): "track_id",
+    ("post", "/api/events/{event_id}/races/{race_id}/commands"): None,
+    ("post", "/api/timing/strip-events"): "event_id",
+    ("post", "/api/signup"): "username",
+    ("post", "/api/users"): "username",
+    ("put", "/api/me/profile"): None,
+    ("post", "/api/auth/token"): "password",
+    ("post", "/api/auth/refresh"): "refresh_token",
+}
+
+
+def request_schema(document: dict, method: str, path: str) -> dict:
+    operation = document["paths"][path][method]
+    schema = operation["requestBody"]["content"]["application/json"]["schema"]
+    return component(document, schema["$ref"]) if "$ref" in schema else schema
+
+
+def test_the_served_document_has_request_schemas_for_every_area_and_304_on_the_polls(stack, chalice_app, tmp_path):
+    with Client(full_app(chalice_app), project_dir=str(tmp_path)) as client:
+        document = json.loads(client.http.get("/api/openapi.json").body)
+
+    for (method, path), required in REQUEST_BODIES.items():
+        schema = request_schema(document, method, path)
+        assert schema.get("properties") or schema.get("oneOf") or schema.get("anyOf"), (method, path, schema)
+        if required is not None:
+            assert required in schema.get("required", []), (method, path, schema.get("required"))
+    command = request_schema(document, "post", "/api/events/{event_id}/races/{race_id}/commands")
+    kinds = {component(document, option["$ref"])["properties"]["kind"].get("const")
+             for option in command.get("oneOf", command.get("anyOf", []))}
+    assert {"start", "capture_lap", "end"} <= kinds
+    for path in ("/api/leaderboard/{event_id}", "/api/overlay/{event_id}"):
+        assert "304" in document["paths"][path]["get"]["responses"], path
+    assert "304" not in document["paths"]["/api/events/{event_id}"]["get"]["responses"]
+    for created in (("post", "/api/events"), ("post", "/api/fleets"), ("post", "/api/models"), ("post", "/api/users")):
+        assert "201" in document["paths"][created[1]][created[0]]["responses"], created
+    assert {p["name"] for p in document["paths"]["/api/models"]["get"]["parameters"]} >= {"limit"}
+    grant = document["paths"]["/api/auth/refresh"]["post"]["responses"]["200"]["content"]["application/json"]
+    assert component(document, grant["schema"]["$ref"])["properties"]["token_type"]["const"] == "Bearer"
+    assert document["paths"]["/api/auth/token"]["post"]["security"] == []

@@ -27,6 +27,10 @@ naming the field) and passes it as keyword `body`; `query=Model` does the same f
 `conditional` (answers 304 to `If-None-Match`), `summary` (default: the view docstring's first line) and `tags`
 are documentation only.
 
+`csrf=False` skips the double-submit check. Only for PUBLIC routes whose callers hold no ambient credentials (a device
+activating, an API client exchanging a password for tokens); such a view is always given the anonymous principal, so
+a session cookie that rides along can never act through it.
+
 `declared_routes(app)` lists every (path, method, allow, ...) for the authorization-matrix test and the OpenAPI
 document; `undeclared_routes(app)` lists any route registered without this wrapper.
 """
@@ -41,14 +45,14 @@ from urllib.parse import parse_qs
 
 from chalice import Blueprint, Chalice, Response
 from chalice.app import Request
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
 from chalicelib import http_errors, logs
-from chalicelib.auth import csrf
+from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.cookies import CSRF_COOKIE, request_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, Role
 from chalicelib.auth.sessions import resolve_caller
-from chalicelib.domain.errors import Forbidden, NotAuthenticated
+from chalicelib.domain.errors import Forbidden, InvalidInput, NotAuthenticated
 from chalicelib.settings import get_settings
 from drem_web import render
 
@@ -117,6 +121,7 @@ class RouteDocs:
     summary: str = ""
     description: str = ""
     tags: tuple[str, ...] = ()
+    csrf: bool = True
 
 
 @dataclass(frozen=True)
@@ -148,11 +153,13 @@ class RequestScope:
 def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], methods: Iterable[str] = ("GET",),
           content_types: list[str] | None = None, body: type[BaseModel] | None = None,
           query: type[BaseModel] | None = None, response: Any = None, status_code: int = 200,
-          conditional: bool = False, summary: str | None = None, tags: Iterable[str] = (),
+          conditional: bool = False, summary: str | None = None, tags: Iterable[str] = (), csrf: bool = True,
           **route_kwargs: Any) -> Callable[[Callable[..., Any]], Callable]:
     declared = as_allow(allow)
+    if not csrf and not declared.public:
+        raise ValueError(f"{path}: csrf=False is only for PUBLIC routes (a signed-in caller's cookie needs CSRF)")
     methods = [m.upper() for m in methods]
-    if content_types is None and set(methods) & csrf.STATE_CHANGING_METHODS:
+    if content_types is None and set(methods) & double_submit.STATE_CHANGING_METHODS:
         content_types = FORM_CONTENT_TYPES
     for name, model in (("body", body), ("query", query)):
         if model is not None and not (isinstance(model, type) and issubclass(model, BaseModel)):
@@ -166,7 +173,8 @@ def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], 
         doc_lines = (view.__doc__ or "").strip().splitlines()
         docs = RouteDocs(body=body, query=query, response=response, status_code=status_code,
                          conditional=conditional, summary=summary or _summary_from(doc_lines, view.__name__),
-                         description="\n".join(line.strip() for line in doc_lines[1:]).strip(), tags=tuple(tags))
+                         description="\n".join(line.strip() for line in doc_lines[1:]).strip(), tags=tuple(tags),
+                         csrf=csrf)
         access = RouteAccess(declared, f"{view.__module__}.{view.__qualname__}", docs)
         handler.drem_access = access  # type: ignore[attr-defined]
         extra = {"content_types": content_types} if content_types else {}
@@ -225,11 +233,23 @@ def _validated_input(request: Request, docs: RouteDocs | None) -> dict[str, Base
     found: dict[str, BaseModel] = {}
     if docs.body is not None:
         form = form_fields(request)
-        found["body"] = (docs.body.model_validate(form) if form
-                         else docs.body.model_validate_json(request.raw_body or b"{}"))
+        found["body"] = docs.body.model_validate(form) if form else _json_body(docs.body, request.raw_body)
     if docs.query is not None:
         found["query"] = docs.query.model_validate(dict(request.query_params or {}))
     return found
+
+
+def _json_body(model: type[BaseModel], raw: bytes | None) -> BaseModel:
+    """`model` from a JSON body (none counts as `{}`); a body that is not a JSON object is named as such."""
+    try:
+        return model.model_validate_json(raw or b"{}")
+    except ValidationError as exc:
+        root_kinds = {error["type"] for error in exc.errors() if not error.get("loc")}
+        if "json_invalid" in root_kinds:
+            raise InvalidInput("The request body is not valid JSON.", field="body") from None
+        if root_kinds & {"model_type", "model_attributes_type", "dict_type"}:
+            raise InvalidInput("Send a JSON object.", field="body") from None
+        raise
 
 
 def _handle(request: Request, declared: Allow, view: Callable[..., Any], params: dict[str, Any],
@@ -238,8 +258,8 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
     cookies = request_cookies(request.headers)
     scope = RequestScope(request=request, csrf_token=cookies.get(CSRF_COOKIE, ""))
     if not scope.csrf_token and "authorization" not in request.headers:
-        scope.csrf_token = csrf.new_token()
-        scope.set_cookies.append(csrf.csrf_cookie(scope.csrf_token, secure=settings.cookie_secure))
+        scope.csrf_token = double_submit.new_token()
+        scope.set_cookies.append(double_submit.csrf_cookie(scope.csrf_token, secure=settings.cookie_secure))
     _local.scope = scope
     htmx = request.headers.get("hx-request") == "true"
     render.bind_request(htmx=htmx, principal=ANONYMOUS, csrf_token=scope.csrf_token)
@@ -250,9 +270,12 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         logs.note_principal(caller.principal.id)
         render.bind_request(htmx=htmx, principal=caller.principal, csrf_token=scope.csrf_token)
         declared.decide(caller.principal)
-        if request.method in csrf.STATE_CHANGING_METHODS and caller.via != "header":
-            csrf.require_matching_token(cookies.get(CSRF_COOKIE), request.headers, form_fields(request))
-        response = view(caller.principal, **params, **_validated_input(request, docs))
+        checks_csrf = docs is None or docs.csrf
+        if checks_csrf and request.method in double_submit.STATE_CHANGING_METHODS and caller.via != "header":
+            double_submit.require_matching_token(cookies.get(CSRF_COOKIE), request.headers, form_fields(request))
+        # A CSRF-exempt view must not act as whoever's cookie came along (a forged cross-site post would).
+        acting = caller.principal if checks_csrf else ANONYMOUS
+        response = view(acting, **params, **_validated_input(request, docs))
     except Exception as exc:  # every failure, expected or not, leaves through the one error→HTTP module
         response = http_errors.to_response(exc, request)
     finally:

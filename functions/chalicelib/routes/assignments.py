@@ -5,23 +5,19 @@ the verified device credential, never from the URL or body).
 """
 from __future__ import annotations
 
-from typing import Any
-
-from chalice import BadRequestError, Blueprint
+from chalice import Blueprint
 
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, STAFF, route
 from chalicelib.auth.principals import Device, User
 from chalicelib.domain.assignments import AssignInput, StatusReport
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.storage.assignments import build_assignment_service
 
 bp = Blueprint(__name__)
 
 
-@route(bp, "/api/cars/{device_id}/models", methods=["PUT"], allow={ADMIN, OPERATOR})
-def assign_models(principal: User, device_id: str) -> dict:
-    request = AssignInput.model_validate(_json_body())
-    return {"assignment": build_assignment_service().assign(principal, device_id, request.model_ids).public()}
+@route(bp, "/api/cars/{device_id}/models", methods=["PUT"], allow={ADMIN, OPERATOR}, body=AssignInput)
+def assign_models(principal: User, device_id: str, body: AssignInput) -> dict:
+    return {"assignment": build_assignment_service().assign(principal, device_id, body.model_ids).public()}
 
 
 @route(bp, "/api/cars/{device_id}/models", allow=STAFF)
@@ -34,9 +30,9 @@ def own_assignment(principal: Device) -> dict:
     return build_assignment_service().for_car(principal)
 
 
-@route(bp, "/api/devices/self/assignment/status", methods=["POST"], allow={CAR})
-def report_model_status(principal: Device) -> dict:
-    progress = build_assignment_service().report(principal, StatusReport.model_validate(_json_body()))
+@route(bp, "/api/devices/self/assignment/status", methods=["POST"], allow={CAR}, body=StatusReport)
+def report_model_status(principal: Device, body: StatusReport) -> dict:
+    progress = build_assignment_service().report(principal, body)
     return {"progress": progress.model_dump(mode="json")}
 
 
@@ -44,11 +40,3 @@ def report_model_status(principal: Device) -> dict:
 def event_model_status(principal: User, event_id: str) -> dict:
     rows = build_assignment_service().event_status(event_id)
     return {"event_id": event_id, "rows": [row.model_dump(mode="json") for row in rows]}
-
-
-def _json_body() -> Any:
-    try:
-        body = bp.current_request.json_body
-    except BadRequestError:
-        raise InvalidInput("The request body is not valid JSON.", field="body") from None
-    return body if body is not None else {}

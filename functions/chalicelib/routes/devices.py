@@ -10,15 +10,13 @@ route acts on the caller's own device id, taken from its verified credential.
 from __future__ import annotations
 
 import time
-from typing import TypeVar
-
 from chalice import Blueprint, Response
-from pydantic import BaseModel
-
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
-from chalicelib.domain.activation import ActivationCodeRequest, ActivationExchange, ActivationService
-from chalicelib.domain.devices import CommandAck, CommandRequest, DeviceService, MoveToFleet, Telemetry
+from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, ActivationService,
+                                         IssuedActivationCode, IssuedCredential)
+from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceService, DeviceView, MoveToFleet,
+                                      Telemetry)
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
@@ -52,17 +50,11 @@ def verify_device_credential(credential: str) -> Device:
     return activation_service().verify(credential)
 
 
-ModelT = TypeVar("ModelT", bound=BaseModel)
-
-
-def _body(model: type[ModelT]) -> ModelT:
-    return model.model_validate_json(bp.current_request.raw_body or b"{}")
-
-
 # --- staff ---
-@route(bp, "/api/devices/activation-codes", methods=["POST"], allow=DEVICE_STAFF)
-def create_activation_code(principal: User) -> Response:
-    issued = activation_service().issue_code(principal, _body(ActivationCodeRequest))
+@route(bp, "/api/devices/activation-codes", methods=["POST"], allow=DEVICE_STAFF, body=ActivationCodeRequest,
+       response=IssuedActivationCode, status_code=201)
+def create_activation_code(principal: User, body: ActivationCodeRequest) -> Response:
+    issued = activation_service().issue_code(principal, body)
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 
@@ -73,15 +65,15 @@ def list_devices(principal: User) -> dict:
     return {"devices": [d.model_dump(mode="json") for d in devices]}
 
 
-@route(bp, "/api/devices/{device_id}", methods=["GET"], allow=DEVICE_STAFF)
+@route(bp, "/api/devices/{device_id}", methods=["GET"], allow=DEVICE_STAFF, response=DeviceView)
 def get_device(principal: User, device_id: str) -> dict:
     return device_service().get_device(device_id).model_dump(mode="json")
 
 
-@route(bp, "/api/devices/{device_id}/fleet", methods=["PUT"], allow=DEVICE_STAFF)
-def move_device(principal: User, device_id: str) -> dict:
-    move = _body(MoveToFleet)
-    return device_service().move_to_fleet(device_id, move.fleet_id).model_dump(mode="json")
+@route(bp, "/api/devices/{device_id}/fleet", methods=["PUT"], allow=DEVICE_STAFF, body=MoveToFleet,
+       response=DeviceView)
+def move_device(principal: User, device_id: str, body: MoveToFleet) -> dict:
+    return device_service().move_to_fleet(device_id, body.fleet_id).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/{device_id}", methods=["DELETE"], allow={ADMIN})
@@ -90,9 +82,10 @@ def deregister_device(principal: User, device_id: str) -> Response:
     return Response(body="", status_code=204)
 
 
-@route(bp, "/api/devices/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF)
-def queue_command(principal: User, device_id: str) -> Response:
-    command = device_service().queue_command(principal, device_id, _body(CommandRequest))
+@route(bp, "/api/devices/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF, body=CommandRequest,
+       response=Command, status_code=201)
+def queue_command(principal: User, device_id: str, body: CommandRequest) -> Response:
+    command = device_service().queue_command(principal, device_id, body)
     return Response(command.model_dump(mode="json"), status_code=201)
 
 
@@ -102,26 +95,28 @@ def device_commands(principal: User, device_id: str) -> dict:
 
 
 # --- the device itself ---
-@route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC)
-def activate_device(principal: Principal) -> Response:
-    issued = activation_service().activate(_body(ActivationExchange))
+# No CSRF check: a device has no session cookie to abuse; the one-time code in the body is its only credential.
+@route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC, csrf=False, body=ActivationExchange,
+       response=IssuedCredential, status_code=201)
+def activate_device(principal: Principal, body: ActivationExchange) -> Response:
+    issued = activation_service().activate(body)
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 
-@route(bp, "/api/devices/self", methods=["GET"], allow=DEVICES)
+@route(bp, "/api/devices/self", methods=["GET"], allow=DEVICES, response=DeviceView)
 def own_device(principal: Device) -> dict:
     return device_service().get_device(principal.device_id).model_dump(mode="json")
 
 
-@route(bp, "/api/devices/self/rotate", methods=["POST"], allow=DEVICES)
+@route(bp, "/api/devices/self/rotate", methods=["POST"], allow=DEVICES, response=IssuedCredential)
 def rotate_credential(principal: Device) -> Response:
     issued = activation_service().rotate(principal)
     return Response(issued.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
 
 
-@route(bp, "/api/devices/self/heartbeat", methods=["POST"], allow=DEVICES)
-def heartbeat(principal: Device) -> dict:
-    return device_service().heartbeat(principal, _body(Telemetry)).model_dump(mode="json")
+@route(bp, "/api/devices/self/heartbeat", methods=["POST"], allow=DEVICES, body=Telemetry, response=DeviceView)
+def heartbeat(principal: Device, body: Telemetry) -> dict:
+    return device_service().heartbeat(principal, body).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/self/commands", methods=["GET"], allow=DEVICES)
@@ -129,9 +124,10 @@ def pending_commands(principal: Device) -> dict:
     return {"commands": [c.model_dump(mode="json") for c in device_service().pending_commands(principal)]}
 
 
-@route(bp, "/api/devices/self/commands/{command_id}/ack", methods=["POST"], allow=DEVICES)
-def acknowledge_command(principal: Device, command_id: str) -> dict:
-    return device_service().acknowledge(principal, command_id, _body(CommandAck)).model_dump(mode="json")
+@route(bp, "/api/devices/self/commands/{command_id}/ack", methods=["POST"], allow=DEVICES, body=CommandAck,
+       response=Command)
+def acknowledge_command(principal: Device, command_id: str, body: CommandAck) -> dict:
+    return device_service().acknowledge(principal, command_id, body).model_dump(mode="json")
 
 
 def _flag(value: str | None) -> bool | None:

@@ -7,7 +7,7 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
-from chalicelib.domain.events import EventInput, EventService
+from chalicelib.domain.events import Event, EventInput, EventService
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.events import DynamoEventStore, DynamoLiveRaceProbe
@@ -35,21 +35,19 @@ def list_events(principal: User) -> dict:
     return {"events": [e.model_dump(mode="json") for e in event_service().list_events()]}
 
 
-@route(bp, "/api/events", methods=["POST"], allow=EVENT_EDITORS)
-def create_event(principal: User) -> Response:
-    data = EventInput.model_validate_json(bp.current_request.raw_body or b"{}")
-    return Response(event_service().create_event(principal, data).model_dump(mode="json"), status_code=201)
+@route(bp, "/api/events", methods=["POST"], allow=EVENT_EDITORS, body=EventInput, response=Event, status_code=201)
+def create_event(principal: User, body: EventInput) -> Response:
+    return Response(event_service().create_event(principal, body).model_dump(mode="json"), status_code=201)
 
 
-@route(bp, "/api/events/{event_id}", methods=["GET"], allow=EVENT_READERS)
+@route(bp, "/api/events/{event_id}", methods=["GET"], allow=EVENT_READERS, response=Event)
 def get_event(principal: User, event_id: str) -> dict:
     return event_service().get_event(event_id).model_dump(mode="json")
 
 
-@route(bp, "/api/events/{event_id}", methods=["PUT"], allow=EVENT_EDITORS)
-def replace_event(principal: User, event_id: str) -> dict:
-    data = EventInput.model_validate_json(bp.current_request.raw_body or b"{}")
-    return event_service().update_event(principal, event_id, data).model_dump(mode="json")
+@route(bp, "/api/events/{event_id}", methods=["PUT"], allow=EVENT_EDITORS, body=EventInput, response=Event)
+def replace_event(principal: User, event_id: str, body: EventInput) -> dict:
+    return event_service().update_event(principal, event_id, body).model_dump(mode="json")
 
 
 @route(bp, "/api/events/{event_id}", methods=["DELETE"], allow=EVENT_EDITORS)

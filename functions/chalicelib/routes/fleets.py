@@ -7,7 +7,7 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
-from chalicelib.domain.fleets import FleetInput, FleetService
+from chalicelib.domain.fleets import Fleet, FleetInput, FleetService
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.devices import DynamoDeviceStore
@@ -29,21 +29,19 @@ def list_fleets(principal: User) -> dict:
     return {"fleets": [f.model_dump(mode="json") for f in fleet_service().list_fleets()]}
 
 
-@route(bp, "/api/fleets", methods=["POST"], allow=FLEET_STAFF)
-def create_fleet(principal: User) -> Response:
-    data = FleetInput.model_validate_json(bp.current_request.raw_body or b"{}")
-    return Response(fleet_service().create_fleet(principal, data).model_dump(mode="json"), status_code=201)
+@route(bp, "/api/fleets", methods=["POST"], allow=FLEET_STAFF, body=FleetInput, response=Fleet, status_code=201)
+def create_fleet(principal: User, body: FleetInput) -> Response:
+    return Response(fleet_service().create_fleet(principal, body).model_dump(mode="json"), status_code=201)
 
 
-@route(bp, "/api/fleets/{fleet_id}", methods=["GET"], allow=FLEET_STAFF)
+@route(bp, "/api/fleets/{fleet_id}", methods=["GET"], allow=FLEET_STAFF, response=Fleet)
 def get_fleet(principal: User, fleet_id: str) -> dict:
     return fleet_service().get_fleet(fleet_id).model_dump(mode="json")
 
 
-@route(bp, "/api/fleets/{fleet_id}", methods=["PUT"], allow=FLEET_STAFF)
-def update_fleet(principal: User, fleet_id: str) -> dict:
-    data = FleetInput.model_validate_json(bp.current_request.raw_body or b"{}")
-    return fleet_service().update_fleet(principal, fleet_id, data).model_dump(mode="json")
+@route(bp, "/api/fleets/{fleet_id}", methods=["PUT"], allow=FLEET_STAFF, body=FleetInput, response=Fleet)
+def update_fleet(principal: User, fleet_id: str, body: FleetInput) -> dict:
+    return fleet_service().update_fleet(principal, fleet_id, body).model_dump(mode="json")
 
 
 @route(bp, "/api/fleets/{fleet_id}", methods=["DELETE"], allow=FLEET_STAFF)

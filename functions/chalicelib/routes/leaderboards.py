@@ -25,13 +25,13 @@ def conditional(view: PublicView) -> Response:
     return Response(body=view.body, status_code=200, headers={**headers, "Content-Type": "application/json"})
 
 
-@route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC)
+@route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC, conditional=True)
 def leaderboard(principal: Principal, event_id: str) -> Response:
     track = (bp.current_request.query_params or {}).get("track") or COMBINED_TRACK_ID
     return conditional(publisher().board(event_id, track))
 
 
-@route(bp, "/api/overlay/{event_id}", allow=PUBLIC)
+@route(bp, "/api/overlay/{event_id}", allow=PUBLIC, conditional=True)
 def overlay(principal: Principal, event_id: str) -> Response:
     track = (bp.current_request.query_params or {}).get("track") or "1"
     return conditional(publisher().overlay(event_id, track))

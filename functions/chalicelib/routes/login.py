@@ -1,11 +1,14 @@
-"""Sign-in, the temporary-password challenge and sign-out (browser forms; errors appear next to their field)."""
+"""Sign-in, the temporary-password challenge and sign-out (browser forms; errors appear next to their field), and
+the JSON token exchange for API clients (`POST /api/auth/token`, `POST /api/auth/refresh`)."""
 from __future__ import annotations
 
 import base64
 import json
 
 from chalice import Blueprint, Response
-from pydantic import ValidationError
+from typing import Literal
+
+from pydantic import BaseModel, Field, ValidationError
 
 from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, form_fields, route
@@ -76,6 +79,48 @@ def logout(principal: Principal) -> Response:
     if principal.is_user and access_token:
         identity_provider().sign_out_everywhere(access_token)
     return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
+
+
+class RefreshRequest(BaseModel):
+    refresh_token: str = Field(min_length=1, max_length=8192, description="from an earlier /api/auth/token answer")
+
+
+class TokenGrant(BaseModel):
+    access_token: str = Field(description="send as `Authorization: Bearer <access_token>`")
+    id_token: str
+    refresh_token: str | None = Field(default=None, description="exchange at /api/auth/refresh for a new one")
+    expires_in: int = Field(description="seconds the access token stays valid")
+    token_type: Literal["Bearer"] = "Bearer"
+
+
+class ChallengeAnswer(BaseModel):
+    """The account still has a temporary password: set a permanent one (in the browser) before tokens are issued."""
+    challenge: Literal["NEW_PASSWORD_REQUIRED"] = "NEW_PASSWORD_REQUIRED"
+    session: str
+
+
+# No ambient credentials here: the password (or refresh token) in the body is the credential, so no CSRF check.
+@route(bp, "/api/auth/token", methods=["POST"], allow=PUBLIC, csrf=False, body=SignInForm,
+       response=TokenGrant | ChallengeAnswer, tags=("auth",))
+def issue_token(principal: Principal, body: SignInForm) -> Response:
+    """Exchange a username and password for Bearer tokens (for API clients and scripts)."""
+    result = identity_provider().sign_in(body.username, body.password)
+    if isinstance(result, NewPasswordChallenge):
+        return _no_store(ChallengeAnswer(session=result.session))
+    return _no_store(TokenGrant(**result.model_dump()))
+
+
+# No ambient credentials here either: the refresh token comes in the body, never from a cookie.
+@route(bp, "/api/auth/refresh", methods=["POST"], allow=PUBLIC, csrf=False, body=RefreshRequest,
+       response=TokenGrant, tags=("auth",))
+def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
+    """Exchange a refresh token for a new access token."""
+    return _no_store(TokenGrant(**identity_provider().refresh(body.refresh_token).model_dump()))
+
+
+def _no_store(answer: BaseModel) -> Response:
+    # Credentials must not linger in shared caches or the browser's back/forward cache.
+    return Response(answer.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
 
 
 def _login_form(exc: Exception | None = None, *, username: str = "", next_path: str = "/",

@@ -8,12 +8,11 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from chalice import BadRequestError, Blueprint, Response
+from chalice import Blueprint, Response
 
 from chalicelib import logs
 from chalicelib.auth.access import SIGNED_IN, route
 from chalicelib.auth.principals import User
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.models import ListQuery, UploadRequest
 from chalicelib.settings import get_settings
 from chalicelib.storage.models import build_model_service
@@ -21,9 +20,9 @@ from chalicelib.storage.models import build_model_service
 bp = Blueprint(__name__)
 
 
-@route(bp, "/api/models", methods=["POST"], allow=SIGNED_IN)
-def request_upload(principal: User) -> Response:
-    ticket = build_model_service().request_upload(principal, UploadRequest.model_validate(_json_body()))
+@route(bp, "/api/models", methods=["POST"], allow=SIGNED_IN, body=UploadRequest, status_code=201)
+def request_upload(principal: User, body: UploadRequest) -> Response:
+    ticket = build_model_service().request_upload(principal, body)
     return Response(body=ticket.public(), status_code=201)
 
 
@@ -32,9 +31,9 @@ def complete_upload(principal: User, model_id: str) -> dict:
     return {"model": build_model_service().complete(principal, model_id).public()}
 
 
-@route(bp, "/api/models", allow=SIGNED_IN)
-def list_models(principal: User) -> dict:
-    page = build_model_service().list_models(principal, ListQuery.model_validate(_query()))
+@route(bp, "/api/models", allow=SIGNED_IN, query=ListQuery)
+def list_models(principal: User, query: ListQuery) -> dict:
+    page = build_model_service().list_models(principal, query)
     return {"models": [model.public() for model in page.models], "next": page.next_token}
 
 
@@ -58,15 +57,3 @@ def handle_upload_complete_event(event: dict[str, Any]) -> dict[str, Any]:
         return {"ignored": True}
     record = build_model_service().complete_upload_key(key)
     return {"model_id": record.model_id, "status": record.status.value} if record else {"ignored": True}
-
-
-def _json_body() -> Any:
-    try:
-        body = bp.current_request.json_body
-    except BadRequestError:
-        raise InvalidInput("The request body is not valid JSON.", field="body") from None
-    return body if body is not None else {}
-
-
-def _query() -> dict[str, str]:
-    return dict(bp.current_request.query_params or {})

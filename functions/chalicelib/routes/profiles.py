@@ -5,8 +5,8 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.profiles import ProfileService, ProfileUpdate, public_view
-from chalicelib.routes.users import json_object, user_directory
+from chalicelib.domain.profiles import Profile, ProfileService, ProfileUpdate, PublicProfile, public_view
+from chalicelib.routes.users import user_directory
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.profiles import DynamoProfileStore
@@ -20,24 +20,23 @@ def profile_service() -> ProfileService:
     return ProfileService(store, user_directory(settings))
 
 
-@route(bp, "/api/me/profile", allow=SIGNED_IN)
+@route(bp, "/api/me/profile", allow=SIGNED_IN, response=Profile)
 def own_profile(principal: User) -> dict:
     return profile_service().own(principal).model_dump()
 
 
-@route(bp, "/api/me/profile", methods=["PUT"], allow=SIGNED_IN)
-def update_own_profile(principal: User) -> dict:
-    update = ProfileUpdate.model_validate(json_object(bp.current_request))
-    return profile_service().update_own(principal, update).model_dump()
+@route(bp, "/api/me/profile", methods=["PUT"], allow=SIGNED_IN, body=ProfileUpdate, response=Profile)
+def update_own_profile(principal: User, body: ProfileUpdate) -> dict:
+    return profile_service().update_own(principal, body).model_dump()
 
 
-@route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN})
-def update_user_profile(principal: User, username: str) -> dict:
-    update = ProfileUpdate.model_validate(json_object(bp.current_request))
-    return public_view(profile_service().update_for(principal, username, update)).model_dump()
+@route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN}, body=ProfileUpdate,
+       response=PublicProfile)
+def update_user_profile(principal: User, username: str, body: ProfileUpdate) -> dict:
+    return public_view(profile_service().update_for(principal, username, body)).model_dump()
 
 
-@route(bp, "/api/profiles/{username}", allow=PUBLIC)
+@route(bp, "/api/profiles/{username}", allow=PUBLIC, response=PublicProfile)
 def public_profile(principal: Principal, username: str) -> dict:
     return profile_service().public(username).model_dump()
 

@@ -3,9 +3,9 @@ their own. Every handler parses its input and calls one service method; `race_se
 from __future__ import annotations
 
 import time
-from typing import Any
 
 from chalice import Blueprint, Response
+from pydantic import RootModel
 
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
@@ -13,14 +13,14 @@ from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.leaderboards import LeaderboardPublisher
 from chalicelib.domain.profiles import ProfileService
 from chalicelib.domain.races import CreateRaceInput, LapEdit, RaceService
-from chalicelib.routes.users import json_object, user_directory
+from chalicelib.routes.users import user_directory
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.events import DynamoEventStore
 from chalicelib.storage.leaderboards import DynamoBoardStore
 from chalicelib.storage.profiles import DynamoProfileStore
 from chalicelib.storage.races import DynamoRaceStore
-from drem_leaderboard.commands import parse_command
+from drem_leaderboard.commands import RaceCommand
 from drem_leaderboard.ranking import RacerProfile
 
 bp = Blueprint(__name__)
@@ -62,13 +62,13 @@ def race_service() -> RaceService:
                        user_directory(settings), ProfilesForBoards(profiles), publisher(), now_ms)
 
 
-def _body() -> dict[str, Any]:
-    return json_object(bp.current_request)
+class RaceCommandBody(RootModel[RaceCommand]):
+    """One race command, chosen by `kind` (e.g. {"kind": "capture_lap"}); the fields depend on the kind."""
 
 
-@route(bp, "/api/events/{event_id}/races", methods=["POST"], allow=RACE_STAFF)
-def create_race(principal: User, event_id: str) -> Response:
-    race = race_service().create_race(principal, event_id, CreateRaceInput.model_validate(_body()))
+@route(bp, "/api/events/{event_id}/races", methods=["POST"], allow=RACE_STAFF, body=CreateRaceInput, status_code=201)
+def create_race(principal: User, event_id: str, body: CreateRaceInput) -> Response:
+    race = race_service().create_race(principal, event_id, body)
     return Response(body=race, status_code=201)
 
 
@@ -88,16 +88,17 @@ def my_races(principal: User) -> dict:
     return {"races": race_service().my_races(principal)}
 
 
-@route(bp, "/api/events/{event_id}/races/{race_id}/commands", methods=["POST"], allow=RACE_STAFF)
-def race_command(principal: User, event_id: str, race_id: str) -> dict:
-    return race_service().apply_command(event_id, race_id, parse_command(_body()))
+@route(bp, "/api/events/{event_id}/races/{race_id}/commands", methods=["POST"], allow=RACE_STAFF,
+       body=RaceCommandBody)
+def race_command(principal: User, event_id: str, race_id: str, body: RaceCommandBody) -> dict:
+    return race_service().apply_command(event_id, race_id, body.root)
 
 
-@route(bp, "/api/events/{event_id}/races/{race_id}/laps/{lap_id}", methods=["PUT"], allow=RACE_STAFF)
-def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> dict:
+@route(bp, "/api/events/{event_id}/races/{race_id}/laps/{lap_id}", methods=["PUT"], allow=RACE_STAFF, body=LapEdit)
+def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str, body: LapEdit) -> dict:
     if not lap_id.isdigit():
         raise InvalidInput("The lap id is a whole number (0 is the first lap).", field="lap_id")
-    return race_service().edit_lap(event_id, race_id, int(lap_id), LapEdit.model_validate(_body()))
+    return race_service().edit_lap(event_id, race_id, int(lap_id), body)
 
 
 @route(bp, "/api/events/{event_id}/races/{race_id}", methods=["DELETE"], allow=RACE_STAFF)

@@ -5,9 +5,8 @@ from chalice import Blueprint
 
 from chalicelib.auth.access import CAR, TIMER, route
 from chalicelib.auth.principals import Device
-from chalicelib.domain.timing import StripPost, TimingService
+from chalicelib.domain.timing import StripAnswer, StripPost, TimingService
 from chalicelib.routes.races import now_ms, race_service, race_store
-from chalicelib.routes.users import json_object
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.devices import DynamoDeviceStore
@@ -31,7 +30,6 @@ def timing_service() -> TimingService:
     return TimingService(race_service(), race_store(), DeviceFleetLookup(devices), now_ms)
 
 
-@route(bp, "/api/timing/strip-events", methods=["POST"], allow={CAR, TIMER})
-def strip_event(principal: Device) -> dict:
-    post = StripPost.model_validate(json_object(bp.current_request))
-    return timing_service().strip_event(principal, post).model_dump(mode="json")
+@route(bp, "/api/timing/strip-events", methods=["POST"], allow={CAR, TIMER}, body=StripPost, response=StripAnswer)
+def strip_event(principal: Device, body: StripPost) -> dict:
+    return timing_service().strip_event(principal, body).model_dump(mode="json")
