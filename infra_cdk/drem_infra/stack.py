@@ -5,7 +5,11 @@ a separate module that nothing in the Lambda bundle imports. Synth makes no AWS 
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import aws_cdk as cdk
@@ -146,8 +150,9 @@ class DremStack(cdk.Stack):
         from chalice.cdk import Chalice
         from chalice.utils import to_cfn_resource_name
 
-        app = Chalice(self, "App", source_dir=str(functions_dir),
-                      stage_config={"environment_variables": self.app_environment()})
+        with _packaging_leaves_no_trace():
+            app = Chalice(self, "App", source_dir=str(functions_dir),
+                          stage_config={"environment_variables": self.app_environment()})
         # By name (Ref of the role Chalice's template defines), so the grant policy attaches to it directly.
         role = iam.Role.from_role_name(self, "AppRole", app.get_resource("DefaultRole").ref)
         for table in self.tables.values():
@@ -188,3 +193,20 @@ class DremStack(cdk.Stack):
             cdk.CfnOutput(self, f"{logical.capitalize()}TableName", value=table.table_name)
         for logical, bucket in self.buckets.items():
             cdk.CfnOutput(self, f"{logical.capitalize()}BucketName", value=bucket.bucket_name)
+
+
+@contextlib.contextmanager
+def _packaging_leaves_no_trace() -> Iterator[None]:
+    """Chalice packages the app in-process: it imports `app`/`chalicelib` from the source dir and copies the stage's
+    environment variables (CDK tokens here) into os.environ. Undo both, so a synth inside a longer-lived process (a
+    test session, a notebook) does not leave it pointing at unresolved tokens or at the packaged copy of the app."""
+    saved_env, saved_path = dict(os.environ), list(sys.path)
+    saved_modules = {name for name in sys.modules if name == "app" or name.split(".")[0] == "chalicelib"}
+    try:
+        yield
+    finally:
+        os.environ.clear()
+        os.environ.update(saved_env)
+        sys.path[:] = saved_path
+        for name in [n for n in sys.modules if (n == "app" or n.split(".")[0] == "chalicelib") and n not in saved_modules]:
+            del sys.modules[name]

@@ -208,3 +208,13 @@ def test_synth_reads_no_local_name_overrides(monkeypatch):
     monkeypatch.setenv("DREM_TABLE_EVENTS", "my-local-events")
     assert resources.table_name(STAGE, "events", env={}) == f"drem-{STAGE}-events"
     assert resources.table_name(STAGE, "events") == "my-local-events"
+
+
+def test_synth_leaves_this_process_as_it_found_it(app_template):
+    # The Chalice construct packaged an app in this process; later tests must not see its tokens or its modules.
+    import sys
+    leaked = {k: v for k, v in os.environ.items() if "${Token[" in v}
+    assert leaked == {}
+    packaged = [name for name, mod in sys.modules.items()
+                if (name == "app" or name.startswith("chalicelib")) and "cdk" in str(getattr(mod, "__file__", ""))]
+    assert packaged == []
