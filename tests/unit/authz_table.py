@@ -77,6 +77,29 @@ def matrix_fleet(world: World, caller: str) -> Call:
     return Call({"fleet_id": world.fleet_id})
 
 
+def matrix_event(world: World, caller: str) -> dict:
+    """An event whose one track races with the matrix fleet (car X and car Y are in it)."""
+    body = {"name": "Matrix event", "event_type": "TEST_EVENT", "date": "2026-05-14", "country_code": "SE",
+            "race_config": {}, "tracks": [{"track_id": "1", "fleet_id": world.fleet_id}]}
+    return world.ok("POST", "/api/events", "admin", body)
+
+
+def event_only(world: World, caller: str) -> Call:
+    return Call({"event_id": matrix_event(world, caller)["event_id"], "track_id": "1"})
+
+
+def racer_a_race(world: World, caller: str) -> Call:
+    """A race of racer A with one lap: racer B must not read it; staff who run races may."""
+    event_id = matrix_event(world, caller)["event_id"]
+    race = world.ok("POST", f"/api/events/{event_id}/races", "operator",
+                    {"track_id": "1", "racer_username": world.usernames["racer_a"]})
+    commands = f"/api/events/{event_id}/races/{race['race_id']}/commands"
+    for kind in ("start", "capture_lap"):
+        world.ok("POST", commands, "operator", {"kind": kind})
+    return Call({"event_id": event_id, "race_id": race["race_id"], "track_id": "1", "lap_id": "0"},
+                {"time_ms": 12345, "resets": 0, "is_valid": True})
+
+
 PUBLIC = Case(allow(*EVERYONE))
 SIGNED_IN = Case(allow(*USERS))
 ADMIN_ONLY = Case(allow("admin"))
@@ -159,7 +182,8 @@ TABLE: dict[tuple[str, str], Case] = {
     # races and timing
     ("POST", "/api/events/{event_id}/races"): ADMIN_OPERATOR,
     ("GET", "/api/events/{event_id}/races"): Case(allow("admin", "operator", "commentator")),
-    ("GET", "/api/events/{event_id}/races/{race_id}"): SIGNED_IN,
+    ("GET", "/api/events/{event_id}/races/{race_id}"): Case(
+        allow("racer_a", "commentator", "operator", "admin"), racer_a_race),
     ("GET", "/api/me/races"): SIGNED_IN,
     ("POST", "/api/events/{event_id}/races/{race_id}/commands"): ADMIN_OPERATOR,
     ("PUT", "/api/events/{event_id}/races/{race_id}/laps/{lap_id}"): ADMIN_OPERATOR,
@@ -170,4 +194,68 @@ TABLE: dict[tuple[str, str], Case] = {
     # public polls
     ("GET", "/api/leaderboard/{event_id}"): PUBLIC,
     ("GET", "/api/overlay/{event_id}"): PUBLIC,
+    # public pages (the big screen, the stream overlay) and the commentator's view
+    ("GET", "/leaderboard/{event_id}"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/leaderboard/{event_id}/live"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/overlay/{event_id}"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/overlay/{event_id}/live"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/commentator/{event_id}"): Case(allow("commentator", "operator", "admin"), event_only),
+    ("GET", "/commentator/{event_id}/live"): Case(allow("commentator", "operator", "admin"), event_only),
+    # console: sign-up and the racer's own pages
+    ("GET", "/signup"): PUBLIC,
+    ("POST", "/signup"): PUBLIC,
+    ("GET", "/signup/confirm"): PUBLIC,
+    ("POST", "/signup/confirm"): PUBLIC,
+    ("GET", "/console/password"): SIGNED_IN,
+    ("POST", "/console/password"): SIGNED_IN,
+    ("GET", "/console/profile"): SIGNED_IN,
+    ("POST", "/console/profile"): SIGNED_IN,
+    ("GET", "/console/my-models"): SIGNED_IN,
+    ("GET", "/console/my-models/rows"): SIGNED_IN,
+    ("GET", "/console/my-models/{model_id}/row"): Case(allow("racer_a"), racer_a_model),
+    ("POST", "/console/my-models/{model_id}/delete"): Case(allow("racer_a"), racer_a_model),
+    ("GET", "/console/my-races"): SIGNED_IN,
+    ("GET", "/console/my-races/{event_id}/{race_id}"): Case(allow("racer_a", deny404=STAFF + ("racer_b",)),
+                                                          racer_a_race),
+    # console: registration desk and user admin
+    ("GET", "/console/registration"): Case(allow("admin", "registration")),
+    ("POST", "/console/registration"): Case(allow("admin", "registration")),
+    ("GET", "/console/users"): ADMIN_ONLY,
+    ("GET", "/console/users/rows"): ADMIN_ONLY,
+    ("POST", "/console/users/{username}/role"): Case(allow("admin"), disposable_racer),
+    ("POST", "/console/users/{username}/disable"): Case(allow("admin"), disposable_racer),
+    ("POST", "/console/users/{username}/enable"): Case(allow("admin"), disposable_racer),
+    # console: operators' screens
+    ("GET", "/console/models"): ADMIN_OPERATOR,
+    ("GET", "/console/models/rows"): ADMIN_OPERATOR,
+    ("POST", "/console/models/assign"): ADMIN_OPERATOR,
+    ("GET", "/console/models/car-status"): Case(allow("admin", "operator"),
+                                                lambda w, c: Call({}, None)),
+    ("GET", "/console/events"): ADMIN_OPERATOR,
+    ("POST", "/console/events"): ADMIN_OPERATOR,
+    ("GET", "/console/events/new"): ADMIN_OPERATOR,
+    ("POST", "/console/events/{event_id}"): Case(allow("admin", "operator"), event_only),
+    ("GET", "/console/events/{event_id}/edit"): Case(allow("admin", "operator"), event_only),
+    ("GET", "/console/events/{event_id}/delete"): Case(allow("admin", "operator"), event_only),
+    ("POST", "/console/events/{event_id}/delete"): Case(allow("admin", "operator"), event_only),
+    ("GET", "/console/fleets"): ADMIN_OPERATOR,
+    ("POST", "/console/fleets"): ADMIN_OPERATOR,
+    ("GET", "/console/cars"): ADMIN_OPERATOR,
+    ("GET", "/console/cars/activate"): ADMIN_OPERATOR,
+    ("POST", "/console/cars/activate"): ADMIN_OPERATOR,
+    ("POST", "/console/cars/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
+    ("POST", "/console/cars/{device_id}/fleet"): Case(allow("admin", "operator"), car_x_device),
+    ("POST", "/console/cars/{device_id}/models"): Case(allow("admin", "operator"), car_x_device),
+    ("POST", "/console/cars/{device_id}/deregister"): Case(allow("admin"), disposable_car),
+    ("GET", "/console/timekeeper"): ADMIN_OPERATOR,
+    ("GET", "/console/timekeeper/racers"): ADMIN_OPERATOR,
+    ("GET", "/console/timekeeper/{event_id}/{track_id}"): Case(allow("admin", "operator"), event_only),
+    ("GET", "/console/timekeeper/{event_id}/{track_id}/state"): Case(allow("admin", "operator"), event_only),
+    ("POST", "/console/timekeeper/{event_id}/{track_id}/races"): Case(allow("admin", "operator"), event_only),
+    ("POST", "/console/timekeeper/{event_id}/{track_id}/commands"): Case(allow("admin", "operator"), event_only),
+    ("GET", "/console/races"): ADMIN_OPERATOR,
+    ("GET", "/console/races/{event_id}/{race_id}"): Case(allow("admin", "operator"), racer_a_race),
+    ("GET", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
+    ("POST", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
+    ("POST", "/console/races/{event_id}/{race_id}/laps/{lap_id}"): Case(allow("admin", "operator"), racer_a_race),
 }
