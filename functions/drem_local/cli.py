@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, str] = {
     "models": "drem_local.commands.models",
     "export": "drem_local.commands.export",
     "import": "drem_local.commands.import_",
+    "league": "drem_local.commands.league",
     "car": "drem_cars.cli",
     "timer": "drem_cars.cli_timer",
     "sim": "drem_sim.cli",

@@ -50,6 +50,13 @@ def racer_a_model(world: World, caller: str) -> Call:
     return Call({"model_id": ticket["model"]["model_id"]})
 
 
+def racer_a_model_evaluation(world: World, caller: str) -> Call:
+    """An evaluation (a `drem sim eval` metrics.json) posted for racer A's model."""
+    body = {"track": "reinvent_base", "attempts": 3, "laps_completed": 3, "completion_pct": 100.0,
+            "offtrack_count": 0, "lap_times_s": [11.2, 11.0, 11.4]}
+    return Call(racer_a_model(world, caller).params, body)
+
+
 def car_x_command(world: World, caller: str) -> Call:
     """A command queued for car X: only car X may acknowledge it (car Y simply does not find it)."""
     command = world.ok("POST", f"/api/devices/{world.device_ids['car_x']}/commands", "admin",
@@ -258,4 +265,17 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
     ("POST", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
     ("POST", "/console/races/{event_id}/{race_id}/laps/{lap_id}"): Case(allow("admin", "operator"), racer_a_race),
+    # the virtual league (anyone reads; racers push their own; admins delete) and the model registry
+    ("POST", "/api/league/{track}/submissions"): SIGNED_IN,
+    ("GET", "/api/league/{track}"): PUBLIC,
+    ("GET", "/api/league/{track}/racers/{racer}"): PUBLIC,
+    ("DELETE", "/api/league/{track}/racers/{racer}"): ADMIN_ONLY,
+    ("GET", "/league/{track}"): PUBLIC,
+    ("GET", "/league/{track}/racers/{racer}"): PUBLIC,
+    ("GET", "/console/models/registry"): ADMIN_OPERATOR,
+    ("GET", "/models/registry"): SIGNED_IN,
+    ("GET", "/models/registry/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("POST", "/api/models/{model_id}/evaluations"): Case(allow("racer_a", "operator", "admin"),
+                                                          racer_a_model_evaluation),
+    ("GET", "/api/models/{model_id}/evaluations"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
 }

@@ -1,0 +1,242 @@
+"""The virtual league: racers submit their model's evaluation on a track; the board ranks the latest submission of
+each racer by best lap or by average of completed laps.
+
+A submission carries its evaluation trials; the figures the board ranks by (best lap, average, laps completed) are
+always recomputed here from the trials, so a client cannot send a best lap its own trials do not show.
+
+Rules: a racer pushes only under their own username (admins may push for anyone); anyone may read; admins delete.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from datetime import UTC, date, datetime
+from enum import StrEnum
+from typing import Annotated, Any, Protocol
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from chalicelib.auth.principals import Principal, Role
+from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
+
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
+TRACK_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
+MAX_TRIALS = 100
+MAX_HYPERPARAMETERS = 60
+LAP_COMPLETE = 100.0
+
+HyperValue = Annotated[str, Field(max_length=200)] | int | float | bool | None
+
+
+class EvaluationTrial(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    trial: int = Field(ge=0, le=10_000)
+    time_s: float = Field(ge=0, le=24 * 3600, allow_inf_nan=False, description="elapsed time of the trial")
+    completion_pct: float = Field(ge=0, le=100, allow_inf_nan=False)
+    off_track_count: int = Field(default=0, ge=0, le=100_000)
+    reset_count: int = Field(default=0, ge=0, le=100_000)
+    crash_count: int = Field(default=0, ge=0, le=100_000)
+    status: str = Field(default="", max_length=40)
+
+    @property
+    def completed(self) -> bool:
+        return self.completion_pct >= LAP_COMPLETE
+
+
+class SubmissionInput(BaseModel):
+    """What `drem league push` sends (built by chalicelib.domain.league_assembler)."""
+    model_config = ConfigDict(extra="forbid")
+
+    racer: str = Field(pattern=NAME_PATTERN)
+    track: str = Field(pattern=TRACK_PATTERN)
+    model_name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,79}$")
+    layout: str = Field(max_length=40)
+    sensor: list[Annotated[str, Field(max_length=40)]] = Field(min_length=1, max_length=4)
+    algorithm: str = Field(max_length=40)
+    action_space_type: str = Field(max_length=20)
+    action_space: str = Field(max_length=200, description="a one-line summary of the action space")
+    hyperparameters: dict[Annotated[str, Field(max_length=64)], HyperValue] = Field(max_length=MAX_HYPERPARAMETERS)
+    training_track: str | None = Field(default=None, max_length=64)
+    training_episodes: int = Field(ge=0, le=10_000_000)
+    training_best_completion_pct: float | None = Field(default=None, ge=0, le=100, allow_inf_nan=False,
+                                                       description="None when training has no episodes (cloning)")
+    trials: list[EvaluationTrial] = Field(min_length=1, max_length=MAX_TRIALS)
+
+
+class BoardEntry(BaseModel):
+    """One racer's latest submission on a track, as the board shows it (no hyperparameters: those are on demand)."""
+    model_config = ConfigDict(frozen=True)
+
+    racer: str
+    model_name: str
+    algorithm: str
+    sensor: list[str]
+    action_space: str
+    layout: str
+    submitted_at: str
+    submission_id: str
+    trials: int
+    laps_completed: int
+    best_lap_s: float | None
+    average_lap_s: float | None
+    average_completion_pct: float
+    off_track_total: int
+    reset_total: int
+
+
+class Submission(SubmissionInput):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    submission_id: str
+    submitted_at: str
+    submitted_by: str
+
+    def entry(self) -> BoardEntry:
+        completed = [t.time_s for t in self.trials if t.completed]
+        return BoardEntry(
+            racer=self.racer, model_name=self.model_name, algorithm=self.algorithm, sensor=list(self.sensor),
+            action_space=self.action_space, layout=self.layout, submitted_at=self.submitted_at,
+            submission_id=self.submission_id, trials=len(self.trials), laps_completed=len(completed),
+            best_lap_s=round(min(completed), 3) if completed else None,
+            average_lap_s=round(sum(completed) / len(completed), 3) if completed else None,
+            average_completion_pct=round(sum(t.completion_pct for t in self.trials) / len(self.trials), 2),
+            off_track_total=sum(t.off_track_count for t in self.trials),
+            reset_total=sum(t.reset_count for t in self.trials))
+
+
+class SortKey(StrEnum):
+    BEST = "best"
+    AVG = "avg"
+
+
+class BoardQuery(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    sort: SortKey = SortKey.BEST
+    algorithm: str | None = Field(default=None, max_length=40)
+    sensor: str | None = Field(default=None, max_length=40)
+    since: date | None = Field(default=None, description="only submissions on or after this day (UTC)")
+    until: date | None = Field(default=None, description="only submissions on or before this day (UTC)")
+
+    @field_validator("algorithm", "sensor", mode="before")
+    @classmethod
+    def _blank_is_none(cls, value: Any) -> Any:
+        return None if isinstance(value, str) and not value.strip() else value
+
+    @field_validator("since", "until", mode="before")
+    @classmethod
+    def _blank_date_is_none(cls, value: Any) -> Any:
+        return None if value == "" else value
+
+    def keeps(self, entry: BoardEntry) -> bool:
+        day = entry.submitted_at[:10]
+        return ((self.algorithm is None or entry.algorithm == self.algorithm)
+                and (self.sensor is None or self.sensor in entry.sensor)
+                and (self.since is None or day >= self.since.isoformat())
+                and (self.until is None or day <= self.until.isoformat()))
+
+
+class RankedEntry(BaseModel):
+    rank: int
+    entry: BoardEntry
+
+
+class Board(BaseModel):
+    track: str
+    sort: SortKey
+    entries: list[RankedEntry]
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Flat rows (CSV, terminal table): the same columns everywhere."""
+        return [board_row(ranked) for ranked in self.entries]
+
+
+BOARD_COLUMNS = ("rank", "racer", "model", "algorithm", "sensor", "best_lap_s", "average_lap_s", "laps_completed",
+                 "trials", "completion_pct", "off_track", "resets", "submitted_at")
+
+
+def board_row(ranked: RankedEntry) -> dict[str, Any]:
+    entry = ranked.entry
+    return {"rank": ranked.rank, "racer": entry.racer, "model": entry.model_name, "algorithm": entry.algorithm,
+            "sensor": "+".join(entry.sensor), "best_lap_s": entry.best_lap_s, "average_lap_s": entry.average_lap_s,
+            "laps_completed": entry.laps_completed, "trials": entry.trials,
+            "completion_pct": entry.average_completion_pct, "off_track": entry.off_track_total,
+            "resets": entry.reset_total, "submitted_at": entry.submitted_at}
+
+
+def rank(entries: list[BoardEntry], sort: SortKey) -> list[RankedEntry]:
+    """Racers with a completed lap first, by the chosen time (ties: the other time, then who submitted first);
+    then racers without one, by average completion."""
+    def key(entry: BoardEntry) -> tuple:
+        primary, secondary = ((entry.best_lap_s, entry.average_lap_s) if sort is SortKey.BEST
+                              else (entry.average_lap_s, entry.best_lap_s))
+        if primary is None:
+            return (1, -entry.average_completion_pct, 0.0, entry.submitted_at)
+        return (0, primary, secondary or 0.0, entry.submitted_at)
+    return [RankedEntry(rank=index, entry=entry) for index, entry in enumerate(sorted(entries, key=key), start=1)]
+
+
+class LeagueStore(Protocol):
+    def board(self, track: str) -> dict[str, BoardEntry]: ...
+    def record(self, submission: Submission) -> None: ...
+    def submission(self, track: str, racer: str, submission_id: str) -> Submission | None: ...
+    def remove_racer(self, track: str, racer: str) -> int: ...
+
+
+def utc_now() -> str:
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+class LeagueService:
+    def __init__(self, store: LeagueStore, *, clock: Callable[[], str] = utc_now) -> None:
+        self.store = store
+        self._clock = clock
+
+    def push(self, principal: Principal, track: str, body: SubmissionInput) -> Submission:
+        if body.track != checked_track(track):
+            raise InvalidInput(f"The submission is for {body.track!r} but was pushed to {track!r}.", field="track")
+        username = getattr(principal, "username", None)
+        if not principal.is_user or not username:
+            raise Forbidden("Only signed-in racers push league submissions.")
+        if body.racer != username and Role.ADMIN not in principal.roles:
+            raise Forbidden(f"You may push submissions only as yourself ({username}), not as {body.racer}.")
+        submitted_at = self._clock()
+        submission = Submission(**body.model_dump(), submitted_at=submitted_at, submitted_by=username,
+                                submission_id=submitted_at)
+        self.store.record(submission)
+        return submission
+
+    def board(self, track: str, query: BoardQuery) -> Board:
+        track = checked_track(track)
+        kept = [entry for entry in self.store.board(track).values() if query.keeps(entry)]
+        return Board(track=track, sort=query.sort, entries=rank(kept, query.sort))
+
+    def latest(self, track: str, racer: str) -> Submission:
+        track, racer = checked_track(track), checked_racer(racer)
+        entry = self.store.board(track).get(racer)
+        found = entry and self.store.submission(track, racer, entry.submission_id)
+        if not found:
+            raise NotFound(f"{racer} has no submission on {track}.", field="racer")
+        return found
+
+    def delete(self, principal: Principal, track: str, racer: str) -> int:
+        if Role.ADMIN not in principal.roles:
+            raise Forbidden("Only admins delete league submissions.")
+        removed = self.store.remove_racer(checked_track(track), checked_racer(racer))
+        if not removed:
+            raise NotFound(f"{racer} has no submission on {track}.", field="racer")
+        return removed
+
+
+class BoardChanged(Conflict):
+    """Two pushes raced for the same board item; the store retries (the loser re-reads)."""
+
+
+def checked_track(track: str) -> str:
+    if not isinstance(track, str) or not re.fullmatch(TRACK_PATTERN, track):
+        raise InvalidInput(f"{str(track)[:64]!r} is not a track name (letters, digits, _ and -).", field="track")
+    return track
+
+
+def checked_racer(racer: str) -> str:
+    if not isinstance(racer, str) or not re.fullmatch(NAME_PATTERN, racer):
+        raise NotFound(f"There is no racer {str(racer)[:64]!r}.", field="racer")
+    return racer

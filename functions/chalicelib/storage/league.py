@@ -1,0 +1,131 @@
+"""DynamoDB adapter for the virtual league (table `league`).
+
+Items:
+* `TRACK#{track}` / `BOARD`: the materialised board, `entries` = JSON map racer → BoardEntry (each racer's latest
+  submission summary) and `version`; the public pull is this one GetItem (moto's Query scans the whole table);
+* `TRACK#{track}` / `RACER#{racer}#SUB#{submittedAt}`: every submission in full (hyperparameters, trials), kept as
+  history; the hyperparameters "on demand" are one GetItem of the latest one.
+
+A push writes both in one transaction, the board guarded by its version (optimistic: the loser re-reads and retries),
+so the board never names a submission that was not stored.
+"""
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from botocore.exceptions import BotoCoreError, ClientError
+
+from chalicelib.domain.errors import Conflict
+from chalicelib.domain.league import BoardEntry, LeagueService, Submission
+from chalicelib.settings import Settings, get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.aws_errors import error_code, translate_common
+
+_SERVICE = "The league store"
+_BOARD_SK = "BOARD"
+_ATTEMPTS = 6
+
+
+def _pk(track: str) -> dict[str, str]:
+    return {"S": f"TRACK#{track}"}
+
+
+def _history_sk(racer: str, submission_id: str) -> dict[str, str]:
+    return {"S": f"RACER#{racer}#SUB#{submission_id}"}
+
+
+class DynamoLeagueStore:
+    def __init__(self, client: Any, table: str) -> None:
+        self._client = client
+        self._table = table
+
+    def board(self, track: str) -> dict[str, BoardEntry]:
+        return self._board(track)[0]
+
+    def record(self, submission: Submission) -> None:
+        history = {"pk": _pk(submission.track), "sk": _history_sk(submission.racer, submission.submission_id),
+                   "body": {"S": submission.model_dump_json()}}
+        for _ in range(_ATTEMPTS):
+            entries, version = self._board(submission.track)
+            entries[submission.racer] = submission.entry()
+            board_put = self._board_put(submission.track, entries, version)
+            try:
+                self._client.transact_write_items(TransactItems=[
+                    {"Put": {"TableName": self._table, "Item": history,
+                             "ConditionExpression": "attribute_not_exists(pk)"}},
+                    board_put])
+                return
+            except ClientError as exc:
+                if error_code(exc) != "TransactionCanceledException":
+                    raise translate_common(exc, _SERVICE) from exc
+            except BotoCoreError as exc:
+                raise translate_common(exc, _SERVICE) from exc
+        raise Conflict("The league board is busy; push again in a moment.")
+
+    def submission(self, track: str, racer: str, submission_id: str) -> Submission | None:
+        reply = self._call("get_item", TableName=self._table,
+                           Key={"pk": _pk(track), "sk": _history_sk(racer, submission_id)})
+        return Submission.model_validate_json(reply["Item"]["body"]["S"]) if "Item" in reply else None
+
+    def remove_racer(self, track: str, racer: str) -> int:
+        """Take the racer off the board and delete their history on this track; returns how many submissions."""
+        keys = self._history_keys(track, racer)
+        for _ in range(_ATTEMPTS):
+            entries, version = self._board(track)
+            if racer not in entries and not keys:
+                return 0
+            entries.pop(racer, None)
+            try:
+                self._client.transact_write_items(TransactItems=[self._board_put(track, entries, version)])
+                break
+            except ClientError as exc:
+                if error_code(exc) != "TransactionCanceledException":
+                    raise translate_common(exc, _SERVICE) from exc
+        else:
+            raise Conflict("The league board is busy; delete again in a moment.")
+        for key in keys:
+            self._call("delete_item", TableName=self._table, Key=key)
+        return max(len(keys), 1)
+
+    def _history_keys(self, track: str, racer: str) -> list[dict[str, Any]]:
+        keys: list[dict[str, Any]] = []
+        request: dict[str, Any] = dict(
+            TableName=self._table, KeyConditionExpression="pk = :pk AND begins_with(sk, :prefix)",
+            ExpressionAttributeValues={":pk": _pk(track), ":prefix": {"S": f"RACER#{racer}#SUB#"}},
+            ProjectionExpression="pk, sk")
+        while True:
+            reply = self._call("query", **request)
+            keys.extend({"pk": item["pk"], "sk": item["sk"]} for item in reply.get("Items", []))
+            if "LastEvaluatedKey" not in reply:
+                return keys
+            request["ExclusiveStartKey"] = reply["LastEvaluatedKey"]
+
+    def _board(self, track: str) -> tuple[dict[str, BoardEntry], int | None]:
+        reply = self._call("get_item", TableName=self._table, ConsistentRead=True,
+                           Key={"pk": _pk(track), "sk": {"S": _BOARD_SK}})
+        if "Item" not in reply:
+            return {}, None
+        item = reply["Item"]
+        entries = {racer: BoardEntry.model_validate(entry) for racer, entry in json.loads(item["entries"]["S"]).items()}
+        return entries, int(item["version"]["N"])
+
+    def _board_put(self, track: str, entries: dict[str, BoardEntry], version: int | None) -> dict[str, Any]:
+        item = {"pk": _pk(track), "sk": {"S": _BOARD_SK}, "version": {"N": str((version or 0) + 1)},
+                "entries": {"S": json.dumps({racer: entry.model_dump(mode="json")
+                                             for racer, entry in sorted(entries.items())})}}
+        if version is None:
+            return {"Put": {"TableName": self._table, "Item": item, "ConditionExpression": "attribute_not_exists(pk)"}}
+        return {"Put": {"TableName": self._table, "Item": item, "ConditionExpression": "version = :seen",
+                        "ExpressionAttributeValues": {":seen": {"N": str(version)}}}}
+
+    def _call(self, operation: str, **kwargs: Any) -> Any:
+        try:
+            return getattr(self._client, operation)(**kwargs)
+        except (ClientError, BotoCoreError) as exc:
+            raise translate_common(exc, _SERVICE) from exc
+
+
+def build_league_service(settings: Settings | None = None) -> LeagueService:
+    settings = settings or get_settings()
+    return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))

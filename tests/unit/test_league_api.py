@@ -1,0 +1,159 @@
+"""League round trip over the real app (Chalice test client, moto, real Cognito tokens): push three racers'
+exports on two tracks, pull the boards sorted both ways, and read the CSV/JSON outputs back."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from chalice import Chalice
+
+from chalicelib.domain.league import BOARD_COLUMNS
+from chalicelib.domain.league_assembler import assemble
+from chalicelib.domain.league_export import read_export
+from drem_local.commands.league import rows_of, table, to_csv
+from tests.unit.conftest import bearer
+from tests.unit.league_helpers import console_old_export, drem_sim_export, drfc_export
+
+pytestmark = pytest.mark.unit
+
+REINVENT, OVAL = "reinvent_base", "Oval_track"
+
+
+@pytest.fixture
+def league_app() -> Chalice:
+    from app import app
+    from chalicelib.routes import league
+
+    if "/api/league/{track}" not in app.routes:
+        app.register_blueprint(league.bp)
+    return app
+
+
+def _submission(path: Path, racer: str, track: str) -> dict[str, Any]:
+    return assemble(read_export(path), racer=racer, track=track).model_dump(mode="json")
+
+
+def _push(client: Any, token: str, submission: dict[str, Any], track: str | None = None) -> Any:
+    return client.http.post(f"/api/league/{track or submission['track']}/submissions",
+                            headers={**bearer(token), "Content-Type": "application/json"},
+                            body=json.dumps(submission))
+
+
+@pytest.fixture
+def pushed(league_app: Chalice, client: Any, users: Any, tmp_path: Path) -> dict[str, str]:
+    tokens = {name: users.access_token(name, ("racer",)) for name in ("alice", "bob", "carol")}
+    # alice: best 15.0 but slow average; bob: steady 15.5s; carol: no completed lap on reinvent.
+    exports = [
+        ("alice", REINVENT, console_old_export(tmp_path / "a1", world=REINVENT, laps=[(15000, 100), (18000, 100)])),
+        ("bob", REINVENT, drfc_export(tmp_path / "b1", world=REINVENT, laps=[(15500, 100), (15600, 100)])),
+        ("carol", REINVENT, drem_sim_export(tmp_path / "c1", track=REINVENT, progress=[80.0, 60.0], lap_times=[])),
+        ("alice", OVAL, console_old_export(tmp_path / "a2", world=OVAL, laps=[(9000, 100)])),
+        ("carol", OVAL, drem_sim_export(tmp_path / "c2", track=OVAL, progress=[100, 100], lap_times=[8.5, 8.7])),
+    ]
+    for racer, track, path in exports:
+        reply = _push(client, tokens[racer], _submission(path, racer, track))
+        assert reply.status_code == 201, reply.body
+    return tokens
+
+
+def _board(client: Any, track: str, query: str = "") -> dict[str, Any]:
+    reply = client.http.get(f"/api/league/{track}{query}", headers={"Accept": "application/json"})
+    assert reply.status_code == 200, reply.body
+    return json.loads(reply.body)
+
+
+def _order(board: dict[str, Any]) -> list[str]:
+    return [ranked["entry"]["racer"] for ranked in board["entries"]]
+
+
+def test_boards_rank_by_best_and_by_average(pushed: dict[str, str], client: Any) -> None:
+    assert _order(_board(client, REINVENT)) == ["alice", "bob", "carol"]
+    assert _order(_board(client, REINVENT, "?sort=avg")) == ["bob", "alice", "carol"]
+    assert _order(_board(client, OVAL)) == ["carol", "alice"]
+    best = _board(client, REINVENT)["entries"][0]["entry"]
+    assert (best["best_lap_s"], best["average_lap_s"], best["laps_completed"]) == (15.0, 16.5, 2)
+
+
+def test_filters(pushed: dict[str, str], client: Any) -> None:
+    assert _order(_board(client, REINVENT, "?algorithm=sac")) == ["bob"]
+    assert _order(_board(client, REINVENT, "?sensor=SECTOR_LIDAR")) == ["bob"]
+    assert _order(_board(client, REINVENT, "?since=2000-01-01&until=2999-01-01")) == ["alice", "bob", "carol"]
+    assert _order(_board(client, REINVENT, "?until=2000-01-01")) == []
+    reply = client.http.get(f"/api/league/{REINVENT}?since=yesterday", headers={"Accept": "application/json"})
+    assert reply.status_code == 400 and json.loads(reply.body)["error"]["field"] == "since"
+
+
+def test_a_new_push_replaces_the_board_entry_and_keeps_history(pushed: dict[str, str], client: Any,
+                                                              tmp_path: Path) -> None:
+    faster = console_old_export(tmp_path / "a3", world=REINVENT, laps=[(14000, 100)])
+    assert _push(client, pushed["alice"], _submission(faster, "alice", REINVENT)).status_code == 201
+    entries = _board(client, REINVENT)["entries"]
+    assert [e["entry"]["racer"] for e in entries].count("alice") == 1
+    assert entries[0]["entry"]["best_lap_s"] == 14.0 and entries[0]["entry"]["model_name"] == "a3"
+    latest = json.loads(client.http.get(f"/api/league/{REINVENT}/racers/alice").body)["submission"]
+    assert latest["hyperparameters"]["lr"] == 0.0003 and latest["model_name"] == "a3"
+
+
+def test_csv_and_json_outputs_parse_back_to_the_same_rows(pushed: dict[str, str], client: Any) -> None:
+    rows = rows_of(_board(client, REINVENT, "?sort=avg"))
+    parsed = list(csv.DictReader(io.StringIO(to_csv(rows, BOARD_COLUMNS))))
+    assert [r["racer"] for r in parsed] == ["bob", "alice", "carol"]
+    assert [(r["rank"], r["best_lap_s"], r["average_lap_s"]) for r in parsed] == [
+        (str(r["rank"]), "" if r["best_lap_s"] is None else str(r["best_lap_s"]),
+         "" if r["average_lap_s"] is None else str(r["average_lap_s"])) for r in rows]
+    assert json.loads(json.dumps(rows)) == rows
+    printed = table(rows, BOARD_COLUMNS).splitlines()
+    assert printed[0].split()[:3] == ["rank", "racer", "model"] and len(printed) == 2 + len(rows)
+    assert printed[2].split()[1] == "bob" and printed[4].split()[5] == "-"  # carol: no best lap
+
+
+def test_racers_push_only_as_themselves(pushed: dict[str, str], client: Any, users: Any, tmp_path: Path) -> None:
+    forged = _submission(console_old_export(tmp_path / "f", world=REINVENT, laps=[(1000, 100)]), "bob", REINVENT)
+    reply = _push(client, pushed["alice"], forged)
+    assert reply.status_code == 403
+    assert _board(client, REINVENT)["entries"][1]["entry"]["best_lap_s"] == 15.5  # bob's entry untouched
+    admin = users.access_token("root", ("admin",))
+    assert _push(client, admin, forged).status_code == 201
+    anonymous = client.http.post(f"/api/league/{REINVENT}/submissions", headers={"Content-Type": "application/json"},
+                                 body=json.dumps(forged))
+    assert anonymous.status_code == 401
+
+
+def test_push_to_a_different_track_than_the_submission(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
+    submission = _submission(console_old_export(tmp_path / "x", world=REINVENT, laps=[(1000, 100)]), "alice", REINVENT)
+    reply = _push(client, pushed["alice"], submission, track=OVAL)
+    assert reply.status_code == 400 and json.loads(reply.body)["error"]["field"] == "track"
+
+
+def test_invalid_submission_names_the_field(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
+    submission = _submission(console_old_export(tmp_path / "x", world=REINVENT, laps=[(1000, 100)]), "alice", REINVENT)
+    submission["trials"][0]["completion_pct"] = 150
+    reply = _push(client, pushed["alice"], submission)
+    assert reply.status_code == 400
+    assert "trials" in json.loads(reply.body)["error"]["field"]
+    assert _board(client, REINVENT)["entries"][0]["entry"]["best_lap_s"] == 15.0  # nothing half-written
+
+
+def test_only_admins_delete(pushed: dict[str, str], client: Any, users: Any) -> None:
+    path = f"/api/league/{REINVENT}/racers/bob"
+    assert client.http.delete(path, headers=bearer(pushed["bob"])).status_code == 403
+    admin = users.access_token("root", ("admin",))
+    reply = client.http.delete(path, headers=bearer(admin))
+    assert reply.status_code == 200 and json.loads(reply.body) == {"deleted": 1}
+    assert _order(_board(client, REINVENT)) == ["alice", "carol"]
+    assert client.http.get(path, headers={"Accept": "application/json"}).status_code == 404
+    assert client.http.delete(path, headers=bearer(admin)).status_code == 404
+
+
+def test_public_page_and_hyperparameter_fragment(pushed: dict[str, str], client: Any) -> None:
+    page = client.http.get(f"/league/{REINVENT}?sort=avg")
+    assert page.status_code == 200
+    html = page.body.decode()
+    assert html.index('data-racer="bob"') < html.index('data-racer="alice"') < html.index('data-racer="carol"')
+    assert 'hx-get="/league/reinvent_base/racers/bob"' in html
+    fragment = client.http.get(f"/league/{REINVENT}/racers/bob", headers={"HX-Request": "true"}).body.decode()
+    assert "<html" not in fragment and "sac_alpha" in fragment and "15.500 s" in fragment

@@ -1,0 +1,179 @@
+"""The assembler reads each real export layout (folder and .tar.gz) into one submission, and says which file and
+field is wrong when it cannot."""
+from __future__ import annotations
+
+import json
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
+from chalicelib.domain.league_assembler import ExportProblem, assemble
+from chalicelib.domain.league_export import ExportLimits, read_export
+from tests.unit.league_helpers import (HYPERPARAMETERS, console_new_export, console_old_export, drem_sim_export,
+                                       drfc_export, raw_tar_gz, tar_gz_of)
+
+pytestmark = pytest.mark.unit
+
+LAPS = [(16468, 100), (16267, 100), (9000, 54)]
+
+
+def build(path: Path, track: str = "reinvent_base", **options):
+    return assemble(read_export(path), racer="alice", track=track, **options)
+
+
+def test_old_console_export(tmp_path: Path) -> None:
+    submission = build(console_old_export(tmp_path / "alice-model", world="reinvent_base", laps=LAPS))
+    assert submission.layout == "console-old"
+    assert submission.model_name == "alice-model"
+    assert submission.algorithm == "clipped_ppo" and submission.sensor == ["FRONT_FACING_CAMERA"]
+    assert submission.action_space == "5 discrete actions, steering -30..30 deg, speed 0.6..0.6 m/s"
+    assert submission.hyperparameters == HYPERPARAMETERS
+    assert submission.training_track == "reinvent_base"  # read from the robomaker log's params
+    assert (submission.training_episodes, submission.training_best_completion_pct) == (4, 100.0)
+    assert [(t.time_s, t.completion_pct, t.off_track_count, t.reset_count) for t in submission.trials] == [
+        (16.468, 100.0, 0, 0), (16.267, 100.0, 0, 0), (9.0, 54.0, 1, 1)]
+
+
+def test_new_console_export_with_iso_folders(tmp_path: Path) -> None:
+    submission = build(console_new_export(tmp_path / "m", world="reinvent_base", laps=[(20000, 100)]))
+    assert submission.layout == "console-new"
+    assert submission.training_episodes == 3 and submission.trials[0].time_s == 20.0
+
+
+def test_drfc_prefix_uses_the_newest_evaluation(tmp_path: Path) -> None:
+    submission = build(drfc_export(tmp_path / "rl-deepracer-sagemaker", world="reinvent_base", laps=LAPS))
+    assert submission.layout == "drfc"
+    assert submission.algorithm == "sac" and submission.sensor == ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"]
+    assert submission.action_space == "continuous, steering -30..30 deg, speed 1..2 m/s"
+    assert submission.hyperparameters["sac_alpha"] == 0.2
+    assert [t.time_s for t in submission.trials] == [16.468, 16.267, 9.0]  # not the older 99 s file
+    assert (submission.training_episodes, submission.training_best_completion_pct) == (5, 100.0)
+
+
+def test_drem_sim_run(tmp_path: Path) -> None:
+    submission = build(drem_sim_export(tmp_path / "bc-1", track="reinvent_base", progress=[100, 37.5, 100],
+                                       lap_times=[21.5, 20.25]))
+    assert submission.layout == "drem-sim" and submission.algorithm == "behaviour_cloning"
+    assert submission.hyperparameters["learning_rate"] == 0.001 and submission.training_episodes == 10
+    assert submission.training_best_completion_pct is None and submission.training_track == "reinvent_base"
+    assert [(t.time_s, t.completion_pct, t.off_track_count) for t in submission.trials] == [
+        (21.5, 100.0, 0), (0.0, 37.5, 1), (20.25, 100.0, 0)]
+
+
+@pytest.mark.parametrize("top", [None, "my-export"])
+def test_tar_gz_matches_the_folder(tmp_path: Path, top: str | None) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    archive = tar_gz_of(folder, tmp_path / "m.tar.gz", top=top)
+    from_archive = build(archive)
+    assert from_archive.model_dump(exclude={"model_name"}) == build(folder).model_dump(exclude={"model_name"})
+    assert from_archive.model_name == (top or "m")
+
+
+def _problem(path: Path, track: str = "reinvent_base") -> str:
+    with pytest.raises(ExportProblem) as caught:
+        build(path, track)
+    return caught.value.message
+
+
+def test_missing_hyperparameters(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    (folder / "ip/hyperparameters.json").unlink()
+    assert _problem(folder).startswith("ip/hyperparameters.json: missing")
+
+
+def test_invalid_json_in_evaluation_metrics(tmp_path: Path) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    (folder / "metrics/EvaluationMetrics-20240102030405.json").write_text('{"metrics": [ {"trial": 1,,}]}')
+    message = _problem(folder)
+    assert message.startswith("metrics/EvaluationMetrics-20240102030405.json: is not valid JSON")
+    assert "line 1" in message
+
+
+def test_yaml_without_world_name(tmp_path: Path) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    (folder / "training_params.yaml").write_text("JOB_TYPE: TRAINING\nRACE_TYPE: TIME_TRIAL\n")
+    assert _problem(folder) == "training_params.yaml: WORLD_NAME: missing or not a track name"
+
+
+def test_evaluation_on_another_track(tmp_path: Path) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS, eval_world="Oval_track")
+    assert "evaluation_params.yaml: WORLD_NAME: the evaluation ran on 'Oval_track'" in _problem(folder)
+
+
+def test_evaluation_entry_without_lap_time(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    path = next((folder / "metrics/evaluation").glob("*.json"))
+    document = json.loads(path.read_text())
+    del document["metrics"][1]["elapsed_time_in_milliseconds"]
+    path.write_text(json.dumps(document))
+    assert _problem(folder).endswith(": metrics[1].elapsed_time_in_milliseconds: missing")
+
+
+def test_bad_model_metadata_names_the_field(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS,
+                                metadata={"action_space": [{"steering_angle": 45, "speed": 1.0}],
+                                          "sensor": ["FRONT_FACING_CAMERA"]})
+    message = _problem(folder)
+    assert message.startswith("model/model_metadata.json: action_space[0].steering_angle")
+
+
+def test_console_export_without_any_track_source(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    for log in (folder / "logs/training").glob("*robomaker.log"):
+        log.unlink()
+    assert _problem(folder).startswith("training_params.yaml: missing")
+
+
+def test_empty_training_metrics(tmp_path: Path) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    (folder / "metrics/TrainingMetrics.json").write_text('{"metrics": [], "version": 2.0}')
+    assert _problem(folder) == "metrics/TrainingMetrics.json: metrics: missing or empty (no episodes recorded)"
+
+
+def test_drem_metrics_for_another_track(tmp_path: Path) -> None:
+    folder = drem_sim_export(tmp_path / "bc", track="Oval_track", progress=[100], lap_times=[20.0])
+    assert _problem(folder) == "metrics.json: track: the evaluation ran on 'Oval_track', not on 'reinvent_base'"
+
+
+# -- hostile archives ------------------------------------------------------------------------------------------------
+
+def _member(name: str, data: bytes | None = b"{}", kind: bytes = tarfile.REGTYPE, link: str = "") -> tuple:
+    info = tarfile.TarInfo(name)
+    info.type, info.linkname = kind, link
+    info.size = len(data) if data is not None and kind == tarfile.REGTYPE else 0
+    return info, data if kind == tarfile.REGTYPE else None
+
+
+def test_archive_links_and_escaping_names_are_never_read(tmp_path: Path) -> None:
+    archive = raw_tar_gz(tmp_path / "evil.tar.gz", [
+        _member("../../etc/hyperparameters.json", b'{"lr": 1}'),
+        _member("/abs/hyperparameters.json", b'{"lr": 1}'),
+        _member("ip/hyperparameters.json", kind=tarfile.SYMTYPE, link="/etc/passwd"),
+        _member("model/model_metadata.json", kind=tarfile.LNKTYPE, link="../../secret.json"),
+    ])
+    export = read_export(archive)
+    assert export.files == {} and export.names == []
+    assert not (tmp_path.parent / "etc").exists()
+    with pytest.raises(ExportProblem, match="model/model_metadata.json: missing"):
+        assemble(export, racer="alice", track="reinvent_base")
+
+
+def test_archive_expanding_past_the_limit_is_refused(tmp_path: Path) -> None:
+    archive = raw_tar_gz(tmp_path / "bomb.tar.gz", [_member("sim-trace/big.csv", b"0" * 3_000_000)])
+    with pytest.raises(PayloadTooLarge, match="expands to more than"):
+        read_export(archive, limits=ExportLimits(max_expanded_bytes=1_000_000))
+
+
+def test_oversized_metrics_file_is_refused(tmp_path: Path) -> None:
+    archive = raw_tar_gz(tmp_path / "big.tar.gz", [_member("metrics/TrainingMetrics.json", b" " * 5000)])
+    with pytest.raises(PayloadTooLarge, match="metrics/TrainingMetrics.json is larger than"):
+        read_export(archive, limits=ExportLimits(max_file_bytes=4096))
+
+
+def test_not_an_archive(tmp_path: Path) -> None:
+    path = tmp_path / "model.tar.gz"
+    path.write_bytes(b"PK\x03\x04 a zip file")
+    with pytest.raises(InvalidInput, match="not a .tar.gz"):
+        read_export(path)
