@@ -163,7 +163,10 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
     first, second = tmp_path / "first", tmp_path / "second"
     assert _export(eid, first, live_stack.state_dir) == 0
     manifest = json.loads((first / MANIFEST).read_text())
-    assert manifest["counts"]["races"] == 2 and manifest["counts"]["archives"] == 1
+    # The stack is shared by the session: the event's staff (admin) may own models from other tests, and an export
+    # carries every referenced account's models. The racer's model must be among them, byte for byte.
+    assert manifest["counts"]["races"] == 2
+    assert manifest["counts"]["archives"] == len(list((first / "archives").glob("*.tar.gz"))) >= 1
     assert (first / "archives" / f"{source_event['model_id']}.tar.gz").read_bytes() == onnx_archive(0.25)
     capsys.readouterr()
 
