@@ -1,0 +1,144 @@
+"""The car's forward camera: 160x120 grayscale frames like the DeepRacer model input.
+
+The track is drawn once, top-down, into a grayscale texture (dark road, white borders, a dashed
+centre line, grass around). A pinhole camera looking at the flat ground plane is a homography,
+so each frame is one `cv2.warpPerspective` of that texture, rendered at `supersample`x and shrunk
+with INTER_AREA (thin far lines alias otherwise). Rows above the horizon get a constant sky value.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from drem_sim.tracks import Track
+
+# Grey values of the printed mat in a grayscale (luma) camera.
+ROAD = 38
+BORDER = 235
+CENTRE_DASH = 165  # orange centre line
+GRASS = 105  # green off-track
+SKY = 180
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    width: int = 160
+    height: int = 120
+    hfov_rad: float = 1.13
+    pitch_deg: float = 15.0  # down
+    mount_forward: float = 0.092  # m ahead of the car origin
+    mount_height: float = 0.115  # m above the ground: 0.08 above the chassis + chassis height
+    supersample: int = 2
+    texture_px_per_m: float = 200.0
+    border_width: float = 0.05  # m (2 in tape)
+    dash_width: float = 0.05
+    dash_length: float = 0.15
+    noise_std: float = 0.0  # grey levels of Gaussian noise per frame (0 = off)
+    brightness_jitter: float = 0.0  # relative gain range per frame, e.g. 0.1 = x[0.9, 1.1]
+
+    @classmethod
+    def for_track(cls, track: Track, **overrides: object) -> CameraConfig:
+        base = {"width": track.sim.camera_width, "height": track.sim.camera_height,
+                "hfov_rad": track.sim.camera_hfov_rad}
+        base.update(overrides)
+        return cls(**base)  # type: ignore[arg-type]
+
+    def as_dict(self) -> dict[str, float | int]:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True, eq=False)
+class TrackTexture:
+    image: np.ndarray  # (H, W) uint8
+    x_min: float
+    y_max: float
+    px_per_m: float
+
+    def to_pixels(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64)
+        return np.stack([(p[..., 0] - self.x_min) * self.px_per_m, (self.y_max - p[..., 1]) * self.px_per_m], -1)
+
+
+def render_texture(track: Track, config: CameraConfig, margin: float = 2.0) -> TrackTexture:
+    """Draw the mat top-down (north up) at `config.texture_px_per_m`."""
+    x0, y0, x1, y1 = track.bounds
+    scale = config.texture_px_per_m
+    width = int(math.ceil((x1 - x0 + 2 * margin) * scale))
+    height = int(math.ceil((y1 - y0 + 2 * margin) * scale))
+    tex = TrackTexture(np.full((height, width), GRASS, np.uint8), x0 - margin, y1 + margin, scale)
+    shift = 4  # sub-pixel drawing precision for cv2 (coordinates x16)
+    fixed = lambda pts: np.round(tex.to_pixels(pts) * (1 << shift)).astype(np.int32)  # noqa: E731
+
+    inner, outer = fixed(track.inner), fixed(track.outer)
+    n = len(inner)
+    last = n if track.is_closed else n - 1
+    quads = [np.array([inner[i], inner[(i + 1) % n], outer[(i + 1) % n], outer[i]]) for i in range(last)]
+    cv2.fillPoly(tex.image, quads, ROAD, lineType=cv2.LINE_AA, shift=shift)
+    line_px = max(1, int(round(config.border_width * scale)))
+    for border in (inner, outer):
+        cv2.polylines(tex.image, [border], track.is_closed, BORDER, line_px, cv2.LINE_AA, shift)
+
+    dash_px = max(1, int(round(config.dash_width * scale)))
+    period = 2 * config.dash_length
+    s = 0.0
+    while s < track.length - config.dash_length:
+        pts = [track.pose_at(s + k * config.dash_length / 4)[:2] for k in range(5)]
+        cv2.polylines(tex.image, [fixed(np.array(pts))], False, CENTRE_DASH, dash_px, cv2.LINE_AA, shift)
+        s += period
+    return tex
+
+
+class Camera:
+    """Renders what the car's camera sees at a pose. Same pose (and same rng draws) -> same frame."""
+
+    def __init__(self, track: Track, config: CameraConfig | None = None, texture: TrackTexture | None = None):
+        self.config = config or CameraConfig.for_track(track)
+        self.texture = texture or render_texture(track, self.config)
+        cfg = self.config
+        self._w = cfg.width * cfg.supersample
+        self._h = cfg.height * cfg.supersample
+        self._focal = (self._w / 2) / math.tan(cfg.hfov_rad / 2)
+        self._cx, self._cy = (self._w - 1) / 2, (self._h - 1) / 2
+        pitch = math.radians(cfg.pitch_deg)
+        self._sin_p, self._cos_p = math.sin(pitch), math.cos(pitch)
+        horizon = self._cy - self._focal * math.tan(pitch)
+        # First row safely below the horizon; everything above is sky.
+        self._row0 = min(self._h, max(0, int(math.floor(horizon)) + 2))
+        t = self.texture
+        self._tex_to_world = np.array([[1 / t.px_per_m, 0, t.x_min], [0, -1 / t.px_per_m, t.y_max], [0, 0, 1]])
+        self._frame = np.full((self._h, self._w), SKY, np.uint8)
+        self._ground = self._frame[self._row0:]
+
+    def homography(self, x: float, y: float, heading: float) -> np.ndarray:
+        """Texture pixel -> (cropped, supersampled) image pixel for a car origin pose."""
+        cfg = self.config
+        ch, sh = math.cos(heading), math.sin(heading)
+        cam = np.array([x + cfg.mount_forward * ch, y + cfg.mount_forward * sh, cfg.mount_height])
+        forward = np.array([ch * self._cos_p, sh * self._cos_p, -self._sin_p])
+        right = np.array([sh, -ch, 0.0])
+        down = np.cross(forward, right)
+        rot = np.stack([right, down, forward])
+        k = np.array([[self._focal, 0, self._cx], [0, self._focal, self._cy - self._row0], [0, 0, 1]])
+        plane = np.column_stack([rot[:, 0], rot[:, 1], -rot @ cam])
+        return k @ plane @ self._tex_to_world
+
+    def render(self, x: float, y: float, heading: float, rng: np.random.Generator | None = None) -> np.ndarray:
+        """The (height, width) uint8 frame for a car origin at (x, y) facing `heading` (radians)."""
+        cfg = self.config
+        cv2.warpPerspective(self.texture.image, self.homography(x, y, heading), (self._w, self._h - self._row0),
+                            dst=self._ground, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                            borderValue=GRASS)
+        if cfg.supersample == 1:
+            frame = self._frame.copy()
+        else:
+            frame = cv2.resize(self._frame, (cfg.width, cfg.height), interpolation=cv2.INTER_AREA)
+        if rng is not None and (cfg.noise_std > 0 or cfg.brightness_jitter > 0):
+            gain = 1.0 + rng.uniform(-cfg.brightness_jitter, cfg.brightness_jitter)
+            noisy = frame.astype(np.float32) * gain
+            if cfg.noise_std > 0:
+                noisy += rng.normal(0.0, cfg.noise_std, size=frame.shape).astype(np.float32)
+            frame = np.clip(noisy, 0, 255).astype(np.uint8)
+        return frame

@@ -1,0 +1,122 @@
+"""Car dynamics of a 1/18-scale DeepRacer on a pymunk body.
+
+A kinematic bicycle with a tyre grip limit: the steered wheels turn the body at
+v·tan(δ)/wheelbase, and the tyres can cancel the sideways velocity this creates only up to
+friction·g (minus what acceleration already uses: a friction circle). Too fast into a corner,
+the car slides wide, which is what sends overspeeding models off the track.
+pymunk integrates the pose (a kinematic body: we set its velocities, it moves it).
+Physics never draws.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import pymunk
+
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class CarSpec:
+    wheelbase: float = 0.164  # m, front hinge to rear axle (simapp URDF)
+    axle_track: float = 0.162  # m, left to right wheel centres
+    front_axle_x: float = 0.0823  # m ahead of the body origin
+    rear_axle_x: float = -0.0817
+    front_point_x: float = 0.14  # DeepRacer reports x, y at this point ahead of the origin
+    max_steering_deg: float = 30.0
+    steering_rate_deg_s: float = 360.0  # servo slew rate
+    max_speed: float = 4.0  # m/s
+    max_accel: float = 6.0  # m/s² drive
+    max_brake: float = 8.0  # m/s² braking
+    mass: float = 1.5  # kg (real car; only reported, the kinematic body needs no inertia)
+    friction: float = 1.0  # tyre grip coefficient (a track's sim.friction overrides it)
+
+
+class CarPhysics:
+    """One car. `command()` sets the held steering/speed; `step()` advances one fixed physics step."""
+
+    def __init__(self, spec: CarSpec | None = None, dt: float = 1.0 / 60.0) -> None:
+        self.spec = spec or CarSpec()
+        self.dt = dt
+        self.space = pymunk.Space()
+        self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        self.space.add(self.body)
+        self._max_steer = math.radians(self.spec.max_steering_deg)
+        self._steer_step = math.radians(self.spec.steering_rate_deg_s) * dt
+        self.reset(0.0, 0.0, 0.0)
+
+    # ---- state ----------------------------------------------------------------------------
+    def reset(self, x: float, y: float, heading: float, speed: float = 0.0) -> None:
+        """Place the body origin at (x, y) facing `heading` (radians), rolling straight at `speed`."""
+        self.body.position = (x, y)
+        self.body.angle = heading
+        self.vx = speed * math.cos(heading)
+        self.vy = speed * math.sin(heading)
+        self.steer = 0.0
+        self.steer_cmd = 0.0
+        self.speed_cmd = speed
+        self.sliding = False
+
+    @property
+    def x(self) -> float:
+        return self.body.position.x
+
+    @property
+    def y(self) -> float:
+        return self.body.position.y
+
+    @property
+    def heading(self) -> float:
+        return self.body.angle
+
+    @property
+    def speed(self) -> float:
+        """Measured speed along the car's heading, m/s."""
+        c, s = math.cos(self.body.angle), math.sin(self.body.angle)
+        return self.vx * c + self.vy * s
+
+    def point_ahead(self, forward: float, left: float = 0.0) -> tuple[float, float]:
+        """World position of a point fixed on the car (body frame, metres)."""
+        c, s = math.cos(self.body.angle), math.sin(self.body.angle)
+        p = self.body.position
+        return p.x + forward * c - left * s, p.y + forward * s + left * c
+
+    def front_point(self) -> tuple[float, float]:
+        return self.point_ahead(self.spec.front_point_x)
+
+    def wheel_points(self) -> list[tuple[float, float]]:
+        sp = self.spec
+        half = sp.axle_track / 2
+        return [self.point_ahead(fx, side) for fx in (sp.front_axle_x, sp.rear_axle_x) for side in (half, -half)]
+
+    # ---- control + integration -----------------------------------------------------------
+    def command(self, steering_deg: float, speed: float) -> None:
+        self.steer_cmd = max(-self._max_steer, min(self._max_steer, math.radians(steering_deg)))
+        self.speed_cmd = max(0.0, min(self.spec.max_speed, speed))
+
+    def step(self) -> None:
+        sp, dt = self.spec, self.dt
+        self.steer += max(-self._steer_step, min(self._steer_step, self.steer_cmd - self.steer))
+        heading = self.body.angle
+        c, s = math.cos(heading), math.sin(heading)
+        v_long = self.vx * c + self.vy * s
+        grip = sp.friction * GRAVITY
+        accel = (self.speed_cmd - v_long) / dt
+        accel = max(-min(sp.max_brake, grip), min(min(sp.max_accel, grip), accel))
+
+        self.body.velocity = (self.vx, self.vy)
+        self.body.angular_velocity = v_long * math.tan(self.steer) / sp.wheelbase
+        self.space.step(dt)
+
+        # The body turned; the tyres now fight the sideways part of the old velocity.
+        heading = self.body.angle
+        c, s = math.cos(heading), math.sin(heading)
+        v_long = self.vx * c + self.vy * s + accel * dt
+        v_lat = -self.vx * s + self.vy * c
+        lateral_budget = math.sqrt(max(0.0, grip * grip - accel * accel)) * dt
+        self.sliding = abs(v_lat) > lateral_budget
+        v_lat = 0.0 if not self.sliding else v_lat - math.copysign(lateral_budget, v_lat)
+        v_long = max(0.0, v_long)
+        self.vx = v_long * c - v_lat * s
+        self.vy = v_long * s + v_lat * c
