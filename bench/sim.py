@@ -1,0 +1,121 @@
+"""Simulator speed with the camera and a trained model in the loop, on ONE CPU core.
+
+One car, 15 Hz decisions, the sample model archive in sim/drem_sim/samples/ driving from camera
+frames through onnxruntime. Each frame is also run through the same network in torch eager mode
+(weights taken from the archive's ONNX initialisers), timed side by side; torch time is left out
+of the real-time factor. Goals: real-time factor >= 100x, onnxruntime p99 <= 1 ms per frame,
+onnxruntime >= 2x faster than torch eager (p50).
+
+    .venv/bin/python bench/sim.py [--track reinvent_base] [--sim-seconds 240]
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # before numpy/torch/onnxruntime load their thread pools
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sim" / "drem_sim" / "samples"
+
+
+def _fail(message: str) -> int:
+    print(f"bench sim: {message}", file=sys.stderr)
+    print("RESULT sim: rtf=n/a ort_p99=n/a speedup=n/a | goal rtf>=100 ort_p99<=1ms speedup>=2 | not met")
+    return 1
+
+
+def _torch_model(onnx_bytes: bytes):  # noqa: ANN202 - torch imported lazily
+    import onnx
+    import torch
+    from onnx import numpy_helper
+
+    from drem_sim.learn.model import BehaviourCloningCNN
+
+    weights = {init.name: torch.from_numpy(numpy_helper.to_array(init).copy())
+               for init in onnx.load_from_string(onnx_bytes).graph.initializer}
+    model = BehaviourCloningCNN()
+    missing = set(model.state_dict()) - set(weights)
+    if missing:
+        raise ValueError(f"the archive's ONNX graph lacks weights for {sorted(missing)}: not a {type(model).__name__}")
+    model.load_state_dict({name: weights[name] for name in model.state_dict()})
+    return model.eval()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--track", default="reinvent_base")
+    parser.add_argument("--sim-seconds", type=float, default=240.0)
+    parser.add_argument("--archive", type=Path, help="model archive (default: the newest in sim/drem_sim/samples)")
+    args = parser.parse_args()
+
+    os.sched_setaffinity(0, {0})
+    archives = [args.archive] if args.archive else sorted(SAMPLES.glob("*.tar.gz"))
+    if not archives or not archives[-1].is_file():
+        return _fail(f"no model archive found in {SAMPLES}; train one with `drem train` "
+                     "(see docs/sim.md) - this bench never times a random model")
+    archive = archives[-1]
+
+    import cv2
+    import numpy as np
+    import torch
+
+    from drem_sim.env import RaceEnv
+    from drem_sim.learn.package import ONNX_MEMBER, read_model_files
+    from drem_sim.learn.pilot import OnnxPilot
+    from drem_sim.tracks import load_track
+
+    cv2.setNumThreads(1)
+    torch.set_num_threads(1)
+    torch.set_num_interop_threads(1)
+    pilot = OnnxPilot.from_archive(archive)  # onnxruntime session with intra/inter op threads = 1
+    torch_model = _torch_model(read_model_files(archive)[ONNX_MEMBER])
+
+    env = RaceEnv(load_track(args.track))
+    obs, _ = env.reset(seed=0)
+    for _ in range(30):  # warm both runtimes and the caches
+        pilot.raw_output(obs)
+        with torch.inference_mode():
+            torch_model(torch.from_numpy(obs.astype(np.float32)).reshape(1, 120, 160, 1))
+
+    steps = int(args.sim_seconds * 15)
+    ort_ns, torch_ns = np.empty(steps), np.empty(steps)
+    max_difference = 0.0
+    clock = time.perf_counter_ns
+    loop_start = clock()
+    for i in range(steps):
+        t0 = clock()
+        output = pilot.raw_output(obs)
+        t1 = clock()
+        with torch.inference_mode():
+            reference = torch_model(torch.from_numpy(obs.astype(np.float32)).reshape(1, 120, 160, 1))[0].numpy()
+        t2 = clock()
+        ort_ns[i], torch_ns[i] = t1 - t0, t2 - t1
+        max_difference = max(max_difference, float(np.abs(reference - output).max()))
+        obs, _params, terminated, truncated, _info = env.step(pilot.action_from_output(output))
+        if terminated or truncated:
+            obs, _ = env.reset()
+    wall_s = (clock() - loop_start - torch_ns.sum()) / 1e9
+    rtf = env.sim_time / wall_s
+    ort_p50, ort_p99 = np.percentile(ort_ns, [50, 99]) / 1e6
+    torch_p50, torch_p99 = np.percentile(torch_ns, [50, 99]) / 1e6
+    speedup = torch_p50 / ort_p50
+
+    print(f"model        {archive.name} ({sum(p.numel() for p in torch_model.parameters())} parameters)")
+    print(f"track        {args.track}: {steps} decisions = {env.sim_time:.1f} s simulated in {wall_s:.2f} s wall "
+          f"on 1 core; laps {env.laps}, resets {env.resets}")
+    print(f"per frame    sim+camera+ort {wall_s / steps * 1e3:.3f} ms")
+    print(f"onnxruntime  p50 {ort_p50:.3f} ms  p99 {ort_p99:.3f} ms")
+    print(f"torch eager  p50 {torch_p50:.3f} ms  p99 {torch_p99:.3f} ms  (max |torch - ort| {max_difference:.1e})")
+    met = rtf >= 100 and ort_p99 <= 1.0 and speedup >= 2
+    print(f"RESULT sim: rtf={rtf:.0f}x ort_p99={ort_p99:.3f}ms speedup={speedup:.1f}x "
+          f"| goal rtf>=100 ort_p99<=1ms speedup>=2 | {'met' if met else 'not met'}")
+    return 0 if met else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Learning from demonstration: dataset snapshots, behaviour cloning, ONNX export, model archives, evaluation."""

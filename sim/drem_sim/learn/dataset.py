@@ -1,0 +1,211 @@
+"""Dataset snapshots: frames and normalised action targets taken from recorded run folders.
+
+A run folder (written by the simulator's recorder) holds ``frames/{i:06d}.png`` (120x160 grayscale),
+``controls.jsonl`` (one row per frame: steering_angle, speed, offtrack, ...) and ``metadata.json``.
+A snapshot freezes which runs and frames a model learned from; its manifest (runs, counts, content
+hash) travels next to the model so its lineage is always known.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import cv2
+import numpy as np
+
+from drem_sim.learn.model import IMAGE_HEIGHT, IMAGE_WIDTH
+
+MAX_STEERING_DEG = 30.0
+MIN_SPEED_SPREAD = 0.2  # m/s; a constant-speed demonstrator still gets a usable speed range
+
+
+class DatasetError(ValueError):
+    """A run folder is missing, malformed or empty."""
+
+
+@dataclass(frozen=True)
+class ActionScale:
+    """Maps real actions (degrees, m/s) to the network's [-1, 1] outputs and back."""
+
+    steering_low: float = -MAX_STEERING_DEG
+    steering_high: float = MAX_STEERING_DEG
+    speed_low: float = 0.5
+    speed_high: float = 4.0
+
+    def normalise(self, steering: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        return np.stack([
+            _to_unit(steering, self.steering_low, self.steering_high),
+            _to_unit(speed, self.speed_low, self.speed_high),
+        ], axis=-1).astype(np.float32)
+
+    def denormalise(self, unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        unit = np.clip(unit, -1.0, 1.0)
+        return (_from_unit(unit[..., 0], self.steering_low, self.steering_high),
+                _from_unit(unit[..., 1], self.speed_low, self.speed_high))
+
+    @classmethod
+    def from_speeds(cls, speeds: np.ndarray) -> "ActionScale":
+        low, high = float(np.min(speeds)), float(np.max(speeds))
+        if high - low < MIN_SPEED_SPREAD:
+            middle = (high + low) / 2
+            low, high = middle - MIN_SPEED_SPREAD / 2, middle + MIN_SPEED_SPREAD / 2
+        return cls(speed_low=round(max(low, 0.1), 3), speed_high=round(min(high, 4.0), 3))
+
+
+def _to_unit(value: np.ndarray, low: float, high: float) -> np.ndarray:
+    return np.clip(2.0 * (np.asarray(value, dtype=np.float64) - low) / (high - low) - 1.0, -1.0, 1.0)
+
+
+def _from_unit(unit: np.ndarray, low: float, high: float) -> np.ndarray:
+    return low + (np.asarray(unit, dtype=np.float64) + 1.0) * 0.5 * (high - low)
+
+
+@dataclass
+class DatasetSnapshot:
+    images: np.ndarray            # uint8 [N, 120, 160]
+    steering: np.ndarray          # float32 degrees [N]
+    speed: np.ndarray             # float32 m/s [N]
+    scale: ActionScale
+    manifest: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self.scale.normalise(self.steering, self.speed)
+
+    def __len__(self) -> int:
+        return int(self.images.shape[0])
+
+    def write_manifest(self, path: Path) -> Path:
+        path.write_text(json.dumps(self.manifest, indent=2, sort_keys=True) + "\n")
+        return path
+
+
+def load_snapshot(runs: Sequence[str | Path], scale: ActionScale | None = None,
+                  include_offtrack: bool = False) -> DatasetSnapshot:
+    """Load every usable frame of the given run folders (or ``s3://`` run prefixes)."""
+    if not runs:
+        raise DatasetError("no runs given: pass at least one run folder")
+    run_dirs = [resolve_run(run) for run in runs]
+    images: list[np.ndarray] = []
+    steering: list[float] = []
+    speed: list[float] = []
+    digest = hashlib.sha256()
+    run_entries = []
+    for run_dir in run_dirs:
+        rows = _read_controls(run_dir)
+        used = 0
+        for row in rows:
+            if row.get("offtrack") and not include_offtrack:
+                continue
+            frame_path = _frame_path(run_dir, row)
+            raw = frame_path.read_bytes()
+            image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
+            if image is None or image.shape != (IMAGE_HEIGHT, IMAGE_WIDTH):
+                raise DatasetError(f"{frame_path}: not a {IMAGE_WIDTH}x{IMAGE_HEIGHT} grayscale image")
+            digest.update(raw)
+            digest.update(f"{row['steering_angle']:.6f},{row['speed']:.6f}".encode())
+            images.append(image)
+            steering.append(float(row["steering_angle"]))
+            speed.append(float(row["speed"]))
+            used += 1
+        run_entries.append({"run": str(run_dir), **_run_identity(run_dir), "rows": len(rows), "frames_used": used})
+    if not images:
+        raise DatasetError("the given runs hold no on-track frames")
+    speeds = np.asarray(speed, dtype=np.float32)
+    scale = scale or ActionScale.from_speeds(speeds)
+    manifest = {
+        "runs": run_entries,
+        "frame_count": len(images),
+        "content_sha256": digest.hexdigest(),
+        "include_offtrack": include_offtrack,
+        "action_scale": scale.__dict__,
+    }
+    return DatasetSnapshot(np.stack(images), np.asarray(steering, dtype=np.float32), speeds, scale, manifest)
+
+
+def resolve_run(run: str | Path) -> Path:
+    """A local run folder as is; an ``s3://bucket/runs/...`` prefix downloaded through the runs module."""
+    text = str(run)
+    if text.startswith("s3://"):
+        return _download_run(text)
+    path = Path(text)
+    if not (path / "controls.jsonl").is_file():
+        raise DatasetError(f"{path}: not a run folder (no controls.jsonl)")
+    return path
+
+
+def _download_run(uri: str) -> Path:
+    from drem_sim import runs as runs_module  # the simulator's run store owns S3 access
+
+    download = getattr(runs_module, "download_run", None)
+    if download is None:
+        raise DatasetError("this build of drem_sim.runs cannot download runs from S3")
+    target = Path(tempfile.mkdtemp(prefix="drem-run-"))
+    return Path(download(uri, target))
+
+
+def _read_controls(run_dir: Path) -> list[dict[str, Any]]:
+    rows = []
+    with (run_dir / "controls.jsonl").open() as handle:
+        for number, line in enumerate(handle, 1):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+                float(row["steering_angle"]), float(row["speed"])
+            except (ValueError, KeyError, TypeError) as error:
+                raise DatasetError(f"{run_dir}/controls.jsonl line {number}: {error}") from error
+            rows.append(row)
+    if not rows:
+        raise DatasetError(f"{run_dir}: controls.jsonl is empty")
+    return rows
+
+
+def _frame_path(run_dir: Path, row: dict[str, Any]) -> Path:
+    frame = row.get("frame", row.get("index"))
+    if isinstance(frame, str):
+        candidate = (run_dir / frame).resolve()
+        if run_dir.resolve() not in candidate.parents:
+            raise DatasetError(f"{run_dir}: frame path {frame!r} leaves the run folder")
+    else:
+        candidate = run_dir / "frames" / f"{int(frame):06d}.png"
+    if not candidate.is_file():
+        raise DatasetError(f"{candidate}: frame listed in controls.jsonl is missing")
+    return candidate
+
+
+def _run_identity(run_dir: Path) -> dict[str, Any]:
+    meta_path = run_dir / "metadata.json"
+    if not meta_path.is_file():
+        return {}
+    meta = json.loads(meta_path.read_text())
+    keys = ("run_id", "track_id", "track", "driver", "source", "seed", "laps")
+    return {key: meta[key] for key in keys if key in meta}
+
+
+def augment_batch(images: np.ndarray, targets: np.ndarray, rng: np.random.Generator,
+                  flip: bool = True, brightness: float = 0.25, noise: float = 6.0) -> tuple[np.ndarray, np.ndarray]:
+    """Random brightness/contrast, pixel noise and mirror images (mirroring negates steering)."""
+    out = images.astype(np.float32)
+    targets = targets.copy()
+    count = out.shape[0]
+    if brightness > 0:
+        gain = rng.uniform(1 - brightness, 1 + brightness, size=(count, 1, 1)).astype(np.float32)
+        offset = rng.uniform(-brightness * 60, brightness * 60, size=(count, 1, 1)).astype(np.float32)
+        out = out * gain + offset
+    if noise > 0:
+        out = out + rng.normal(0.0, noise, size=out.shape).astype(np.float32)
+    if flip:
+        mirrored = rng.random(count) < 0.5
+        out[mirrored] = out[mirrored, :, ::-1]
+        targets[mirrored, 0] = -targets[mirrored, 0]
+    return np.clip(out, 0, 255), targets
+
+
+def iter_run_dirs(root: Path) -> Iterable[Path]:
+    """Every run folder below ``root`` (folders that hold a controls.jsonl)."""
+    return sorted(path.parent for path in Path(root).rglob("controls.jsonl"))

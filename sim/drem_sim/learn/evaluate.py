@@ -1,0 +1,138 @@
+"""Drive a model (or any policy) round a track in the simulator and measure how it races.
+
+A *lap attempt* starts at the start line (or where the car was put back after leaving the track)
+and ends either with a completed lap or with the car leaving the track. Completion % is the mean
+progress of the attempts (100 for a completed lap), as in a DeepRacer evaluation.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from pydantic import BaseModel
+
+Policy = Callable[[np.ndarray, dict[str, Any]], dict[str, float]]
+
+SIM_SECONDS_PER_LAP_LIMIT = 90.0  # an attempt slower than this is a stuck car, not a lap
+
+
+class EvalMetrics(BaseModel):
+    model: str
+    track: str
+    seed: int
+    laps_requested: int
+    attempts: int
+    laps_completed: int
+    laps_completed_pct: float
+    completion_pct: float
+    attempt_progress: list[float]
+    offtrack_count: int
+    resets: int
+    lap_times_s: list[float]
+    mean_lap_time_s: float | None
+    best_lap_time_s: float | None
+    steering_jitter_deg: float
+    steps: int
+    sim_seconds: float
+
+    def summary(self) -> str:
+        mean = f"{self.mean_lap_time_s:.2f}s" if self.mean_lap_time_s is not None else "-"
+        return (f"{self.model} on {self.track}: {self.laps_completed}/{self.attempts} laps completed "
+                f"({self.laps_completed_pct:.0f}%), completion {self.completion_pct:.1f}%, "
+                f"off-track {self.offtrack_count}, mean lap {mean}, steering jitter {self.steering_jitter_deg:.2f} deg")
+
+
+def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_name: str,
+          max_steps: int | None = None) -> EvalMetrics:
+    """Run ``policy`` until ``attempts`` lap attempts have ended; the env's own lap/reset bookkeeping is trusted."""
+    observation, info = env.reset(seed=seed)
+    params: dict[str, Any] = dict(info.get("params", {})) if isinstance(info, dict) else {}
+    step_seconds = float(getattr(env, "step_seconds", 1.0 / 15.0))
+    limit = max_steps or int(attempts * SIM_SECONDS_PER_LAP_LIMIT / step_seconds)
+    progress_log: list[float] = []
+    lap_times: list[float] = []
+    steering: list[float] = []
+    offtrack = 0
+    laps_before = _laps(info)
+    resets_before = _resets(info)
+    best_progress = 0.0
+    steps = 0
+    while len(progress_log) < attempts and steps < limit:
+        action = policy(observation, params)
+        steering.append(float(action["steering_angle"]))
+        observation, params, terminated, truncated, info = env.step(action)
+        steps += 1
+        best_progress = max(best_progress, float(params.get("progress", 0.0)))
+        laps_now = _laps(info)
+        if laps_now > laps_before:
+            new_times = list(info.get("lap_times_s", info.get("lap_times", [])))[laps_before:laps_now]
+            lap_times.extend(float(t) for t in new_times)
+            progress_log.extend([100.0] * (laps_now - laps_before))
+            laps_before, best_progress = laps_now, 0.0
+        resets_now = _resets(info)
+        if resets_now > resets_before or params.get("is_offtrack"):
+            offtrack += 1
+            progress_log.append(min(best_progress, 99.9))
+            best_progress = 0.0
+            resets_before = resets_now
+        if terminated or truncated:
+            observation, info = env.reset(seed=seed + len(progress_log) + 1)
+            params = dict(info.get("params", {})) if isinstance(info, dict) else {}
+            laps_before, resets_before = _laps(info), _resets(info)
+    if len(progress_log) < attempts:  # out of time: the unfinished attempt counts with what it reached
+        progress_log.append(min(best_progress, 99.9))
+    progress_log = progress_log[:attempts]
+    completed = sum(1 for p in progress_log if p >= 100.0)
+    deltas = np.diff(np.asarray(steering)) if len(steering) > 1 else np.zeros(1)
+    return EvalMetrics(
+        model=label, track=track_name, seed=seed, laps_requested=attempts, attempts=len(progress_log),
+        laps_completed=completed, laps_completed_pct=round(100.0 * completed / max(len(progress_log), 1), 2),
+        completion_pct=round(float(np.mean(progress_log)), 2), attempt_progress=[round(p, 2) for p in progress_log],
+        offtrack_count=offtrack, resets=_resets(info), lap_times_s=[round(t, 3) for t in lap_times],
+        mean_lap_time_s=round(float(np.mean(lap_times)), 3) if lap_times else None,
+        best_lap_time_s=round(float(np.min(lap_times)), 3) if lap_times else None,
+        steering_jitter_deg=round(float(np.std(deltas)), 3), steps=steps, sim_seconds=round(steps * step_seconds, 2),
+    )
+
+
+def _laps(info: Any) -> int:
+    return int(info.get("laps", 0)) if isinstance(info, dict) else 0
+
+
+def _resets(info: Any) -> int:
+    return int(info.get("resets", 0)) if isinstance(info, dict) else 0
+
+
+def evaluate_model(archive_or_dir: str | Path, track: str, laps: int = 3, seed: int = 0) -> EvalMetrics:
+    from drem_sim.learn.pilot import OnnxPilot
+
+    pilot = OnnxPilot.from_archive(archive_or_dir)  # refuse a bad archive before building a simulator
+    from drem_sim.env import RaceEnv
+    from drem_sim.tracks import load_track
+
+    env = RaceEnv(load_track(track))
+    label = Path(archive_or_dir).name
+    return drive(env, lambda observation, _params: pilot.act(observation), laps, seed, label, track)
+
+
+def main_eval(args: argparse.Namespace) -> int:
+    """Entry point for ``drem sim eval --model M --track T --laps K [--out DIR]``."""
+    from drem_sim.learn.package import ArchiveError
+
+    try:
+        metrics = evaluate_model(args.model, args.track, int(args.laps), int(getattr(args, "seed", 0) or 0))
+    except ArchiveError as error:
+        print(f"drem sim eval: {error}", file=sys.stderr)
+        return 2
+    print(metrics.summary())
+    out = getattr(args, "out", None)
+    if out:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        path = Path(out) / "metrics.json"
+        path.write_text(json.dumps(metrics.model_dump(), indent=2) + "\n")
+        print(f"metrics      {path}")
+    return 0

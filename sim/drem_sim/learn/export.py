@@ -1,0 +1,49 @@
+"""Torch → ONNX export, checked against onnxruntime before anything ships."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import onnxruntime
+import torch
+from torch import nn
+
+from drem_sim.learn.model import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, OUTPUT_NAME
+
+OPSET = 17
+TOLERANCE = 1e-4
+
+
+class ExportMismatchError(RuntimeError):
+    """onnxruntime disagrees with torch: the exported graph is not the trained model."""
+
+
+def export_onnx(model: nn.Module, path: Path) -> Path:
+    model.eval()
+    example = torch.zeros(1, IMAGE_HEIGHT, IMAGE_WIDTH, 1)
+    # The dynamo exporter needs onnxscript, which we do not ship; the TorchScript path does this graph fine.
+    torch.onnx.export(model, (example,), str(path), input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
+                      dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}},
+                      opset_version=OPSET, dynamo=False)
+    return path
+
+
+def onnx_session(model_bytes_or_path: bytes | Path) -> onnxruntime.InferenceSession:
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    source = model_bytes_or_path if isinstance(model_bytes_or_path, bytes) else str(model_bytes_or_path)
+    return onnxruntime.InferenceSession(source, options, providers=["CPUExecutionProvider"])
+
+
+def verify_onnx(model: nn.Module, path: Path, samples: np.ndarray, tolerance: float = TOLERANCE) -> float:
+    """Run the same uint8 frames through torch and onnxruntime; return the largest difference."""
+    inputs = np.ascontiguousarray(samples, dtype=np.float32).reshape(-1, IMAGE_HEIGHT, IMAGE_WIDTH, 1)
+    model.eval()
+    with torch.no_grad():
+        expected = model(torch.from_numpy(inputs)).numpy()
+    actual = onnx_session(path).run([OUTPUT_NAME], {INPUT_NAME: inputs})[0]
+    difference = float(np.max(np.abs(expected - actual)))
+    if difference > tolerance:
+        raise ExportMismatchError(f"onnxruntime output differs from torch by {difference:.2e} (> {tolerance:.0e})")
+    return difference

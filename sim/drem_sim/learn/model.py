@@ -1,0 +1,46 @@
+"""The behaviour-cloning policy network and the tensor contract it shares with DeepRacer models.
+
+Input follows the DeepRacer camera contract: NHWC ``[N, 120, 160, 1]`` float32 holding raw 0..255
+grayscale pixels; the network rescales by 1/255 itself so every consumer feeds plain pixels.
+Output is ``[N, 2]`` tanh means (steering, speed) in [-1, 1], the continuous-action head layout.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+IMAGE_HEIGHT = 120
+IMAGE_WIDTH = 160
+INPUT_NAME = "observation"
+OUTPUT_NAME = "policy"
+NETWORK_NAME = "DREM_BC_CNN_SMALL"
+
+
+class BehaviourCloningCNN(nn.Module):
+    """Five strided convolutions and one small dense layer (about 190k parameters)."""
+
+    def __init__(self, dropout: float = 0.1) -> None:
+        super().__init__()
+        self.features = nn.Sequential(
+            nn.Conv2d(1, 16, kernel_size=5, stride=2), nn.ReLU(),
+            nn.Conv2d(16, 32, kernel_size=5, stride=2), nn.ReLU(),
+            nn.Conv2d(32, 48, kernel_size=3, stride=2), nn.ReLU(),
+            nn.Conv2d(48, 64, kernel_size=3, stride=2), nn.ReLU(),
+            nn.Conv2d(64, 64, kernel_size=3, stride=1), nn.ReLU(),
+        )
+        self.head = nn.Sequential(
+            nn.Flatten(),
+            nn.Dropout(dropout),
+            nn.Linear(64 * 4 * 6, 64), nn.ReLU(),
+            nn.Linear(64, 2),
+            nn.Tanh(),
+        )
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        # NHWC raw pixels in, as the DeepRacer graphs expect; convolutions want NCHW in [0, 1].
+        pixels = observation.permute(0, 3, 1, 2) * (1.0 / 255.0)
+        return self.head(self.features(pixels))
+
+
+def parameter_count(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())

@@ -1,0 +1,76 @@
+"""OnnxPilot: turns camera frames into actions by following a model archive's metadata."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drem_sim.learn.package import ONNX_MEMBER, TENSORFLOW_MEMBER, ArchiveError, load_metadata, read_model_files
+
+
+class TensorFlowModelError(ArchiveError):
+    """The archive holds a console (TensorFlow) model, which the simulator cannot run."""
+
+
+class OnnxPilot:
+    """Continuous action spaces rescale the [-1, 1] means to low..high; discrete ones take the argmax action."""
+
+    def __init__(self, metadata: dict[str, Any], onnx_model: bytes) -> None:
+        from drem_sim.learn.export import onnx_session  # onnxruntime loads only when a pilot is built
+
+        self.metadata = metadata
+        self.kind = str(metadata.get("action_space_type", "discrete"))
+        self.action_space = metadata["action_space"]
+        self._check_action_space()
+        self.session = onnx_session(onnx_model)
+        tensors = metadata.get("drem", {})
+        self.input_name = tensors.get("input", {}).get("name") or self.session.get_inputs()[0].name
+        self.output_name = tensors.get("output", {}).get("name") or self.session.get_outputs()[0].name
+
+    @classmethod
+    def from_archive(cls, source: Path | str) -> "OnnxPilot":
+        files = read_model_files(Path(source))
+        metadata = load_metadata(files)
+        if ONNX_MEMBER not in files:
+            if TENSORFLOW_MEMBER in files:
+                raise TensorFlowModelError("cannot scrutineer: TensorFlow model (agent/model.pb); "
+                                           "the simulator runs ONNX models only")
+            raise ArchiveError(f"the archive has no {ONNX_MEMBER}")
+        return cls(metadata, files[ONNX_MEMBER])
+
+    def _check_action_space(self) -> None:
+        if self.kind == "continuous":
+            for key in ("steering_angle", "speed"):
+                bounds = self.action_space.get(key) if isinstance(self.action_space, dict) else None
+                if not bounds or "low" not in bounds or "high" not in bounds:
+                    raise ArchiveError(f"continuous action_space needs {key}.low and {key}.high")
+        elif self.kind == "discrete":
+            if not isinstance(self.action_space, list) or not self.action_space:
+                raise ArchiveError("discrete action_space must be a non-empty list of actions")
+        else:
+            raise ArchiveError(f"unknown action_space_type {self.kind!r}")
+
+    def raw_output(self, observation: np.ndarray) -> np.ndarray:
+        frame = np.asarray(observation, dtype=np.float32).reshape(1, observation.shape[0], observation.shape[1], 1)
+        return self.session.run([self.output_name], {self.input_name: frame})[0][0]
+
+    def act(self, observation: np.ndarray) -> dict[str, float]:
+        return self.action_from_output(self.raw_output(observation))
+
+    def action_from_output(self, output: np.ndarray) -> dict[str, float]:
+        output = np.asarray(output, dtype=np.float64).reshape(-1)
+        if self.kind == "continuous":
+            steering, speed = np.clip(output[:2], -1.0, 1.0)
+            return {"steering_angle": _rescale(steering, self.action_space["steering_angle"]),
+                    "speed": _rescale(speed, self.action_space["speed"])}
+        if output.shape[0] != len(self.action_space):
+            raise ArchiveError(f"model outputs {output.shape[0]} values but the action space lists "
+                               f"{len(self.action_space)} actions")
+        chosen = self.action_space[int(np.argmax(output))]
+        return {"steering_angle": float(chosen["steering_angle"]), "speed": float(chosen["speed"])}
+
+
+def _rescale(unit: float, bounds: dict[str, float]) -> float:
+    low, high = float(bounds["low"]), float(bounds["high"])
+    return float(low + (unit + 1.0) * 0.5 * (high - low))

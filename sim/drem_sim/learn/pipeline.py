@@ -1,0 +1,65 @@
+"""One call from recorded runs to a shippable model archive: snapshot → train → ONNX → verify → package."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence, TextIO
+
+import numpy as np
+
+from drem_sim.learn.dataset import DatasetSnapshot, load_snapshot
+from drem_sim.learn.export import export_onnx, verify_onnx
+from drem_sim.learn.model import NETWORK_NAME, parameter_count
+from drem_sim.learn.package import build_archive, build_metadata
+from drem_sim.learn.train import TrainConfig, TrainResult, plot_loss_curve, train_behaviour_cloning
+
+VERIFY_SAMPLES = 16
+
+
+@dataclass
+class TrainedModel:
+    archive: Path
+    onnx: Path
+    manifest: Path
+    loss_curve: Path
+    lineage: dict
+    result: TrainResult
+    snapshot: DatasetSnapshot
+    max_export_difference: float
+
+
+def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, config: TrainConfig,
+                     progress: TextIO | None = sys.stderr) -> TrainedModel:
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    snapshot = load_snapshot(runs)
+    result = train_behaviour_cloning(snapshot, config, progress=progress)
+    onnx_path = export_onnx(result.model, out_dir / "model.onnx")
+    picks = np.random.default_rng(config.seed).choice(len(snapshot), size=min(VERIFY_SAMPLES, len(snapshot)), replace=False)
+    difference = verify_onnx(result.model, onnx_path, snapshot.images[np.sort(picks)])
+    manifest_path = snapshot.write_manifest(out_dir / "snapshot_manifest.json")
+    loss_curve = plot_loss_curve(result, out_dir / "loss_curve.png")
+    lineage = {
+        "created_epoch_s": int(time.time()),
+        "network": NETWORK_NAME,
+        "parameters": parameter_count(result.model),
+        "dataset": snapshot.manifest,
+        "seed": config.seed,
+        "epochs_requested": config.epochs,
+        "epochs_run": result.epochs_run,
+        "batch_size": config.batch_size,
+        "learning_rate": config.learning_rate,
+        "augment": config.augment,
+        "train_frames": result.train_frames,
+        "validation_frames": result.validation_frames,
+        "train_losses": [round(v, 6) for v in result.train_losses],
+        "validation_losses": [round(v, 6) for v in result.validation_losses],
+        "train_seconds": round(result.seconds, 2),
+        "onnx_max_abs_difference": difference,
+    }
+    (out_dir / "lineage.json").write_text(json.dumps(lineage, indent=2, sort_keys=True) + "\n")
+    archive = build_archive(out_dir / f"{name}.tar.gz", onnx_path, build_metadata(snapshot.scale), lineage)
+    return TrainedModel(archive, onnx_path, manifest_path, loss_curve, lineage, result, snapshot, difference)

@@ -1,0 +1,162 @@
+"""Behaviour cloning: fit the policy CNN to demonstrator actions, reproducibly, on a CPU."""
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+import cv2
+import numpy as np
+import torch
+from torch import nn
+
+from drem_sim.learn.dataset import DatasetSnapshot, augment_batch
+from drem_sim.learn.model import BehaviourCloningCNN
+
+STEERING_LOSS_WEIGHT = 2.0  # steering errors crash the car; speed errors only cost time
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    epochs: int = 10
+    seed: int = 0
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    weight_decay: float = 1e-4
+    validation_fraction: float = 0.15
+    num_threads: int = 1
+    augment: bool = True
+    flip: bool = True
+    max_seconds: float | None = None  # stop early (after a whole batch) when a time budget is spent
+
+
+@dataclass
+class TrainResult:
+    model: BehaviourCloningCNN
+    train_losses: list[float] = field(default_factory=list)
+    validation_losses: list[float] = field(default_factory=list)
+    epochs_run: int = 0
+    seconds: float = 0.0
+    train_frames: int = 0
+    validation_frames: int = 0
+
+    @property
+    def final_validation_loss(self) -> float | None:
+        return self.validation_losses[-1] if self.validation_losses else None
+
+
+def seed_everything(seed: int, num_threads: int) -> None:
+    torch.manual_seed(seed)
+    torch.set_num_threads(max(1, num_threads))
+    # CPU kernels used here are deterministic; this turns any future non-deterministic op into a warning.
+    torch.use_deterministic_algorithms(True, warn_only=True)
+
+
+def split_indices(count: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    order = np.random.default_rng(seed).permutation(count)
+    validation_count = int(round(count * fraction)) if count >= 10 else 0
+    return np.sort(order[validation_count:]), np.sort(order[:validation_count])
+
+
+def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
+                            progress: TextIO | None = sys.stderr) -> TrainResult:
+    seed_everything(config.seed, config.num_threads)
+    rng = np.random.default_rng(config.seed)
+    model = BehaviourCloningCNN()
+    optimiser = torch.optim.AdamW(model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=max(1, config.epochs))
+    targets = snapshot.targets
+    train_idx, val_idx = split_indices(len(snapshot), config.validation_fraction, config.seed)
+    result = TrainResult(model=model, train_frames=len(train_idx), validation_frames=len(val_idx))
+    weights = torch.tensor([STEERING_LOSS_WEIGHT, 1.0])
+    started = time.monotonic()
+    batches_per_epoch = max(1, int(np.ceil(len(train_idx) / config.batch_size)))
+    for epoch in range(1, config.epochs + 1):
+        model.train()
+        order = rng.permutation(train_idx)
+        total, seen = 0.0, 0
+        for batch_number, start in enumerate(range(0, len(order), config.batch_size), 1):
+            batch = order[start:start + config.batch_size]
+            images, batch_targets = snapshot.images[batch], targets[batch]
+            if config.augment:
+                images, batch_targets = augment_batch(images, batch_targets, rng, flip=config.flip)
+            inputs = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32))[..., None]
+            loss = _weighted_mse(model(inputs), torch.from_numpy(batch_targets), weights)
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            total += loss.item() * len(batch)
+            seen += len(batch)
+            _report(progress, epoch, config.epochs, batch_number, batches_per_epoch, total / seen, started)
+        schedule.step()
+        result.train_losses.append(total / max(seen, 1))
+        if len(val_idx):
+            result.validation_losses.append(evaluate_loss(model, snapshot, val_idx, weights))
+        result.epochs_run = epoch
+        if progress is not None:
+            val = f" val {result.validation_losses[-1]:.4f}" if result.validation_losses else ""
+            line = f"epoch {epoch}/{config.epochs} train {result.train_losses[-1]:.4f}{val} {time.monotonic() - started:6.1f}s"
+            progress.write(f"\r{line:<64}\n")
+            progress.flush()
+        if config.max_seconds is not None and time.monotonic() - started > config.max_seconds:
+            break
+    model.eval()
+    result.seconds = time.monotonic() - started
+    return result
+
+
+def evaluate_loss(model: nn.Module, snapshot: DatasetSnapshot, indices: np.ndarray,
+                  weights: torch.Tensor, batch_size: int = 256) -> float:
+    model.eval()
+    targets = snapshot.targets
+    total = 0.0
+    with torch.no_grad():
+        for start in range(0, len(indices), batch_size):
+            batch = indices[start:start + batch_size]
+            inputs = torch.from_numpy(snapshot.images[batch].astype(np.float32))[..., None]
+            total += float(_weighted_mse(model(inputs), torch.from_numpy(targets[batch]), weights)) * len(batch)
+    return total / max(len(indices), 1)
+
+
+def _weighted_mse(prediction: torch.Tensor, target: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    return (((prediction - target) ** 2) * weights).sum(dim=1).mean() / weights.sum()
+
+
+def _report(stream: TextIO | None, epoch: int, epochs: int, batch: int, batches: int,
+            loss: float, started: float) -> None:
+    if stream is None:
+        return
+    filled = int(20 * batch / batches)
+    stream.write(f"\repoch {epoch}/{epochs} [{'#' * filled}{'.' * (20 - filled)}] "
+                 f"loss {loss:.4f} {time.monotonic() - started:6.1f}s")
+    stream.flush()
+
+
+def plot_loss_curve(result: TrainResult, path: Path, width: int = 640, height: int = 360) -> Path:
+    """Draw train/validation loss per epoch with plain OpenCV lines (no plotting library needed)."""
+    canvas = np.full((height, width, 3), 255, np.uint8)
+    left, right, top, bottom = 60, width - 20, 30, height - 40
+    cv2.rectangle(canvas, (left, top), (right, bottom), (0, 0, 0), 1)
+    series = [(result.train_losses, (200, 80, 0), "train"), (result.validation_losses, (0, 120, 230), "validation")]
+    values = [v for losses, _, _ in series for v in losses]
+    if values:
+        peak = max(values) * 1.05 or 1.0
+        epochs = max(len(result.train_losses), 2)
+        for losses, colour, label in series:
+            points = [(int(left + (right - left) * i / (epochs - 1)),
+                       int(bottom - (bottom - top) * v / peak)) for i, v in enumerate(losses)]
+            for a, b in zip(points, points[1:]):
+                cv2.line(canvas, a, b, colour, 2, cv2.LINE_AA)
+            for point in points:
+                cv2.circle(canvas, point, 3, colour, -1)
+        cv2.putText(canvas, f"{peak:.3f}", (5, top + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+        cv2.putText(canvas, "0", (40, bottom), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+        for offset, (_, colour, label) in enumerate(series):
+            cv2.putText(canvas, label, (right - 110, top + 20 + 18 * offset), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1)
+    cv2.putText(canvas, "behaviour cloning loss per epoch", (left, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1)
+    cv2.putText(canvas, f"epochs: {result.epochs_run}", (left, height - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
+    if not cv2.imwrite(str(path), canvas):
+        raise OSError(f"could not write {path}")
+    return path

@@ -1,0 +1,159 @@
+"""Run folders: what a driver saw and did, frame by frame, for behaviour cloning.
+
+Layout `runs/{track_id}/{date}/{run_id}/` (the same keys under the runs bucket):
+- `frames/{index:06d}.png`: the 160x120 grayscale camera frame the driver acted on;
+- `controls.jsonl`: one row per frame (index, frame, t_ms, steering_angle, speed, progress, x, y,
+  heading, lap, offtrack); `offtrack` is true when the action taken on that frame ended off the
+  track, so a dataset can leave those bad examples out;
+- `metadata.json`: track, direction, driver, start/end, frames, laps, lap times, seed, camera.
+This module is the only one in drem_sim that talks to S3; the boto3 client is injected (or built
+lazily from the environment, which honours AWS_ENDPOINT_URL for the local stack).
+"""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import secrets
+from pathlib import Path, PurePosixPath
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from drem_sim.camera import CameraConfig
+from drem_sim.env import RaceEnv
+
+Policy = Callable[[np.ndarray, dict[str, Any]], dict[str, float]]
+RUN_FILES = ("controls.jsonl", "metadata.json")
+
+
+class RunError(ValueError):
+    """A run folder or S3 run prefix is missing or malformed."""
+
+
+def new_run_id(now: dt.datetime) -> str:
+    return f"{now:%H%M%S}-{secrets.token_hex(3)}"
+
+
+class RunRecorder:
+    """Writes one run folder as frames arrive; `close()` writes the metadata."""
+
+    def __init__(self, root: Path, track_id: str, *, direction: str, driver: str, seed: int | None,
+                 camera: CameraConfig | None = None, run_id: str | None = None,
+                 started_at: dt.datetime | None = None, extra: dict[str, Any] | None = None) -> None:
+        self.started_at = started_at or dt.datetime.now(dt.timezone.utc)
+        self.run_id = run_id or new_run_id(self.started_at)
+        self.path = Path(root) / track_id / f"{self.started_at:%Y-%m-%d}" / self.run_id
+        (self.path / "frames").mkdir(parents=True, exist_ok=False)
+        self._controls = (self.path / "controls.jsonl").open("w")
+        self.frames = 0
+        self._meta = {"run_id": self.run_id, "track_id": track_id, "direction": direction, "driver": driver,
+                      "source": "sim", "seed": seed, "camera": camera.as_dict() if camera else None, **(extra or {})}
+
+    def add(self, frame: np.ndarray, action: dict[str, float], params: dict[str, Any], *, t_ms: int, lap: int,
+            offtrack: bool) -> None:
+        if frame.shape != (120, 160) or frame.dtype != np.uint8:
+            raise RunError(f"a run frame is 160x120 uint8 grayscale, got {frame.shape} {frame.dtype}")
+        name = f"frames/{self.frames:06d}.png"
+        if not cv2.imwrite(str(self.path / name), frame):
+            raise RunError(f"could not write {self.path / name}")
+        row = {"index": self.frames, "frame": name, "t_ms": int(t_ms),
+               "steering_angle": round(float(action["steering_angle"]), 4), "speed": round(float(action["speed"]), 4),
+               "progress": round(float(params["progress"]), 3), "x": round(float(params["x"]), 4),
+               "y": round(float(params["y"]), 4), "heading": round(float(params["heading"]), 3), "lap": lap,
+               "offtrack": bool(offtrack)}
+        self._controls.write(json.dumps(row) + "\n")
+        self.frames += 1
+
+    def close(self, *, laps: int, lap_times_ms: list[int], resets: int = 0) -> Path:
+        self._controls.close()
+        meta = {**self._meta, "started_at": self.started_at.isoformat(),
+                "ended_at": dt.datetime.now(dt.timezone.utc).isoformat(), "frames": self.frames, "laps": laps,
+                "lap_times_ms": lap_times_ms, "resets": resets}
+        (self.path / "metadata.json").write_text(json.dumps(meta, indent=2) + "\n")
+        return self.path
+
+
+def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: str, seed: int = 0,
+               max_steps: int | None = None, run_id: str | None = None) -> Path:
+    """Drive `policy` in `env` until `laps` laps are done (or `max_steps` frames) and write a run folder."""
+    if env.camera is None:
+        raise RunError("recording needs a camera: build the env with EnvConfig(observe=True)")
+    limit = max_steps or int(laps * 120 * env.config.decision_hz)  # 2 min a lap is a stuck car
+    track = env.track
+    recorder = RunRecorder(Path(root), track.track_id, direction="reverse" if track.is_reversed else "forward",
+                           driver=driver, seed=seed, camera=env.camera.config, run_id=run_id,
+                           extra={"track_direction": track.direction, "decision_hz": env.config.decision_hz})
+    obs, info = env.reset(seed=seed)
+    params = info["params"]
+    for _ in range(limit):
+        action = policy(obs, params)
+        t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
+        next_obs, params, terminated, truncated, info = env.step(action)
+        recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(params["is_offtrack"]))
+        obs = next_obs
+        if env.laps >= laps or terminated or truncated:
+            break
+    return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
+
+
+# ---- S3 ---------------------------------------------------------------------------------------
+def run_key_prefix(run_dir: Path) -> str:
+    """`runs/{track_id}/{date}/{run_id}/` from a run folder's last three path parts."""
+    run_dir = Path(run_dir)
+    if not (run_dir / "controls.jsonl").is_file() or not (run_dir / "metadata.json").is_file():
+        raise RunError(f"{run_dir}: not a finished run folder (needs controls.jsonl and metadata.json)")
+    track_id, date, run_id = run_dir.parts[-3:]
+    return f"runs/{track_id}/{date}/{run_id}/"
+
+
+def upload_run(s3_client: Any, bucket: str, run_dir: Path) -> str:
+    """Upload a run folder; returns its `s3://bucket/runs/.../` URI. Metadata goes last: its presence marks a
+    complete upload."""
+    run_dir = Path(run_dir)
+    prefix = run_key_prefix(run_dir)
+    files = sorted(p for p in run_dir.rglob("*") if p.is_file() and p.name != "metadata.json")
+    for path in [*files, run_dir / "metadata.json"]:
+        s3_client.upload_file(str(path), bucket, prefix + path.relative_to(run_dir).as_posix())
+    return f"s3://{bucket}/{prefix}"
+
+
+def parse_s3_uri(uri: str) -> tuple[str, str]:
+    if not uri.startswith("s3://") or "/" not in uri[5:]:
+        raise RunError(f"{uri!r}: expected s3://bucket/runs/{{track_id}}/{{date}}/{{run_id}}/")
+    bucket, _, prefix = uri[5:].partition("/")
+    return bucket, prefix.rstrip("/") + "/"
+
+
+def download_run(uri: str, target: Path, s3_client: Any | None = None) -> Path:
+    """Download the run at `s3://bucket/runs/.../` into `target/{run_id}`; returns that folder."""
+    bucket, prefix = parse_s3_uri(uri)
+    client = s3_client or default_s3_client()
+    folder = Path(target) / PurePosixPath(prefix).name
+    keys = []
+    for page in client.get_paginator("list_objects_v2").paginate(Bucket=bucket, Prefix=prefix):
+        keys += [item["Key"] for item in page.get("Contents", [])]
+    if prefix + "metadata.json" not in keys:
+        raise RunError(f"{uri}: no complete run there (metadata.json missing)")
+    for key in keys:
+        relative = PurePosixPath(key[len(prefix):])
+        if ".." in relative.parts or relative.is_absolute():
+            raise RunError(f"{uri}: refusing key {key!r} that leaves the run folder")
+        local = folder.joinpath(*relative.parts)
+        local.parent.mkdir(parents=True, exist_ok=True)
+        client.download_file(bucket, key, str(local))
+    return folder
+
+
+def default_s3_client() -> Any:
+    import boto3  # only when S3 is really used
+
+    return boto3.client("s3")
+
+
+def runs_bucket_name() -> str:
+    """The stage's runs bucket (DREM_STAGE, or DREM_BUCKET_RUNS to override)."""
+    from drem_infra.resources import bucket_name
+
+    return bucket_name(os.environ.get("DREM_STAGE", "local"), "runs")
