@@ -13,6 +13,10 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 up: install
 	$(BIN)/drem up $(ARGS)
 
+## make demo: the same stack with a demo event, sim cars driving sample models and a race director (fills the boards live)
+demo: install
+	$(BIN)/drem up --demo $(ARGS)
+
 ## make test: install the test dependencies (Python, npm htmx, Debian chromium), then run every test
 test: install-test
 	$(BIN)/python -m pytest $(PYTEST_ARGS)

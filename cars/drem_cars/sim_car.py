@@ -46,7 +46,7 @@ class SimCar:
 def build_sim_car(track: str, *, safety: Safety | None = None, outbox: Outbox | None = None,
                   event_id: str | None = None, track_id: str = "1", device_id: str = "sim",
                   full_throttle_mps: float = 2.0, line_follower_speed: float = 0.75) -> SimCar:
-    world = SimWorld(track)
+    world = SimWorld(track, device_id=device_id)
     slot = PilotSlot()
     safety = safety or Safety()
     telemetry = Telemetry()

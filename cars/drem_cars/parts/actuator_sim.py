@@ -15,18 +15,21 @@ class SimActuator:
         self.max_steering_deg = max_steering_deg
 
     def run(self, steering: float | None, throttle: float | None) -> None:
-        self.world.command((steering or 0.0) * self.max_steering_deg, max(0.0, throttle or 0.0) * self.full_throttle_mps)
+        self.world.command((steering or 0.0) * self.max_steering_deg,
+                           max(0.0, throttle or 0.0) * self.full_throttle_mps)
         self.world.advance()
 
 
 class SimLineFollower:
-    """Part: a stand-in pilot for the simulator when no model is loaded (pure pursuit on the centre line).
-
-    Outputs an action like a model would: (steering degrees, speed) with a fixed speed."""
+    """Part: a stand-in pilot for the simulator when no model is loaded: the simulator's demonstrator steers
+    (pure pursuit on the centre line) at a fixed relative speed, output like a model's (steering degrees, speed)."""
 
     def __init__(self, world: SimWorld, speed: float = 1.0) -> None:
+        from drem_sim.demonstrator import Demonstrator
+
         self.world = world
         self.speed = speed
+        self._demonstrator = Demonstrator(world.track)
 
     def run(self) -> tuple[float, float]:
-        return self.world.steering_to_centre(), self.speed
+        return self._demonstrator.act(self.world.params)["steering_angle"], self.speed

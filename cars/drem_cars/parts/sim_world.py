@@ -1,94 +1,76 @@
-"""The simulated car for `drem car run --sim`: a drem_sim track, car physics and camera, on a simulated clock.
+"""The simulated car for `drem car run --sim`: the simulator's own `drem_sim.env.RaceEnv`, on a simulated clock.
 
-The world advances one camera frame period per drive-loop tick (sim time, not wall time), so a loop run faster than
-15 Hz simply runs the race faster than real time and timestamps stay exact. The track's timing line (waypoint 0, as
-the simulator's) is a virtual timing strip: each forward crossing of the car's front point becomes a crossing at
-`epoch_ms + sim time`, interpolated inside the step. Leaving the track puts the car back on the centre line at rest,
-as DeepRacer's reset does.
+The car drives the very environment models are trained and evaluated in (same physics, track friction, camera and
+virtual timing strip), so a sample model behaves in a car as it did in `drem sim`. The world advances one camera frame
+(1/15 s of sim time) per drive-loop tick, so a loop run faster than 15 Hz simply runs the race faster than real time
+and timestamps stay exact. The timing line is the simulator's `TimingLine` (the track's `timing_line`, or the line
+across waypoint 0, with the hardware's 2 s debounce): each forward crossing of the car's front point becomes a strip
+crossing at `epoch_ms + sim time`, interpolated inside the physics step. Leaving the track puts the car back on the
+centre line at rest, as DeepRacer's reset does; the teleport never counts as a crossing.
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
+from typing import Any
 
 import numpy as np
 
+from drem_sim.env import EnvConfig, RaceEnv
+from drem_sim.timing import TimingConfig
+from drem_sim.tracks import load_track
+
 FRAME_PERIOD_S = 1.0 / 15.0
-VIRTUAL_STRIP_SENSOR = 17  # reported like the first timing-strip GPIO
+START_BEHIND_LINE_M = 1.0  # the car starts this far before the timing line: its first crossing starts the race
 
 
 class SimWorld:
-    def __init__(self, track_name: str, *, physics_hz: float = 60.0, start_epoch_ms: int | None = None,
-                 frame_period_s: float = FRAME_PERIOD_S) -> None:
-        from drem_sim.camera import Camera
-        from drem_sim.physics import CarPhysics
-        from drem_sim.tracks import load_track
-
-        self.track = load_track(track_name).require_racing_loop()
-        self.physics = CarPhysics(dt=1.0 / physics_hz)
-        self.camera = Camera(self.track)
-        self.frame_period_s = frame_period_s
-        self.sim_time_s = 0.0
+    def __init__(self, track_name: str, *, start_epoch_ms: int | None = None, device_id: str = "sim",
+                 seed: int | None = None) -> None:
         self.start_epoch_ms = int(time.time() * 1000) if start_epoch_ms is None else start_epoch_ms
-        self.resets = 0
+        timing = TimingConfig(device_id=device_id, epoch_ms=self.start_epoch_ms)
+        track = load_track(track_name).require_racing_loop()
+        start = track.length - START_BEHIND_LINE_M
+        self.env = RaceEnv(track, EnvConfig(decision_hz=1.0 / FRAME_PERIOD_S, start_offset_m=start,
+                                                  timing=timing))
+        self.track = self.env.track
+        self._frame, _info = self.env.reset(seed=seed)
+        self._action = (0.0, 0.0)
         self.crossings: list[tuple[int, int]] = []  # (timestamp_ms, sensor), drained by the camera part
         self._lock = threading.Lock()
-        x, y, heading = self.track.pose_at(self.track.length - 1.0)  # 1 m before the line: the first crossing starts
-        self.physics.reset(x, y, heading)
-        self._hint = int(self.track.project(self.physics.front_point()).segment[0])
-        self._s = self._arc()
 
-    def _arc(self) -> float:
-        x, y = self.physics.front_point()
-        segment, along, offset, half = self.track.locate(x, y, self._hint)
-        self._hint, self._offset, self._half = segment, offset, half
-        return self.track.arc_length(segment, along)
+    @property
+    def sim_time_s(self) -> float:
+        return self.env.sim_time
+
+    @property
+    def resets(self) -> int:
+        return self.env.resets
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """DeepRacer's params of the current state (what the stand-in driver steers by)."""
+        return self.env.params
 
     def pose(self) -> tuple[float, float, float]:
-        return self.physics.x, self.physics.y, self.physics.heading
+        state = self.env.car_state()
+        return state["x"], state["y"], state["heading"]
 
     def render(self) -> np.ndarray:
-        return self.camera.render(*self.pose())
+        """The camera frame of the current pose (rendered by the environment when it stepped)."""
+        return self._frame
 
     def command(self, steering_deg: float, speed_mps: float) -> None:
-        self.physics.command(steering_deg, speed_mps)
+        self._action = (steering_deg, speed_mps)
 
     def advance(self) -> None:
-        """One frame period of physics; records timing-line crossings and resets an off-track car."""
-        steps = max(1, round(self.frame_period_s / self.physics.dt))
-        length = self.track.length
-        for _ in range(steps):
-            before = self._s
-            t_before = self.sim_time_s
-            self.physics.step()
-            self.sim_time_s += self.physics.dt
-            after = self._arc()
-            if before > 0.75 * length and after < 0.25 * length:  # forward over the line at s = 0
-                fraction = (length - before) / max(1e-9, (length - before) + after)
-                at_ms = self.start_epoch_ms + round((t_before + fraction * self.physics.dt) * 1000)
-                with self._lock:
-                    self.crossings.append((at_ms, VIRTUAL_STRIP_SENSOR))
-            self._s = after
-            if abs(self._offset) > self._half + 0.05:
-                self._reset_on_centre_line()
-
-    def _reset_on_centre_line(self) -> None:
-        x, y, heading = self.track.pose_at(self._s)
-        self.physics.reset(x, y, heading)
-        self.resets += 1
-        self._s = self._arc()
+        """One frame period of physics; records timing-line crossings (resets happen inside the environment)."""
+        self._frame, _params, _terminated, _truncated, info = self.env.step(self._action)
+        if info["strip_events"]:
+            with self._lock:
+                self.crossings.extend((e["timestamp_ms"], e["sensor"]) for e in info["strip_events"])
 
     def drain_crossings(self) -> list[tuple[int, int]]:
         with self._lock:
             crossings, self.crossings = self.crossings, []
         return crossings
-
-    def steering_to_centre(self, lookahead_m: float = 0.6) -> float:
-        """A pure-pursuit steering angle (degrees) towards the centre line ahead: the sim's stand-in driver."""
-        x, y, heading = self.pose()
-        tx, ty, _ = self.track.pose_at(self._s + lookahead_m)
-        angle = math.atan2(ty - y, tx - x) - heading
-        angle = math.atan2(math.sin(angle), math.cos(angle))
-        steer = math.atan2(2 * self.physics.spec.wheelbase * math.sin(angle), lookahead_m)
-        return max(-30.0, min(30.0, math.degrees(steer)))

@@ -17,6 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=8000, help="app port on 127.0.0.1 (default 8000)")
     parser.add_argument("--storage-port", type=int, default=8001,
                         help="durable moto (AWS API) port on 127.0.0.1 (default 8001)")
+    parser.add_argument("--demo", action="store_true",
+                        help="also run a demo: sample models, demo racers, sim cars and a race director that races "
+                             "them, so the leaderboard and overlay fill live (see docs/cars.md)")
 
 
 class _Stop(Exception):
@@ -45,13 +48,24 @@ def run(args: argparse.Namespace) -> int:
         print("drem up: interrupted while starting; everything started so far was stopped.", file=sys.stderr)
         return 1
 
+    demo = None
     try:
         _print_ready(stack)
+        if args.demo:
+            demo = _start_demo(stack)
+            if demo is None:
+                stack.stop()
+                return 1
         while stack.app.alive() and stack.storage.alive():
-            time.sleep(0.5)
+            if demo is not None:
+                demo.step()
+            time.sleep(1.0 if demo is not None else 0.5)
     except _Stop:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the snapshot short
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if demo is not None:
+            print("\nStopping the demo cars ...", flush=True)
+            demo.stop()
         print("\nStopping: app first, then storage (it saves a snapshot) ...", flush=True)
         app_code, storage_code = stack.stop()
         if storage_code not in (0, None):
@@ -61,11 +75,36 @@ def run(args: argparse.Namespace) -> int:
         print("drem stopped cleanly. Your data is in " f"{config.state_dir.resolve()}.")
         return 0
 
+    if demo is not None:
+        demo.stop()
     died = stack.app if not stack.app.alive() else stack.storage
     print(f"drem up: the {died.name} stopped unexpectedly (exit code {died.popen.returncode}). "
           f"Last lines of {died.log_path}:\n{died.log_tail()}", file=sys.stderr)
     stack.stop()
     return 1
+
+
+def _start_demo(stack):  # type: ignore[no-untyped-def]
+    """The demo (drem_local.demo) on the running stack, its URLs printed; None (and why, printed) if it failed."""
+    from drem_local.api_client import ApiError
+    from drem_local.demo import Demo, DemoError
+
+    print("Setting up the demo: sample models, racers, an event and sim cars ...", flush=True)
+    demo = Demo(stack, rate_hz=float(os.environ.get("DREM_DEMO_RATE_HZ", "15")))
+    try:
+        demo.start()
+    except (DemoError, ApiError) as exc:
+        print(f"drem up --demo: the demo could not start. {exc}", file=sys.stderr)
+        demo.stop()
+        return None
+    except BaseException:
+        demo.stop()
+        raise
+    lines = [f"Demo running: {len(demo.cars)} sim cars racing demo racers at event {demo.event_id}. Open:"]
+    lines += [f"  {name + ':':<20} {url}" for name, url in demo.urls().items()]
+    lines.append(f"  (car logs: {stack.config.log_dir.resolve()}/demo-sim-*.log)")
+    print("\n".join(lines), flush=True)
+    return demo
 
 
 def _print_ready(stack) -> None:
