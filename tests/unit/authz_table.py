@@ -128,6 +128,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/api/auth/token"): PUBLIC,
     ("POST", "/api/auth/refresh"): PUBLIC,
     ("GET", "/healthz"): PUBLIC,
+    ("GET", "/api/ping"): PUBLIC,
     ("GET", "/api/openapi.json"): PUBLIC,
     ("GET", "/api/docs"): PUBLIC,
     # accounts and users

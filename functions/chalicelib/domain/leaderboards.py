@@ -5,11 +5,18 @@ racer. Refreshing one racer replaces their row and re-ranks; nothing else is rea
 the rows of every track board; it is written for single-track events too (then equal to the track's board), so a
 poll without `?track=` always finds a board without looking the event up. Versions go up by one per write; a write is skipped
 when neither what viewers see (the board's etag) nor the stored rows changed, so polls keep getting 304.
+
+Poll reads (`board`, `overlay`) go through a per-process `PublicViewCache`: hundreds of spectators polling every second
+cost one GetItem per item per freshness window (250 ms) instead of one each. Writes through the publisher invalidate the
+entry in the writing process, so that process serves its own writes at once; other processes see them within 250 ms.
 """
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterable, Mapping
+import threading
+import time
+from collections.abc import Callable, Hashable, Iterable, Mapping
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict
@@ -21,6 +28,7 @@ from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfil
 from drem_leaderboard.summary import RaceSummary
 
 BOARD_ATTEMPTS = 4
+PUBLIC_READ_FRESH_MS = 250.0
 
 
 class StaleBoard(Exception):
@@ -54,6 +62,117 @@ class BoardRepository(Protocol):
     def put(self, event_id: str, sort_key: str, item: Materialised, expected_version: int | None) -> None: ...
 
 
+# --- the poll-side cache ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Entry:
+    read_started: float
+    value: PublicView | None
+
+
+@dataclass
+class _Flight:
+    """One table read in progress; threads asking for the same key meanwhile wait for it instead of reading too."""
+    done: threading.Event = field(default_factory=threading.Event)
+    value: PublicView | None = None
+    ok: bool = False
+    invalidated: bool = False
+
+
+class PublicViewCache:
+    """Per-process cache of poll reads, keyed by (store namespace, event id, sort key).
+
+    Staleness bound: an answer was read from the table at most `fresh_ms` ago (timed from the moment the read started),
+    and a write made through this process's publisher is visible to the next read here. Single flight: while one
+    thread reads an expired key, the others asking for it wait for that read. Refresh ahead: once an entry is older than
+    `refresh_after_ms` (60 % of the window), the next asker reads it again while everyone else is still served the
+    entry, so a busy key never expires and pollers do not queue behind a read. "No item" is cached like an item.
+    """
+
+    def __init__(self, fresh_ms: float = PUBLIC_READ_FRESH_MS, *, monotonic: Callable[[], float] = time.monotonic,
+                 max_entries: int = 4096, wait_s: float = 5.0) -> None:
+        self.fresh_ms = fresh_ms
+        self.refresh_after_ms = fresh_ms * 0.6
+        self._monotonic = monotonic
+        self._max_entries = max_entries
+        self._wait_s = wait_s
+        self._lock = threading.Lock()
+        self._entries: dict[Hashable, _Entry] = {}
+        self._flights: dict[Hashable, _Flight] = {}
+
+    def get(self, key: Hashable, load: Callable[[], PublicView | None]) -> PublicView | None:
+        with self._lock:
+            entry = self._entries.get(key)
+            age_ms = (self._monotonic() - entry.read_started) * 1000 if entry is not None else None
+            held = entry if age_ms is not None and age_ms <= self.fresh_ms else None
+            if held is not None:
+                if age_ms < self.refresh_after_ms or key in self._flights:
+                    return held.value
+                flight = self._flights[key] = _Flight()  # refresh ahead: this asker reads, the others keep the entry
+                leader = True
+            else:
+                flight = self._flights.get(key)
+                leader = flight is None
+                if flight is None:
+                    flight = self._flights[key] = _Flight()
+        if held is not None:
+            return self._refresh_ahead(key, flight, load, held)
+        if not leader:
+            if flight.done.wait(self._wait_s) and flight.ok:
+                return flight.value
+            return load()  # the leader failed or hung: this request reads (and fails) on its own
+        return self._lead(key, flight, load)
+
+    def _refresh_ahead(self, key: Hashable, flight: _Flight, load: Callable[[], PublicView | None],
+                       entry: _Entry) -> PublicView | None:
+        try:
+            return self._lead(key, flight, load)
+        except Exception:
+            if (self._monotonic() - entry.read_started) * 1000 <= self.fresh_ms:
+                return entry.value  # the early read failed, but what we hold is still within the bound
+            raise
+
+    def _lead(self, key: Hashable, flight: _Flight, load: Callable[[], PublicView | None]) -> PublicView | None:
+        started = self._monotonic()
+        try:
+            value = load()
+        except BaseException:
+            with self._lock:
+                if self._flights.get(key) is flight:
+                    del self._flights[key]
+            flight.done.set()
+            raise
+        with self._lock:
+            if self._flights.get(key) is flight:
+                del self._flights[key]
+            if not flight.invalidated:  # a write landed during the read: what it read may be older than the write
+                if len(self._entries) >= self._max_entries:
+                    self._entries.clear()
+                self._entries[key] = _Entry(started, value)
+            flight.value, flight.ok = value, True
+        flight.done.set()
+        return value
+
+    def invalidate(self, key: Hashable) -> None:
+        """Forget `key`, and keep a read already in flight from storing (or handing out to new askers) older data."""
+        with self._lock:
+            self._entries.pop(key, None)
+            flight = self._flights.pop(key, None)
+            if flight is not None:
+                flight.invalidated = True
+
+    def clear(self) -> None:
+        with self._lock:
+            self._entries.clear()
+            for flight in self._flights.values():
+                flight.invalidated = True
+            self._flights.clear()
+
+
+PROCESS_CACHE = PublicViewCache()
+
+
 def board_key(track_id: str) -> str:
     return f"BOARD#{track_id}"
 
@@ -71,18 +190,23 @@ def empty_board_body(event_id: str, track_id: str) -> str:
 
 
 class LeaderboardPublisher:
-    def __init__(self, boards: BoardRepository, clock_ms: Callable[[], int]) -> None:
+    def __init__(self, boards: BoardRepository, clock_ms: Callable[[], int], *,
+                 cache: PublicViewCache | None = PROCESS_CACHE) -> None:
+        """`cache=None` reads the table on every poll; the default shares this process's cache."""
         self._boards = boards
         self._clock_ms = clock_ms
+        self._cache = cache
+        # Keeps two stores (tables) in one process apart in the shared cache.
+        self._namespace = getattr(boards, "cache_namespace", "")
 
     # --- reads -------------------------------------------------------------------------------------------------
 
     def board(self, event_id: str, track_id: str) -> PublicView:
-        found = self._boards.public(event_id, board_key(track_id))
+        found = self._public(event_id, board_key(track_id))
         return found or PublicView(version=0, etag='"v0"', body=empty_board_body(event_id, track_id))
 
     def overlay(self, event_id: str, track_id: str) -> PublicView:
-        found = self._boards.public(event_id, overlay_key(track_id))
+        found = self._public(event_id, overlay_key(track_id))
         return found or PublicView(version=0, etag='"v0"', body=_dumps(
             {"event_id": event_id, "track_id": track_id, "version": 0, "status": "NO_RACE"}))
 
@@ -134,6 +258,15 @@ class LeaderboardPublisher:
 
     # --- plumbing ----------------------------------------------------------------------------------------------
 
+    def _public(self, event_id: str, sort_key: str) -> PublicView | None:
+        if self._cache is None:
+            return self._boards.public(event_id, sort_key)
+        return self._cache.get((self._namespace, event_id, sort_key), lambda: self._boards.public(event_id, sort_key))
+
+    def _invalidate(self, event_id: str, sort_key: str) -> None:
+        if self._cache is not None:
+            self._cache.invalidate((self._namespace, event_id, sort_key))
+
     def _write_board(self, event_id: str, track_id: str, method: RankingMethod,
                      change: Callable[[dict[str, BoardRow]], dict[str, BoardRow]]) -> Leaderboard:
         result: dict[str, Leaderboard] = {}
@@ -181,6 +314,9 @@ class LeaderboardPublisher:
                 return
             except StaleBoard:
                 continue
+            finally:
+                # Also after a failed put: its outcome is unknown (a timeout may have written it).
+                self._invalidate(event_id, sort_key)
         raise Conflict("The leaderboard is being updated by someone else; try again.")
 
 

@@ -30,6 +30,11 @@ class DynamoBoardStore:
         self._client = client
         self._table = table
 
+    @property
+    def cache_namespace(self) -> str:
+        """Tells the publisher's per-process read cache this store's items from another table's."""
+        return self._table
+
     def public(self, event_id: str, sort_key: str) -> PublicView | None:
         """The hot read: one GetItem, without the ranking state."""
         item = self._call("get_item", TableName=self._table, Key=item_key(event_id, sort_key),
