@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-HELP = "simulator: list tracks, demonstrator laps, record training runs, evaluate a model archive"
+HELP = "simulator: list tracks, demonstrator laps, drive by hand, record training runs, evaluate a model archive"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,12 +30,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     record.add_argument("--upload", action="store_true",
                         help="also upload to the runs bucket of the local stack (needs AWS_ENDPOINT_URL)")
 
+    drive = sub.add_parser("drive", help="drive the car yourself from a browser page (keyboard or gamepad) and record")
+    _track_arguments(drive)
+    drive.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765)")
+    drive.add_argument("--out", type=Path, default=Path("runs"), help="runs root for recordings (default ./runs)")
+    drive.add_argument("--upload", action="store_true",
+                       help="upload each recording to the runs bucket of the local stack when it stops (needs AWS_ENDPOINT_URL)")
+
     evaluate = sub.add_parser("eval", help="drive a model archive round a track and write metrics")
     evaluate.add_argument("--model", required=True, type=Path, help="model archive (.tar.gz) or folder")
     evaluate.add_argument("--track", required=True)
     evaluate.add_argument("--laps", type=int, default=3)
     evaluate.add_argument("--seed", type=int, default=0)
-    evaluate.add_argument("--out", type=Path, help="folder to write metrics.json into")
+    evaluate.add_argument("--out", type=Path, help="metrics file (*.json) or folder to write metrics.json into")
 
 
 def _track_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,7 +54,7 @@ def _track_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from drem_sim.tracks import TrackError
 
-    commands = {"tracks": _tracks, "demo": _demo, "record": _record, "eval": _eval}
+    commands = {"tracks": _tracks, "demo": _demo, "drive": _drive, "record": _record, "eval": _eval}
     command = commands.get(getattr(args, "sim_command", None) or "")
     if command is None:
         print("drem sim: choose one of " + ", ".join(commands), file=sys.stderr)
@@ -141,6 +148,37 @@ def _record(args: argparse.Namespace) -> int:
         from drem_sim.runs import default_s3_client
 
         print(f"uploaded     {upload_run(default_s3_client(), runs_bucket_name(), run_dir)}")
+    return 0
+
+
+def _drive(args: argparse.Namespace) -> int:
+    from drem_sim import drive_server
+    from drem_sim.runs import default_s3_client, runs_bucket_name, upload_run
+    from drem_sim.tracks import load_track
+
+    if args.upload and not os.environ.get("AWS_ENDPOINT_URL"):
+        print("drem sim drive: --upload needs AWS_ENDPOINT_URL (start the local stack with `drem up`)", file=sys.stderr)
+        return 2
+    track = load_track(args.track, reverse=args.reverse)
+    uploader = None
+    if args.upload:
+        bucket = runs_bucket_name()
+        uploader = lambda run_dir: upload_run(default_s3_client(), bucket, run_dir)  # noqa: E731
+    try:
+        server, threads = drive_server.start(track, args.out, port=args.port, uploader=uploader, seed=args.seed)
+    except OSError as error:
+        print(f"drem sim drive: cannot listen on 127.0.0.1:{args.port} ({error})", file=sys.stderr)
+        return 2
+    print(f"driving {track.track_id} at {server.url}  (Ctrl-C to stop; recordings go to {args.out})", flush=True)
+    try:
+        threads[1].join()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        drive_server.stop(server, threads)
+    last = server.session.last_run
+    if last:
+        print(f"last run     {last['run_dir']} ({last['frames']} frames)")
     return 0
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 HELP = "train a behaviour-cloning model from recorded sim runs and package it as a .tar.gz model archive"
@@ -31,13 +32,17 @@ def run(args: argparse.Namespace) -> int:
     for run in args.runs:
         path = Path(run)
         if not str(run).startswith("s3://") and path.is_dir() and not (path / "controls.jsonl").is_file():
-            runs.extend(iter_run_dirs(path))
+            found = list(iter_run_dirs(path))
+            if not found:
+                print(f"drem train: no run folders under {path} (record some with `drem sim record` or `drem sim drive`)")
+                return 2
+            runs.extend(found)
         else:
             runs.append(run)
     config = TrainConfig(epochs=args.epochs, seed=args.seed, batch_size=args.batch_size,
                          learning_rate=args.learning_rate, num_threads=args.threads, augment=not args.no_augment)
     try:
-        trained = train_to_archive(runs, args.out, args.name, config)
+        trained = train_to_archive(runs, args.out, args.name, config, progress=sys.stderr)
     except (DatasetError, ArchiveError) as error:
         print(f"drem train: {error}")
         return 2

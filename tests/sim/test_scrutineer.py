@@ -8,7 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from drem_sim.learn.scrutineer import scrutineer
+from drem_sim.learn.dataset import ActionScale
+from drem_sim.learn.package import build_metadata
+from drem_sim.learn.scrutineer import scrutineer, scrutineer_for_event, track_for_event
+from tests.sim.test_learn_pilot import _constant_policy
 
 pytestmark = pytest.mark.sim
 
@@ -46,3 +49,50 @@ def test_archive_without_metadata_is_invalid_with_a_clear_reason(tmp_path: Path)
 
     assert report.verdict == "invalid"
     assert "no model_metadata.json" in report.message
+
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
+
+
+@pytest.mark.parametrize(("track_type", "track"), [
+    ("REINVENT_2018", "reinvent_base"), ("ATOZ_SPEEDWAY", "reInvent2019_wide"),
+    ("SUMMIT_SPEEDWAY", "2022_summit_speedway"), ("FOREVER_RACEWAY", "2024_reinvent_champ_ccw"),
+    ("REINVENT_2019", "reInvent2019_track"),
+])
+def test_event_track_types_map_to_their_simulator_twin(track_type: str, track: str) -> None:
+    from drem_sim.tracks import load_track
+
+    mapped = track_for_event(track_type)
+    assert mapped.track == track and mapped.note is None
+    assert load_track(mapped.track).length > 10  # a real shipped track
+
+
+def test_unknown_track_types_fall_back_to_reinvent_2018_with_a_note() -> None:
+    mapped = track_for_event("REINVENT_2023")
+    assert mapped.track == "reinvent_base"
+    assert mapped.note == "no simulator track for REINVENT_2023; driven on reinvent_base"
+
+
+def test_a_model_that_laps_passes_with_its_lap_times() -> None:
+    report = scrutineer_for_event(SAMPLE, "REINVENT_2018", laps=2)
+
+    assert report.verdict == "passed", report.message
+    assert report.track == "reinvent_base" and report.track_type == "REINVENT_2018"
+    assert report.completion_pct == 100.0 and report.laps_completed == 2
+    assert len(report.lap_times_s) == 2 and all(7.0 < t < 20.0 for t in report.lap_times_s)
+    assert report.message.startswith("2/2 laps completed on reinvent_base")
+
+
+def test_a_model_that_leaves_the_track_fails_with_its_completion(tmp_path: Path) -> None:
+    metadata = {**build_metadata(ActionScale(speed_low=1.0, speed_high=2.0))}
+    archive = _archive(tmp_path / "hard-left.tar.gz", {
+        "model_metadata.json": json.dumps(metadata).encode(),
+        "model.onnx": _constant_policy([1.0, 1.0]),  # full left lock at top speed, whatever the camera sees
+    })
+
+    report = scrutineer(archive, "reinvent_base", laps=2)
+
+    assert report.verdict == "failed"
+    assert report.laps_completed == 0 and report.offtrack_count >= 1
+    assert 0.0 <= report.completion_pct < 50.0
+    assert report.message.startswith("0/2 laps completed")

@@ -101,6 +101,8 @@ def load_snapshot(runs: Sequence[str | Path], scale: ActionScale | None = None,
         for row in rows:
             if row.get("offtrack") and not include_offtrack:
                 continue
+            if float(row["speed"]) <= 0.0:
+                continue  # a person standing still (before setting off, after braking) is not a racing example
             frame_path = _frame_path(run_dir, row)
             raw = frame_path.read_bytes()
             image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)

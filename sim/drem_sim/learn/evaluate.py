@@ -21,8 +21,11 @@ SIM_SECONDS_PER_LAP_LIMIT = 90.0  # an attempt slower than this is a stuck car, 
 
 
 class EvalMetrics(BaseModel):
+    """What `metrics.json` holds; `track, attempts, laps_completed, completion_pct, offtrack_count, lap_times_s,
+    steering_jitter_deg, source` are what the model registry's evaluation upload reads."""
     model: str
     track: str
+    source: str = "sim"
     seed: int
     laps_requested: int
     attempts: int
@@ -131,8 +134,14 @@ def main_eval(args: argparse.Namespace) -> int:
     print(metrics.summary())
     out = getattr(args, "out", None)
     if out:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        path = Path(out) / "metrics.json"
-        path.write_text(json.dumps(metrics.model_dump(), indent=2) + "\n")
+        path = write_metrics(metrics, Path(out))
         print(f"metrics      {path}")
     return 0
+
+
+def write_metrics(metrics: EvalMetrics, out: Path) -> Path:
+    """`out` ending in .json is the file itself; anything else is a folder that gets `metrics.json`."""
+    path = out if out.suffix.lower() == ".json" else out / "metrics.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(metrics.model_dump(), indent=2) + "\n")
+    return path

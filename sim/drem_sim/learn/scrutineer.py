@@ -1,7 +1,8 @@
-"""Scrutineering: test-drive an uploaded model archive in the simulator before it races.
+"""Scrutineering: test-drive an uploaded model archive on the event's track before it races.
 
-ONNX models (our own archives) are driven directly. Console models carry a TensorFlow graph
-(``agent/model.pb``) that the simulator cannot run; they are reported, not guessed at.
+ONNX models (our own archives) are driven for N lap attempts in the simulator. Console models carry a
+TensorFlow graph (``agent/model.pb``) that the simulator cannot run; they are reported, not guessed at.
+DREM events name a *track type*; `track_for_event` maps it to the simulator track that resembles it.
 """
 from __future__ import annotations
 
@@ -14,6 +15,30 @@ from drem_sim.learn.package import ArchiveError
 
 Verdict = Literal["passed", "failed", "cannot_scrutineer", "invalid"]
 PASS_COMPLETION_PCT = 100.0  # every attempted lap finished
+FALLBACK_TRACK = "reinvent_base"
+
+# DREM event track type -> the simulator track closest to it.
+EVENT_TRACKS: dict[str, str] = {
+    "REINVENT_2018": "reinvent_base",
+    "ATOZ_SPEEDWAY": "reInvent2019_wide",
+    "SUMMIT_SPEEDWAY": "2022_summit_speedway",
+    "FOREVER_RACEWAY": "2024_reinvent_champ_ccw",
+    "REINVENT_2019": "reInvent2019_track",
+}
+
+
+class EventTrack(BaseModel):
+    track_type: str
+    track: str
+    note: str | None = None  # set when the track type has no simulator twin
+
+
+def track_for_event(track_type: str) -> EventTrack:
+    key = track_type.strip().upper()
+    if key in EVENT_TRACKS:
+        return EventTrack(track_type=key, track=EVENT_TRACKS[key])
+    return EventTrack(track_type=key, track=FALLBACK_TRACK,
+                      note=f"no simulator track for {key or 'an empty track type'}; driven on {FALLBACK_TRACK}")
 
 
 class ScrutineerReport(BaseModel):
@@ -22,6 +47,8 @@ class ScrutineerReport(BaseModel):
     laps: int
     verdict: Verdict
     message: str
+    track_type: str | None = None
+    note: str | None = None
     completion_pct: float | None = None
     laps_completed: int = 0
     lap_times_s: list[float] = []
@@ -30,10 +57,19 @@ class ScrutineerReport(BaseModel):
     offtrack_count: int = 0
 
 
+def scrutineer_for_event(archive: str | Path, track_type: str, laps: int = 3, seed: int = 0) -> ScrutineerReport:
+    """Scrutineer on the simulator twin of a DREM event's track type (e.g. ATOZ_SPEEDWAY)."""
+    event_track = track_for_event(track_type)
+    report = scrutineer(archive, event_track.track, laps, seed)
+    return report.model_copy(update={"track_type": event_track.track_type, "note": event_track.note})
+
+
 def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) -> ScrutineerReport:
     from drem_sim.learn.evaluate import evaluate_model
     from drem_sim.learn.pilot import TensorFlowModelError
 
+    if laps < 1:
+        raise ValueError("scrutineering needs at least one lap")
     base = {"archive": Path(archive).name, "track": track, "laps": laps}
     try:
         metrics = evaluate_model(archive, track, laps, seed)

@@ -129,6 +129,8 @@ def _report(stream: TextIO | None, epoch: int, epochs: int, batch: int, batches:
     if stream is None:
         return
     filled = int(20 * batch / batches)
+    if batch not in (1, batches) and filled == int(20 * (batch - 1) / batches):
+        return  # redraw only when the bar grows: a few writes per epoch, not one per batch
     stream.write(f"\repoch {epoch}/{epochs} [{'#' * filled}{'.' * (20 - filled)}] "
                  f"loss {loss:.4f} {time.monotonic() - started:6.1f}s")
     stream.flush()

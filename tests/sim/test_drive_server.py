@@ -1,0 +1,163 @@
+"""Manual drive server: a real HTTP server on a free port, the simulator stepping in real time in its thread."""
+from __future__ import annotations
+
+import json
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import boto3
+import cv2
+import numpy as np
+import pytest
+from moto import mock_aws
+
+from drem_sim import drive_server
+from drem_sim.learn.dataset import load_snapshot
+from drem_sim.runs import upload_run
+from drem_sim.tracks import load_track
+
+pytestmark = pytest.mark.sim
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[drive_server.DriveServer]:
+    running, threads = drive_server.start(load_track("drem_oval"), tmp_path / "runs", port=0)
+    yield running
+    drive_server.stop(running, threads)
+
+
+def _get(server: drive_server.DriveServer, path: str) -> tuple[int, str, bytes]:
+    with urllib.request.urlopen(server.url.rstrip("/") + path, timeout=5) as response:
+        return response.status, response.headers.get_content_type(), response.read()
+
+
+def _post(server: drive_server.DriveServer, path: str, body: Any, content_type: str = "application/json") -> tuple[int, Any]:
+    data = body if isinstance(body, bytes) else json.dumps(body).encode()
+    request = urllib.request.Request(server.url.rstrip("/") + path, data=data, method="POST",
+                                     headers={"Content-Type": content_type})
+    try:
+        with urllib.request.urlopen(request, timeout=5) as response:
+            return response.status, json.loads(response.read())
+    except urllib.error.HTTPError as error:
+        return error.code, json.loads(error.read())
+
+
+def _state(server: drive_server.DriveServer) -> dict[str, Any]:
+    return json.loads(_get(server, "/state")[2])
+
+
+def _drive_until(server: drive_server.DriveServer, condition, control: dict[str, float], seconds: float = 5.0) -> dict:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        _post(server, "/control", control)
+        state = _state(server)
+        if condition(state):
+            return state
+        time.sleep(0.05)
+    raise AssertionError(f"condition not reached in {seconds}s: {state}")
+
+
+def test_page_and_camera_frame_are_served(server: drive_server.DriveServer) -> None:
+    status, kind, page = _get(server, "/")
+    assert status == 200 and kind == "text/html"
+    assert b'src="/frame.png"' in page and b'"/control"' in page
+    status, kind, png = _get(server, "/frame.png")
+    frame = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert kind == "image/png" and frame.shape == (120, 160)
+
+
+def test_throttle_moves_the_car_and_the_camera_view_changes(server: drive_server.DriveServer) -> None:
+    first_frame = _get(server, "/frame.png")[2]
+    start = _state(server)
+    assert start["speed"] == 0 and start["progress"] == 0
+
+    moving = _drive_until(server, lambda s: s["progress"] > 2.0, {"steering": 0.0, "throttle": 1.0})
+
+    assert moving["speed"] == pytest.approx(drive_server.FULL_THROTTLE_SPEED)
+    assert moving["steps"] > start["steps"]
+    assert _get(server, "/frame.png")[2] != first_frame
+
+
+def test_steering_is_scaled_to_degrees_left_positive(server: drive_server.DriveServer) -> None:
+    state = _drive_until(server, lambda s: s["steering_angle"] == 15.0, {"steering": 0.5, "throttle": 0.0})
+    assert state["speed"] == 0
+
+
+def test_the_car_stops_when_controls_stop_arriving(tmp_path: Path) -> None:
+    session = drive_server.DriveSession(load_track("drem_oval"), tmp_path, control_timeout_s=0.2)
+    session.set_control(drive_server.Control(steering=0.3, throttle=1.0))
+    assert session.action()["speed"] == pytest.approx(drive_server.FULL_THROTTLE_SPEED)
+    time.sleep(0.3)
+    assert session.action() == {"steering_angle": 0.0, "speed": 0.0}
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ({"steering": "left"}, "steering must be a number"),
+    (b'{"throttle": NaN}', "throttle must be a number"),
+    (b'{"steering": ', "body is not JSON"),
+    ({"steering": 0, "boost": 1}, "a control is"),
+    ([1, 2], "a control is"),
+])
+def test_bad_controls_are_refused_with_a_reason(server: drive_server.DriveServer, body: Any, message: str) -> None:
+    status, reply = _post(server, "/control", body)
+    assert status == 400 and message in reply["error"]
+
+
+def test_form_posts_are_refused(server: drive_server.DriveServer) -> None:
+    status, reply = _post(server, "/control", b"steering=1", content_type="application/x-www-form-urlencoded")
+    assert status == 415 and "application/json" in reply["error"]
+
+
+def test_a_recording_is_a_run_folder_the_trainer_reads(server: drive_server.DriveServer) -> None:
+    status, state = _post(server, "/record", {"on": True})
+    assert status == 200 and state["recording"]
+    _drive_until(server, lambda s: s["recorded_frames"] >= 12, {"steering": 0.2, "throttle": 0.8})
+    status, state = _post(server, "/record", {"on": False})
+
+    assert status == 200 and not state["recording"]
+    run_dir = Path(state["last_run"]["run_dir"])
+    meta = json.loads((run_dir / "metadata.json").read_text())
+    assert meta["driver"] == "human" and meta["track_id"] == "drem_oval" and meta["frames"] >= 12
+    rows = [json.loads(line) for line in (run_dir / "controls.jsonl").read_text().splitlines()]
+    assert rows[0]["t_ms"] == 0
+    assert max(row["speed"] for row in rows) == pytest.approx(0.8 * drive_server.FULL_THROTTLE_SPEED, abs=1e-3)
+    snapshot = load_snapshot([run_dir])  # off-track and standing-still frames are left out of training data
+    assert len(snapshot) == sum(1 for row in rows if not row["offtrack"] and row["speed"] > 0) > 0
+
+
+def test_a_stopped_recording_is_uploaded_to_the_runs_bucket(tmp_path: Path) -> None:
+    with mock_aws():
+        s3 = boto3.client("s3", region_name="us-east-1")
+        s3.create_bucket(Bucket="drem-test-runs")
+        session = drive_server.DriveSession(load_track("drem_oval"), tmp_path,
+                                            uploader=lambda run_dir: upload_run(s3, "drem-test-runs", run_dir))
+        session.set_recording(True)
+        session.set_control(drive_server.Control(throttle=1.0))
+        for _ in range(5):
+            session.step()
+        state = session.set_recording(False)
+
+        uri = state["last_run"]["uploaded"]
+        assert uri.startswith("s3://drem-test-runs/runs/drem_oval/")
+        keys = {item["Key"] for item in s3.list_objects_v2(Bucket="drem-test-runs")["Contents"]}
+        assert len([key for key in keys if "/frames/" in key]) == 5
+        assert any(key.endswith("/metadata.json") for key in keys)
+
+
+def test_a_failed_upload_is_reported_and_the_run_stays_on_disk(tmp_path: Path) -> None:
+    def unreachable(_run_dir: Path) -> str:
+        raise ConnectionError("local stack is not running")
+
+    session = drive_server.DriveSession(load_track("drem_oval"), tmp_path, uploader=unreachable)
+    session.set_recording(True)
+    session.set_control(drive_server.Control(throttle=1.0))
+    session.step()
+    state = session.set_recording(False)
+
+    assert state["last_run"]["uploaded"] is None
+    assert state["last_run"]["upload_error"] == "ConnectionError: local stack is not running"
+    assert (Path(state["last_run"]["run_dir"]) / "metadata.json").is_file()
