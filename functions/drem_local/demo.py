@@ -28,7 +28,10 @@ from drem_local.stack import ManagedProcess, RunningStack, spawn
 DEMO_DIR = "demo"
 DEMO_FILE = "demo.json"
 DIRECTOR = "demo-director"
-SIM_TRACK = "reinvent_base"
+# The sim track the cars drive and the sample model trained on it. re:Invent 2018 comes from the DeepRacer route files
+# (DREM_TRACKS_DIR or the shared folder beside the repository); drem_oval ships with drem_sim, so a fresh clone without
+# the route files still gets a demo.
+SIM_TRACKS_AND_SAMPLES: tuple[tuple[str, str], ...] = (("reinvent_base", "drem-bc-sample"), ("drem_oval", "drem-bc-oval"))
 TRACK_IDS = ("1", "2")  # one sim car per track
 RACE_TIME_MIN = 1
 OVERDUE_S = 90.0  # a race still running this long after its race time is ended by the director
@@ -77,6 +80,7 @@ class Demo:
     fleet_id: str = ""
     cars: list[DemoCar] = field(default_factory=list)
     model_ids: list[str] = field(default_factory=list)
+    sim_track: str = ""
     _api: ApiClient | None = None
     _directors: list[TrackDirector] = field(default_factory=list)
     _next_racer: Any = None
@@ -95,9 +99,11 @@ class Demo:
     def start(self) -> None:
         self.directory.mkdir(parents=True, exist_ok=True)
         self._sign_in_director()
-        self.model_ids = [m["model_id"] for m in self._seed_samples() if m["status"] == "AVAILABLE"]
-        if not self.model_ids:
-            raise DemoError("no sample model passed validation; see sim/drem_sim/samples/")
+        self.sim_track, sample = demo_track_and_sample()
+        available = {m["model_id"] for m in self._seed_samples() if m["status"] == "AVAILABLE"}
+        if f"sample-{sample}" not in available:
+            raise DemoError(f"the sample model {sample} did not pass validation; see sim/drem_sim/samples/")
+        self.model_ids = [f"sample-{sample}"]
         self._ensure_racers()
         saved = self._load()
         self.fleet_id = saved.get("fleet_id") if saved.get("fleet_id") and self._exists(
@@ -172,7 +178,7 @@ class Demo:
 
     def _spawn_car(self, car: DemoCar) -> ManagedProcess:
         argv = [sys.executable, "-m", "drem_local.cli", "car", "--config-dir", str(car.config_dir), "run", "--sim",
-                "--track", SIM_TRACK, "--event", self.event_id, "--race-track", car.track_id,
+                "--track", self.sim_track, "--event", self.event_id, "--race-track", car.track_id,
                 "--rate-hz", str(self.rate_hz)]
         env = {k: v for k, v in self.stack.env.items() if not k.startswith(("AWS_", "DREM_"))}
         env["DREM_CAR_NO_REEXEC"] = "1"
@@ -259,3 +265,16 @@ class Demo:
                 process.popen.wait(max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 process.stop(2)
+
+
+def demo_track_and_sample() -> tuple[str, str]:
+    """The first sim track of SIM_TRACKS_AND_SAMPLES this machine has, with the sample model trained on it."""
+    from drem_sim.tracks import TrackError, load_track
+
+    for track, sample in SIM_TRACKS_AND_SAMPLES:
+        try:
+            load_track(track)
+        except TrackError:
+            continue
+        return track, sample
+    raise DemoError("none of the demo tracks can be loaded: " + ", ".join(t for t, _ in SIM_TRACKS_AND_SAMPLES))

@@ -33,6 +33,7 @@ def test_eval_writes_registry_ready_metrics_to_a_file_or_folder(tmp_path: Path, 
     ("drem-bc-sample.tar.gz", "reinvent_base"),
     ("drem-bc-wide.tar.gz", "reInvent2019_wide"),
     ("drem-bc-wide-cw.tar.gz", "reInvent2019_wide_cw"),
+    ("drem-bc-oval.tar.gz", "drem_oval"),
 ])
 def test_each_sample_model_laps_its_track(archive: str, track: str) -> None:
     from drem_sim.learn.evaluate import evaluate_model
