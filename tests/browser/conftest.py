@@ -33,3 +33,9 @@ def page(chromium: Any) -> Iterator[Any]:
     page = context.new_page()
     yield page
     context.close()
+
+
+@pytest.fixture(scope="session")
+def app_url(live_stack: Any) -> str:
+    """The app of the session's live stack (functions/app.py with every blueprint), as the browser reaches it."""
+    return live_stack.url

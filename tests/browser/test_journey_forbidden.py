@@ -8,7 +8,6 @@ import boto3
 import pytest
 from botocore.config import Config
 
-from tests.browser.racer_console_stack import racer_console_url  # noqa: F401  (fixture)
 
 pytestmark = pytest.mark.browser
 
@@ -32,18 +31,18 @@ def make_racer(live_stack) -> str:
     return username
 
 
-def test_a_racer_gets_not_allowed_on_every_staff_page_and_from_the_api(racer_console_url, live_stack, page):
+def test_a_racer_gets_not_allowed_on_every_staff_page_and_from_the_api(app_url, live_stack, page):
     username = make_racer(live_stack)
-    page.goto(racer_console_url + "/login")
+    page.goto(app_url + "/login")
     page.fill("#username", username)
     page.fill("#password", PASSWORD)
     page.get_by_role("button", name="Sign in").click()
-    page.wait_for_url(racer_console_url + "/")
+    page.wait_for_url(app_url + "/")
     nav = page.get_by_test_id("nav-links").inner_text().split("\n")
     assert [line.strip() for line in nav if line.strip()] == ["My models", "My races", "Model registry", "Profile"]
 
     for path in STAFF_PAGES:
-        response = page.goto(racer_console_url + path)
+        response = page.goto(app_url + path)
         assert response is not None and response.status == 403, path
         assert page.get_by_role("heading", level=1).inner_text() == "Not allowed", path
         assert "This needs the role" in page.get_by_test_id("error-message").inner_text(), path
@@ -52,13 +51,13 @@ def test_a_racer_gets_not_allowed_on_every_staff_page_and_from_the_api(racer_con
     csrf = next(c["value"] for c in page.context.cookies() if c["name"] == "drem_csrf")
     for method, path in STAFF_API:
         # The racer's own session cookie rides along (page.request shares the browser's cookies).
-        reply = page.request.fetch(racer_console_url + path, method=method, data={} if method != "GET" else None,
+        reply = page.request.fetch(app_url + path, method=method, data={} if method != "GET" else None,
                                    headers={"Accept": "application/json", "X-CSRF-Token": csrf})
         assert reply.status == 403, (method, path, reply.text())
         assert "This needs the role" in reply.json()["error"]["message"]
 
     # A staff action posted from the racer's page is refused too (server-side, not just hidden).
-    reply = page.request.post(racer_console_url + "/console/registration", headers={"X-CSRF-Token": csrf},
+    reply = page.request.post(app_url + "/console/registration", headers={"X-CSRF-Token": csrf},
                               form={"username": "sneaky", "email": "s@example.test", "country_code": "SE"})
     assert reply.status == 403
     assert "Not allowed" in reply.text()

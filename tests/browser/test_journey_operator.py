@@ -9,7 +9,6 @@ import pytest
 import requests
 
 from tests.browser.console_api import access_token, call, create_user, sign_in
-from tests.browser.console_stack import console_url  # noqa: F401 - fixture
 from tests.unit.models_helpers import onnx_archive
 
 pytestmark = pytest.mark.browser
@@ -28,21 +27,21 @@ def _upload_model(url: str, token: str, filename: str) -> dict:
     return done["model"]
 
 
-def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model(live_stack, console_url, page):
+def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model(live_stack, app_url, page):
     create_user(live_stack, "journey-op", "operator")
     create_user(live_stack, "journey-racer", "racer")
-    model = _upload_model(console_url, access_token(live_stack, "journey-racer"), "journey-model.tar.gz")
-    sign_in(page, console_url, "journey-op")
+    model = _upload_model(app_url, access_token(live_stack, "journey-racer"), "journey-model.tar.gz")
+    sign_in(page, app_url, "journey-op")
 
     # A fleet for the cars of track 1.
-    page.goto(console_url + "/console/fleets")
+    page.goto(app_url + "/console/fleets")
     page.fill("#name", "Track 1 cars")
     page.get_by_role("button", name="Create fleet").click()
-    page.wait_for_url(console_url + "/console/fleets")
+    page.wait_for_url(app_url + "/console/fleets")
     assert "Track 1 cars" in page.inner_text("[data-testid=fleets-table]")
 
     # An event with two tracks; a mistake first, shown next to its field.
-    page.goto(console_url + "/console/events/new")
+    page.goto(app_url + "/console/events/new")
     page.fill("#name", "Journey Summit")
     page.fill("#date", "2026-06-01")
     page.fill("#country_code", "XX")
@@ -55,7 +54,7 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     assert page.input_value("#track-2-title") == "Side track"  # nothing typed is lost
     page.fill("#country_code", "SE")
     page.get_by_role("button", name="Create event").click()
-    page.wait_for_url(console_url + "/console/events")
+    page.wait_for_url(app_url + "/console/events")
     row = page.locator("tr", has_text="Journey Summit")
     assert "Main track" in row.inner_text() and "Side track" in row.inner_text()
     assert row.get_by_role("link", name="Leaderboard").get_attribute("href").startswith("/leaderboard/")
@@ -63,21 +62,21 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     page.screenshot(path=str(ARTIFACTS / "events.png"), full_page=True)
 
     # Activate a car: the screen shows a one-time code and the command to run on the car.
-    page.goto(console_url + "/console/cars/activate")
+    page.goto(app_url + "/console/cars/activate")
     page.select_option("#device_kind", "car")
     page.fill("#hostname", "deepracer-07")
     page.select_option("#fleet_id", label="Track 1 cars")
     page.get_by_role("button", name="Create activation code").click()
     code = page.inner_text("[data-testid=activation-code]").strip()
     command = page.inner_text("[data-testid=activation-command]")
-    assert command == f"drem car activate --code {code} --api {console_url}"
-    issued = call(console_url, "POST", "/api/devices/activate",
+    assert command == f"drem car activate --code {code} --api {app_url}"
+    issued = call(app_url, "POST", "/api/devices/activate",
                   body={"code": code, "hostname": "deepracer-07", "device_kind": "car"}, expect=201)
-    call(console_url, "POST", "/api/devices/self/heartbeat", device=issued["credential"],
+    call(app_url, "POST", "/api/devices/self/heartbeat", device=issued["credential"],
          body={"battery_pct": 81, "agent_version": "journey"}, expect=200)
 
     # The car is listed online with its battery; give it the racer's model.
-    page.goto(console_url + "/console/cars")
+    page.goto(app_url + "/console/cars")
     car_row = page.locator("tr[data-hostname='deepracer-07']")
     assert "online" in car_row.inner_text() and "81 %" in car_row.inner_text()
     models_row = page.get_by_test_id("models-deepracer-07")
@@ -88,5 +87,5 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     assert "journey-racer · journey-model (assigned)" in page.get_by_test_id("models-deepracer-07").inner_text()
 
     # The car sees the assignment through its own API.
-    mine = call(console_url, "GET", "/api/devices/self/assignment", device=issued["credential"], expect=200)
+    mine = call(app_url, "GET", "/api/devices/self/assignment", device=issued["credential"], expect=200)
     assert [m["model_id"] for m in mine["models"]] == [model["model_id"]]

@@ -14,7 +14,6 @@ import onnx
 import pytest
 from onnx import TensorProto, helper
 
-from tests.browser.racer_console_stack import racer_console_url  # noqa: F401  (fixture)
 
 pytestmark = pytest.mark.browser
 
@@ -62,9 +61,9 @@ def drop_file(page, selector: str, name: str, data: bytes) -> None:
     }""", [selector, name, base64.b64encode(data).decode()])
 
 
-def test_racer_signs_up_uploads_models_and_sees_their_verdicts(racer_console_url, page):
+def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
     username = f"racer.{secrets.token_hex(3)}"
-    page.goto(racer_console_url + "/signup")
+    page.goto(app_url + "/signup")
     page.fill("#username", username)
     page.fill("#email", f"{username}@example.test")
     page.select_option("#country_code", "SE")
@@ -75,7 +74,7 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(racer_console_url
 
     page.fill("#password", PASSWORD)
     page.get_by_role("button", name="Sign up").click()
-    page.wait_for_url(f"{racer_console_url}/signup/confirm?username={username}")
+    page.wait_for_url(f"{app_url}/signup/confirm?username={username}")
     page.fill("#code", "123456")
     page.get_by_role("button", name="Confirm").click()
     assert "is confirmed" in page.get_by_test_id("confirmed").inner_text()
@@ -84,12 +83,12 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(racer_console_url
     page.fill("#username", username)
     page.fill("#password", PASSWORD)
     page.get_by_role("button", name="Sign in").click()
-    page.wait_for_url(racer_console_url + "/")
+    page.wait_for_url(app_url + "/")
     nav = page.get_by_test_id("nav-links").inner_text()
     assert "My models" in nav and "Users" not in nav and "Registration" not in nav
 
     page.get_by_test_id("nav-links").get_by_role("link", name="My models").click()
-    page.wait_for_url(racer_console_url + "/console/my-models")
+    page.wait_for_url(app_url + "/console/my-models")
     valid = archive({"model.onnx": tiny_policy(), "model_metadata.json": json.dumps(METADATA).encode()})
     invalid = archive({"model.onnx": tiny_policy()})
     page.set_input_files("#model-files", files=[{"name": "fast-lap.tar.gz", "mimeType": "application/gzip",

@@ -7,7 +7,6 @@ import secrets
 
 import pytest
 
-from tests.browser.racer_console_stack import racer_console_url  # noqa: F401  (fixture)
 
 pytestmark = pytest.mark.browser
 
@@ -39,15 +38,15 @@ def create_at_desk(page, username: str) -> str:
     return page.get_by_test_id("temporary-password").inner_text()
 
 
-def test_desk_staff_register_racers_who_then_choose_their_password(racer_console_url, live_stack, page, chromium):
+def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live_stack, page, chromium):
     suffix = secrets.token_hex(3)
     desk, first, second = f"desk-{suffix}", f"kim-{suffix}", f"lee-{suffix}"
 
     # The admin registers a colleague at the desk, then makes them registration staff on the Users page.
-    sign_in(page, racer_console_url, live_stack.admin_username, live_stack.admin_password)
-    page.goto(racer_console_url + "/console/registration")
+    sign_in(page, app_url, live_stack.admin_username, live_stack.admin_password)
+    page.goto(app_url + "/console/registration")
     desk_password = create_at_desk(page, desk)
-    page.goto(racer_console_url + "/console/users")
+    page.goto(app_url + "/console/users")
     page.locator("#q").press_sequentially(desk[:7])  # active search: the table narrows as the admin types
     row = page.locator(f'[data-testid="user-row"][data-username="{desk}"]')
     row.wait_for()
@@ -59,12 +58,12 @@ def test_desk_staff_register_racers_who_then_choose_their_password(racer_console
     page.context.clear_cookies()
 
     # The colleague signs in (temporary password → their own) and sees only the desk among staff screens.
-    sign_in(page, racer_console_url, desk, desk_password)
-    choose_password(page, racer_console_url, "Desk-Duty-2026")
+    sign_in(page, app_url, desk, desk_password)
+    choose_password(page, app_url, "Desk-Duty-2026")
     nav = page.get_by_test_id("nav-links").inner_text()
     assert "Registration" in nav and "Users" not in nav and "Models" not in nav.replace("My models", "")
     page.get_by_test_id("nav-links").get_by_role("link", name="Registration").click()
-    page.wait_for_url(racer_console_url + "/console/registration")
+    page.wait_for_url(app_url + "/console/registration")
     assert page.evaluate("document.activeElement.id") == "username"  # autofocus: type straight away
 
     first_password = create_at_desk(page, first)
@@ -92,8 +91,8 @@ def test_desk_staff_register_racers_who_then_choose_their_password(racer_console
     # The first racer signs in with the temporary password and chooses their own.
     racer = chromium.new_context().new_page()
     try:
-        sign_in(racer, racer_console_url, first, first_password)
-        choose_password(racer, racer_console_url, "My-Own-Pass-77")
+        sign_in(racer, app_url, first, first_password)
+        choose_password(racer, app_url, "My-Own-Pass-77")
         assert racer.get_by_test_id("signed-in-as").inner_text() == f"Signed in as {first}"
         assert "Your roles: racer." in racer.inner_text("main")
     finally:

@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 
 from tests.browser.console_api import access_token, call, create_user, sign_in
-from tests.browser.console_stack import console_url  # noqa: F401 - fixture
 
 pytestmark = pytest.mark.browser
 
@@ -24,19 +23,19 @@ def _wait_laps(page, count: int) -> None:
     page.wait_for_function(f"document.querySelectorAll('[data-testid=laps] tr[data-lap]').length === {count}")
 
 
-def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin(live_stack, console_url, page):
+def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin(live_stack, app_url, page):
     create_user(live_stack, "keys-op", "operator")
     create_user(live_stack, "keys-racer", "racer")
     token = access_token(live_stack, "keys-op")
-    fleet = call(console_url, "POST", "/api/fleets", token=token, body={"name": "Keyboard fleet"}, expect=201)
-    event = call(console_url, "POST", "/api/events", token=token, expect=201, body={
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "Keyboard fleet"}, expect=201)
+    event = call(app_url, "POST", "/api/events", token=token, expect=201, body={
         "name": "Keyboard Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-07-01", "country_code": "GB",
         "race_config": {"race_time_min": 3, "resets_per_lap": 0},
         "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"], "leaderboard_title": "Keyboard track"}]})
     event_id = event["event_id"]
 
-    sign_in(page, console_url, "keys-op")
-    page.goto(f"{console_url}/console/timekeeper/{event_id}/1")
+    sign_in(page, app_url, "keys-op")
+    page.goto(f"{app_url}/console/timekeeper/{event_id}/1")
     assert "No timer in this track's fleet" in page.get_by_test_id("timer-status").inner_text()
     page.fill("#racer_username", "keys-racer")
     page.get_by_role("button", name="Ready race").click()
@@ -78,7 +77,7 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
 
     # A second screen (another tablet) shows the same race.
     other = page.context.new_page()
-    other.goto(f"{console_url}/console/timekeeper/{event_id}/1")
+    other.goto(f"{app_url}/console/timekeeper/{event_id}/1")
     assert other.get_by_test_id("racer").inner_text() == "keys-racer"
     assert other.locator("[data-testid=laps] tr[data-lap]").count() == 3
     other.close()
@@ -87,11 +86,11 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     page.get_by_role("button", name="Submit race").click()
     page.get_by_role("button", name="Ready race").wait_for()  # back to the next racer
 
-    page.goto(f"{console_url}/console/races?event_id={event_id}")
+    page.goto(f"{app_url}/console/races?event_id={event_id}")
     row = page.locator("[data-testid=races-table] tr", has_text="keys-racer")
     assert "SUBMITTED" in row.inner_text() and "3 (1)" in row.inner_text()
 
-    download = page.request.get(console_url + page.get_by_test_id("csv-laps").get_attribute("href"))
+    download = page.request.get(app_url + page.get_by_test_id("csv-laps").get_attribute("href"))
     assert download.ok and download.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(download.text())))
     assert [(r["Username"], r["Lap #"], r["Resets"], r["Valid"]) for r in rows] == [

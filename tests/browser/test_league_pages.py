@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -17,40 +15,6 @@ from tests.unit.league_helpers import console_old_export, drfc_export
 from tests.unit.models_helpers import DREM_METADATA, onnx_policy, tar_gz
 
 pytestmark = pytest.mark.browser
-REPO = Path(__file__).resolve().parents[2]
-# The app server with the league and registry blueprints, until app.py registers them (then it is the same app).
-SERVER = """
-import sys
-from drem_local import appserver
-appserver._put_project_on_path()
-import app as app_module
-from chalicelib.routes import league, registry
-for module, marker in ((league, "/api/league/{track}"), (registry, "/models/registry")):
-    if marker not in app_module.app.routes:
-        app_module.app.register_blueprint(module.bp)
-appserver.make_server("127.0.0.1", int(sys.argv[1])).serve_forever()
-"""
-
-
-@pytest.fixture(scope="module")
-def league_url(live_stack: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    from drem_local import stack as local_stack
-
-    port = local_stack.free_port()
-    url = f"http://127.0.0.1:{port}"
-    env = {**live_stack.env, "DREM_PUBLIC_URL": url, "PYTHONPATH": str(REPO)}
-    process = local_stack.spawn("league app server", [sys.executable, "-c", SERVER, str(port)],
-                                tmp_path_factory.mktemp("league-app") / "app.log", env=env)
-    try:
-        local_stack.wait_for_ok(url + local_stack.APP_HEALTH_PATH, process, 60.0)
-    except BaseException:
-        print(process.log_tail())
-        process.stop(2)
-        raise
-    yield url
-    process.stop(10)
-
-
 def _push(url: str, username: str, path: Path, track: str) -> int:
     from drem_local.commands import league
 
@@ -59,15 +23,15 @@ def _push(url: str, username: str, path: Path, track: str) -> int:
     return league.run(args)
 
 
-def test_league_board_with_hyperparameters_on_demand(live_stack: Any, league_url: str, page: Any,
+def test_league_board_with_hyperparameters_on_demand(live_stack: Any, app_url: str, page: Any,
                                                      tmp_path: Path) -> None:
     for name in ("lea", "ben"):
         create_user(live_stack, name, "racer")
-    assert _push(league_url, "lea", console_old_export(tmp_path / "lea-fast", world="reinvent_base",
+    assert _push(app_url, "lea", console_old_export(tmp_path / "lea-fast", world="reinvent_base",
                                                         laps=[(15100, 100), (15900, 100)]), "reinvent_base") == 0
-    assert _push(league_url, "ben", drfc_export(tmp_path / "ben-sac", world="reinvent_base",
+    assert _push(app_url, "ben", drfc_export(tmp_path / "ben-sac", world="reinvent_base",
                                                 laps=[(15400, 100), (15500, 100)]), "reinvent_base") == 0
-    page.goto(league_url + "/league/reinvent_base")
+    page.goto(app_url + "/league/reinvent_base")
     rows = page.locator("tr.league-row")
     assert rows.count() == 2
     assert rows.nth(0).get_attribute("data-racer") == "lea"
@@ -81,7 +45,7 @@ def test_league_board_with_hyperparameters_on_demand(live_stack: Any, league_url
     assert "sac_alpha" in hyper.inner_text() and "0.2" in hyper.inner_text()
 
 
-def test_model_registry_dashboard(live_stack: Any, league_url: str, page: Any) -> None:
+def test_model_registry_dashboard(live_stack: Any, app_url: str, page: Any) -> None:
     create_user(live_stack, "rita", "racer")
     token = access_token(live_stack, "rita")
     lineage = {"network": "DREM_SMALL_CNN", "epochs_run": 3, "batch_size": 32, "learning_rate": 0.001,
@@ -89,18 +53,18 @@ def test_model_registry_dashboard(live_stack: Any, league_url: str, page: Any) -
                "train_losses": [0.8, 0.4, 0.2], "validation_losses": [0.9, 0.5, 0.3]}
     archive = tar_gz([("model.onnx", onnx_policy(0.3)), ("model_metadata.json", json.dumps(DREM_METADATA).encode()),
                       ("training/lineage.json", json.dumps(lineage).encode())])
-    ticket = call(league_url, "POST", "/api/models", token=token, body={"filename": "rita-bc.tar.gz"})
+    ticket = call(app_url, "POST", "/api/models", token=token, body={"filename": "rita-bc.tar.gz"})
     posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
                            files={"file": ("rita-bc.tar.gz", archive)}, timeout=15)
     assert posted.status_code in (200, 204), posted.text
     model_id = ticket["model"]["model_id"]
-    assert call(league_url, "POST", f"/api/models/{model_id}/complete", token=token)["model"]["status"] == "AVAILABLE"
+    assert call(app_url, "POST", f"/api/models/{model_id}/complete", token=token)["model"]["status"] == "AVAILABLE"
     for track, laps in (("reinvent_base", [19.5, 18.75]), ("Oval_track", [9.25])):
-        call(league_url, "POST", f"/api/models/{model_id}/evaluations", token=token,
+        call(app_url, "POST", f"/api/models/{model_id}/evaluations", token=token,
              body={"track": track, "attempts": 2, "laps_completed": len(laps), "completion_pct": 90.0,
                    "offtrack_count": 2 - len(laps), "lap_times_s": laps, "steering_jitter_deg": 1.1})
-    sign_in(page, league_url, "rita")
-    page.goto(league_url + "/models/registry")
+    sign_in(page, app_url, "rita")
+    page.goto(app_url + "/models/registry")
     assert page.locator("svg[data-testid=plot-tracks] rect").count() == 2
     assert page.locator("svg[data-testid=plot-lap-times] circle").count() >= 1
     row = page.locator('tr.registry-row[data-model="rita-bc"]')

@@ -71,10 +71,10 @@ def call(url: str, method: str, path: str, body: Any = None, *, authorization: s
     return json.loads(text) if text else None
 
 
-def start_race(url: str, admin: str, password: str) -> tuple[str, str, str]:
+def start_race(url: str, admin: str, password: str, racer: str = "lina") -> tuple[str, str, str]:
     """(event id, race id, timer credential): an event, a racer, a fleet, an activated timer, a started race."""
     bearer = "Bearer " + call(url, "POST", "/api/auth/token", {"username": admin, "password": password})["access_token"]
-    call(url, "POST", "/api/users", {"username": "lina", "email": "lina@example.test", "country_code": "DE"},
+    call(url, "POST", "/api/users", {"username": racer, "email": f"{racer}@example.test", "country_code": "DE"},
          authorization=bearer)
     fleet = call(url, "POST", "/api/fleets", {"name": "Timers"}, authorization=bearer)
     event = call(url, "POST", "/api/events", {
@@ -86,7 +86,7 @@ def start_race(url: str, admin: str, password: str) -> tuple[str, str, str]:
     credential = call(url, "POST", "/api/devices/activate", {
         "code": code, "hostname": "timer-1", "device_kind": "timer"})["credential"]
     eid = event["event_id"]
-    race = call(url, "POST", f"/api/events/{eid}/races", {"track_id": "1", "racer_username": "lina"},
+    race = call(url, "POST", f"/api/events/{eid}/races", {"track_id": "1", "racer_username": racer},
                 authorization=bearer)
     call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", {"kind": "start"}, authorization=bearer)
     return eid, race["race_id"], credential
@@ -167,3 +167,38 @@ def test_leaderboard_and_overlay_show_a_timer_lap_live_in_their_own_tabs(live_st
     print(f"\nleaderboard polls: {len(polls)} ({len(unchanged)} x 204, {len(changed)} x 200); "
           f"204 median {sorted(p['ms'] for p in unchanged)[len(unchanged) // 2]:.1f} ms, "
           f"200 median {sorted(p['ms'] for p in changed)[len(changed) // 2]:.1f} ms")
+
+
+def test_a_fragment_built_before_it_was_sent_starts_its_clock_from_the_send_time(live_stack: Any, pages_url: str,
+                                                                                page: Any) -> None:
+    """The server hands every spectator the same cached fragment: the one that reaches this page says it was built a
+    minute before it was sent (X-Drem-Server-Ms), so the countdown must show its reading minus that minute."""
+    import re
+
+    eid, _rid, timer = start_race(pages_url, live_stack.admin_username, live_stack.admin_password, racer="omar")
+    aged: list[int] = []
+
+    def built_a_minute_earlier(route: Any) -> None:
+        reply = route.fetch()
+        headers = dict(reply.headers)
+        read_at = re.search(r'data-clock-at="(\d+)"', reply.text()) if reply.status == 200 else None
+        if read_at:
+            headers["x-drem-server-ms"] = str(int(read_at.group(1)) + 60_000)
+            aged.append(1)
+        route.fulfill(response=reply, headers=headers)
+
+    page.route(re.compile(r".*/overlay/[^/]+/live\?.*"), built_a_minute_earlier)
+    page.goto(f"{pages_url}/overlay/{eid}?track=1")
+    time_left = page.get_by_test_id("time-left")
+    time_left.wait_for()
+    seed = int(time.time() * 1000)
+    strip(pages_url, timer, eid, seed, "crossing-1")
+    strip(pages_url, timer, eid, seed + 9_000, "crossing-2")
+    page.wait_for_selector('[data-testid="previous-lap"]:has-text("0:09.000")', timeout=5_000)
+    assert aged, "no changed fragment came through the route"
+
+    reading_s = int(time_left.get_attribute("data-clock-ms")) / 1000
+    minutes, seconds = time_left.inner_text().split(":")
+    shown_s = int(minutes) * 60 + int(seconds)
+    # The reading is from a moment ago (a 3-minute race), shown a minute older, ticking since: allow 2 s of slack.
+    assert reading_s - 60 - 2 <= shown_s <= reading_s - 60 + 1, (time_left.inner_text(), reading_s)
