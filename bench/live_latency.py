@@ -9,25 +9,22 @@ offset to this process's clock is calibrated per page (the error bound is printe
 
 Load: N spectators = N keep-alive connections (bench/_crowd.py, an asyncio child process), each polling the pages' own
 live fragment URL (half the leaderboard's, half the overlay's) with the version token IT holds (`&v=`, replaced from
-each 200, so every spectator gets its own 200 after a change, as browsers do), HX-Request set, every 0.5-1.5 s (mean
-1 s, like the pages). wrk cannot do this: its Lua state, and so the token, is shared by all connections of a thread.
-Posts are spaced by a random 1.5-2.5 s pause, so they fall at random points of the pages' 1 s poll cycle (a lap
-every ~2.6 s: about three times a real race's lap rate on one track). N = 0, 100, 500.
+each 200, so every spectator gets its own 200 after a change, as browsers do), HX-Request set, every 0.5-1.5 x the
+pages' poll period (read from the live region's `hx-trigger`, 500 ms since the render cache; mean = the period, like
+the pages). wrk cannot do this: its Lua state, and so the token, is shared by all connections of a thread.
+Posts are spaced by a random 1.5-2.5 s pause, so they fall at random points of the pages' poll cycle (a lap every
+~2.6 s: about three times a real race's lap rate on one track). N = 0, 100, 500.
 Goal: p95 <= 1 s at N = 500 on both pages.
 
     .venv/bin/python bench/live_latency.py [--samples 25] [--spectators 0,100,500]
-
-What-if flags (each changes the bench's app process only, and renames the RESULT line `live_latency_what_if_...`):
-`--what-if-race-read-cache` (the overlay fragment reads its race once per overlay version), `--what-if-render-once`
-(a fragment is built once per token and options, served to every spectator for up to 250 ms) and
-`--what-if-poll-every 500ms` (the pages and the crowd poll twice as often). They measure changes proposed for
-chalicelib/routes/public_pages.py and the live templates before anyone makes them.
 """
 from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
 import random
+import re
 import sys
 import time
 from pathlib import Path
@@ -80,6 +77,29 @@ def clock_offset_ms(page: Any) -> tuple[float, float]:
     return best
 
 
+def poll_period_ms(page: Any, selector: str) -> int:
+    """The live region's poll period as its htmx trigger says (`every 500ms`, `every 1s`)."""
+    trigger = page.get_attribute(selector, "hx-trigger") or ""
+    match = re.fullmatch(r"every (\d+)(ms|s)", trigger.strip())
+    if not match:
+        raise SystemExit(f"{selector} does not poll on a fixed period: hx-trigger={trigger!r}")
+    return int(match.group(1)) * (1 if match.group(2) == "ms" else 1000)
+
+
+def app_cpu_seconds(port: int) -> float | None:
+    """CPU seconds (user + system) the bench's app server process has used so far; None where /proc cannot say."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    for proc in Path("/proc").iterdir():
+        try:
+            command = (proc / "cmdline").read_bytes().split(b"\0")
+            if b"from bench._stack import serve" in b" ".join(command) and str(port).encode() in command:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+                return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime (fields 14, 15 of stat)
+        except (OSError, ValueError, IndexError):
+            continue
+    return None
+
+
 def live_path(page: Any, selector: str) -> tuple[str, str]:
     """(the live region's poll path without its `v=`, the token) exactly as the page's htmx polls it."""
     url = page.get_attribute(selector, "hx-get")
@@ -115,7 +135,7 @@ def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lappe
                  rng: random.Random) -> dict[str, list[float]]:
     latencies: dict[str, list[float]] = {name: [] for name in pages}
     for index in range(samples):
-        # A random pause lands each lap at a random point of the pages' 1 s poll cycle. A lap every ~2.6 s is still
+        # A random pause lands each lap at a random point of the pages' poll cycle. A lap every ~2.6 s is still
         # about 3x the lap rate of a real race on one track (laps take 7-15 s), so the crowd renders often.
         time.sleep(rng.uniform(*LAP_PAUSE_S))
         lap_ms = lapper.next_lap_ms
@@ -138,33 +158,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--samples", type=int, default=25)
     parser.add_argument("--spectators", default="0,100,500")
-    parser.add_argument("--what-if-poll-every", default=None, metavar="MS",
-                        help="what-if only: the bench's app process rewrites the pages' `every 1s` to this "
-                             "(e.g. 500ms),"
-                             " and the crowd polls as often; the RESULT line is then named live_latency_what_if_<MS>")
-    parser.add_argument("--what-if-race-read-cache", action="store_true",
-                        help="what-if only: the bench's app process reads the overlay's race once per overlay version "
-                             "(the change proposed for public_pages.live_race)")
-    parser.add_argument("--what-if-render-once", action="store_true",
-                        help="what-if only: the bench's app process builds each fragment once per (token, options) "
-                             "and serves it to every spectator for up to 250 ms")
     args = parser.parse_args(argv)
-    poll_ms = int(args.what_if_poll_every.removesuffix("ms")) if args.what_if_poll_every else 1000
-    extra_env = {_stack.WHAT_IF_POLL_ENV: f"{poll_ms}ms"} if args.what_if_poll_every else {}
-    if args.what_if_race_read_cache:
-        extra_env[_stack.WHAT_IF_RACE_CACHE_ENV] = "1"
-    if args.what_if_render_once:
-        extra_env[_stack.WHAT_IF_RENDER_ONCE_ENV] = "1"
-    what_ifs = ([f"poll_{poll_ms}ms"] if args.what_if_poll_every else []) + (
-        ["race_read_cache"] if args.what_if_race_read_cache else []) + (
-        ["render_once"] if args.what_if_render_once else [])
     crowd_sizes = [int(n) for n in args.spectators.split(",")]
     from playwright.sync_api import sync_playwright
 
     rng = random.Random(7)
     results: list[dict[str, Any]] = []
     load_before = _stack.machine_load()
-    with _stack.bench_stack(extra_env) as stack, sync_playwright() as playwright:
+    with _stack.bench_stack() as stack, sync_playwright() as playwright:
         race = _stack.start_live_race(stack, RACER)
         _stack.seed_board(stack.env, race.event_id)
         lapper = Lapper(stack.url, race)
@@ -176,6 +177,9 @@ def main(argv: list[str] | None = None) -> int:
             page.goto(stack.url + path)
             page.evaluate(OBSERVER_JS)
             pages[name] = page
+        poll_ms = poll_period_ms(pages["leaderboard"], "#board-live")
+        if poll_period_ms(pages["overlay"], "#overlay-live") != poll_ms:
+            raise SystemExit("the leaderboard and the overlay poll at different periods; the crowd assumes one")
         for crowd in crowd_sizes:
             offsets, bounds = {}, {}
             for name, page in pages.items():
@@ -190,30 +194,33 @@ def main(argv: list[str] | None = None) -> int:
                     "127.0.0.1", stack.port, fragments, crowd, poll_ms / 1000, stop, queue), daemon=True)
                 crowd_process.start()
                 time.sleep(WARM_UP_S)
+            cpu_before, wall_before = app_cpu_seconds(stack.port), time.monotonic()
             try:
                 latencies = sample_round(pages, offsets, lapper, args.samples, rng)
+                cpu_after = app_cpu_seconds(stack.port)
+                app_cpu = (None if cpu_before is None or cpu_after is None
+                           else 100 * (cpu_after - cpu_before) / (time.monotonic() - wall_before))
             finally:
                 load = None
                 if crowd_process is not None:
                     stop.set()
                     load = queue.get(timeout=60)
                     crowd_process.join(30)
-            results.append({"crowd": crowd, "latencies": latencies, "load": load,
-                            "clock_error_ms": max(bounds.values())})
+            results.append({"crowd": crowd, "latencies": latencies, "load": load, "app_cpu": app_cpu,
+                            "machine_load": os.getloadavg()[0], "clock_error_ms": max(bounds.values())})
             summary = "  ".join(f"{name} p50 {_stack.percentile(v, 50):.0f} ms p95 {_stack.percentile(v, 95):.0f} ms"
                                 for name, v in latencies.items())
             print(f"  N={crowd}: {summary}", flush=True)
         browser.close()
 
-    what_if = (f"WHAT-IF ({', '.join(what_ifs)}: changed in this bench's app process only, not in the product); "
-               if what_ifs else "")
-    print(f"\n{what_if}{args.samples} laps per N ({LAP_PAUSE_S[0]}-{LAP_PAUSE_S[1]} s apart + latency), each seen "
+    print(f"\n{args.samples} laps per N ({LAP_PAUSE_S[0]}-{LAP_PAUSE_S[1]} s apart + latency), each seen "
           f"on both pages; pages poll every {poll_ms} ms (htmx), "
           f"spectators every {poll_ms // 2}-{poll_ms * 3 // 2} ms; latency = POST sent -> first frame with the lap; "
-          f"machine load before the bench: {load_before}")
+          f"machine load before the bench: {load_before}; app CPU = the app server process's CPU time during the "
+          f"round, in % of one core (one Python process: ~100 % is its ceiling)")
     print(f"{'N':>4s} {'board p50':>10s} {'board p95':>10s} {'board max':>10s} {'ovl p50':>8s} {'ovl p95':>8s} "
           f"{'ovl max':>8s} {'crowd polls/s':>13s} {'crowd p99':>10s} {'crowd 200/204':>14s} {'errors':>7s} "
-          f"{'clock +-':>8s}")
+          f"{'clock +-':>8s} {'app CPU':>8s} {'load':>5s}")
     for r in results:
         board, overlay, load = r["latencies"]["leaderboard"], r["latencies"]["overlay"], r["load"]
         crowd_cols = ("{:13.0f} {:>10s} {:>14s} {:7d}".format(
@@ -223,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"     first crowd error: {load['first_error']}")
         print(f"{r['crowd']:4d} {_stack.percentile(board, 50):8.0f}ms {_stack.percentile(board, 95):8.0f}ms "
               f"{max(board):8.0f}ms {_stack.percentile(overlay, 50):6.0f}ms {_stack.percentile(overlay, 95):6.0f}ms "
-              f"{max(overlay):6.0f}ms {crowd_cols} {r['clock_error_ms']:6.1f}ms")
+              f"{max(overlay):6.0f}ms {crowd_cols} {r['clock_error_ms']:6.1f}ms "
+              f"{'-' if r['app_cpu'] is None else format(r['app_cpu'], '.0f') + ' %':>8s} {r['machine_load']:5.1f}")
     last = results[-1]
     p95 = {name: _stack.percentile(v, 95) for name, v in last["latencies"].items()}
     figures = " ".join(f"N={r['crowd']}:board_p50/p95={_stack.percentile(r['latencies']['leaderboard'], 50):.0f}/"
@@ -231,8 +239,7 @@ def main(argv: list[str] | None = None) -> int:
                        f"{_stack.percentile(r['latencies']['overlay'], 50):.0f}/"
                        f"{_stack.percentile(r['latencies']['overlay'], 95):.0f}ms" for r in results)
     met = last["crowd"] >= 500 and max(p95.values()) <= 1000
-    name = "live_latency" + "".join(f"_what_if_{w}" for w in what_ifs)
-    print(f"RESULT {name}: {figures} | goal p95<=1000ms at N=500 | {'met' if met else 'not met'}")
+    print(f"RESULT live_latency: {figures} | goal p95<=1000ms at N=500 | {'met' if met else 'not met'}")
     return 0
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Callable, Iterable, Sequence
+from functools import lru_cache
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict
@@ -34,6 +35,10 @@ _PODIUM = {1: "gold", 2: "silver", 3: "bronze"}
 _HEX_COLOUR = re.compile(r"#?([0-9a-fA-F]{3}|[0-9a-fA-F]{6})")
 _ALPHA2 = re.compile(r"[A-Za-z]{2}")
 _REGIONAL_INDICATOR_A = 0x1F1E6
+# Every poll parses the board/overlay bodies it was handed (for the version token); the poll cache hands out the same
+# body for a while, so parsing each distinct body once saves validating a 50-row board hundreds of times a second.
+# Callers share the parsed snapshot: nothing here mutates one (re-ranking sorts a copy, highlighting copies rows).
+PARSED_BODIES = 64
 
 
 # --- formatting ------------------------------------------------------------------------------------------------------
@@ -97,7 +102,7 @@ class BoardSnapshot(BaseModel):
 
     @classmethod
     def parse(cls, body: str) -> BoardSnapshot:
-        return cls.model_validate(json.loads(body))
+        return _parse_board(body)
 
     @property
     def event_best_lap_ms(self) -> int | None:
@@ -128,7 +133,7 @@ class OverlaySnapshot(BaseModel):
 
     @classmethod
     def parse(cls, body: str) -> OverlaySnapshot:
-        return cls.model_validate(json.loads(body))
+        return _parse_overlay(body)
 
     @property
     def is_live(self) -> bool:
@@ -138,6 +143,16 @@ class OverlaySnapshot(BaseModel):
         """(time left, current lap) at `now_ms`: the stored readings, advanced while the race runs."""
         elapsed = max(0, now_ms - self.as_of_ms) if self.running else 0
         return max(0, self.time_left_ms - elapsed), self.current_lap_ms + elapsed
+
+
+@lru_cache(maxsize=PARSED_BODIES)
+def _parse_board(body: str) -> BoardSnapshot:
+    return BoardSnapshot.model_validate(json.loads(body))
+
+
+@lru_cache(maxsize=PARSED_BODIES)
+def _parse_overlay(body: str) -> OverlaySnapshot:
+    return OverlaySnapshot.model_validate(json.loads(body))
 
 
 def version_token(*versions: int | str) -> str:

@@ -1,11 +1,17 @@
 """Public live pages: the big-screen leaderboard (`/leaderboard/{event}`) and the OBS stream overlay
-(`/overlay/{event}`), plus the fragment routes their live regions poll every second.
+(`/overlay/{event}`), plus the fragment routes their live regions poll every 500 ms.
 
 A page renders its live region once; the region then polls `…/live?…&v={token}`, where the token names every
 materialised item version (and overlay phase) it was built from. The fragment route reads the same items as
-`GET /api/leaderboard|overlay/{event}` (one GetItem each) and answers **204 No Content** while the token is current:
-htmx 2 leaves the DOM alone on 204, so an unchanged poll costs two GetItems, no rendering and no flicker. An
+`GET /api/leaderboard|overlay/{event}` (through the process's poll cache) and answers **204 No Content** while the
+token is current: htmx 2 leaves the DOM alone on 204, so an unchanged poll costs no rendering and no flicker. An
 `If-None-Match` with the fragment's ETag gets a 304 the same way (for clients that cache).
+
+A changed token is rendered once per (fragment, event, options, token) and the same HTML is served to every poller
+(`domain/render_cache.LIVE_FRAGMENTS`); the overlay's race is read once per overlay version (`LIVE_RACES`). The only
+wall-time-dependent parts, the race clocks, carry the server time they were computed at (`data-clock-at`) and each
+200 carries the server time it was sent (`X-Drem-Server-Ms`): live.js advances a running clock by the difference, so a
+fragment built earlier still shows the right time.
 """
 from __future__ import annotations
 
@@ -25,6 +31,7 @@ from chalicelib.auth.principals import Principal
 from chalicelib.domain import public_views as views
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.events import Event
+from chalicelib.domain.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 from chalicelib.routes import races as race_routes
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
@@ -37,6 +44,7 @@ bp = Blueprint(__name__)
 
 _TRACK_ID = re.compile(r"[A-Za-z0-9_-]{1,32}")
 MAX_FOOTER_TRACKS = 8
+SERVER_TIME_HEADER = "X-Drem-Server-Ms"
 
 
 class PageOptions(BaseModel):
@@ -97,10 +105,15 @@ def read_live(event_id: str, board_track: str, overlay_tracks: list[str]) -> Liv
 
 def live_race(event_id: str, overlay: views.OverlaySnapshot) -> Race | None:
     """The race behind the overlay (lap detail for colours and the lap table); only read when a fragment renders."""
-    if not overlay.race_id:
+    race_id = overlay.race_id
+    if not race_id:
         return None
-    record = race_routes.race_store().get(event_id, overlay.race_id)
-    return record.race if record else None
+
+    def read() -> Race | None:
+        record = race_routes.race_store().get(event_id, race_id)
+        return record.race if record else None
+
+    return LIVE_RACES.get((event_id, overlay.track_id, race_id, overlay.version), read)
 
 
 def event_or_404(event_id: str) -> Event:
@@ -130,6 +143,18 @@ def unchanged(token: str, client_token: str, if_none_match: str | None) -> Respo
 
 def fragment_headers(token: str) -> dict[str, str]:
     return {"ETag": f'"live-{token}"', "Cache-Control": "no-cache"}
+
+
+def live_fragment(name: str, options: tuple[Any, ...], token: str, client_token: str,
+                  context: Callable[[], dict[str, Any]]) -> Response:
+    """204/304 while the client's token is current; else the fragment, built once per (name, options, token) and
+    handed to every poller: a live partial must render nothing that depends on who asks."""
+    reply = unchanged(token, client_token, bp.current_request.headers.get("if-none-match"))
+    if reply is not None:
+        return reply
+    body = LIVE_FRAGMENTS.get((name, *options, token), lambda: render.fragment(name, **context()).body)
+    return Response(body=body, status_code=200, headers={
+        "Content-Type": render.HTML, **fragment_headers(token), SERVER_TIME_HEADER: str(race_routes.now_ms())})
 
 
 def live_url(path: str, params: dict[str, Any]) -> str:
@@ -162,7 +187,7 @@ def leaderboard_live(event_id: str, track: str, query: LeaderboardQuery, footer_
             "track": track, "format": query.format, "flag": query.flag, "scroll": query.scroll, "lang": query.lang,
             "tracks": ",".join(footer_tracks), "v": token})
         return {"rows": views.board_rows(items.board, query.format, t, show_flags=query.flag), "footers": footers,
-                "poll_url": poll, "token": token, "scroll": query.scroll, "t": t}
+                "poll_url": poll, "token": token, "scroll": query.scroll, "t": t, "clock_at": now_ms}
 
     return token, context
 
@@ -186,9 +211,8 @@ def leaderboard_fragment(principal: Principal, event_id: str, query: Leaderboard
     track = query.track or COMBINED_TRACK_ID
     footer_tracks = [t for t in query.tracks.split(",") if t] or ([track] if track != COMBINED_TRACK_ID else [])
     token, live = leaderboard_live(event_id, track, query, footer_tracks, race_routes.now_ms())
-    if_none_match = bp.current_request.headers.get("if-none-match")
-    return unchanged(token, query.v, if_none_match) or render.fragment(
-        "leaderboard_live", headers=fragment_headers(token), **live())
+    options = (event_id, track, tuple(footer_tracks), query.model_dump_json(exclude={"v"}))
+    return live_fragment("leaderboard_live", options, token, query.v, live)
 
 
 # --- overlay -------------------------------------------------------------------------------------------------------
@@ -209,7 +233,8 @@ def overlay_live(event_id: str, query: OverlayQuery, now_ms: int) -> tuple[str, 
         poll = live_url(f"/overlay/{quote(event_id, safe='')}/live", {
             "track": track, "format": query.format, "flag": query.flag, "lang": query.lang,
             "gapToLeader": query.gap_to_leader, "showLeaderboard": query.show_leaderboard, "v": token})
-        return {"view": view, "poll_url": poll, "token": token, "gap_to_leader": query.gap_to_leader, "t": t}
+        return {"view": view, "poll_url": poll, "token": token, "gap_to_leader": query.gap_to_leader, "t": t,
+                "clock_at": now_ms}
 
     return token, context
 
@@ -229,6 +254,5 @@ def overlay_page(principal: Principal, event_id: str, query: OverlayQuery) -> Re
 def overlay_fragment(principal: Principal, event_id: str, query: OverlayQuery) -> Response:
     """The overlay's live region; 204 while `v` is current"""
     token, context = overlay_live(event_id, query, race_routes.now_ms())
-    if_none_match = bp.current_request.headers.get("if-none-match")
-    return unchanged(token, query.v, if_none_match) or render.fragment(
-        "overlay_live", headers=fragment_headers(token), **context())
+    options = (event_id, query.overlay_track, query.model_dump_json(exclude={"v"}))
+    return live_fragment("overlay_live", options, token, query.v, context)

@@ -1,5 +1,8 @@
 // drem live pages: clocks tick locally between polls, and a new or improved board row is highlighted and scrolled
 // into view. The server re-syncs the clocks whenever the race changes (each swapped fragment carries fresh readings).
+// A fragment may have been built (and cached on the server) a while before this poll got it: its clocks carry the
+// server time they were read at (data-clock-at) and the response the server time it was sent (X-Drem-Server-Ms), so a
+// running clock starts from its reading plus the difference. Each clock element is anchored once, when it arrives.
 (function () {
   "use strict";
   var HIGHLIGHT_MS = 12000;
@@ -18,19 +21,32 @@
     return Math.floor(ms / 60000) + ":" + pad(Math.floor(rest / 1000), 2) + "." + pad(rest % 1000, 3);
   }
 
-  function startClocks() {
+  function serverTime(xhr) {
+    var sent = xhr ? Number(xhr.getResponseHeader("X-Drem-Server-Ms")) : NaN;
+    return isFinite(sent) && sent > 0 ? sent : null;
+  }
+  function anchorClocks(sentAt) {
     var now = performance.now();
-    clocks = Array.prototype.map.call(document.querySelectorAll("[data-clock]"), function (el) {
-      return { el: el, base: Number(el.dataset.clockMs), at: now, running: el.dataset.running === "true",
-               down: el.dataset.clock === "down" };
+    document.querySelectorAll("[data-clock]").forEach(function (el) {
+      if (el.dremClock) { return; }
+      var running = el.dataset.running === "true";
+      var readAt = Number(el.dataset.clockAt);
+      var age = running && sentAt !== null && isFinite(readAt) ? Math.max(0, sentAt - readAt) : 0;
+      var down = el.dataset.clock === "down";
+      el.dremClock = { base: Number(el.dataset.clockMs) + (down ? -age : age), at: now, running: running,
+                       down: down };
     });
+    clocks = Array.prototype.filter.call(document.querySelectorAll("[data-clock]"), function (el) {
+      return el.dremClock;
+    }).map(function (el) { return { el: el, clock: el.dremClock }; });
   }
   function tick() {
     var now = performance.now();
-    clocks.forEach(function (clock) {
-      if (!clock.running || !clock.el.isConnected) { return; }
+    clocks.forEach(function (entry) {
+      var clock = entry.clock;
+      if (!clock.running || !entry.el.isConnected) { return; }
       var elapsed = now - clock.at;
-      clock.el.textContent = clock.down ? countdown(clock.base - elapsed) : lapTime(clock.base + elapsed);
+      entry.el.textContent = clock.down ? countdown(clock.base - elapsed) : lapTime(clock.base + elapsed);
     });
   }
 
@@ -63,12 +79,17 @@
     });
   }
 
-  function refresh() { startClocks(); markChangedRows(); }
+  function arrived(event) {
+    anchorClocks(serverTime(event && event.detail ? event.detail.xhr : null));
+    tick();
+  }
   function start() {
     if (window.dremLive) { return; }  // loaded twice (a page swapped in by htmx): one set of timers is enough
     window.dremLive = true;
-    refresh();
-    document.body.addEventListener("htmx:afterSettle", refresh);
+    arrived(null);
+    markChangedRows();
+    document.body.addEventListener("htmx:afterSwap", arrived);
+    document.body.addEventListener("htmx:afterSettle", function () { anchorClocks(null); markChangedRows(); });
     setInterval(tick, 50);
     setInterval(expireHighlights, 1000);
   }
