@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -30,100 +29,10 @@ _NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))
 
 
 def serve(port: int) -> None:
-    """App-server mode: the real app, plus /api/ping if app.py does not register it yet."""
+    """App-server mode: the real app (functions/app.py, every blueprint registered)."""
     from drem_local import appserver
 
-    appserver._put_project_on_path()
-    import app as app_module
-    from chalicelib.routes import ping
-
-    if "/api/ping" not in app_module.app.routes:
-        app_module.app.register_blueprint(ping.bp)
-    if os.environ.get(WHAT_IF_RACE_CACHE_ENV):
-        _cache_overlay_race_reads()
-    if os.environ.get(WHAT_IF_RENDER_ONCE_ENV):
-        _render_fragments_once()
-    every = os.environ.get(WHAT_IF_POLL_ENV)
-    if every:
-        _rewrite_poll_interval(every)
     appserver.make_server("127.0.0.1", port).serve_forever()
-
-
-WHAT_IF_POLL_ENV = "DREM_BENCH_WHAT_IF_POLL_EVERY"
-WHAT_IF_RACE_CACHE_ENV = "DREM_BENCH_WHAT_IF_RACE_CACHE"
-WHAT_IF_RENDER_ONCE_ENV = "DREM_BENCH_WHAT_IF_RENDER_ONCE"
-
-
-def _render_fragments_once() -> None:
-    """What-if runs only (`live_latency.py --what-if-render-once`): the change proposed for public_pages' fragment
-    routes. After a change every spectator's poll renders the same fragment (same token, same options); here the
-    context and the HTML are built once per (token, options) and served to all askers for up to 250 ms."""
-    from chalice import Response
-
-    from chalicelib.domain.leaderboards import PublicViewCache
-    from chalicelib.routes import public_pages
-    from drem_web import render
-
-    built = PublicViewCache()
-
-    def once(kind: str, original: Any) -> Any:
-        def live(event_id: str, *args: Any) -> Any:
-            token, context = original(event_id, *args[:-1], args[-1])
-            options = tuple(a.model_dump_json() if hasattr(a, "model_dump_json") else repr(a) for a in args[:-1])
-            return token, lambda: built.get((kind, event_id, options, token), context)
-        return live
-
-    class RenderOnce:
-        def __getattr__(self, name: str) -> Any:
-            return getattr(render, name)
-
-        def fragment(self, name: str, *, headers: dict[str, str] | None = None, **ctx: Any) -> Any:
-            first = built.get(("html", name, ctx.get("poll_url")),
-                              lambda: render.fragment(name, headers=headers, **ctx))
-            return Response(body=first.body, status_code=first.status_code, headers=dict(first.headers))
-
-    public_pages.leaderboard_live = once("board", public_pages.leaderboard_live)
-    public_pages.overlay_live = once("overlay", public_pages.overlay_live)
-    public_pages.render = RenderOnce()
-
-
-def _cache_overlay_race_reads() -> None:
-    """What-if runs only (`live_latency.py --what-if-race-read-cache`): the change proposed for
-    `public_pages.live_race`. The overlay fragment reads the race to render; after a lap every overlay spectator asks at
-    once, so N concurrent GetItems queue at moto. Keyed by the overlay's version (bumped on every race change), one read
-    per version serves them all (single flight), no staler than the overlay item itself."""
-    from chalicelib.domain.leaderboards import PublicViewCache
-    from chalicelib.routes import public_pages
-    from chalicelib.routes import races as race_routes
-
-    reads = PublicViewCache()
-
-    def live_race(event_id: str, overlay: Any) -> Any:
-        if not overlay.race_id:
-            return None
-        record = reads.get(("race", event_id, overlay.race_id, overlay.version),
-                           lambda: race_routes.race_store().get(event_id, overlay.race_id))
-        return record.race if record else None
-
-    public_pages.live_race = live_race
-
-
-def _rewrite_poll_interval(every: str) -> None:
-    """What-if runs only (`live_latency.py --what-if-poll-every`): this process's pages poll `every`, not 1s."""
-    from jinja2 import BaseLoader
-
-    from drem_web import render
-
-    environment = render.environment()
-    original = environment.loader
-    assert original is not None
-
-    class Rewritten(BaseLoader):
-        def get_source(self, env: Any, template: str) -> Any:
-            source, filename, uptodate = original.get_source(env, template)
-            return source.replace('hx-trigger="every 1s"', f'hx-trigger="every {every}"'), filename, uptodate
-
-    environment.loader = Rewritten()
 
 
 @dataclass
@@ -135,7 +44,6 @@ class BenchStack:
     admin_username: str
     admin_password: str
     tmp: Path
-    ping_registered_by_app_py: bool
 
 
 @contextmanager
@@ -159,17 +67,11 @@ def bench_stack(extra_env: dict[str, str] | None = None) -> Iterator[BenchStack]
                                     config.log_dir / "app.log", env=env)
             local_stack.wait_for_ok(config.app_url + local_stack.APP_HEALTH_PATH, app, 60)
             yield BenchStack(url=config.app_url, port=config.app_port, storage_url=config.storage_url, env=env,
-                             admin_username="admin", admin_password=password, tmp=tmp,
-                             ping_registered_by_app_py=_app_py_registers_ping())
+                             admin_username="admin", admin_password=password, tmp=tmp)
         finally:
             if app is not None:
                 app.stop(10)
             storage.stop(30)
-
-
-def _app_py_registers_ping() -> bool:
-    text = (ROOT / "functions" / "app.py").read_text()
-    return re.search(r"\bping\b", text) is not None
 
 
 # --- the JSON API, as the operator's tools and a timer device call it ----------------------------------------------

@@ -168,8 +168,6 @@ def main(argv: list[str] | None = None) -> int:
             nginx.terminate()
             nginx.wait(10)
             shutil.rmtree(nginx_dir, ignore_errors=True)
-        ping_note = ("app.py registers /api/ping" if stack.ping_registered_by_app_py
-                     else "/api/ping registered by the bench (app.py does not yet)")
 
     def rate(name: str) -> float:
         return statistics.median(r["rate"] for r in runs[name])
@@ -183,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"\n{args.connections} keep-alive connections, wrk -t {WRK_THREADS}, {args.rounds} rounds x "
           f"{args.seconds:.0f} s "
-          f"per case (alternating); board body {len(body)} bytes; {ping_note}")
+          f"per case (alternating); board body {len(body)} bytes")
     print(f"machine load before the bench: {load_before} (the machine is shared with other work)")
     print("saturated = every connection sends its next request as soon as the answer is in (max throughput);")
     print("@1000/s   = every connection polls every ~195 ms (200 x ~5.1/s offered)")
