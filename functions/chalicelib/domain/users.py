@@ -8,9 +8,9 @@ from __future__ import annotations
 import re
 import secrets
 import string
-from typing import Protocol
+from typing import Annotated, Protocol
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import USER_ROLES, Role, User
 from chalicelib.domain.countries import normalise_country_code
@@ -75,28 +75,22 @@ def temporary_password(length: int = 16) -> str:
     return "".join(chars)
 
 
+# The checks raise InvalidInput (not ValueError) so the 400 carries DREM's own wording for each rule.
+EmailAddress = Annotated[str, Field(max_length=254), AfterValidator(check_email)]
+CountryCode = Annotated[str, Field(max_length=8), AfterValidator(normalise_country_code)]
+
+
 class SignUpForm(BaseModel):
     model_config = ConfigDict(extra="forbid")
     username: str = Field(max_length=128)
-    email: str = Field(max_length=254)
-    country_code: str = Field(max_length=8)
+    email: EmailAddress
+    country_code: CountryCode
     password: str = Field(max_length=256)
 
-    # The checks raise InvalidInput (not ValueError) so the 400 carries DREM's own wording for each rule.
     @field_validator("username")
     @classmethod
     def _username(cls, value: str) -> str:
         return check_sign_up_username(value.strip())
-
-    @field_validator("email")
-    @classmethod
-    def _email(cls, value: str) -> str:
-        return check_email(value)
-
-    @field_validator("country_code")
-    @classmethod
-    def _country(cls, value: str) -> str:
-        return normalise_country_code(value)
 
     @field_validator("password")
     @classmethod
@@ -113,23 +107,13 @@ class ConfirmSignUpForm(BaseModel):
 class StaffRegistrationForm(BaseModel):
     model_config = ConfigDict(extra="forbid")
     username: str = Field(max_length=128)
-    email: str = Field(max_length=254)
-    country_code: str = Field(max_length=8)
+    email: EmailAddress
+    country_code: CountryCode
 
     @field_validator("username")
     @classmethod
     def _username(cls, value: str) -> str:
         return check_staff_username(value.strip())
-
-    @field_validator("email")
-    @classmethod
-    def _email(cls, value: str) -> str:
-        return check_email(value)
-
-    @field_validator("country_code")
-    @classmethod
-    def _country(cls, value: str) -> str:
-        return normalise_country_code(value)
 
 
 class RoleChange(BaseModel):
