@@ -13,25 +13,18 @@ from drem_sim.tracks import load_track
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync"]
-
-
 @pytest.fixture
-def drive_page(tmp_path: Path) -> Iterator[tuple[Any, drive_server.DriveServer]]:
-    from playwright.sync_api import sync_playwright
-
+def drive_page(chromium: Any, tmp_path: Path) -> Iterator[tuple[Any, drive_server.DriveServer]]:
+    """The page of `drem sim drive` on the oval, in the session's Chromium (one Playwright per process)."""
     server, threads = drive_server.start(load_track("drem_oval"), tmp_path / "runs", port=0)
+    context = chromium.new_context()
     try:
-        with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            page = browser.new_page()
-            page.set_default_timeout(10_000)
-            page.goto(server.url)
-            yield page, server
-            browser.close()
+        page = context.new_page()
+        page.set_default_timeout(10_000)
+        page.goto(server.url)
+        yield page, server
     finally:
+        context.close()
         drive_server.stop(server, threads)
 
 
