@@ -15,3 +15,5 @@ SIM_LAP_CROSSINGS = "sim/crossings"      # list of (timestamp_ms, sensor) crosse
 TELEMETRY_FPS = "telemetry/fps"
 TELEMETRY_INFERENCE_MS = "telemetry/inference_ms"
 PILOT_ABSENT = "pilot/absent"            # run_condition of the simulator's stand-in driver
+PWM_SERVO_NS = "pwm/servo_duty_ns"       # duty cycle written to the steering servo
+PWM_MOTOR_NS = "pwm/motor_duty_ns"       # duty cycle written to the drive motor

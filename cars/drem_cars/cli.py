@@ -8,7 +8,7 @@ import os
 import socket
 import sys
 
-HELP = "car agent: activate this car, run it (--sim for the simulator), show its status"
+HELP = "car agent: activate this car, run it (--sim, --pwm camera + PWM, --deepracer), show its status"
 EXIT_REVOKED = 3  # the same code as drem_cars.runner.EXIT_REVOKED (kept here so --help stays light)
 
 
@@ -34,6 +34,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--deepracer", metavar="URL", help="drive an AWS DeepRacer through its device console at URL")
     run.add_argument("--deepracer-password", default=os.environ.get("DEEPRACER_PASSWORD"),
                      help="device console password (or $DEEPRACER_PASSWORD)")
+    run.add_argument("--pwm", action="store_true",
+                     help="drive a DIY car: OpenCV camera + steering servo and motor on Linux sysfs PWM")
+    run.add_argument("--camera", default="0", help="--pwm: camera index (0 = /dev/video0), video file or URL")
+    run.add_argument("--pwm-root", default="/sys/class/pwm", help="--pwm: sysfs PWM root (default /sys/class/pwm)")
+    run.add_argument("--pwm-chip", type=int, default=0, help="--pwm: pwmchipN of the servo and motor (default 0)")
+    run.add_argument("--servo-channel", type=int, default=0, help="--pwm: steering servo channel (default 0)")
+    run.add_argument("--motor-channel", type=int, default=1, help="--pwm: drive motor (ESC) channel (default 1)")
+    run.add_argument("--calibration", metavar="FILE",
+                     help="--pwm: DeepRacer calibration.json (default: DeepRacer's factory values)")
     sub.add_parser("status", help="show this device's activation and local state")
 
 

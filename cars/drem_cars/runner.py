@@ -32,9 +32,11 @@ def run_agent(args: argparse.Namespace) -> int:
     deadline = time.monotonic() + args.seconds if args.seconds else None
     if args.deepracer:
         return _run_deepracer(args, client, outbox, models, deadline)
+    if args.pwm:
+        return _run_pwm(args, client, outbox, models, deadline)
     if not args.sim:
-        print("drem car run: hardware driving needs --sim or --deepracer URL on this build (camera + PWM parts "
-              "exist in drem_cars.drivers; see docs/cars.md)", file=sys.stderr)
+        print("drem car run: say what to drive: --sim, --pwm (camera + PWM) or --deepracer URL "
+              "(see docs/cars.md)", file=sys.stderr)
         return 2
     from drem_cars.parts.safety import Safety
     from drem_cars.sim_car import build_sim_car
@@ -42,18 +44,44 @@ def run_agent(args: argparse.Namespace) -> int:
     car = build_sim_car(args.track, safety=Safety(heartbeat_limit_s=args.heartbeat_limit), outbox=outbox,
                         event_id=args.event, track_id=args.race_track, device_id=client.device_id)
     agent = CarAgent(client, car.driver, outbox, models)
-    agent.start()
-    watcher = threading.Thread(target=_stop_vehicle_when, args=(agent, car.vehicle, deadline), daemon=True)
-    watcher.start()
-    try:
-        stats = car.vehicle.start(rate_hz=args.rate_hz)
-    except KeyboardInterrupt:
-        stats = car.vehicle.stats
-    agent.stop()
-    agent.flush_outbox()
+    stats = _drive(agent, car.vehicle, args.rate_hz, deadline)
     print(f"drive loop: {stats.summary()}; sim laps crossed: {car.strips.queued if car.strips else 0}; "
           f"outbox pending {outbox.count()}")
     return _finish(agent)
+
+
+def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,
+             deadline: float | None) -> int:
+    from drem_cars.drivers.camera_cv import camera_source
+    from drem_cars.parts.safety import Safety
+    from drem_cars.pwm_car import HardwareUnavailable, PwmWiring, build_pwm_car
+
+    wiring = PwmWiring(Path(args.pwm_root), args.pwm_chip, args.servo_channel, args.motor_channel,
+                       Path(args.calibration) if args.calibration else None)
+    try:
+        car = build_pwm_car(camera_source(args.camera), wiring, safety=Safety(heartbeat_limit_s=args.heartbeat_limit))
+    except HardwareUnavailable as exc:
+        print(f"drem car run --pwm: {exc}", file=sys.stderr)
+        return 1
+    agent = CarAgent(client, car.driver, outbox, models)
+    stats = _drive(agent, car.vehicle, args.rate_hz, deadline)  # the loop's shutdown: motor neutral, PWM disabled
+    print(f"drive loop: {stats.summary()}; camera frames read: {car.camera.frames_read}; "
+          f"outbox pending {outbox.count()}")
+    return _finish(agent)
+
+
+def _drive(agent: CarAgent, vehicle, rate_hz: float, deadline: float | None):  # type: ignore[no-untyped-def]
+    """Run the agent next to the drive loop until stopped (Ctrl-C, deadline, revocation, restart)."""
+    agent.start()
+    watcher = threading.Thread(target=_stop_vehicle_when, args=(agent, vehicle, deadline), daemon=True)
+    watcher.start()
+    try:
+        stats = vehicle.start(rate_hz=rate_hz)
+    except KeyboardInterrupt:
+        stats = vehicle.stats
+    agent.stop()
+    agent.flush_outbox()
+    return stats
 
 
 def _stop_vehicle_when(agent: CarAgent, vehicle, deadline: float | None) -> None:  # type: ignore[no-untyped-def]

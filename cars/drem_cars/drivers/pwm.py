@@ -15,6 +15,10 @@ PERIOD_NS = 20_000_000  # 50 Hz
 SYSFS_PWM = Path("/sys/class/pwm")
 
 
+class PwmUnavailable(RuntimeError):
+    """A PWM chip or channel cannot be opened, or the calibration file cannot be read; the message says which."""
+
+
 @dataclass(frozen=True)
 class Calibration:
     min_ns: int
@@ -35,12 +39,19 @@ MOTOR_DEFAULT = Calibration(1_311_000, 1_446_000, 1_603_500, -1)
 
 def load_calibration(path: Path) -> tuple[Calibration, Calibration]:
     """(servo, motor) from DeepRacer's calibration.json ({"Calibration": {"Servo": {...}, "Motor": {...}}})."""
-    data = json.loads(path.read_text())["Calibration"]
-
     def one(entry: dict) -> Calibration:
-        return Calibration(int(entry["min"]), int(entry["mid"]), int(entry["max"]), int(entry.get("polarity", 1)))
+        calibration = Calibration(int(entry["min"]), int(entry["mid"]), int(entry["max"]),
+                                  int(entry.get("polarity", 1)))
+        if not 0 < calibration.min_ns <= calibration.mid_ns <= calibration.max_ns < PERIOD_NS:
+            raise ValueError(f"min <= mid <= max within one 20 ms period is required, got {entry}")
+        return calibration
 
-    return one(data["Servo"]), one(data["Motor"])
+    try:
+        data = json.loads(path.read_text())["Calibration"]
+        return one(data["Servo"]), one(data["Motor"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise PwmUnavailable(f"calibration file {path}: {type(exc).__name__}: {exc} (expected DeepRacer's "
+                             '{"Calibration": {"Servo": {"min", "mid", "max", "polarity"}, "Motor": {...}}})') from None
 
 
 class PwmChannel:
@@ -48,11 +59,18 @@ class PwmChannel:
         self.calibration = calibration
         chip_dir = root / f"pwmchip{chip}"
         self.path = chip_dir / f"pwm{channel}"
-        if not self.path.exists():
-            (chip_dir / "export").write_text(str(channel))
-        self._write("period", PERIOD_NS)
-        self.set(0.0)
-        self._write("enable", 1)
+        if not chip_dir.is_dir():
+            raise PwmUnavailable(f"no PWM chip at {chip_dir}: enable hardware PWM (on a Raspberry Pi "
+                                 "`dtoverlay=pwm-2chan` in config.txt) or pass --pwm-root / --pwm-chip")
+        try:
+            if not self.path.exists():
+                (chip_dir / "export").write_text(str(channel))
+            self._write("period", PERIOD_NS)
+            self.set(0.0)
+            self._write("enable", 1)
+        except OSError as exc:
+            raise PwmUnavailable(f"cannot drive PWM channel {self.path}: {exc.strerror or exc} (is the channel "
+                                 "number right, and may this user write to it?)") from None
 
     def _write(self, name: str, value: int) -> None:
         (self.path / name).write_text(str(value))

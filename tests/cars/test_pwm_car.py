@@ -1,0 +1,198 @@
+"""The DIY car's loop end to end without hardware: a video file the simulator's camera rendered stands in for the
+camera, the real sample model (installed by the agent's own model store) drives, and a temp sysfs tree stands in for
+the PWM chip. What the servo and motor receive must follow the pilot through DeepRacer's calibration."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from drem_cars import channels as ch
+from drem_cars import cli
+from drem_cars.credentials import CredentialStore, StoredCredential
+from drem_cars.drivers.pwm import MOTOR_DEFAULT, SERVO_DEFAULT
+from drem_cars.model_store import InstalledModel, ModelStore, md5_of
+from drem_cars.parts.drive_mapping import unit_throttle
+from drem_cars.parts.pilot_onnx import OnnxPilot
+from drem_cars.pwm_car import PwmCar, PwmWiring, build_pwm_car
+
+pytestmark = pytest.mark.unit
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
+VIDEO_FRAMES = 23  # about 1.5 s at 15 fps
+NEUTRAL_MOTOR, CENTRED_SERVO = MOTOR_DEFAULT.mid_ns, SERVO_DEFAULT.mid_ns
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The sim car's camera view while the simulator's demonstrator drives it off the start of reinvent_base,
+    written losslessly (FFV1) so the test can decode exactly what the car's camera part will see."""
+    from drem_sim.demonstrator import Demonstrator
+
+    from drem_cars.parts.sim_world import SimWorld
+
+    world = SimWorld("reinvent_base")
+    demonstrator = Demonstrator(world.track)
+    path = tmp_path_factory.mktemp("video") / "reinvent_base.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 15, (160, 120), isColor=False)
+    assert writer.isOpened()
+    for _ in range(VIDEO_FRAMES):
+        writer.write(world.render())
+        world.command(demonstrator.act(world.params)["steering_angle"], 1.5)
+        world.advance()
+    writer.release()
+    return path
+
+
+@pytest.fixture(scope="module")
+def sample_model(tmp_path_factory: pytest.TempPathFactory) -> InstalledModel:
+    store = ModelStore(tmp_path_factory.mktemp("config") / "models")
+    return store.install("sample", "drem-bc-sample", "drem-bc-sample", md5_of(SAMPLE),
+                         download=lambda handle: handle.write(SAMPLE.read_bytes()))
+
+
+def decoded_frames(path: Path) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            return frames
+        frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+
+
+def pwm_tree(root: Path) -> Path:
+    """A temp stand-in for /sys/class/pwm with channels 0 and 1 of pwmchip0 already exported."""
+    for channel in (0, 1):
+        (root / "pwmchip0" / f"pwm{channel}").mkdir(parents=True)
+    (root / "pwmchip0" / "export").write_text("")
+    return root
+
+
+def written(root: Path, channel: int, name: str) -> int:
+    return int((root / "pwmchip0" / f"pwm{channel}" / name).read_text())
+
+
+class Recorder:
+    """Last part of the loop: what each tick saw and what it wrote to the PWM files; may act at a given tick."""
+
+    def __init__(self, root: Path, at_tick: dict[int, Any] | None = None) -> None:
+        self.root = root
+        self.ticks: list[dict[str, Any]] = []
+        self.at_tick = at_tick or {}
+
+    def run(self, image, steering, speed, stopped, reason, servo_ns, motor_ns):  # type: ignore[no-untyped-def]
+        self.ticks.append({"image": None if image is None else image.copy(), "steering": steering, "speed": speed,
+                           "stopped": stopped, "reason": reason, "servo_ns": servo_ns, "motor_ns": motor_ns,
+                           "servo_file": written(self.root, 0, "duty_cycle"),
+                           "motor_file": written(self.root, 1, "duty_cycle")})
+        action = self.at_tick.get(len(self.ticks))
+        if action is not None:
+            action()
+
+
+def car_with_recorder(video: Path, root: Path, model: InstalledModel,
+                      at_tick: dict[int, Any] | None = None) -> tuple[PwmCar, Recorder]:
+    car = build_pwm_car(str(video), PwmWiring(root=root))
+    car.driver.load_model(model)  # what the agent does once the assigned model is verified and unpacked
+    recorder = Recorder(root, at_tick)
+    car.vehicle.add(recorder, inputs=[ch.CAMERA_IMAGE, ch.PILOT_STEERING, ch.PILOT_SPEED, ch.SAFETY_STOPPED,
+                                      ch.SAFETY_REASON, ch.PWM_SERVO_NS, ch.PWM_MOTOR_NS])
+    return car, recorder
+
+
+def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_ends(
+        video: Path, sample_model: InstalledModel, tmp_path: Path) -> None:
+    root = pwm_tree(tmp_path / "pwm")
+    frames = decoded_frames(video)
+    assert len(frames) == VIDEO_FRAMES
+    reference = OnnxPilot(sample_model.path)
+    space = reference.action_space
+    car, recorder = car_with_recorder(video, root, sample_model)
+    assert written(root, 0, "period") == 20_000_000 and written(root, 1, "enable") == 1
+    car.vehicle.start(rate_hz=15, max_loops=45)  # 3 s: the 1.5 s video, then its last frame goes stale
+
+    driving = [t for t in recorder.ticks if not t["stopped"]]
+    seen = set()
+    for tick in driving:
+        index = next(i for i, frame in enumerate(frames) if np.array_equal(frame, tick["image"]))
+        seen.add(index)
+        steering, speed, _ = reference.run(frames[index])
+        assert (tick["steering"], tick["speed"]) == (steering, speed), "the car's pilot is the sample model"
+        servo = SERVO_DEFAULT.duty_ns(steering / space.max_abs_steering)
+        motor = MOTOR_DEFAULT.duty_ns(unit_throttle(speed, space.max_speed))
+        assert (tick["servo_ns"], tick["motor_ns"]) == (servo, motor)
+        assert (tick["servo_file"], tick["motor_file"]) == (servo, motor), "written to sysfs, in nanoseconds"
+        assert 1_200_000 <= servo <= 1_700_000
+        assert speed >= space.speed[0] > 0 and motor < NEUTRAL_MOTOR, "forward (polarity −1: below mid)"
+    assert len(seen) >= VIDEO_FRAMES // 2, f"the video played through the camera part (frames {sorted(seen)})"
+    assert len({t["servo_ns"] for t in driving}) > 1, "steering follows the frames, not a constant"
+
+    assert car.camera.ended
+    last = recorder.ticks[-5:]
+    assert all(t["stopped"] and "camera frame is" in t["reason"] for t in last), [t["reason"] for t in last]
+    assert all((t["servo_file"], t["motor_file"]) == (CENTRED_SERVO, NEUTRAL_MOTOR) for t in last)
+    assert written(root, 1, "duty_cycle") == NEUTRAL_MOTOR
+    assert written(root, 0, "enable") == 0 and written(root, 1, "enable") == 0, "PWM disabled when the loop ends"
+
+
+def test_throttle_cap_scales_the_motor_and_emergency_stop_puts_it_to_neutral(
+        video: Path, sample_model: InstalledModel, tmp_path: Path) -> None:
+    root = pwm_tree(tmp_path / "pwm")
+    space = OnnxPilot(sample_model.path).action_space
+    car, recorder = car_with_recorder(video, root, sample_model)
+    recorder.at_tick = {8: car.driver.emergency_stop}  # what the agent does on staff's EMERGENCY_STOP
+    car.driver.set_throttle_cap(50)
+    car.vehicle.start(rate_hz=15, max_loops=14)
+
+    before, after = recorder.ticks[:8], recorder.ticks[8:]
+    driving = [t for t in before if not t["stopped"]]
+    assert driving, [t["reason"] for t in before]
+    for tick in driving:
+        assert tick["motor_file"] == MOTOR_DEFAULT.duty_ns(0.5 * unit_throttle(tick["speed"], space.max_speed))
+        assert tick["motor_file"] < NEUTRAL_MOTOR
+    assert all(t["stopped"] and t["reason"] == "emergency stop" for t in after)
+    assert all((t["servo_file"], t["motor_file"]) == (CENTRED_SERVO, NEUTRAL_MOTOR) for t in after)
+    assert car.driver.faults() == ["stopped: emergency stop"], "the heartbeat tells staff why"
+
+
+def run_args(config_dir: Path, *extra: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    return parser.parse_args(["--config-dir", str(config_dir), "run", "--pwm", *extra])
+
+
+def activated(config_dir: Path) -> Path:
+    CredentialStore(config_dir).save(StoredCredential(api="http://127.0.0.1:9", device_id="car-1", device_kind="car",
+                                                      hostname="diy-1", fleet_id="f", credential="car-1.secret"))
+    return config_dir
+
+
+def test_a_missing_camera_is_a_clear_message_and_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    config = activated(tmp_path / "config")
+    root = pwm_tree(tmp_path / "pwm")
+    assert cli.run(run_args(config, "--camera", str(tmp_path / "no-such.avi"), "--pwm-root", str(root))) == 1
+    err = capsys.readouterr().err
+    assert "cannot open camera" in err and "no-such.avi" in err and "Traceback" not in err
+    assert not (root / "pwmchip0" / "pwm0" / "duty_cycle").exists(), "nothing driven without a camera"
+    assert cli.run(run_args(config, "--camera", "7", "--pwm-root", str(root))) == 1
+    assert "cannot open camera '/dev/video7'" in capsys.readouterr().err
+
+
+def test_a_missing_pwm_chip_or_bad_calibration_is_a_clear_message_and_exit_1(
+        video: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    config = activated(tmp_path / "config")
+    assert cli.run(run_args(config, "--camera", str(video), "--pwm-root", str(tmp_path / "nothing"))) == 1
+    err = capsys.readouterr().err
+    assert f"no PWM chip at {tmp_path / 'nothing' / 'pwmchip0'}" in err and "Traceback" not in err
+    calibration = tmp_path / "calibration.json"
+    calibration.write_text(json.dumps({"Calibration": {"Servo": {"min": 1}}}))
+    root = pwm_tree(tmp_path / "pwm")
+    assert cli.run(run_args(config, "--camera", str(video), "--pwm-root", str(root),
+                            "--calibration", str(calibration))) == 1
+    assert f"calibration file {calibration}" in capsys.readouterr().err
