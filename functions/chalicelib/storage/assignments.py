@@ -18,7 +18,7 @@ from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import NotFound
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.events import DynamoEventStore
 from chalicelib.storage.models import build_model_service
@@ -87,10 +87,7 @@ class DynamoAssignmentStore:
         return True
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)
 
 
 def _item(assignment: Assignment) -> dict[str, Any]:

@@ -1,6 +1,8 @@
 """Turning botocore failures into domain errors by error *code* (never by message text)."""
 from __future__ import annotations
 
+from typing import Any
+
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
 
 from chalicelib.domain.errors import DremError, RateLimited, ServiceUnavailable, UpstreamError
@@ -23,3 +25,11 @@ def translate_common(exc: Exception, service: str) -> DremError:
     if isinstance(exc, (EndpointConnectionError, BotoCoreError)):
         return ServiceUnavailable(f"{service} cannot be reached.")
     return UpstreamError(f"{service} failed unexpectedly.")
+
+
+def call(client: Any, operation: str, service: str, *args: Any, **kwargs: Any) -> Any:
+    """`client.operation(...)`, with any AWS failure turned into the domain error `translate_common` picks."""
+    try:
+        return getattr(client, operation)(*args, **kwargs)
+    except (ClientError, BotoCoreError) as exc:
+        raise translate_common(exc, service) from exc

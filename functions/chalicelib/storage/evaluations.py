@@ -8,12 +8,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.model_registry import Evaluation, RegistryService, lineage_from_archive
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
-from chalicelib.storage.aws_errors import translate_common
+from chalicelib.storage.aws_errors import call
 from chalicelib.storage.models import build_model_service
 
 _SERVICE = "The evaluation store"
@@ -41,10 +40,7 @@ class DynamoEvaluationStore:
             request["ExclusiveStartKey"] = reply["LastEvaluatedKey"]
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)
 
 
 def build_registry_service(settings: Settings | None = None) -> RegistryService:

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.fleets import FleetRecord
-from chalicelib.storage.aws_errors import translate_common
+from chalicelib.storage.aws_errors import call
 
 _SERVICE = "The fleet table"
 
@@ -51,10 +50,7 @@ class DynamoFleetStore:
         self._call("delete_item", Key=fleet_key(fleet_id))
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
-        try:
-            return getattr(self._client, operation)(TableName=self._table, **kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, TableName=self._table, **kwargs)
 
 
 def _fleet(item: dict[str, Any]) -> FleetRecord:

@@ -16,7 +16,7 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.leaderboards import Materialised, PublicView, StaleBoard
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The leaderboards table"
 
@@ -71,7 +71,4 @@ class DynamoBoardStore:
             raise translate_common(exc, _SERVICE) from exc
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)

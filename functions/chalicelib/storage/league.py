@@ -20,7 +20,7 @@ from chalicelib.domain.errors import Conflict
 from chalicelib.domain.league import BoardEntry, LeagueService, Submission
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The league store"
 _BOARD_SK = "BOARD"
@@ -120,10 +120,7 @@ class DynamoLeagueStore:
                         "ExpressionAttributeValues": {":seen": {"N": str(version)}}}}
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)
 
 
 def build_league_service(settings: Settings | None = None) -> LeagueService:

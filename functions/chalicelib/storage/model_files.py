@@ -12,7 +12,7 @@ from typing import IO, Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The model file store"
 _CHUNK = 1024 * 1024
@@ -99,7 +99,4 @@ class S3ModelFiles:
         return self.size_of(key) is not None
 
     def _call(self, operation: str, *args: Any, **kwargs: Any) -> Any:
-        try:
-            return getattr(self._client, operation)(*args, **kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, *args, **kwargs)

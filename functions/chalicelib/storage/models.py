@@ -18,7 +18,7 @@ from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.models import ModelChanged, ModelPage, ModelRecord, ModelService, ModelStatus
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 from chalicelib.storage.model_files import S3ModelFiles
 
 _SERVICE = "The model store"
@@ -127,10 +127,7 @@ class DynamoModelStore:
                          next_token=encode_token(last) if last else None)
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)
 
 
 def encode_token(key: dict[str, Any]) -> str:

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.profiles import Profile
-from chalicelib.storage.aws_errors import translate_common
+from chalicelib.storage.aws_errors import call
 
 _SERVICE = "The profile store"
 _FIELDS = ("username", "country_code", "highlight_colour", "avatar", "updated_at")
@@ -58,7 +57,4 @@ class DynamoProfileStore:
         return self._call("get_item", TableName=self._table, Key=key, ConsistentRead=True).get("Item")
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)

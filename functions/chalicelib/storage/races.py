@@ -20,7 +20,7 @@ from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import Conflict
 from chalicelib.domain.races import RaceRecord, StaleRace
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The races table"
 
@@ -202,10 +202,7 @@ class DynamoRaceStore:
             raise translate_common(exc, _SERVICE) from exc
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
-        try:
-            return getattr(self._client, operation)(**kwargs)
-        except (ClientError, BotoCoreError) as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, **kwargs)
 
     def _pages(self, operation: str, kwargs: dict[str, Any]) -> list[dict[str, Any]]:
         items, start = [], None
