@@ -74,8 +74,7 @@ def _activate(args: argparse.Namespace) -> int:
 def _status(args: argparse.Namespace) -> int:
     from drem_cars.client import DeviceApiError, DeviceClient
     from drem_cars.credentials import CredentialStore, NotActivated
-    from drem_cars.model_store import ModelStore
-    from drem_cars.outbox import Outbox
+    from drem_cars.runner import open_agent_files
 
     store = CredentialStore(args.config_dir)
     try:
@@ -83,11 +82,11 @@ def _status(args: argparse.Namespace) -> int:
     except NotActivated as exc:
         print(exc, file=sys.stderr)
         return 1
-    outbox = Outbox(store.directory / "outbox.sqlite3")
+    outbox, models = open_agent_files(store.directory)
     local = {"device_id": client.device_id, "api": client.api, "hostname": client.credential.hostname,
              "fleet_id": client.credential.fleet_id, "outbox_pending": outbox.count("pending"),
              "outbox_rejected": outbox.count("rejected"),
-             "models": sorted(m.folder for m in ModelStore(store.directory / "models").installed().values())}
+             "models": sorted(m.folder for m in models.installed().values())}
     try:
         local["server"] = client.request("GET", "/api/devices/self", what="status")
     except DeviceApiError as exc:

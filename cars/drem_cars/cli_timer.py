@@ -27,6 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from drem_cars.drivers.timer_device import TimerDriver
     from drem_cars.drivers.timing_strips import TimingStrips
     from drem_cars.outbox import Outbox
+    from drem_cars.runner import run_until_stopped
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     store = CredentialStore(args.config_dir)
@@ -39,15 +40,7 @@ def run(args: argparse.Namespace) -> int:
     pins = tuple(int(p) for p in args.pins.split(","))
     strips = TimingStrips(outbox, args.event, args.track, client.device_id, pins)
     agent = CarAgent(client, TimerDriver(), outbox, store=None)
-    agent.start()
-    deadline = time.monotonic() + args.seconds if args.seconds else None
-    try:
-        while not agent.wait(0.5):
-            if deadline is not None and time.monotonic() >= deadline:
-                break
-    except KeyboardInterrupt:
-        pass
-    agent.stop()
+    run_until_stopped(agent, time.monotonic() + args.seconds if args.seconds else None)
     agent.flush_outbox()
     strips.close()
     print(f"crossings queued {strips.queued}, ignored {strips.ignored}, outbox pending {outbox.count()}")

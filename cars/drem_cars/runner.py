@@ -21,6 +21,18 @@ def open_agent_files(config_dir: Path) -> tuple[Outbox, ModelStore]:
     return Outbox(config_dir / "outbox.sqlite3"), ModelStore(config_dir / "models")
 
 
+def run_until_stopped(agent: CarAgent, deadline: float | None) -> None:
+    """Run the agent's background work until it stops itself (revoked, restart), the deadline, or Ctrl-C."""
+    agent.start()
+    try:
+        while not agent.wait(0.5):
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+    except KeyboardInterrupt:
+        pass
+    agent.stop()
+
+
 def run_agent(args: argparse.Namespace) -> int:
     store = CredentialStore(args.config_dir)
     try:
@@ -105,14 +117,7 @@ def _run_deepracer(args: argparse.Namespace, client: DeviceClient, outbox: Outbo
         print(f"DeepRacer console: {exc}", file=sys.stderr)
         return 1
     agent = CarAgent(client, DeepRacerConsoleDriver(console), outbox, models)
-    agent.start()
-    try:
-        while not agent.wait(0.5):
-            if deadline is not None and time.monotonic() >= deadline:
-                break
-    except KeyboardInterrupt:
-        pass
-    agent.stop()
+    run_until_stopped(agent, deadline)
     return _finish(agent)
 
 
