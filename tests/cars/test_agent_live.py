@@ -24,7 +24,7 @@ from drem_cars.sim_car import build_sim_car
 from drem_local import stack as local_stack
 from drem_local.api_client import ApiClient
 from tests.cars.onnx_models import CONTINUOUS_SPACE, mean_brightness_policy
-from tests.unit.models_helpers import onnx_archive, tar_gz
+from tests.unit.models_helpers import UNREADABLE_IR_VERSION, onnx_archive, tar_gz
 
 pytestmark = pytest.mark.integration
 
@@ -87,8 +87,8 @@ def test_activation_stores_a_private_credential_and_status_reads_the_server(live
 
 def test_assigned_models_are_pulled_verified_loaded_and_reported(live_stack, admin, tmp_path) -> None:
     _fleet, device_id = activate_car(live_stack, admin, tmp_path, "car-models")
-    # Built by the models tests' helper: an ONNX file of IR version 14, newer than this onnxruntime reads.
-    too_new = upload_model(admin, "too_new.tar.gz", onnx_archive(0.25))
+    # Too new by construction: an IR version no onnxruntime release reads, whatever version the lock installs.
+    too_new = upload_model(admin, "too_new.tar.gz", onnx_archive(0.25, ir_version=UNREADABLE_IR_VERSION))
     runnable_bytes = tar_gz([("model.onnx", mean_brightness_policy([0.0, 0.0], [0.0, 0.0])),
                              ("model_metadata.json", __import__("json").dumps(
                                  {"action_space": CONTINUOUS_SPACE, "action_space_type": "continuous",

@@ -24,8 +24,14 @@ DREM_METADATA = {
 }
 
 
-def onnx_policy(bias: float = 0.0) -> bytes:
-    """A real ONNX graph with the car's input contract (grayscale 1x120x160x1 → 2 means); `bias` changes its bytes."""
+# An ONNX IR version far beyond any that exists (IR 14 is current in 2026): every runtime refuses the file.
+UNREADABLE_IR_VERSION = 10_000
+
+
+def onnx_policy(bias: float = 0.0, ir_version: int | None = None) -> bytes:
+    """A real ONNX graph with the car's input contract (grayscale 1x120x160x1 → 2 means); `bias` changes its bytes.
+
+    `ir_version` overrides the file's IR version after the checker ran (the checker refuses unknown versions)."""
     image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 120, 160, 1])
     means = helper.make_tensor_value_info("means", TensorProto.FLOAT, [1, 2])
     weights = helper.make_tensor("weights", TensorProto.FLOAT, [120 * 160, 2], [bias] * (120 * 160 * 2))
@@ -36,6 +42,8 @@ def onnx_policy(bias: float = 0.0) -> bytes:
         "drem_policy", [image], [means], initializer=[weights, shape])
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     onnx.checker.check_model(model)
+    if ir_version is not None:
+        model.ir_version = ir_version
     return model.SerializeToString()
 
 
@@ -53,8 +61,8 @@ def tar_gz(members: list[tuple[str, bytes]], *, symlinks: dict[str, str] | None 
     return gzip.compress(buffer.getvalue(), mtime=0)
 
 
-def onnx_archive(bias: float = 0.0, metadata: dict | None = None) -> bytes:
-    return tar_gz([("model.onnx", onnx_policy(bias)),
+def onnx_archive(bias: float = 0.0, metadata: dict | None = None, ir_version: int | None = None) -> bytes:
+    return tar_gz([("model.onnx", onnx_policy(bias, ir_version)),
                    ("model_metadata.json", json.dumps(metadata or DREM_METADATA).encode())])
 
 
