@@ -17,7 +17,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
-PROJECT_DIR = Path(__file__).resolve().parent.parent
+from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
+
 REQUEST_QUEUE_SIZE = 1024
 
 
@@ -46,8 +47,7 @@ def _quiet(*_args: Any) -> None:
 
 def _put_project_on_path() -> None:
     # chalicelib is not installed: like Chalice itself, import it from the project dir.
-    if str(PROJECT_DIR) not in sys.path:
-        sys.path.insert(0, str(PROJECT_DIR))
+    use_app_source()
 
 
 def _prefer_installed_packages() -> None:

@@ -10,6 +10,8 @@ import argparse
 import importlib
 import sys
 
+from drem_local.app_source import use_app_source
+
 SUBCOMMANDS: dict[str, str] = {
     "up": "drem_local.commands.up",
     "status": "drem_local.commands.status",
@@ -61,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "_run", None) is None:
         parser.print_help()
         return 2
+    use_app_source()  # subcommands import chalicelib; it lives in functions/, not site-packages
     return int(args._run(args) or 0)
 
 
