@@ -65,6 +65,7 @@ lock: | $(UV)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras -o $(DEV_LOCK)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --constraint $(DEV_LOCK) \
 		-o $(RUNTIME_LOCK)
+	$(UV_COMPILE) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
 
 node_modules/.package-lock.json: package.json package-lock.json
 	npm ci --no-audit --no-fund

@@ -3,7 +3,6 @@ to one without the other fails here. Synth is slow (seconds), so it happens once
 from __future__ import annotations
 
 import os
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -17,49 +16,34 @@ pytestmark = pytest.mark.infra
 STAGE = "test"
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-# A stand-in Chalice project: it exercises the stack's wiring (env, grants, upload rule) without depending on the
-# real app, which tests/infra/test_bundle.py packages and imports on its own.
-WIRING_APP = textwrap.dedent(f"""
-    from chalice import Chalice
-    app = Chalice(app_name="drem")
-
-    @app.route("/")
-    def index():
-        return {{}}
-
-    @app.lambda_function(name="{resources.UPLOAD_COMPLETE_FUNCTION}")
-    def upload_complete(event, context):
-        return None
-""")
+# Anything that tried to reach a package index during synth would fail against this.
+OFFLINE = {"PIP_NO_INDEX": "1", "PIP_INDEX_URL": "http://127.0.0.1:9/simple", "PIP_EXTRA_INDEX_URL": "",
+           "PIP_FIND_LINKS": "", "UV_OFFLINE": "1"}
 
 
 @pytest.fixture(scope="module")
-def templates(tmp_path_factory):
+def templates(tmp_path_factory, lambda_build):
+    """The storage-only stack and the real app's stack (functions/ as `drem build` left it), synthesised offline."""
     import aws_cdk as cdk
     from aws_cdk.assertions import Template
 
     from drem_infra.stack import DremStack
 
+    assert not (lambda_build / "requirements.txt").exists(), "Chalice would download requirements at synth"
     work = tmp_path_factory.mktemp("cdk")
-    project = work / "functions"
-    (project / ".chalice").mkdir(parents=True)
-    (project / "chalicelib").mkdir()
-    (project / "chalicelib" / "__init__.py").write_text("")
-    (project / "app.py").write_text(WIRING_APP)
-    (project / "requirements.txt").write_text("")
-    (project / ".chalice" / "config.json").write_text(
-        (REPO_ROOT / "functions" / ".chalice" / "config.json").read_text())
-
-    cwd = os.getcwd()
+    cwd, saved_env = os.getcwd(), dict(os.environ)
     os.chdir(work)  # the Chalice construct writes chalice.out/ into the working directory
+    os.environ.update(OFFLINE)
     try:
         app = cdk.App(outdir=str(work / "cdk.out"))
         storage_only = DremStack(app, "drem-storage", stage=STAGE)
-        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=project)
+        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build)
         app.synth()
         return Template.from_stack(storage_only), Template.from_stack(with_app)
     finally:
         os.chdir(cwd)
+        os.environ.clear()
+        os.environ.update(saved_env)
 
 
 @pytest.fixture(scope="module")
