@@ -13,30 +13,26 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import aws_cdk as cdk
+from aws_cdk import aws_cloudwatch as cloudwatch
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
 from aws_cdk import aws_events as events
 from aws_cdk import aws_events_targets as targets
 from aws_cdk import aws_iam as iam
 from aws_cdk import aws_lambda as lambda_
+from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
 from constructs import Construct
 
-from drem_infra import resources
+from drem_infra import permissions, resources
 from drem_infra.resources import BucketSpec, TableSpec
 
-# What the app does with Cognito itself: staff registration, role changes, user listing, self-delete.
-_APP_COGNITO_ACTIONS = (
-    "cognito-idp:AdminCreateUser",
-    "cognito-idp:AdminDeleteUser",
-    "cognito-idp:AdminGetUser",
-    "cognito-idp:AdminAddUserToGroup",
-    "cognito-idp:AdminRemoveUserFromGroup",
-    "cognito-idp:AdminListGroupsForUser",
-    "cognito-idp:AdminUpdateUserAttributes",
-    "cognito-idp:ListUsers",
-    "cognito-idp:ListUsersInGroup",
-)
+# How long the functions' logs are kept (CloudWatch keeps them forever, and bills for them, unless told otherwise).
+LOG_RETENTION = logs.RetentionDays.ONE_MONTH
+# API Gateway stage throttling: well above an event's staff and timer traffic, far below the regional default
+# (10,000 rps), so a runaway client cannot take the account's whole API quota.
+API_RATE_LIMIT_RPS = 200
+API_BURST_LIMIT = 400
 
 
 class DremStack(cdk.Stack):
@@ -60,8 +56,9 @@ class DremStack(cdk.Stack):
 
         table = dynamodb.Table(
             self, f"{spec.logical.capitalize()}Table",
-            # env={} so a developer's local DREM_TABLE_* overrides never leak into a deployment.
-            table_name=resources.table_name(self.stage, spec.logical, env={}),
+            # No table_name: CloudFormation names it after the stack (drem-{stage}-...) plus a unique suffix, so a
+            # table retained by `make destroy` never collides with the next deploy. The app gets the name through
+            # DREM_TABLE_<LOGICAL>, the CLI through the stack outputs.
             partition_key=key(spec.pk),
             sort_key=key(spec.sk),
             billing_mode=dynamodb.BillingMode.PAY_PER_REQUEST,
@@ -125,6 +122,11 @@ class DremStack(cdk.Stack):
             "WebClient",
             user_pool_client_name=resources.client_name(self.stage),
             generate_secret=spec.generate_secret,
+            # The app signs users in with the API flows (USER_PASSWORD_AUTH, refresh) and serves its own pages; it
+            # uses no hosted UI, so no OAuth flows, scopes or callback URLs (CDK's default enables the implicit
+            # grant with https://example.com).
+            disable_o_auth=True,
+            prevent_user_existence_errors=True,
         )
         # Set the Cognito names verbatim so the template says exactly what resources.py says.
         cfn_client = client.node.default_child
@@ -153,21 +155,63 @@ class DremStack(cdk.Stack):
         with _packaging_leaves_no_trace():
             app = Chalice(self, "App", source_dir=str(functions_dir),
                           stage_config={"environment_variables": self.app_environment()})
-        # By name (Ref of the role Chalice's template defines), so the grant policy attaches to it directly.
-        role = iam.Role.from_role_name(self, "AppRole", app.get_resource("DefaultRole").ref)
-        for table in self.tables.values():
-            table.grant_read_write_data(role)
-        for bucket in self.buckets.values():
-            bucket.grant_read_write(role)
-        self.user_pool.grant(role, *_APP_COGNITO_ACTIONS)
-
         sam = json.loads(Path(app._sam_package_dir, "sam.json").read_text())  # the template Chalice just wrote
+        functions = [name for name, r in sam["Resources"].items() if r["Type"] == "AWS::Serverless::Function"]
+        log_groups = self._log_groups(app, functions)
+        self._least_privilege(app, log_groups)
+        self._alarms(app, functions)
+        api = sam["Resources"].get("RestAPI")
+        if api is not None:
+            app.get_resource("RestAPI").add_property_override("MethodSettings", [{
+                "ResourcePath": "/*", "HttpMethod": "*",
+                "ThrottlingRateLimit": API_RATE_LIMIT_RPS, "ThrottlingBurstLimit": API_BURST_LIMIT}])
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
         if upload_fn in sam["Resources"]:
             for spec in resources.BUCKETS:
                 if spec.eventbridge:
                     self._route_uploads(self.buckets[spec.logical], app.get_function(upload_fn))
         return app
+
+    def _log_groups(self, app, functions: list[str]) -> list[logs.LogGroup]:
+        """One log group per function, with retention; each function is told to log there."""
+        groups = []
+        for name in functions:
+            group = logs.LogGroup(self, f"{name}Logs", retention=LOG_RETENTION,
+                                  removal_policy=cdk.RemovalPolicy.DESTROY)
+            app.get_resource(name).add_property_override("LoggingConfig", {"LogGroup": group.log_group_name})
+            groups.append(group)
+        return groups
+
+    def _least_privilege(self, app, log_groups: list[logs.LogGroup]) -> None:
+        """Replace Chalice's default role policy (logs on arn:*:logs:*:*:*) with exactly drem_infra.permissions."""
+        tables = list(self.tables.values())
+        statements = [
+            iam.PolicyStatement(actions=list(permissions.LOG_ACTIONS),
+                                resources=[f"{g.log_group_arn}" for g in log_groups]),
+            iam.PolicyStatement(actions=list(permissions.TABLE_ACTIONS),
+                                resources=[arn for t in tables for arn in (t.table_arn, f"{t.table_arn}/index/*")]),
+            iam.PolicyStatement(actions=list(permissions.USER_POOL_ACTIONS), resources=[self.user_pool.user_pool_arn]),
+        ]
+        for logical, actions in permissions.BUCKET_OBJECT_ACTIONS.items():
+            statements.append(iam.PolicyStatement(actions=list(actions),
+                                                  resources=[self.buckets[logical].arn_for_objects("*")]))
+        for logical, actions in permissions.BUCKET_ACTIONS.items():
+            statements.append(iam.PolicyStatement(actions=list(actions), resources=[self.buckets[logical].bucket_arn]))
+        document = iam.PolicyDocument(statements=statements)
+        app.get_resource("DefaultRole").add_property_override(
+            "Policies", [{"PolicyName": "DremApp", "PolicyDocument": self.resolve(document.to_json())}])
+
+    def _alarms(self, app, functions: list[str]) -> None:
+        """Errors and throttles of every function, so a broken deploy or a quota problem shows up on the dashboard."""
+        for name in functions:
+            function_name = app.get_resource(name).ref
+            for metric_name in ("Errors", "Throttles"):
+                metric = cloudwatch.Metric(namespace="AWS/Lambda", metric_name=metric_name, statistic="Sum",
+                                           period=cdk.Duration.minutes(5),
+                                           dimensions_map={"FunctionName": function_name})
+                metric.create_alarm(self, f"{name}{metric_name}Alarm", threshold=1, evaluation_periods=1,
+                                    alarm_description=f"drem {self.stage}: {name} {metric_name.lower()} in 5 minutes",
+                                    treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
 
     def _route_uploads(self, bucket: s3.Bucket, function) -> None:
         rule = events.Rule(
