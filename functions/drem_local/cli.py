@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, str] = {
     "export": "drem_local.commands.export",
     "import": "drem_local.commands.import_",
     "league": "drem_local.commands.league",
+    "aws": "drem_local.commands.aws",
     "car": "drem_cars.cli",
     "timer": "drem_cars.cli_timer",
     "sim": "drem_sim.cli",

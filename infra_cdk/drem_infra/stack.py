@@ -13,6 +13,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import aws_cdk as cdk
+from aws_cdk import aws_certificatemanager as acm
+from aws_cdk import aws_cloudfront as cloudfront
+from aws_cdk import aws_cloudfront_origins as origins
 from aws_cdk import aws_cloudwatch as cloudwatch
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
@@ -36,16 +39,26 @@ API_BURST_LIMIT = 400
 
 
 class DremStack(cdk.Stack):
-    """Tables, buckets and the user pool; with `functions_dir`, also the Chalice app wired to them."""
+    """Tables, buckets and the user pool; with `functions_dir`, also the Chalice app wired to them, behind a
+    CloudFront distribution (the public URL: links are root-relative, and CloudFront maps / to the API's stage).
+
+    `public_url` is the URL people use (QR codes, activation commands, Secure cookies). CloudFront's own domain is
+    only known after the first deploy, and the functions cannot reference the distribution that fronts their own
+    API (a dependency cycle), so `make deploy` passes it in on a second deploy; with `domain_name` (and an ACM
+    `certificate_arn` in us-east-1) it is known from the start."""
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str,
-                 functions_dir: Path | None = None, **kwargs) -> None:
+                 functions_dir: Path | None = None, public_url: str | None = None,
+                 domain_name: str | None = None, certificate_arn: str | None = None, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
+        self.domain_name = domain_name
+        self.public_url = public_url or (f"https://{domain_name}" if domain_name else None)
         self.tables = {spec.logical: self._table(spec) for spec in resources.TABLES}
         self.buckets = {spec.logical: self._bucket(spec) for spec in resources.BUCKETS}
         self.user_pool, self.user_pool_client = self._user_pool()
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
+        self.distribution = self._distribution(certificate_arn) if self.app is not None else None
         self._outputs()
 
     # --- storage ------------------------------------------------------------------------------------------------
@@ -141,10 +154,42 @@ class DremStack(cdk.Stack):
     # --- application --------------------------------------------------------------------------------------------
 
     def app_environment(self) -> dict[str, str]:
-        return resources.stage_environment(
+        env = resources.stage_environment(
             self.stage, self.user_pool.user_pool_id, self.user_pool_client.user_pool_client_id,
             {logical: t.table_name for logical, t in self.tables.items()},
             {logical: b.bucket_name for logical, b in self.buckets.items()},
+        )
+        if self.public_url:
+            env["DREM_PUBLIC_URL"] = self.public_url
+        return env
+
+    def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
+        """Everything through CloudFront: /static/* cached at the edge, the rest passed to the API uncached (with
+        cookies, query strings and headers, but not the viewer's Host, which API Gateway must see as its own)."""
+        api_domain = f"{self.app.get_resource('RestAPI').ref}.execute-api.{self.region}.{self.url_suffix}"
+        api = origins.HttpOrigin(api_domain, origin_path="/api",
+                                 protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)
+        certificate = (acm.Certificate.from_certificate_arn(self, "Certificate", certificate_arn)
+                       if certificate_arn else None)
+        return cloudfront.Distribution(
+            self, "Distribution",
+            comment=f"drem {self.stage}",
+            default_behavior=cloudfront.BehaviorOptions(
+                origin=api,
+                viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+                allowed_methods=cloudfront.AllowedMethods.ALLOW_ALL,
+                cache_policy=cloudfront.CachePolicy.CACHING_DISABLED,
+                origin_request_policy=cloudfront.OriginRequestPolicy.ALL_VIEWER_EXCEPT_HOST_HEADER,
+            ),
+            additional_behaviors={"/static/*": cloudfront.BehaviorOptions(
+                origin=api,
+                viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+                cache_policy=cloudfront.CachePolicy.CACHING_OPTIMIZED,
+            )},
+            domain_names=[self.domain_name] if self.domain_name and certificate else None,
+            certificate=certificate,
+            price_class=cloudfront.PriceClass.PRICE_CLASS_100,
+            http_version=cloudfront.HttpVersion.HTTP2_AND_3,
         )
 
     def _chalice_app(self, functions_dir: Path):
@@ -231,6 +276,11 @@ class DremStack(cdk.Stack):
                               source_arn=rule.rule_arn)
 
     def _outputs(self) -> None:
+        cdk.CfnOutput(self, "Stage", value=self.stage)
+        cdk.CfnOutput(self, "Region", value=self.region)
+        if self.distribution is not None:
+            cdk.CfnOutput(self, "DistributionUrl", value=f"https://{self.distribution.distribution_domain_name}")
+            cdk.CfnOutput(self, "PublicUrl", value=self.public_url or "")
         cdk.CfnOutput(self, "UserPoolId", value=self.user_pool.user_pool_id)
         cdk.CfnOutput(self, "UserPoolClientId", value=self.user_pool_client.user_pool_client_id)
         for logical, table in self.tables.items():

@@ -14,6 +14,8 @@ os.environ.setdefault("JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION", "20")
 REPO_ROOT = Path(__file__).resolve().parents[2]
 FUNCTIONS_DIR = REPO_ROOT / "functions"
 STAGE = "test"
+# What `make deploy` passes on its second deploy (CloudFront's domain, or the custom domain).
+PUBLIC_URL = "https://drem.example.org"
 
 
 @pytest.fixture(scope="session")
@@ -45,7 +47,7 @@ def templates(tmp_path_factory, lambda_build):
     try:
         app = cdk.App(outdir=str(work / "cdk.out"))
         storage_only = DremStack(app, "drem-storage", stage=STAGE)
-        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build)
+        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL)
         app.synth()
         return Template.from_stack(storage_only), Template.from_stack(with_app)
     finally:
