@@ -169,14 +169,17 @@ class CarAgent:
             if kind == "EMERGENCY_STOP":
                 self.driver.emergency_stop()
                 return True, "stopped"
+            if kind == "START_CAR":
+                self.driver.start_car()
+                return True, "started"
             if kind == "SET_THROTTLE_CAP":
                 self.driver.set_throttle_cap(int(parameters["throttle_cap_pct"]))
                 return True, f"throttle capped at {parameters['throttle_cap_pct']}%"
             if kind == "SET_TAIL_LIGHT":
-                self.driver.set_tail_light(str(parameters["colour"]))
-                return True, f"tail light {parameters['colour']}"
+                message = self.driver.set_tail_light(str(parameters["colour"]))
+                return True, message or f"tail light {parameters['colour']}"
             if kind == "DELETE_ALL_MODELS":
-                self.driver.unload_models()
+                self.driver.delete_all_models()
                 self.loaded = None
                 removed = self.store.delete_all() if self.store is not None else 0
                 self._reported.clear()
