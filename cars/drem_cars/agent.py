@@ -118,11 +118,13 @@ class CarAgent:
         return True
 
     def telemetry(self) -> dict[str, Any]:
+        readings = (("battery_pct", self.driver.battery_pct()), ("fps", self.driver.fps()),
+                    ("inference_latency_ms", self.driver.inference_ms()))
+        # faults after the readings: reading the battery is how a device-console car learns of its faults
         body: dict[str, Any] = {"agent_version": __version__, "faults": self.driver.faults()[:10]}
         if self.loaded is not None:
             body["model"] = {"name": self.loaded.name[:200], "md5": self.loaded.archive_md5}
-        for key, value in (("battery_pct", self.driver.battery_pct()), ("fps", self.driver.fps()),
-                           ("inference_latency_ms", self.driver.inference_ms())):
+        for key, value in readings:
             if value is not None:
                 body[key] = value
         return body

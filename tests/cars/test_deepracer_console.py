@@ -273,3 +273,42 @@ def test_fake_changes_the_tail_light_only_in_calibration_mode(fake: FakeConsole)
     assert fake.state.mode == CALIBRATION and fake.state.tail_light == (10, 20, 30)
     refused = session.post(f"{fake.url}/api/set_led_color", json={**colour, "red": 300}, headers=headers, timeout=5)
     assert refused.json() == {"success": False, "reason": "Input is not valid"}
+
+
+class AckRecorder:
+    """The part of the device API client a command needs: acknowledgements, recorded."""
+
+    def __init__(self) -> None:
+        self.acks: dict[str, tuple[bool, str]] = {}
+
+    def acknowledge(self, command_id: str, ok: bool, message: str) -> None:
+        self.acks[command_id] = (ok, message)
+
+
+def test_staff_commands_reach_the_car_through_the_agent(fake: FakeConsole, tmp_path: Path) -> None:
+    from drem_cars.agent import CarAgent
+
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    client = AckRecorder()
+    agent = CarAgent(client, driver, outbox=None, store=None)  # type: ignore[arg-type]
+    agent.run_command({"command_id": "c1", "type": "SET_THROTTLE_CAP", "parameters": {"throttle_cap_pct": 30}})
+    agent.run_command({"command_id": "c2", "type": "START_CAR"})
+    assert fake.state.driving and fake.state.throttle_scale == 0.3
+    agent.run_command({"command_id": "c3", "type": "SET_TAIL_LIGHT", "parameters": {"colour": "#0000FF"}})
+    assert client.acks["c3"] == (True, "tail light #0000FF when the car next stops (it changes only in "
+                                       "calibration mode)")
+    agent.run_command({"command_id": "c4", "type": "EMERGENCY_STOP"})
+    assert not fake.state.driving and fake.state.tail_light == (0, 0, 255)
+    agent.run_command({"command_id": "c5", "type": "DELETE_ALL_MODELS"})
+    assert fake.state.artifacts == {}
+    assert all(ok for ok, _ in client.acks.values()), client.acks
+    assert "someone else" not in " ".join(agent.telemetry()["faults"])
+
+
+def test_an_unreachable_car_is_retried_later_not_reported_as_a_broken_model(tmp_path: Path) -> None:
+    from drem_cars.drivers.deepracer_console import ConsoleUnreachable
+
+    driver = DeepRacerConsoleDriver(DeepRacerConsole("http://127.0.0.1:9", "pw", timeout_s=2))
+    with pytest.raises(ConsoleUnreachable, match="cannot reach the DeepRacer console"):
+        driver.load_model(console_model(tmp_path))

@@ -46,6 +46,10 @@ class ConsoleError(RuntimeError):
     """The DeepRacer console refused or could not be reached; the message says which, in plain words."""
 
 
+class ConsoleUnreachable(ConsoleError):
+    """No answer from the car (WiFi, car off): worth trying again later, unlike a refusal."""
+
+
 class ConsoleHeld(ConsoleError):
     """Someone else is logged in to the car's console and drem is leaving it to them for now."""
 
@@ -99,7 +103,7 @@ class DeepRacerConsole:
         try:
             return self._http.request(method, f"{self.base_url}{path}", timeout=timeout or self.timeout_s, **kwargs)
         except requests.RequestException as exc:
-            raise ConsoleError(f"cannot reach the DeepRacer console at {self.base_url} ({exc.__class__.__name__})"
+            raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} ({exc.__class__.__name__})"
                                ) from None
 
     def _call(self, method: str, path: str, *, take_back: bool = True, **kwargs: Any) -> requests.Response:
@@ -214,6 +218,8 @@ class DeepRacerConsoleDriver:
             self.console.load_model(model.folder)
             self._wait_until_loaded(model.folder)
             self.console.max_nav_throttle(self.throttle_cap_pct)
+        except ConsoleUnreachable:
+            raise  # not the model's fault: the agent tries again on its next cycle
         except ConsoleError as exc:
             raise ModelError(str(exc)) from None
 
