@@ -16,9 +16,9 @@ of:
 - aws-deepracer/aws-deepracer-i2c-pkg         i2c_pkg/src/battery_node.cpp
 
 What is real here: CSRF is Flask-WTF's own CSRFProtect (every POST/PUT, including POST /login; the token comes from
-`<meta name="csrf-token">`; 400 "The CSRF token has expired." after WTF_CSRF_TIME_LIMIT, 3600 s). What is not: the
-real car serves HTTPS through nginx with `SESSION_COOKIE_SECURE=True`; this fake serves plain HTTP on loopback, so
-its session cookie is not marked Secure. The login page, password hashing and the session cookie's exact name are
+`<meta name="csrf-token">`; 400 "The CSRF token has expired." after WTF_CSRF_TIME_LIMIT, 3600 s), and the session
+cookie is marked Secure as on the car (`SESSION_COOKIE_SECURE=True`). What is not: the real car serves HTTPS through
+nginx; this fake serves plain HTTP on loopback (a client must send the Secure cookie back anyway). The login page, password hashing and the session cookie's exact name are
 not in the public source we could read; the fake keeps what clients rely on (form field `password`, answer
 "failure" without a cookie on a wrong password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls
 without the current token).
@@ -32,6 +32,7 @@ import gzip
 import hashlib
 import io
 import json
+import logging
 import os
 import tarfile
 import threading
@@ -171,8 +172,9 @@ class CarState:
 
 def create_app(state: CarState) -> Flask:
     app = Flask(__name__)
-    # [webserver.py] SECRET_KEY, CSRFProtect().init_app(app); WTF_CSRF_TIME_LIMIT is Flask-WTF's default 3600 s.
-    app.config.update(SECRET_KEY=os.urandom(16).hex(), WTF_CSRF_TIME_LIMIT=3600)
+    # [webserver.py] SECRET_KEY, SESSION_COOKIE_SECURE, CSRFProtect().init_app(app); WTF_CSRF_TIME_LIMIT is
+    # Flask-WTF's default 3600 s.
+    app.config.update(SECRET_KEY=os.urandom(16).hex(), SESSION_COOKIE_SECURE=True, WTF_CSRF_TIME_LIMIT=3600)
     CSRFProtect(app)
 
     def logged_in() -> bool:
@@ -438,6 +440,7 @@ def create_app(state: CarState) -> Flask:
 
 class FakeConsole:
     def __init__(self, password: str = "car-password", *, load_seconds: float = 0.3) -> None:
+        logging.getLogger("werkzeug").setLevel(logging.WARNING)  # no access log in test output
         self.clock = ConsoleClock()
         self.state = CarState(password=password, clock=self.clock, load_seconds=load_seconds)
         self.server = make_server("127.0.0.1", 0, create_app(self.state), threaded=True)
@@ -456,6 +459,8 @@ class FakeConsole:
         other = requests.Session()
         page = other.get(f"{self.url}/login", timeout=5).text
         token = page.split('name="csrf-token" content="', 1)[1].split('"', 1)[0]
+        for cookie in other.cookies:
+            cookie.secure = False  # plain http here; the car is HTTPS
         reply = other.post(f"{self.url}/login", data={"password": self.state.password},
                            headers={"X-CSRFToken": token}, timeout=5)
         assert DEEPRACER_TOKEN in reply.cookies

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import requests
 
-from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver
+from drem_cars.drivers.deepracer_console import (ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver,
+                                                 csrf_meta_token)
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole
@@ -212,6 +213,8 @@ def test_delete_all_models_stops_the_car_and_deletes_every_model_on_it(fake: Fak
 def logged_in_session(fake: FakeConsole) -> tuple[requests.Session, dict[str, str]]:
     session = requests.Session()
     token = session.get(f"{fake.url}/", timeout=5).text.split('name="csrf-token" content="')[1].split('"')[0]
+    for cookie in session.cookies:
+        cookie.secure = False  # the car's session cookie is Secure (HTTPS); this fake speaks plain http
     headers = {"X-CSRFToken": token, "Referer": f"{fake.url}/"}
     assert session.post(f"{fake.url}/login", data={"password": "car-password"}, headers=headers,
                         timeout=5).text == "success"
@@ -312,3 +315,9 @@ def test_an_unreachable_car_is_retried_later_not_reported_as_a_broken_model(tmp_
     driver = DeepRacerConsoleDriver(DeepRacerConsole("http://127.0.0.1:9", "pw", timeout_s=2))
     with pytest.raises(ConsoleUnreachable, match="cannot reach the DeepRacer console"):
         driver.load_model(console_model(tmp_path))
+
+
+def test_the_csrf_token_is_read_from_the_meta_tag_whatever_the_attribute_order() -> None:
+    assert csrf_meta_token('<head><meta charset="utf-8"><meta name="csrf-token" content="abc.def"></head>') == "abc.def"
+    assert csrf_meta_token("<meta content='x-1' name='csrf-token' />") == "x-1"
+    assert csrf_meta_token('<meta name="viewport" content="width=device-width">') is None

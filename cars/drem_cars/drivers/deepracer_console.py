@@ -36,7 +36,9 @@ import requests
 from drem_cars.model_files import TENSORFLOW_FILES, ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 
-_CSRF_META = re.compile(r'<meta\s+name=["\']csrf-token["\']\s+content=["\']([^"\']+)["\']', re.I)
+_META_TAG = re.compile(r"<meta\s[^>]*>", re.I)
+_META_NAME = re.compile(r"""\bname\s*=\s*["']csrf-token["']""", re.I)
+_META_CONTENT = re.compile(r"""\bcontent\s*=\s*["']([^"']+)["']""", re.I)
 LOGIN_COOKIE = "deepracer_token"
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
@@ -90,10 +92,9 @@ class DeepRacerConsole:
 
     def _page_token(self) -> str:
         for path in ("/", "/login"):  # `/` sends a logged-out client on to the login page
-            page = self._send("GET", path)
-            match = _CSRF_META.search(page.text)
-            if match:
-                return match.group(1)
+            token = csrf_meta_token(self._send("GET", path).text)
+            if token:
+                return token
         raise ConsoleError("the console page has no csrf-token meta tag; is this a DeepRacer device console?")
 
     def _headers(self) -> dict[str, str]:
@@ -101,10 +102,16 @@ class DeepRacerConsole:
 
     def _send(self, method: str, path: str, *, timeout: float | None = None, **kwargs: Any) -> requests.Response:
         try:
-            return self._http.request(method, f"{self.base_url}{path}", timeout=timeout or self.timeout_s, **kwargs)
+            reply = self._http.request(method, f"{self.base_url}{path}", timeout=timeout or self.timeout_s, **kwargs)
         except requests.RequestException as exc:
-            raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} ({exc.__class__.__name__})"
-                               ) from None
+            raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} "
+                                     f"({exc.__class__.__name__})") from None
+        if self.base_url.startswith("http://"):
+            # The car marks its cookies Secure (it is HTTPS behind nginx); reached over plain http (nginx bypassed,
+            # a bench replica) they must still come back, or every CSRF check fails.
+            for cookie in self._http.cookies:
+                cookie.secure = False
+        return reply
 
     def _call(self, method: str, path: str, *, take_back: bool = True, **kwargs: Any) -> requests.Response:
         if self.csrf_token is None:
@@ -124,7 +131,8 @@ class DeepRacerConsole:
 
     def _authed(self, method: str, path: str, **kwargs: Any) -> requests.Response:
         headers = {**self._headers(), **kwargs.pop("headers", {})}
-        return self._send(method, path, headers=headers, **kwargs)
+        # No redirects: a console that sends a logged-out API call to its login page must not turn a PUT into a GET.
+        return self._send(method, path, headers=headers, allow_redirects=False, **kwargs)
 
     def _login_was_young(self) -> bool:
         return self.logged_in_at is not None and self._clock() - self.logged_in_at < LOGIN_LIFE_S - 60
@@ -326,8 +334,20 @@ class DeepRacerConsoleDriver:
         return None
 
 
+def csrf_meta_token(page: str) -> str | None:
+    """The content of `<meta name="csrf-token" content=...>`, whatever the attribute order."""
+    for tag in _META_TAG.findall(page):
+        content = _META_CONTENT.search(tag)
+        if _META_NAME.search(tag) and content:
+            return content.group(1)
+    return None
+
+
 def _needs_login(reply: requests.Response) -> bool:
-    """401: no valid login cookie (expired, or someone else logged in). 400 from CSRFProtect: the token expired."""
+    """401: no valid login cookie (expired, or someone else logged in). 400 from CSRFProtect: the token expired.
+    A redirect to the login page: the same as a 401, said the way a web page says it."""
+    if reply.is_redirect and "login" in reply.headers.get("Location", "").lower():
+        return True
     return reply.status_code == 401 or (reply.status_code == 400 and "csrf" in reply.text.lower())
 
 
