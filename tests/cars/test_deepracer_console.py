@@ -139,6 +139,16 @@ def test_an_emergency_stop_works_after_the_login_and_csrf_token_expired(fake: Fa
     assert paths(fake).count("POST /login") == 2
 
 
+def test_an_upload_retried_after_logging_in_again_sends_the_whole_archive(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.battery_pct()  # logged in
+    fake.advance_clock(3601)  # the upload's first attempt is refused (expired CSRF token), the second must be whole
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    assert fake.state.artifacts["racer-fast"]["model.pb"] == b"frozen graph"
+    assert paths(fake).count("POST /login") == 2
+
+
 def test_another_client_logging_in_is_survived_and_shown_to_staff(fake: FakeConsole, tmp_path: Path) -> None:
     driver = make_driver(fake)
     driver.load_model(console_model(tmp_path))

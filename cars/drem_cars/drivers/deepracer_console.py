@@ -162,9 +162,9 @@ class DeepRacerConsole:
 
     # --- the console API ---
     def upload_model(self, archive: Path, folder: str) -> dict[str, Any]:
-        with open(archive, "rb") as handle:
-            return self._api("PUT", "/api/uploadModels", timeout=self.upload_timeout_s,
-                             files={"file": (f"{folder}.tar.gz", handle, "application/gzip")})
+        data = archive.read_bytes()  # bytes, not a file handle: a retry after logging in again resends it whole
+        return self._api("PUT", "/api/uploadModels", timeout=self.upload_timeout_s,
+                         files={"file": (f"{folder}.tar.gz", data, "application/gzip")})
 
     def load_model(self, folder: str) -> dict[str, Any]:
         return self._api("PUT", f"/api/models/{folder}/model")  # the car's optimizer appends ".pb"
