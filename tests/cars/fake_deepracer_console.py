@@ -14,6 +14,8 @@ of:
   model_install_state,model_loader_config}.py, deepracer_systems_pkg/file_system_utils.py
 - aws-deepracer/aws-deepracer-model-optimizer-pkg  model_optimizer_pkg/model_optimizer_node.py
 - aws-deepracer/aws-deepracer-i2c-pkg         i2c_pkg/src/battery_node.cpp
+- aws-deepracer/aws-deepracer-navigation-pkg  deepracer_navigation_pkg/deepracer_navigation_node.py (throttle_scale
+  starts at 0.0), as recorded in ../shared/reference/deepracer-formats.md §2.2 (that file was not in our index)
 
 What is real here: CSRF is Flask-WTF's own CSRFProtect (every POST/PUT, including POST /login; the token comes from
 `<meta name="csrf-token">`; 400 "The CSRF token has expired." after WTF_CSRF_TIME_LIMIT, 3600 s), and the session
