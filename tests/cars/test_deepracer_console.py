@@ -15,6 +15,7 @@ import requests
 
 from drem_cars.drivers.deepracer_console import (ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver,
                                                  csrf_meta_token)
+from chalicelib.domain.devices import Telemetry
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole
@@ -156,6 +157,7 @@ def test_another_client_logging_in_is_survived_and_shown_to_staff(fake: FakeCons
     fake.log_in_elsewhere()
     assert driver.battery_pct() is None
     assert any("someone else logged in" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())  # the heartbeat accepts them (at most 120 characters each)
     assert paths(fake).count("POST /login") == 2, "ours, theirs: a poll does not take the car's login back"
     driver.emergency_stop()  # staff commands always do
     assert not fake.state.driving and paths(fake).count("POST /login") == 3
@@ -195,6 +197,7 @@ def test_a_tail_light_asked_for_while_the_car_drives_waits_for_the_next_stop(fak
     assert fake.state.driving and fake.state.tail_light == (0, 0, 0)
     driver.battery_pct()
     assert any("waits for the car to stop" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())
     driver.emergency_stop()
     assert fake.state.tail_light == (0, 255, 0) and not fake.state.driving
 
@@ -325,6 +328,8 @@ def test_an_unreachable_car_is_retried_later_not_reported_as_a_broken_model(tmp_
     driver = DeepRacerConsoleDriver(DeepRacerConsole("http://127.0.0.1:9", "pw", timeout_s=2))
     with pytest.raises(ConsoleUnreachable, match="cannot reach the DeepRacer console"):
         driver.load_model(console_model(tmp_path))
+    assert driver.battery_pct() is None and driver.faults()[0].startswith("console: cannot reach")
+    Telemetry(faults=driver.faults())
 
 
 def test_the_csrf_token_is_read_from_the_meta_tag_whatever_the_attribute_order() -> None:

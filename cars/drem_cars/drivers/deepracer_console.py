@@ -42,6 +42,7 @@ _META_CONTENT = re.compile(r"""\bcontent\s*=\s*["']([^"']+)["']""", re.I)
 LOGIN_COOKIE = "deepracer_token"
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
+FAULT_MAX = 120              # the heartbeat refuses longer fault lines
 
 
 class ConsoleError(RuntimeError):
@@ -146,9 +147,7 @@ class DeepRacerConsole:
     def held_message(self) -> str | None:
         if self.held_by_other_since is None:
             return None
-        return ("someone else logged in to this car's device console (another agent, or a person on the car's web "
-                "page); drem logs back in for staff commands and model loads, and for polls after "
-                f"{self.yield_login_s:.0f} s")
+        return "someone else logged in to the car's console; drem logs back in for staff commands and model loads"
 
     def _api(self, method: str, path: str, **kwargs: Any) -> Any:
         reply = self._call(method, path, **kwargs)
@@ -311,14 +310,14 @@ class DeepRacerConsoleDriver:
             level = None
         except ConsoleError as exc:
             level = None
-            faults.append(f"console: {exc}"[:160])
+            faults.append(f"console: {exc}"[:FAULT_MAX])
         if level is not None and level < 0:
             faults.append("the car cannot read its battery level (the console reports -1)")
         elif level is not None:
             pct = min(100.0, 100.0 * level / BATTERY_FULL_LEVEL)
         held = self.console.held_message()
         if held is not None:
-            faults.append(held[:160])
+            faults.append(held)
         if self.pending_tail_light is not None:
             faults.append(f"tail light {self.pending_tail_light} waits for the car to stop")
         self._faults = faults
