@@ -268,7 +268,10 @@ class DeepRacerConsoleDriver:
     def emergency_stop(self) -> None:
         self._stop()
         if self.pending_tail_light is not None:
-            self._apply_tail_light(self.pending_tail_light)
+            try:
+                self._apply_tail_light(self.pending_tail_light)
+            except ConsoleError:
+                pass  # the car is stopped, which is what was asked; the colour stays pending (and in the faults)
 
     def _stop(self) -> None:
         self.console.start_stop(False)
