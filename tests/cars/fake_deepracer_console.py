@@ -295,6 +295,7 @@ def create_app(state: CarState) -> Flask:
     @app.get("/api/get_battery_level")
     @authenticated
     def get_battery_level():  # type: ignore[no-untyped-def]
+        record()
         return jsonify({"battery_level": state.battery_level, "success": True})
 
     # --- [webserver models.py] ---

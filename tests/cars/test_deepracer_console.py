@@ -336,3 +336,28 @@ def test_the_csrf_token_is_read_from_the_meta_tag_whatever_the_attribute_order()
     assert csrf_meta_token('<head><meta charset="utf-8"><meta name="csrf-token" content="abc.def"></head>') == "abc.def"
     assert csrf_meta_token("<meta content='x-1' name='csrf-token' />") == "x-1"
     assert csrf_meta_token('<meta name="viewport" content="width=device-width">') is None
+
+
+def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake: FakeConsole, tmp_path: Path) -> None:
+    """`drem car run --deepracer` as a user runs it: the installed entry point, from outside the repository."""
+    import subprocess
+    import sys
+
+    from drem_cars.credentials import CredentialStore, StoredCredential
+
+    config = tmp_path / "config"
+    CredentialStore(config).save(StoredCredential(api="http://127.0.0.1:9", device_id="car-1", device_kind="car",
+                                                  hostname="deepracer-07", fleet_id="f", credential="car-1.secret"))
+    drem = str(Path(sys.executable).with_name("drem"))
+
+    def run(password: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([drem, "car", "--config-dir", str(config), "run", "--deepracer", fake.url,
+                               "--seconds", "2"], cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                              env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": password,
+                                   "DREM_CAR_NO_REEXEC": "1"})
+
+    refused = run("wrong")
+    assert refused.returncode == 1 and "refused the password" in refused.stderr, refused.stderr
+    ran = run("car-password")
+    assert ran.returncode == 0, ran.stderr
+    assert "GET /api/get_battery_level" in paths(fake), "the heartbeat reads the car's battery (API unreachable)"
