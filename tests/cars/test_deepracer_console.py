@@ -361,3 +361,30 @@ def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake
     ran = run("car-password")
     assert ran.returncode == 0, ran.stderr
     assert "GET /api/get_battery_level" in paths(fake), "the heartbeat reads the car's battery (API unreachable)"
+
+
+def test_the_agents_two_threads_sharing_the_console_do_not_take_each_other_for_someone_else(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    import threading
+
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.advance_clock(3601)  # both threads' next calls are refused and log in again, at the same moment
+    errors: list[BaseException] = []
+
+    def hammer(action) -> None:  # type: ignore[no-untyped-def]
+        try:
+            for _ in range(15):
+                action()
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=hammer, args=(driver.battery_pct,)),
+               threading.Thread(target=hammer, args=(lambda: driver.set_throttle_cap(50),))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert errors == []
+    assert driver.console.held_by_other_since is None and driver.faults() == []
+    assert fake.state.throttle_scale == 0.5

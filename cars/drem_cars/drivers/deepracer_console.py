@@ -26,6 +26,7 @@ started is applied at its next stop. Polls (battery) do not take the login back 
 from __future__ import annotations
 
 import re
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -75,6 +76,9 @@ class DeepRacerConsole:
         self.csrf_token: str | None = None
         self.logged_in_at: float | None = None
         self.held_by_other_since: float | None = None  # when a young login of ours was replaced by someone else's
+        # The agent calls from two threads (commands + heartbeat, model loads). Logins are serialised, requests are
+        # not (an emergency stop must not wait for an upload).
+        self._login_lock = threading.Lock()
 
     # --- session ---
     def login(self) -> None:
@@ -116,12 +120,11 @@ class DeepRacerConsole:
 
     def _call(self, method: str, path: str, *, take_back: bool = True, **kwargs: Any) -> requests.Response:
         if self.csrf_token is None:
-            self._login_unless_held(take_back)
+            self._relogin(take_back, self._credentials_in_use(), None)
+        sent = self._credentials_in_use()
         reply = self._authed(method, path, **kwargs)
         if _needs_login(reply):
-            if reply.status_code == 401 and self.held_by_other_since is None and self._login_was_young():
-                self.held_by_other_since = self._clock()
-            self._login_unless_held(take_back)
+            self._relogin(take_back, sent, reply)
             reply = self._authed(method, path, **kwargs)
         if _needs_login(reply):
             raise ConsoleError(f"{method} {path}: the console still refuses drem after logging in again "
@@ -129,6 +132,19 @@ class DeepRacerConsole:
         if reply.status_code >= 400:
             raise ConsoleError(f"{method} {path}: HTTP {reply.status_code}: {_short(reply.text)}")
         return reply
+
+    def _credentials_in_use(self) -> tuple[str | None, str | None]:
+        return self._http.cookies.get(LOGIN_COOKIE), self.csrf_token
+
+    def _relogin(self, take_back: bool, sent: tuple[str | None, str | None],
+                 refused: requests.Response | None) -> None:
+        with self._login_lock:
+            if self.csrf_token is not None and self._credentials_in_use() != sent:
+                return  # our other thread logged in meanwhile: retry with its login
+            if (refused is not None and refused.status_code == 401 and self.held_by_other_since is None
+                    and self._login_was_young()):
+                self.held_by_other_since = self._clock()
+            self._login_unless_held(take_back)
 
     def _authed(self, method: str, path: str, **kwargs: Any) -> requests.Response:
         headers = {**self._headers(), **kwargs.pop("headers", {})}
