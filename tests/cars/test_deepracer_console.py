@@ -388,3 +388,10 @@ def test_the_agents_two_threads_sharing_the_console_do_not_take_each_other_for_s
     assert errors == []
     assert driver.console.held_by_other_since is None and driver.faults() == []
     assert fake.state.throttle_scale == 0.5
+
+
+def test_a_strange_battery_answer_is_a_fault_not_a_broken_heartbeat(fake: FakeConsole) -> None:
+    driver = make_driver(fake)
+    fake.state.battery_level = "unknown"  # type: ignore[assignment]
+    assert driver.battery_pct() is None
+    assert driver.faults() == ["console: /api/get_battery_level: battery_level 'unknown' is not a number"]

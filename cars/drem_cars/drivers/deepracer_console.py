@@ -185,7 +185,7 @@ class DeepRacerConsole:
         return self._api("PUT", f"/api/models/{folder}/model")  # the car's optimizer appends ".pb"
 
     def model_loading_status(self) -> str:
-        return str(self._api("GET", "/api/isModelLoading").get("isModelLoading"))
+        return str(_field(self._api("GET", "/api/isModelLoading"), "isModelLoading", "/api/isModelLoading"))
 
     def drive_mode(self, mode: str) -> dict[str, Any]:
         return self._api("PUT", "/api/drive_mode", json={"drive_mode": mode})
@@ -203,13 +203,21 @@ class DeepRacerConsole:
         return self._api("POST", "/api/set_led_color", json={"red": red, "green": green, "blue": blue})
 
     def uploaded_models(self) -> list[str]:
-        return [str(entry["name"]) for entry in self._api("GET", "/api/uploaded_model_list")]
+        entries = self._api("GET", "/api/uploaded_model_list")
+        if not isinstance(entries, list):
+            raise ConsoleError("/api/uploaded_model_list: the console did not answer with a list")
+        return [str(_field(entry, "name", "/api/uploaded_model_list")) for entry in entries]
 
     def delete_models(self, folders: list[str]) -> dict[str, Any]:
         return self._api("PUT", "/api/deleteModels", json={"filenames": folders})
 
     def battery_level(self) -> int:
-        return int(self._api("GET", "/api/get_battery_level", take_back=False)["battery_level"])
+        level = _field(self._api("GET", "/api/get_battery_level", take_back=False), "battery_level",
+                       "/api/get_battery_level")
+        try:
+            return int(level)
+        except (TypeError, ValueError):
+            raise ConsoleError(f"/api/get_battery_level: battery_level {level!r} is not a number") from None
 
 
 class DeepRacerConsoleDriver:
@@ -350,6 +358,12 @@ class DeepRacerConsoleDriver:
 
     def inference_ms(self) -> float | None:
         return None
+
+
+def _field(body: Any, key: str, path: str) -> Any:
+    if not isinstance(body, dict) or key not in body:
+        raise ConsoleError(f"{path}: the console's answer has no {key!r}")
+    return body[key]
 
 
 def csrf_meta_token(page: str) -> str | None:
