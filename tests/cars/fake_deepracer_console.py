@@ -20,10 +20,11 @@ of:
 What is real here: CSRF is Flask-WTF's own CSRFProtect (every POST/PUT, including POST /login; the token comes from
 `<meta name="csrf-token">`; 400 "The CSRF token has expired." after WTF_CSRF_TIME_LIMIT, 3600 s), and the session
 cookie is marked Secure as on the car (`SESSION_COOKIE_SECURE=True`). What is not: the real car serves HTTPS through
-nginx; this fake serves plain HTTP on loopback (a client must send the Secure cookie back anyway). The login page, password hashing and the session cookie's exact name are
-not in the public source we could read; the fake keeps what clients rely on (form field `password`, answer
-"failure" without a cookie on a wrong password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls
-without the current token).
+nginx; this fake serves plain HTTP on loopback (a client must send the Secure cookie back anyway). The car's login
+module (login page, password hashing) is not in the public source we could read; the fake keeps what clients rely on
+and what the community console (aws-deepracer-community/deepracer-custom-console website/src/pages/login.tsx,
+common/helpers/api-helper.ts) expects: form field `password`, the answer "failure" and no cookie on a wrong
+password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls without the current token.
 
 Time: `FakeConsole.advance_clock(seconds)` moves the clock that Flask-WTF's token check (itsdangerous) and the
 login's cookie age read, so a test can pass the one-hour limits without waiting an hour.
