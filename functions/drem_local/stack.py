@@ -51,6 +51,7 @@ class StackConfig:
     snapshot_interval: float = 5.0
     app_bind: str | None = None
     announce: str | None = None
+    public_url: str | None = None  # a TLS proxy's URL in front of the app, when there is one
 
     @property
     def storage_url(self) -> str:
@@ -63,6 +64,8 @@ class StackConfig:
     @property
     def app_url(self) -> str:
         """The URL people open, QR codes carry and presigned links point at (DREM_PUBLIC_URL)."""
+        if self.public_url:
+            return self.public_url.rstrip("/")
         return f"http://{self.announce or self.app_host}:{self.app_port}"
 
     @property
@@ -137,6 +140,41 @@ def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None
                              start_new_session=True, preexec_fn=_child_setup)
     log.close()
     return ManagedProcess(name, popen, log_path)
+
+
+def lan_address() -> str:
+    """This machine's address on the network its default route leaves by (the venue WiFi or switch)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))  # TEST-NET-1: connecting a UDP socket only picks a route, sends nothing
+            address = probe.getsockname()[0]
+        except OSError:
+            address = ""
+    if not address or address.startswith("127.") or address == "0.0.0.0":
+        raise StackError("this machine has no network address to serve the venue on (no default route). Join the "
+                         "venue network first, or name the address with --host ADDR (see `ip -4 addr`).")
+    return address
+
+
+def lan_config(config: StackConfig, host: str | None, public_url: str | None = None) -> StackConfig:
+    """`config` serving the app on the venue network: on `host` (an address of this machine; 0.0.0.0 or None means
+    every interface, announced as the default route's address). Storage stays on loopback whatever `host` is."""
+    from dataclasses import replace
+
+    bind = host or "0.0.0.0"
+    if bind != "0.0.0.0":
+        require_local_address(bind)
+    announce = lan_address() if bind == "0.0.0.0" and not public_url else (None if bind == "0.0.0.0" else bind)
+    return replace(config, app_bind=bind, announce=announce, public_url=public_url)
+
+
+def require_local_address(address: str) -> None:
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.bind((address, 0))
+    except OSError as exc:
+        raise StackError(f"{address} is not an IPv4 address of this machine ({exc.strerror}); `ip -4 addr` lists "
+                         "them") from None
 
 
 def port_in_use(host: str, port: int) -> bool:
