@@ -15,7 +15,7 @@ namespace, so every byte crosses the veth like a phone's over WiFi would.
 Goal: LAN polls/s >= 0.9 x loopback, LAN live p95 <= 1.1 x loopback (+25 ms for timer resolution) on both pages,
 PutItem ratio <= 1.4.
 
-    .venv/bin/python bench/lan.py [--seconds 5] [--rounds 2] [--samples 10] [--spectators 100]
+    .venv/bin/python bench/lan.py [--seconds 4] [--rounds 2] [--samples 8] [--spectators 100]
 """
 from __future__ import annotations
 
@@ -216,9 +216,9 @@ def putitem_ratio(config: Any) -> tuple[float, float, float]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=5)
+    parser.add_argument("--seconds", type=float, default=4)
     parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--samples", type=int, default=10)
+    parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--spectators", type=int, default=100)
     parser.add_argument("--device", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
