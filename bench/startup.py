@@ -5,7 +5,7 @@ Measured in one run, side by side:
 - `drem up` again on the state it left (snapshot load + bootstrap finding everything in place),
 - PutItem latency (median / p95 over 300) through the durable server (journal + SigV4 verification) vs a plain
   `moto_server` subprocess.
-Goal: up <= 5 s, restart <= 5 s, durable/plain PutItem median ratio <= 1.3.
+Goal: up <= 5 s, restart <= 5 s, durable/plain PutItem median ratio <= 1.4 (journal + SigV4 verification; issue 12).
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from drem_local.storage_keys import load as load_keys
 
 PUTS = 300
 WARMUP = 30
-GOALS = {"up": 5.0, "restart": 5.0, "ratio": 1.3}
+GOALS = {"up": 5.0, "restart": 5.0, "ratio": 1.4}
 
 
 def time_drem_up(state_dir: Path, app_port: int, storage_port: int) -> tuple[float, subprocess.Popen]:
@@ -142,7 +142,7 @@ def main() -> int:
 
     met = up_s <= GOALS["up"] and restart_s <= GOALS["restart"] and ratio <= GOALS["ratio"]
     print(f"RESULT startup: up={up_s:.2f}s restart={restart_s:.2f}s putitem_ratio={ratio:.2f}x "
-          f"| goal up<=5s restart<=5s ratio<=1.3 | {'met' if met else 'not met'}")
+          f"| goal up<=5s restart<=5s ratio<=1.4 | {'met' if met else 'not met'}")
     return 0
 
 

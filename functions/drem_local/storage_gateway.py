@@ -19,7 +19,7 @@ from drem_local.durable.guard import GATEWAY_PATH
 _CHUNK = 256 * 1024
 _METHODS = ("GET", "HEAD", "POST")
 # Hop-by-hop (RFC 9110 7.6.1), plus what must never reach the storage journal (the racer's session cookie).
-_DROP_REQUEST = {"connection", "keep-alive", "proxy-connection", "te", "trailer", "upgrade", "cookie",
+_DROP_REQUEST = {"connection", "keep-alive", "proxy-connection", "te", "trailer", "upgrade", "expect", "cookie",
                  "authorization", "x-forwarded-for", "forwarded"}
 _DROP_RESPONSE = {"connection", "keep-alive", "transfer-encoding", "content-type", "content-disposition",
                   "server", "date", "set-cookie"}
