@@ -121,10 +121,12 @@ class Demo:
 
     def _sign_in_director(self) -> None:
         from drem_local.bootstrap import clients_for, ensure_admin, generate_password
+        from drem_local.storage_keys import load
 
         config = self.stack.config
         password = generate_password()
-        ensure_admin(clients_for(config.storage_url, config.region), self.stack.outputs, DIRECTOR, password)
+        ensure_admin(clients_for(config.storage_url, config.region, load(config.state_dir)), self.stack.outputs,
+                     DIRECTOR, password)
         self._api = ApiClient(config.app_url)
         self._api.sign_in(DIRECTOR, password)
 
