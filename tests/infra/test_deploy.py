@@ -74,12 +74,17 @@ def _cdk_outputs(stage: str, outputs) -> dict:
 
 def test_drem_aws_records_the_outputs_and_creates_the_first_admin_once(durable_server_factory, tmp_path):
     from drem_local.bootstrap import clients_for, ensure_stack
+    from drem_local.storage_keys import load
 
     server = durable_server_factory.start("aws-deploy")
-    clients = clients_for(server.url, "us-east-1")
+    keys = load(server.state_dir)  # the local storage server stands in for AWS and accepts only these
+    clients = clients_for(server.url, "us-east-1", keys)
     outputs = ensure_stack(clients, stage="deployed")
     (tmp_path / "outputs.json").write_text(json.dumps(_cdk_outputs("deployed", outputs)))
-    env = {**{k: v for k, v in os.environ.items() if k != "PYTHONPATH"}, "AWS_ENDPOINT_URL": server.url}
+    # `drem aws` uses the default credential chain, as on a real account: here, the environment.
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AWS_SESSION_TOKEN", "AWS_SECURITY_TOKEN")}
+    env.update(AWS_ENDPOINT_URL=server.url, AWS_ACCESS_KEY_ID=keys.access_key_id,
+               AWS_SECRET_ACCESS_KEY=keys.secret_access_key)
 
     def drem(*args: str) -> subprocess.CompletedProcess:
         return subprocess.run([str(DREM), "aws", *args], cwd=tmp_path, env=env, capture_output=True, text=True,
