@@ -3,6 +3,8 @@
 Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
 for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
 No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
+A sweeper thread finishes board publishes a crash left pending (at start, then every `SWEEP_INTERVAL_S`), so boards
+equal what the races say within seconds of a restart even if no race changes (see `RaceService`).
 
     python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local]
 """
@@ -19,6 +21,7 @@ from typing import Any
 
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 REQUEST_QUEUE_SIZE = 1024
+SWEEP_INTERVAL_S = 2.0
 
 
 def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local") -> Any:
@@ -38,6 +41,22 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local")
     # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
     logging.getLogger("botocore").setLevel(logging.WARNING)
     return factory.create_local_server(config.chalice_app, config, host, port)
+
+
+def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
+    """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set."""
+    from chalicelib import logs
+    from chalicelib.routes.races import race_service
+
+    while True:
+        try:
+            finished = race_service().complete_pending_publishes()
+            if finished:
+                logs.log(logging.WARNING, "finished board publishes a crash had left pending", count=finished)
+        except Exception as exc:  # storage down or not set up yet: the intents stay, the next sweep tries again
+            logs.log(logging.INFO, "publish sweep skipped", reason=str(exc)[:200])
+        if stopping.wait(interval_s):
+            return
 
 
 def _quiet(*_args: Any) -> None:
@@ -90,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper", daemon=True).start()
     host, port = server.server.server_address[:2]
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:

@@ -5,7 +5,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
 
-from chalicelib.domain.errors import DremError, RateLimited, ServiceUnavailable, UpstreamError
+from chalicelib.domain.errors import DremError, MaybeStored, RateLimited, ServiceUnavailable, UpstreamError
 
 _THROTTLING = {"TooManyRequestsException", "ThrottlingException", "ProvisionedThroughputExceededException",
                "LimitExceededException", "RequestLimitExceeded", "SlowDown"}
@@ -15,14 +15,31 @@ def error_code(exc: ClientError) -> str:
     return exc.response.get("Error", {}).get("Code", "")
 
 
-def translate_common(exc: Exception, service: str) -> DremError:
-    """The fallback for codes a specific adapter does not handle itself."""
+# Operations that only read. Anything else changes state, so a connection lost during it may have stored it.
+_READ_OPERATIONS = ("get_", "list_", "query", "scan", "describe_", "head_", "batch_get_", "transact_get_",
+                    "admin_get_", "generate_presigned_", "initiate_auth", "admin_initiate_auth")
+
+
+def is_write(operation: str) -> bool:
+    return not operation.startswith(_READ_OPERATIONS)
+
+
+def translate_common(exc: Exception, service: str, *, write: bool = False) -> DremError:
+    """The fallback for codes a specific adapter does not handle itself.
+
+    `write=True` for a state-changing call: when the connection fails, the request (or one of botocore's retries of
+    it) may have reached storage and been stored before it went away, so the answer must not claim it was not.
+    """
     if isinstance(exc, ClientError):
         code = error_code(exc)
         if code in _THROTTLING:
             return RateLimited(f"{service} is busy; try again in a moment.")
         return UpstreamError(f"{service} refused the request ({code or 'unknown error'}).")
     if isinstance(exc, (EndpointConnectionError, BotoCoreError)):
+        if write:
+            return MaybeStored(f"{service} stopped answering while this change was being saved, so it may or may not "
+                               "have been stored. Check before repeating it; a request with an idempotency key is "
+                               "safe to retry with the same key.")
         return ServiceUnavailable(f"{service} cannot be reached.")
     return UpstreamError(f"{service} failed unexpectedly.")
 
@@ -32,4 +49,4 @@ def call(client: Any, operation: str, service: str, *args: Any, **kwargs: Any) -
     try:
         return getattr(client, operation)(*args, **kwargs)
     except (ClientError, BotoCoreError) as exc:
-        raise translate_common(exc, service) from exc
+        raise translate_common(exc, service, write=is_write(operation)) from exc
