@@ -3,8 +3,9 @@
 Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
 for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
 No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
-A sweeper thread finishes board publishes a crash left pending (at start, then every `SWEEP_INTERVAL_S`), so boards
-equal what the races say within seconds of a restart even if no race changes (see `RaceService`).
+A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
+finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
+within seconds of a restart even if no race changes (see `RaceService`, `UserService`).
 
     python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local]
 """
@@ -48,6 +49,7 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
     from chalicelib import logs
     from chalicelib.routes.races import race_service
 
+    _finish_interrupted_registrations()
     while True:
         try:
             finished = race_service().complete_pending_publishes()
@@ -57,6 +59,22 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
             logs.log(logging.INFO, "publish sweep skipped", reason=str(exc)[:200])
         if stopping.wait(interval_s):
             return
+
+
+def _finish_interrupted_registrations() -> None:
+    """Once at start: accounts a crash left without profile or role group get them, and the log says who."""
+    from chalicelib import logs
+    from chalicelib.routes.users import user_service
+
+    try:
+        finished = user_service().finish_interrupted_registrations()
+    except Exception as exc:
+        logs.log(logging.WARNING, "could not check for interrupted registrations", reason=str(exc)[:200])
+        return
+    if finished:
+        logs.log(logging.WARNING, f"finished {len(finished)} registration(s) a crash had interrupted: "
+                 f"{', '.join(finished)}. If a temporary password was never handed over, register the racer again "
+                 "at the desk (same name and email) to get a new one.", usernames=finished)
 
 
 def _quiet(*_args: Any) -> None:

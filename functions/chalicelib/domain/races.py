@@ -128,6 +128,7 @@ class EventSource(Protocol):
 
 class RacerDirectory(Protocol):
     def get_user(self, username: str) -> Any: ...  # has .sub and .username (raises NotFound)
+    def groups_of(self, username: str) -> list[str]: ...
 
 
 class ProfileSource(Protocol):
@@ -215,6 +216,10 @@ class RaceService:
         event = self.event(event_id)
         event.track(data.track_id)
         racer = self._racers.get_user(data.racer_username)
+        if not self._racers.groups_of(racer.username):  # the last step of a registration: this one was cut off
+            raise Conflict(f"The registration of {racer.username} was interrupted before it finished. Register "
+                           f"{racer.username} again at the desk (same name and email) to finish it, then create "
+                           "the race.", field="racer_username")
         config = event.race_config
         used = sum(1 for r in self._races.list_event(event_id, racer_sub=racer.sub)
                    if r.race.status is not RaceStatus.DISCARDED)
