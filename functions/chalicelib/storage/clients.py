@@ -9,6 +9,7 @@ import boto3
 from botocore.config import Config
 
 from chalicelib.settings import get_settings
+from chalicelib.storage.aws_errors import note_write_sent
 
 # botocore 1.44 otherwise sends some DynamoDB calls to account-specific hosts that moto does not serve.
 _BASE_CONFIG = Config(account_id_endpoint_mode="disabled", retries={"max_attempts": 3, "mode": "standard"},
@@ -21,7 +22,9 @@ def _client(service: str, region: str, endpoint_url: str | None) -> Any:
     if service == "s3":
         # s3v4 + path style: presigned URLs that moto (127.0.0.1) and browsers both accept.
         config = config.merge(Config(signature_version="s3v4", s3={"addressing_style": "path"} if endpoint_url else {}))
-    return boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    made = boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    made.meta.events.register("before-call", note_write_sent)  # honest errors after a write (see aws_errors)
+    return made
 
 
 def client(service: str) -> Any:
