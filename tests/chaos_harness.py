@@ -10,7 +10,7 @@ would). Meanwhile, the way an event runs:
 - an operator creates events; when storage stops answering mid-create, the client checks the event list before
   creating it again (what the error message tells a user to do), since event creation has no idempotency key.
 
-Each round kills -9 the storage server or the app at a random moment, then restarts it. At the end every count a user
+Each round kills -9 the storage server or the app (in turn) at a random moment, then restarts it. At the end every count a user
 would notice is compared with what was acknowledged: laps lost or counted twice, racers or events lost or created
 twice, boards that differ from their races, and accounts left half-registered.
 """
@@ -258,9 +258,9 @@ class Chaos:
         for worker in workers:
             worker.start()
         try:
-            for _ in range(rounds):
-                time.sleep(self.random.uniform(*round_s))
-                self._crash_and_restart(self.random.choice(("storage", "app")))
+            for index in range(rounds):
+                time.sleep(self.random.uniform(*round_s))  # a random moment in the traffic
+                self._crash_and_restart(("storage", "app")[index % 2])  # both, whatever the number of rounds
                 self.report.rounds += 1
         finally:
             self._stop.set()
@@ -279,10 +279,11 @@ class Chaos:
         self.report.crash_restart_s.append(self._first_authenticated_200(killed))
 
     def clean_restart(self) -> float:
-        """Stop the way Ctrl-C stops drem up (app, then storage with a snapshot) and start both again."""
+        """Stop the way Ctrl-C stops drem up (app, then storage with a snapshot), then time starting both again
+        (a crash's time runs from the kill, so it also holds noticing the crash and the journal replay)."""
         assert self.stack is not None
-        started = time.perf_counter()
         self.stack.stop()
+        started = time.perf_counter()
         self.stack.restart_storage(60)
         self.stack.restart_app(60)
         seconds = self._first_authenticated_200(started)
