@@ -52,6 +52,7 @@ class ChaosReport:
     stale_boards: int = 0
     half_created_accounts: int = 0
     crash_restart_s: list[float] = field(default_factory=list)
+    crash_restart_by_role: dict[str, list[float]] = field(default_factory=dict)
     clean_restart_s: list[float] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)  # answers no retry explains (a 4xx, or an op that never ended)
     misleading_answers: list[str] = field(default_factory=list)
@@ -276,7 +277,9 @@ class Chaos:
         process.kill_hard()
         self.report.kills[role] += 1
         self._supervisor.check()
-        self.report.crash_restart_s.append(self._first_authenticated_200(killed))
+        seconds = self._first_authenticated_200(killed)
+        self.report.crash_restart_s.append(seconds)
+        self.report.crash_restart_by_role.setdefault(role, []).append(seconds)
 
     def clean_restart(self) -> float:
         """Stop the way Ctrl-C stops drem up (app, then storage with a snapshot), then time starting both again

@@ -47,12 +47,15 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local")
 def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
     """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set."""
     from chalicelib import logs
+    from chalicelib.domain.races import STALE_INTENT_MS
     from chalicelib.routes.races import race_service
 
     _finish_interrupted_registrations()
+    older_than_ms = 0  # at start nothing is in flight: every intent left is a crash's
     while True:
         try:
-            finished = race_service().complete_pending_publishes()
+            finished = race_service().complete_pending_publishes(older_than_ms)
+            older_than_ms = STALE_INTENT_MS
             if finished:
                 logs.log(logging.WARNING, "finished board publishes a crash had left pending", count=finished)
         except Exception as exc:  # storage down or not set up yet: the intents stay, the next sweep tries again

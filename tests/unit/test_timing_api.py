@@ -127,7 +127,7 @@ def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
     assert _board_laps(desk, eid) == 2 and desk.board(eid)["entries"][0]["fastest_lap_ms"] == 9_000
 
 
-def test_a_left_over_publish_is_finished_by_the_next_race_write_and_by_the_sweeper(
+def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
         desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
     from chalicelib.domain.races import RaceService
     from chalicelib.routes.races import race_service
@@ -141,7 +141,7 @@ def test_a_left_over_publish_is_finished_by_the_next_race_write_and_by_the_sweep
     assert race_service().complete_pending_publishes() == 1  # what the app server's sweeper runs
     assert _board_laps(desk, eid) == 1
     assert race_service().complete_pending_publishes() == 0  # finished intents are gone
-    # A second racer's left-over row is picked up by the next race write anywhere (another lap here).
+    # A left-over row is also brought up to date by the racer's next lap (its rebuild reads every race).
     with monkeypatch.context() as crash:
         crash.setattr(RaceService, "publish", lambda *args: None)
         desk.ok(desk.strip(timer, eid, T0 + 20_000, "l2"))

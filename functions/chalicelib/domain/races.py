@@ -39,6 +39,9 @@ from drem_leaderboard.ranking import Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer
 
 WRITE_ATTEMPTS = 3
+# A race write finishes other writes' intents only once they are this old: a younger one most likely belongs to a
+# request that is publishing it right now, and rebuilding it too would only add load.
+STALE_INTENT_MS = 2_000
 log = logging.getLogger("drem.races")
 RACE_READERS = frozenset({Role.ADMIN, Role.OPERATOR, Role.COMMENTATOR})
 T = TypeVar("T")
@@ -118,7 +121,7 @@ class RaceRepository(Protocol):
     def finalise(self, record: RaceRecord, expected_version: int) -> None: ...
     def delete(self, record: RaceRecord) -> None: ...
     # Each write above also stores `PublishIntent.of(race)` in the same transaction.
-    def pending_publishes(self) -> list[PublishIntent]: ...
+    def pending_publishes(self, older_than_ms: int = 0) -> list[PublishIntent]: ...
     def complete_publish(self, intent: PublishIntent) -> None: ...
 
 
@@ -297,8 +300,11 @@ class RaceService:
         if record.race.status not in TERMINAL_STATUSES:
             raise Conflict(f"Race {race_id} is live on track {record.race.track_id}; end and discard it instead.")
         self._races.delete(record)
-        self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
-        self._finish(PublishIntent.of(record.race, deleted=True))
+        try:
+            self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
+            self._finish(PublishIntent.of(record.race, deleted=True))
+        except DremError as exc:
+            _board_behind(record.race, exc)
 
     def recompute(self, event_id: str) -> dict[str, Any]:
         event = self.event(event_id)
@@ -336,16 +342,15 @@ class RaceService:
             name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
             self._boards.publish_overlay(race, now_ms, board, name)
             self._finish(PublishIntent.of(race))
-            self.complete_pending_publishes()
+            self.complete_pending_publishes(STALE_INTENT_MS)
         except DremError as exc:
-            log.warning("race %s is stored but its board was not rebuilt yet (%s); its publish intent will be "
-                        "finished by the next request or the sweeper", race.race_id, exc.message)
+            _board_behind(race, exc)
 
-    def complete_pending_publishes(self) -> int:
+    def complete_pending_publishes(self, older_than_ms: int = 0) -> int:
         """Rebuild every board row whose publish intent is still stored (a crash or outage came between a race write
         and its board write). Returns how many were finished."""
         finished = 0
-        for intent in self._races.pending_publishes():
+        for intent in self._races.pending_publishes(older_than_ms):
             event = self._events.get(intent.event_id)
             if event is None:  # the event is gone; nothing left to publish to
                 self._races.complete_publish(intent)
@@ -380,6 +385,11 @@ class RaceService:
         if summary is None:
             return None
         return BoardRow(summary=summary, profile=self._profiles.racer_profile(summary.racer_sub, summary.username))
+
+
+def _board_behind(race: Race, exc: DremError) -> None:
+    log.warning("race %s is stored but its board was not rebuilt yet (%s); its publish intent will be finished by "
+                "the next request or the sweeper", race.race_id, exc.message)
 
 
 def _listing(record: RaceRecord) -> dict[str, Any]:

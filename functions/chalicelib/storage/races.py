@@ -21,6 +21,7 @@ partition, so finding them is one Query, empty almost always.
 """
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
@@ -59,10 +60,14 @@ def intent_key(event_id: str, track_id: str, racer_sub: str) -> dict[str, Any]:
     return {"pk": _s(PUBLISH_PK), "sk": _s(f"{event_id}#{track_id}#{racer_sub}")}
 
 
+def _wall_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
 def _intent_put(intent: PublishIntent, table: str) -> dict[str, Any]:
     item = {**intent_key(intent.event_id, intent.track_id, intent.racer_sub), "event_id": _s(intent.event_id),
             "track_id": _s(intent.track_id), "racer_sub": _s(intent.racer_sub), "racer": _s(intent.racer_username),
-            "race_id": _s(intent.race_id), "token": _s(intent.token)}
+            "race_id": _s(intent.race_id), "token": _s(intent.token), "at_ms": _n(_wall_ms())}
     return {"Put": {"TableName": table, "Item": item}}
 
 
@@ -217,10 +222,14 @@ class DynamoRaceStore:
 
     # --- publish intents -----------------------------------------------------------------------------------------
 
-    def pending_publishes(self) -> list[PublishIntent]:
+    def pending_publishes(self, older_than_ms: int = 0) -> list[PublishIntent]:
+        """Intents still stored, written at least `older_than_ms` ago (by this adapter's wall clock: younger ones
+        usually belong to a request that is publishing right now)."""
         kwargs = {"TableName": self._table, "ConsistentRead": True, "KeyConditionExpression": "pk = :pk",
                   "ExpressionAttributeValues": {":pk": _s(PUBLISH_PK)}}
-        return [_intent(item) for item in self._pages("query", kwargs)]
+        cutoff = _wall_ms() - older_than_ms
+        return [_intent(item) for item in self._pages("query", kwargs)
+                if older_than_ms <= 0 or int(item.get("at_ms", {"N": "0"})["N"]) <= cutoff]
 
     def complete_publish(self, intent: PublishIntent) -> None:
         """Drop the intent once its board row is rebuilt; a newer write's intent (another token) stays."""
