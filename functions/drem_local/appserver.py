@@ -3,6 +3,9 @@
 Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
 for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
 No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
+A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
+finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
+within seconds of a restart even if no race changes (see `RaceService`, `UserService`).
 
 With --storage-url it also forwards `/_storage/...` to the local storage server (drem_local.storage_gateway), so
 presigned uploads and downloads work from the venue network while storage itself stays on loopback.
@@ -24,6 +27,7 @@ from typing import Any
 from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
 
 REQUEST_QUEUE_SIZE = 1024
+SWEEP_INTERVAL_S = 2.0
 
 
 def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local", storage_url: str | None = None) -> Any:
@@ -63,6 +67,42 @@ def _add_storage_gateway(server: Any, handler_class: type, storage_url: str) -> 
 
     wrapped = server._wrapped_handler  # functools.partial(handler_class, app_object=..., config=...)
     server.server.RequestHandlerClass = functools.partial(GatewayRequestHandler, *wrapped.args, **wrapped.keywords)
+
+
+def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
+    """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set."""
+    from chalicelib import logs
+    from chalicelib.domain.races import STALE_INTENT_MS
+    from chalicelib.routes.races import race_service
+
+    _finish_interrupted_registrations()
+    older_than_ms = 0  # at start nothing is in flight: every intent left is a crash's
+    while True:
+        try:
+            finished = race_service().complete_pending_publishes(older_than_ms)
+            older_than_ms = STALE_INTENT_MS
+            if finished:
+                logs.log(logging.WARNING, "finished board publishes a crash had left pending", count=finished)
+        except Exception as exc:  # storage down or not set up yet: the intents stay, the next sweep tries again
+            logs.log(logging.INFO, "publish sweep skipped", reason=str(exc)[:200])
+        if stopping.wait(interval_s):
+            return
+
+
+def _finish_interrupted_registrations() -> None:
+    """Once at start: accounts a crash left without profile or role group get them, and the log says who."""
+    from chalicelib import logs
+    from chalicelib.routes.users import user_service
+
+    try:
+        finished = user_service().finish_interrupted_registrations()
+    except Exception as exc:
+        logs.log(logging.WARNING, "could not check for interrupted registrations", reason=str(exc)[:200])
+        return
+    if finished:
+        logs.log(logging.WARNING, f"finished {len(finished)} registration(s) a crash had interrupted: "
+                 f"{', '.join(finished)}. If a temporary password was never handed over, register the racer again "
+                 "at the desk (same name and email) to get a new one.", usernames=finished)
 
 
 def _quiet(*_args: Any) -> None:
@@ -116,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper", daemon=True).start()
     host, port = server.server.server_address[:2]
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:

@@ -86,6 +86,7 @@ class ManagedProcess:
     name: str
     popen: subprocess.Popen
     log_path: Path
+    log_start: int = 0  # where this run's lines begin in the (appended-to) log file
 
     @property
     def pid(self) -> int:
@@ -112,8 +113,11 @@ class ManagedProcess:
         self.popen.wait(5)
 
     def log_tail(self, lines: int = 40) -> str:
+        """The last lines this run wrote (never an earlier run's: the log file is appended to across restarts)."""
         try:
-            text = self.log_path.read_text(errors="replace")
+            with open(self.log_path, "rb") as handle:
+                handle.seek(self.log_start)
+                text = handle.read().decode(errors="replace")
         except OSError:
             return ""
         return "\n".join(text.splitlines()[-lines:])
@@ -134,12 +138,13 @@ def _child_setup() -> None:
 def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None = None) -> ManagedProcess:
     log_path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
     log = os.fdopen(os.open(log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600), "ab")
+    log_start = log.tell()  # append mode starts at the end: this run's lines begin here
     log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
     log.flush()
     popen = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                              start_new_session=True, preexec_fn=_child_setup)
     log.close()
-    return ManagedProcess(name, popen, log_path)
+    return ManagedProcess(name, popen, log_path, log_start)
 
 
 def lan_address() -> str:
@@ -311,6 +316,19 @@ class RunningStack:
     admin: Any
     env: dict[str, str]
     timings: dict[str, float] = field(default_factory=dict)
+
+    def restart_storage(self, timeout: float = 30.0) -> None:
+        """Start the storage server again on the same state dir and port (it recovers from its journal)."""
+        self.storage = start_storage(self.config, timeout)
+        self._record_pids()
+
+    def restart_app(self, timeout: float = 30.0) -> None:
+        self.app = start_app(self.config, self.env, timeout)
+        self._record_pids()
+
+    def _record_pids(self) -> None:
+        write_stack_file(self.config, self.outputs, self.admin.username, storage_pid=self.storage.pid,
+                         app_pid=self.app.pid)
 
     def stop(self) -> tuple[int | None, int | None]:
         """App first (it may still be writing), then storage, which snapshots on SIGTERM."""

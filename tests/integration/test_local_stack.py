@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -106,3 +108,58 @@ def _b64(segment: str) -> bytes:
     import base64
 
     return base64.urlsafe_b64decode(segment + "=" * (-len(segment) % 4))
+
+
+def _drem_up(cwd, state_dir, app_port, storage_port, env) -> subprocess.Popen:
+    """The installed `drem` as a user runs it, from a directory outside the repo."""
+    drem = str(Path(sys.executable).with_name("drem"))
+    return subprocess.Popen([drem, "up", "--state-dir", str(state_dir), "--port", str(app_port),
+                             "--storage-port", str(storage_port)], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+
+
+def _read_until(process: subprocess.Popen, marker: str, timeout: float = 60) -> str:
+    lines = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if marker in line:
+            return "".join(lines)
+    process.kill()
+    pytest.fail(f"drem up never printed {marker!r}:\n" + "".join(lines))
+
+
+def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on(tmp_path):
+    state_dir = tmp_path / "state"
+    app_port, storage_port = free_port(), free_port()
+    env = {**os.environ, "DREM_ADMIN_PASSWORD": "Admin-Pass-123!"}
+    up = _drem_up(tmp_path, state_dir, app_port, storage_port, env)
+    try:
+        banner = _read_until(up, "Press Ctrl-C")
+        # A fresh state dir: the admin was just created with the password from the environment.
+        assert "admin (created now, with the password in DREM_ADMIN_PASSWORD)" in banner
+        assert "password unchanged" not in banner
+
+        for role in ("storage", "app"):
+            before = read_stack_file(state_dir)["pids"][role]
+            os.kill(before, signal.SIGKILL)
+            said = _read_until(up, "is running again")
+            assert "was killed by SIGKILL; restarting it in" in said, said
+            assert read_stack_file(state_dir)["pids"][role] != before
+            assert up.poll() is None
+            deadline = time.monotonic() + 30
+            while (answer := http_get(f"http://127.0.0.1:{app_port}/healthz")) is None or answer[0] != 200:
+                assert time.monotonic() < deadline, answer
+                time.sleep(0.1)
+        cognito = boto3.client("cognito-idp", endpoint_url=f"http://127.0.0.1:{storage_port}", region_name="us-east-1",
+                               config=Config(account_id_endpoint_mode="disabled"))
+        client_id = read_stack_file(state_dir)["outputs"]["user_pool_client_id"]
+        cognito.initiate_auth(ClientId=client_id, AuthFlow="USER_PASSWORD_AUTH",
+                              AuthParameters={"USERNAME": "admin", "PASSWORD": "Admin-Pass-123!"})
+    finally:
+        up.send_signal(signal.SIGTERM)
+        rest, _ = up.communicate(timeout=60)
+    assert up.returncode == 0 and "stopped cleanly" in rest, rest

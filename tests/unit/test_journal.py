@@ -89,3 +89,23 @@ def test_the_file_grows_in_zeroed_segments_for_records_larger_than_one(tmp_path)
 
     assert path.stat().st_size % SEGMENT_BYTES == 0
     assert [len(r.body) for r in read_all(path).records] == [2, len(big), 2]
+
+
+def test_after_emptying_shorter_new_records_do_not_look_like_a_torn_tail(tmp_path, caplog):
+    """New records end in the middle of a longer record of the previous cycle: recovery must see a clean end (no
+    'torn tail' of leftovers) and appends after recovery must survive."""
+    path = tmp_path / "journal.bin"
+    journal = _write(path, [_record(1, b"a" * 5000), _record(2, b"b" * 5000)], fsync=True)
+    journal.truncate()
+    journal.append(_record(3, b"c" * 700))  # ends inside old record 1
+    journal.append(_record(4, b"d" * 900))
+    journal.close()
+
+    with caplog.at_level("WARNING", logger="drem.durable"):
+        reopened = Journal(path, fsync=True)
+        recovered = reopened.open()
+    assert [r.seq for r in recovered.records] == [3, 4]
+    assert recovered.torn_bytes == 0 and "partly written" not in caplog.text
+    reopened.append(_record(5))
+    reopened.close()
+    assert [r.seq for r in read_all(path).records] == [3, 4, 5]

@@ -280,3 +280,12 @@ def test_race_writes_are_conditional_on_the_version(desk: Desk, clock: FakeClock
     with pytest.raises(StaleRace):
         store.save(second, expected_version=0)
     assert store.get(eid, rid).race.car == "car-1"
+
+
+def test_no_race_for_a_racer_whose_registration_was_cut_off(desk: Desk, clock: FakeClock) -> None:
+    desk.users.create("halfway")  # the account exists, but the registration never reached its racer group
+    eid = desk.event()["event_id"]
+    reply = desk.create_race(eid, "halfway")
+    assert reply.status_code == 409
+    error = json.loads(reply.body)["error"]
+    assert error["field"] == "racer_username" and "Register halfway again at the desk" in error["message"]

@@ -111,3 +111,15 @@ def test_confirm_with_a_wrong_code_through_the_adapter():
 def test_confirm_needs_a_code(api):
     status, body = call(api, "POST", "/api/signup/confirm", {"username": "x"})
     assert status == 400 and body["error"]["field"] == "code"
+
+
+def test_signing_up_again_finishes_a_sign_up_cut_off_before_its_profile_and_group(api, aws_clients, stack):
+    aws_clients.cognito.sign_up(ClientId=stack.user_pool_client_id, Username="cut.off", Password=PASSWORD,
+                                UserAttributes=[{"Name": "email", "Value": "cut.off@example.test"},
+                                                {"Name": "custom:countryCode", "Value": "SE"}])
+    status, body = call(api, "POST", "/api/signup", sign_up_body("cut.off"))
+    assert status == 201, body
+    assert body["message"].startswith("This sign-up was already started.")
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="cut.off")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+    assert call(api, "GET", "/api/profiles/cut.off")[0] == 200

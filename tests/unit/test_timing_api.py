@@ -101,3 +101,70 @@ def test_bad_strip_post_names_the_field(desk: Desk, clock: FakeClock, timed_trac
         {"event_id": eid, "track_id": "1", "timestamp_ms": -5, "sensor": 17, "idempotency_key": "k"}).encode(),
         headers={"Authorization": f"Device {timer}", "Content-Type": "application/json"})
     assert reply.status_code == 400 and json.loads(reply.body)["error"]["field"] == "timestamp_ms"
+
+
+def _board_laps(desk: Desk, eid: str) -> int:
+    entries = desk.board(eid)["entries"]
+    return entries[0]["laps"] if entries else 0
+
+
+def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
+        desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The process dies right after the race write (its answer never reaches the timer): the lap is in the race, the
+    board is a lap behind; the timer's retry is answered from the store AND brings the board up to date."""
+    from chalicelib.domain.races import RaceService
+
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "s"))
+    desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
+    assert _board_laps(desk, eid) == 1
+    with monkeypatch.context() as crash:
+        crash.setattr(RaceService, "publish", lambda *args: None)  # dies between the race write and the board write
+        desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
+    assert len(_race(desk, eid, rid)["laps"]) == 2 and _board_laps(desk, eid) == 1
+    replay = desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
+    assert replay["replayed"] is True
+    assert _board_laps(desk, eid) == 2 and desk.board(eid)["entries"][0]["fastest_lap_ms"] == 9_000
+
+
+def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
+        desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
+    from chalicelib.domain.races import RaceService
+    from chalicelib.routes.races import race_service
+
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "s"))
+    with monkeypatch.context() as crash:
+        crash.setattr(RaceService, "publish", lambda *args: None)
+        desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
+    assert _board_laps(desk, eid) == 0
+    assert race_service().complete_pending_publishes() == 1  # what the app server's sweeper runs
+    assert _board_laps(desk, eid) == 1
+    assert race_service().complete_pending_publishes() == 0  # finished intents are gone
+    # A left-over row is also brought up to date by the racer's next lap (its rebuild reads every race).
+    with monkeypatch.context() as crash:
+        crash.setattr(RaceService, "publish", lambda *args: None)
+        desk.ok(desk.strip(timer, eid, T0 + 20_000, "l2"))
+    desk.ok(desk.strip(timer, eid, T0 + 29_000, "l3"))
+    assert _board_laps(desk, eid) == 3
+
+
+def test_a_board_write_failing_after_the_lap_is_stored_still_acknowledges_the_lap(
+        desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Storage goes away between the race write and the board write: the lap is stored, so the answer is the lap
+    (not 'cannot be reached'), and the board catches up once storage answers again."""
+    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.domain.leaderboards import LeaderboardPublisher
+
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "s"))
+
+    def storage_down(*_args, **_kwargs):
+        raise ServiceUnavailable("The leaderboards table cannot be reached.")
+
+    with monkeypatch.context() as outage:
+        outage.setattr(LeaderboardPublisher, "refresh_racer", storage_down)
+        lap = desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
+    assert lap["action"] == "lap" and _board_laps(desk, eid) == 0
+    assert desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))["replayed"] is True
+    assert _board_laps(desk, eid) == 1

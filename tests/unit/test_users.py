@@ -43,9 +43,57 @@ def test_racers_and_anonymous_cannot_register_others(api, users):
 def test_a_taken_name_is_a_409_that_says_so(api, users):
     admin = users.access_token("boss", ("admin",))
     assert _register(api, admin, "dup")[0] == 201
-    status, body = _register(api, admin, "dup")
+    status, body = _register(api, admin, "dup", email="someone-else@example.test")
     assert status == 409
     assert error_message(body) == "The user name 'dup' is taken."
+
+
+def _crash_after_the_account_step(aws_clients, stack, username: str) -> None:
+    """What an interrupted registration leaves: the Cognito account only (no profile, no racer group)."""
+    aws_clients.cognito.admin_create_user(
+        UserPoolId=stack.user_pool_id, Username=username, TemporaryPassword="Lost-Password-1!", MessageAction="SUPPRESS",
+        UserAttributes=[{"Name": "email", "Value": f"{username}@example.test"},
+                        {"Name": "custom:countryCode", "Value": "NL"}, {"Name": "email_verified", "Value": "true"}])
+
+
+def test_registering_again_finishes_an_interrupted_registration_and_shows_a_new_password(api, users, aws_clients,
+                                                                                        stack):
+    admin = users.access_token("boss", ("admin",))
+    _crash_after_the_account_step(aws_clients, stack, "half")
+
+    status, body = _register(api, admin, "half")
+    assert status == 201, body
+    assert body["resumed"] is True and body["role"] == "racer"
+    reply = aws_clients.cognito.initiate_auth(
+        AuthFlow="USER_PASSWORD_AUTH", ClientId=stack.user_pool_client_id,
+        AuthParameters={"USERNAME": "half", "PASSWORD": body["temporary_password"]})
+    assert reply["ChallengeName"] == "NEW_PASSWORD_REQUIRED"
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="half")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+    assert call(api, "GET", "/api/profiles/half")[0] == 200
+    # A retry whose first answer was lost (the registration had finished) also shows a password that works.
+    status, again = _register(api, admin, "half")
+    assert status == 201 and again["temporary_password"] != body["temporary_password"]
+
+
+def test_a_racer_who_has_signed_in_is_never_re_registered(api, users):
+    admin = users.access_token("boss", ("admin",))
+    users.create("settled", ("racer",))  # a confirmed account with its own password
+    status, body = _register(api, admin, "settled", email="settled@example.test")
+    assert status == 409 and error_message(body) == "The user name 'settled' is taken."
+
+
+def test_start_up_repair_finishes_interrupted_registrations(api, users, aws_clients, stack):
+    from chalicelib.routes.users import user_service
+
+    users.create("complete", ("racer",))
+    _crash_after_the_account_step(aws_clients, stack, "cutoff")
+
+    assert user_service().finish_interrupted_registrations() == ["cutoff"]
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="cutoff")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+    assert call(api, "GET", "/api/profiles/cutoff")[0] == 200
+    assert user_service().finish_interrupted_registrations() == []
 
 
 def test_staff_username_rule_and_country_are_checked(api, users):

@@ -60,5 +60,10 @@ class ServiceUnavailable(DremError):
     """A backing service (storage, identity provider) cannot be reached or is not configured."""
 
 
+class MaybeStored(ServiceUnavailable):
+    """Storage went away during a write: the change may or may not have been stored (the message says how to
+    find out, and whether a retry is safe)."""
+
+
 class UpstreamError(DremError):
     """A backing service answered with an error drem does not know how to explain."""

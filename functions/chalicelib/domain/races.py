@@ -9,9 +9,15 @@ leaderboard and overlay are rebuilt right after.
   race's version; on a clash the service reloads and applies again (a few times) before answering 409.
 - The leaderboard follows the race live: a racer's row is their submitted races plus the live race once it has a lap
   (counted as if submitted). Discarding the live race takes its laps off the board again.
+- Boards are derived state, repaired by construction: every race write stores a `PublishIntent` for the racer's row
+  in the same transaction, and the intent is deleted only after the row and overlay are rebuilt. If the process or
+  storage dies in between, the intent is still there, and `complete_pending_publishes` (run by every race write
+  after its own publish, by a timer's retry, and by the app server's sweeper) rebuilds the row from what the races
+  say.
 """
 from __future__ import annotations
 
+import logging
 import uuid
 from collections.abc import Callable, Iterable
 from typing import Any, Protocol, TypeVar
@@ -19,7 +25,7 @@ from typing import Any, Protocol, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from chalicelib.auth.principals import Principal, Role, User
-from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.domain.errors import Conflict, DremError, Forbidden, InvalidInput, NotFound
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, LeaderboardPublisher
 from chalicelib.domain.ownership import require_owner_or_role
@@ -33,6 +39,10 @@ from drem_leaderboard.ranking import Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer
 
 WRITE_ATTEMPTS = 3
+# A race write finishes other writes' intents only once they are this old: a younger one most likely belongs to a
+# request that is publishing it right now, and rebuilding it too would only add load.
+STALE_INTENT_MS = 2_000
+log = logging.getLogger("drem.races")
 RACE_READERS = frozenset({Role.ADMIN, Role.OPERATOR, Role.COMMENTATOR})
 T = TypeVar("T")
 
@@ -54,6 +64,24 @@ class RaceRecord(BaseModel):
     race: Race
     created_by: str
     max_runs_override: MaxRunsOverride | None = None
+
+
+class PublishIntent(BaseModel):
+    """A racer's board row (and the track's overlay) still to rebuild after a race write. Stored with the write;
+    `token` names the write, so finishing an older intent never drops a newer one."""
+    model_config = ConfigDict(frozen=True)
+    event_id: str
+    track_id: str
+    racer_sub: str
+    racer_username: str
+    race_id: str
+    token: str
+
+    @classmethod
+    def of(cls, race: Race, *, deleted: bool = False) -> PublishIntent:
+        return cls(event_id=race.event_id, track_id=race.track_id, racer_sub=race.racer.sub,
+                   racer_username=race.racer.username, race_id=race.race_id,
+                   token=f"{race.race_id}#{'deleted' if deleted else race.version}")
 
 
 class CreateRaceInput(BaseModel):
@@ -91,7 +119,10 @@ class RaceRepository(Protocol):
     def create_live(self, record: RaceRecord) -> None: ...
     def save(self, record: RaceRecord, expected_version: int) -> None: ...
     def finalise(self, record: RaceRecord, expected_version: int) -> None: ...
-    def delete(self, event_id: str, race_id: str) -> None: ...
+    def delete(self, record: RaceRecord) -> None: ...
+    # Each write above also stores `PublishIntent.of(race)` in the same transaction.
+    def pending_publishes(self, older_than_ms: int = 0) -> list[PublishIntent]: ...
+    def complete_publish(self, intent: PublishIntent) -> None: ...
 
 
 class EventSource(Protocol):
@@ -100,6 +131,7 @@ class EventSource(Protocol):
 
 class RacerDirectory(Protocol):
     def get_user(self, username: str) -> Any: ...  # has .sub and .username (raises NotFound)
+    def groups_of(self, username: str) -> list[str]: ...
 
 
 class ProfileSource(Protocol):
@@ -187,6 +219,10 @@ class RaceService:
         event = self.event(event_id)
         event.track(data.track_id)
         racer = self._racers.get_user(data.racer_username)
+        if not self._racers.groups_of(racer.username):  # the last step of a registration: this one was cut off
+            raise Conflict(f"The registration of {racer.username} was interrupted before it finished. Register "
+                           f"{racer.username} again at the desk (same name and email) to finish it, then create "
+                           "the race.", field="racer_username")
         config = event.race_config
         used = sum(1 for r in self._races.list_event(event_id, racer_sub=racer.sub)
                    if r.race.status is not RaceStatus.DISCARDED)
@@ -263,8 +299,12 @@ class RaceService:
         record = self.record(event_id, race_id)
         if record.race.status not in TERMINAL_STATUSES:
             raise Conflict(f"Race {race_id} is live on track {record.race.track_id}; end and discard it instead.")
-        self._races.delete(event_id, race_id)
-        self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
+        self._races.delete(record)
+        try:
+            self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
+            self._finish(PublishIntent.of(record.race, deleted=True))
+        except DremError as exc:
+            _board_behind(record.race, exc)
 
     def recompute(self, event_id: str) -> dict[str, Any]:
         event = self.event(event_id)
@@ -292,10 +332,44 @@ class RaceService:
     # --- publishing --------------------------------------------------------------------------------------------
 
     def publish(self, event: Event, race: Race, now_ms: int) -> None:
-        """After a change: the racer's board row (their submitted races + this one if live), then the overlay."""
-        board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race)
-        name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
-        self._boards.publish_overlay(race, now_ms, board, name)
+        """After a change: the racer's board row (their submitted races + this one if live), then the overlay; then
+        drop the publish intent the write stored, and finish any other write's intent a crash left behind.
+
+        The race change is already stored (with its intent) when this runs, so a storage failure here does not fail
+        the request: the change is acknowledged and the intent makes sure the board catches up."""
+        try:
+            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race)
+            name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
+            self._boards.publish_overlay(race, now_ms, board, name)
+            self._finish(PublishIntent.of(race))
+            self.complete_pending_publishes(STALE_INTENT_MS)
+        except DremError as exc:
+            _board_behind(race, exc)
+
+    def complete_pending_publishes(self, older_than_ms: int = 0) -> int:
+        """Rebuild every board row whose publish intent is still stored (a crash or outage came between a race write
+        and its board write). Returns how many were finished."""
+        finished = 0
+        for intent in self._races.pending_publishes(older_than_ms):
+            event = self._events.get(intent.event_id)
+            if event is None:  # the event is gone; nothing left to publish to
+                self._races.complete_publish(intent)
+                continue
+            now = self.clock_ms()
+            board = self.refresh_racer_board(event, intent.track_id,
+                                             Racer(sub=intent.racer_sub, username=intent.racer_username), now)
+            record = self._races.get(intent.event_id, intent.race_id)
+            live = self._races.live_race_id(intent.event_id, intent.track_id)
+            if record is not None and live in (None, intent.race_id):  # an older race must not cover a newer live one
+                race = record.race
+                name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
+                self._boards.publish_overlay(race, now, board, name)
+            self._races.complete_publish(intent)
+            finished += 1
+        return finished
+
+    def _finish(self, intent: PublishIntent) -> None:
+        self._races.complete_publish(intent)
 
     def refresh_racer_board(self, event: Event, track_id: str, racer: Racer, now_ms: int,
                             changed: Race | None = None) -> Leaderboard:
@@ -311,6 +385,11 @@ class RaceService:
         if summary is None:
             return None
         return BoardRow(summary=summary, profile=self._profiles.racer_profile(summary.racer_sub, summary.username))
+
+
+def _board_behind(race: Race, exc: DremError) -> None:
+    log.warning("race %s is stored but its board was not rebuilt yet (%s); its publish intent will be finished by "
+                "the next request or the sweeper", race.race_id, exc.message)
 
 
 def _listing(record: RaceRecord) -> dict[str, Any]:

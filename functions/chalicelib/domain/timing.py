@@ -3,7 +3,9 @@
 A post names the event and track; the device must be in that track's fleet. The crossing is applied to the track's
 live race with `drem_leaderboard.timer_input.handle_strip_event`. Devices retry, so the answer is stored under
 `(device, idempotency_key)` in the same transaction as the race change, BEFORE it is returned; a repeated key gets
-the stored answer back (`replayed: true`) and never a second lap.
+the stored answer back (`replayed: true`) and never a second lap. A replay also finishes any board publish a crash
+left pending (the race write and its publish intent are stored together, the board after), so a retry of a post whose
+answer was lost brings the board up to date.
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from typing import Protocol
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.auth.principals import Device
-from chalicelib.domain.errors import Forbidden
+from chalicelib.domain.errors import DremError, Forbidden, MaybeStored
 from chalicelib.domain.races import RaceRecord, RaceService, with_retries
 from drem_leaderboard.models import Lap
 from drem_leaderboard.timer_input import StripEvent, handle_strip_event
@@ -68,6 +70,7 @@ class TimingService:
             raise Forbidden(f"Device {device.device_id} is not in the fleet of track {post.track_id}.")
         stored = self._replay(device.device_id, post.idempotency_key)
         if stored is not None:
+            self._catch_up_boards()
             return stored
         crossing = StripEvent(timestamp_ms=post.timestamp_ms, sensor=post.sensor, idempotency_key=post.idempotency_key)
 
@@ -86,7 +89,12 @@ class TimingService:
             kept = self._keep(device, answer, updated, record.race.version if changed else None)
             return kept, (updated if kept is answer else None), now
 
-        answer, updated, now = with_retries(attempt)
+        try:
+            answer, updated, now = with_retries(attempt)
+        except MaybeStored as exc:
+            raise MaybeStored("Storage stopped answering while this crossing was being saved, so it may or may not "
+                              "have been stored. Post it again with the same idempotency_key once storage is back: a "
+                              "repeated key is never counted twice.") from exc
         if updated is not None:
             self._races.publish(event, updated.race, now)
         return answer
@@ -101,6 +109,12 @@ class TimingService:
         replay = self._replay(device.device_id, answer.idempotency_key)
         assert replay is not None  # save_with_outcome said it exists
         return replay
+
+    def _catch_up_boards(self) -> None:
+        try:
+            self._races.complete_pending_publishes()
+        except DremError:
+            pass  # storage is struggling; the stored answer is still true, and the intent stays for the next one
 
     def _replay(self, device_id: str, key: str) -> StripAnswer | None:
         stored = self._outcomes.get_outcome(device_id, key)

@@ -165,6 +165,8 @@ class RegisteredUser(BaseModel):
     role: Role = Role.RACER
     # Shown once: drem does not store it and Cognito will not return it again.
     temporary_password: str
+    # True when this finished a registration that was interrupted earlier (the password is a new one).
+    resumed: bool = False
 
 
 class UserDirectory(Protocol):
@@ -172,6 +174,8 @@ class UserDirectory(Protocol):
     def confirm_sign_up(self, username: str, code: str) -> None: ...
     def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str: ...
     def get_user(self, username: str) -> DirectoryUser: ...
+    def groups_of(self, username: str) -> list[str]: ...
+    def reset_temporary_password(self, username: str, temporary_password: str) -> None: ...
     def list_users(self, prefix: str | None, limit: int, next_token: str | None) -> UserPage: ...
     def set_only_group(self, username: str, group: str) -> None: ...
     def set_enabled(self, username: str, enabled: bool) -> None: ...
@@ -227,24 +231,70 @@ class UserService:
         self._profiles = profiles
         self._erasers = erasers
 
+    # Registrations are three writes (account, profile, role group), in that order: an account is complete once it
+    # has a group, so "no group" marks one a crash interrupted. Repeating the same registration finishes it
+    # (`_resume`), races refuse a racer without a group, and `finish_interrupted_registrations` repairs them at start.
+
     def sign_up(self, form: SignUpForm) -> SignUpResult:
-        sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
-        self._directory.set_only_group(form.username, Role.RACER.value)
-        self._profiles.create_for(sub, form.username, form.country_code)
-        return SignUpResult(username=form.username, sub=sub, confirmed=False,
-                            message=f"Check {form.email} for a confirmation code, then confirm your account.")
+        message = f"Check {form.email} for a confirmation code, then confirm your account."
+        try:
+            sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
+        except Conflict:
+            # Only a half-created one (no group yet) is finished; a complete sign-up keeps answering "taken".
+            existing = self._resumable(form.username, form.email, status="UNCONFIRMED")
+            if self._directory.groups_of(existing.username):
+                raise
+            self._finish(existing.username, existing.sub, form.country_code)
+            return SignUpResult(username=existing.username, sub=existing.sub, confirmed=False,
+                                message=f"This sign-up was already started. {message}")
+        self._finish(form.username, sub, form.country_code)
+        return SignUpResult(username=form.username, sub=sub, confirmed=False, message=message)
 
     def confirm_sign_up(self, form: ConfirmSignUpForm) -> dict[str, str]:
         self._directory.confirm_sign_up(form.username.strip(), form.code.strip())
         return {"username": form.username.strip(), "message": "Your account is confirmed; you can sign in now."}
 
     def register_racer(self, form: StaffRegistrationForm) -> RegisteredUser:
+        """Create the account, profile and racer group. Registering the same name and email again while the racer
+        has never signed in finishes whatever is missing and shows a new temporary password (the answer of the
+        first attempt may never have reached the desk)."""
         password = temporary_password()
-        sub = self._directory.create_user(form.username, form.email, form.country_code, password)
-        self._directory.set_only_group(form.username, Role.RACER.value)
-        self._profiles.create_for(sub, form.username, form.country_code)
+        resumed = False
+        try:
+            sub = self._directory.create_user(form.username, form.email, form.country_code, password)
+        except Conflict:
+            existing = self._resumable(form.username, form.email, status="FORCE_CHANGE_PASSWORD")
+            self._directory.reset_temporary_password(existing.username, password)
+            sub, resumed = existing.sub, True
+        self._finish(form.username, sub, form.country_code)
         return RegisteredUser(username=form.username, sub=sub, email=form.email, country_code=form.country_code,
-                              temporary_password=password)
+                              temporary_password=password, resumed=resumed)
+
+    def finish_interrupted_registrations(self) -> list[str]:
+        """Accounts without a role group were cut off mid-registration: give them their profile and the racer
+        group. Returns their usernames (the caller says so in plain words)."""
+        finished, token = [], None
+        while True:
+            page = self._directory.list_users(None, MAX_PAGE, token)
+            for user in page.users:
+                if not self._directory.groups_of(user.username):
+                    self._finish(user.username, user.sub, user.country_code)
+                    finished.append(user.username)
+            token = page.next_token
+            if not token:
+                return finished
+
+    def _resumable(self, username: str, email: str, *, status: str) -> DirectoryUser:
+        """The existing account, if this is a repeat of its own unfinished registration; else the name is taken."""
+        existing = self._directory.get_user(username)
+        if existing.status != status or (existing.email or "").casefold() != email.casefold():
+            raise Conflict(f"The user name '{username}' is taken.", field="username")
+        return existing
+
+    def _finish(self, username: str, sub: str, country_code: str | None) -> None:
+        self._profiles.create_for(sub, username, country_code)
+        if not self._directory.groups_of(username):  # a role given meanwhile (say, operator) is kept
+            self._directory.set_only_group(username, Role.RACER.value)
 
     def list_users(self, prefix: str | None = None, limit: int = MAX_PAGE, next_token: str | None = None) -> UserPage:
         prefix = (prefix or "").strip() or None

@@ -1,11 +1,14 @@
 """Turning botocore failures into domain errors by error *code* (never by message text)."""
 from __future__ import annotations
 
+import re
+import threading
 from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
 
-from chalicelib.domain.errors import DremError, RateLimited, ServiceUnavailable, UpstreamError
+from chalicelib import logs
+from chalicelib.domain.errors import DremError, MaybeStored, RateLimited, ServiceUnavailable, UpstreamError
 
 _THROTTLING = {"TooManyRequestsException", "ThrottlingException", "ProvisionedThroughputExceededException",
                "LimitExceededException", "RequestLimitExceeded", "SlowDown"}
@@ -15,14 +18,53 @@ def error_code(exc: ClientError) -> str:
     return exc.response.get("Error", {}).get("Code", "")
 
 
-def translate_common(exc: Exception, service: str) -> DremError:
-    """The fallback for codes a specific adapter does not handle itself."""
+# Operations that only read. Anything else changes state, so a connection lost during it may have stored it.
+_READ_OPERATIONS = ("get_", "list_", "query", "scan", "describe_", "head_", "batch_get_", "transact_get_",
+                    "admin_get_", "admin_list_", "generate_presigned_", "initiate_auth", "admin_initiate_auth")
+
+
+def is_write(operation: str) -> bool:
+    return not operation.startswith(_READ_OPERATIONS)
+
+
+_written = threading.local()
+
+
+def note_write_sent(model: Any = None, **_kwargs: Any) -> None:
+    """botocore `before-call` hook (see `clients`): remember that this request has sent a state-changing call."""
+    name = getattr(model, "name", "")
+    if name and is_write(_snake(name)):
+        _written.request_id = logs.current_request_id()
+
+
+def writes_sent() -> bool:
+    """Did the current request already send a write? Then a later failure must not claim nothing was stored."""
+    request_id = logs.current_request_id()
+    return request_id is not None and getattr(_written, "request_id", None) == request_id
+
+
+def _snake(name: str) -> str:
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", name).lower()
+
+
+def translate_common(exc: Exception, service: str, *, write: bool = False) -> DremError:
+    """The fallback for codes a specific adapter does not handle itself.
+
+    `write=True` for a state-changing call: when the connection fails, the request (or one of botocore's retries of
+    it) may have reached storage and been stored before it went away, so the answer must not claim it was not. The
+    same holds for any failure after an earlier write of the same HTTP request (say, a registration's account was
+    created and reading its groups failed): `writes_sent` knows.
+    """
     if isinstance(exc, ClientError):
         code = error_code(exc)
         if code in _THROTTLING:
             return RateLimited(f"{service} is busy; try again in a moment.")
         return UpstreamError(f"{service} refused the request ({code or 'unknown error'}).")
     if isinstance(exc, (EndpointConnectionError, BotoCoreError)):
+        if write or writes_sent():
+            return MaybeStored(f"{service} stopped answering while this change was being saved, so it may or may not "
+                               "have been stored. Check before repeating it; a request with an idempotency key is "
+                               "safe to retry with the same key.")
         return ServiceUnavailable(f"{service} cannot be reached.")
     return UpstreamError(f"{service} failed unexpectedly.")
 
@@ -32,4 +74,4 @@ def call(client: Any, operation: str, service: str, *args: Any, **kwargs: Any) -
     try:
         return getattr(client, operation)(*args, **kwargs)
     except (ClientError, BotoCoreError) as exc:
-        raise translate_common(exc, service) from exc
+        raise translate_common(exc, service, write=is_write(operation)) from exc

@@ -10,6 +10,7 @@ from botocore import UNSIGNED
 from botocore.config import Config
 
 from chalicelib.settings import get_settings
+from chalicelib.storage.aws_errors import note_write_sent
 
 # botocore 1.44 otherwise sends some DynamoDB calls to account-specific hosts that moto does not serve.
 _BASE_CONFIG = Config(account_id_endpoint_mode="disabled", retries={"max_attempts": 3, "mode": "standard"},
@@ -23,6 +24,7 @@ def _client(service: str, region: str, endpoint_url: str | None) -> Any:
         # s3v4 + path style: presigned URLs that moto (127.0.0.1) and browsers both accept.
         config = config.merge(Config(signature_version="s3v4", s3={"addressing_style": "path"} if endpoint_url else {}))
     made = boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    made.meta.events.register("before-call", note_write_sent)  # honest errors after a write (see aws_errors)
     # The local storage server accepts only requests signed with the installation's keys (from the environment).
     return sign_every_call(made) if endpoint_url else made
 

@@ -6,20 +6,28 @@ of timing-strip posts (idempotency).
 | race (the whole `RaceRecord` as JSON in `doc`, plus `track_id`, `racer_sub`, `status`, `version` to filter on) | `EVENT#{eventId}` | `RACE#{raceId}` |
 | live race of a track (`race_id`, `racer`) | `EVENT#{eventId}` | `LIVE#{trackId}` |
 | stored strip outcome (`outcome` JSON) | `IDEMPOTENCY#{deviceId}` | `{key}` |
+| publish intent: a racer's board row still to rebuild (`event_id`, `track_id`, `racer_sub`, `race_id`, `token`) | `PUBLISH` | `{eventId}#{trackId}#{racerSub}` |
 
 The race body is a JSON string rather than a DynamoDB map: no float/Decimal round trips, and one attribute to parse.
 Every race write is conditional on the race's `version` (optimistic concurrency); a lost race raises `StaleRace` so
 the service can reload and retry. Writes that must happen together (race + live pointer, race + stored outcome) are
 one transaction, so a retried strip post can never produce a second lap.
+
+Every race write also puts the racer's publish intent in the same transaction. The board is derived state: the
+service deletes the intent (only if its token is still the one it wrote) after the board and overlay are rebuilt,
+so a crash between the race write and the board write leaves the intent behind for whoever comes next
+(`pending_publishes`: a retry, the next race write, or the app's sweeper) to finish. All intents share one
+partition, so finding them is one Query, empty almost always.
 """
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import Conflict
-from chalicelib.domain.races import RaceRecord, StaleRace
+from chalicelib.domain.races import PublishIntent, RaceRecord, StaleRace
 from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The races table"
@@ -45,6 +53,30 @@ def outcome_key(device_id: str, key: str) -> dict[str, Any]:
     return {"pk": _s(f"IDEMPOTENCY#{device_id}"), "sk": _s(key)}
 
 
+PUBLISH_PK = "PUBLISH"
+
+
+def intent_key(event_id: str, track_id: str, racer_sub: str) -> dict[str, Any]:
+    return {"pk": _s(PUBLISH_PK), "sk": _s(f"{event_id}#{track_id}#{racer_sub}")}
+
+
+def _wall_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
+def _intent_put(intent: PublishIntent, table: str) -> dict[str, Any]:
+    item = {**intent_key(intent.event_id, intent.track_id, intent.racer_sub), "event_id": _s(intent.event_id),
+            "track_id": _s(intent.track_id), "racer_sub": _s(intent.racer_sub), "racer": _s(intent.racer_username),
+            "race_id": _s(intent.race_id), "token": _s(intent.token), "at_ms": _n(_wall_ms())}
+    return {"Put": {"TableName": table, "Item": item}}
+
+
+def _intent(item: dict[str, Any]) -> PublishIntent:
+    return PublishIntent(event_id=item["event_id"]["S"], track_id=item["track_id"]["S"],
+                         racer_sub=item["racer_sub"]["S"], racer_username=item.get("racer", {}).get("S", ""),
+                         race_id=item["race_id"]["S"], token=item["token"]["S"])
+
+
 def _race_item(record: RaceRecord) -> dict[str, Any]:
     race = record.race
     return {**race_key(race.event_id, race.race_id), "race_id": _s(race.race_id), "event_id": _s(race.event_id),
@@ -54,12 +86,6 @@ def _race_item(record: RaceRecord) -> dict[str, Any]:
 
 def _record(item: dict[str, Any]) -> RaceRecord:
     return RaceRecord.model_validate_json(item["doc"]["S"])
-
-
-def _version_condition(expected_version: int | None) -> tuple[str, dict[str, Any]]:
-    if expected_version is None:
-        return "attribute_not_exists(pk)", {}
-    return "version = :expected", {":expected": _n(expected_version)}
 
 
 class DynamoRaceStore:
@@ -125,6 +151,7 @@ class DynamoRaceStore:
                          "ConditionExpression": "attribute_not_exists(pk)"}},
                 {"Put": {"TableName": self._table, "Item": pointer,
                          "ConditionExpression": "attribute_not_exists(pk)"}},
+                _intent_put(PublishIntent.of(race), self._table),
             ])
         except ClientError as exc:
             if error_code(exc) == "TransactionCanceledException":
@@ -132,21 +159,18 @@ class DynamoRaceStore:
                 raise Conflict(f"Track {race.track_id} already has a live race"
                                f"{f' ({racer})' if racer else ''}; submit or discard it first.",
                                field="track_id") from exc
-            raise translate_common(exc, _SERVICE) from exc
+            raise translate_common(exc, _SERVICE, write=True) from exc
         except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+            raise translate_common(exc, _SERVICE, write=True) from exc
 
     def save(self, record: RaceRecord, expected_version: int) -> None:
-        condition, values = _version_condition(expected_version)
-        try:
-            self._client.put_item(TableName=self._table, Item=_race_item(record), ConditionExpression=condition,
-                                  ExpressionAttributeValues=values)
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise StaleRace(record.race.race_id) from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        """Save a changed race (conditional on its version) together with its publish intent."""
+        self._transact([
+            {"Put": {"TableName": self._table, "Item": _race_item(record),
+                     "ConditionExpression": "version = :expected",
+                     "ExpressionAttributeValues": {":expected": _n(expected_version)}}},
+            _intent_put(PublishIntent.of(record.race), self._table),
+        ], record.race.race_id)
 
     def finalise(self, record: RaceRecord, expected_version: int) -> None:
         """Save a submitted/discarded race and clear its track's live pointer, together."""
@@ -158,6 +182,7 @@ class DynamoRaceStore:
             {"Delete": {"TableName": self._table, "Key": live_key(race.event_id, race.track_id),
                         "ConditionExpression": "race_id = :rid",
                         "ExpressionAttributeValues": {":rid": _s(race.race_id)}}},
+            _intent_put(PublishIntent.of(race), self._table),
         ], race.race_id)
 
     def save_with_outcome(self, record: RaceRecord | None, expected_version: int | None, device_id: str, key: str,
@@ -174,20 +199,50 @@ class DynamoRaceStore:
             items.append({"Put": {"TableName": self._table, "Item": _race_item(record),
                                   "ConditionExpression": "version = :expected",
                                   "ExpressionAttributeValues": {":expected": _n(expected_version)}}})
+            items.append(_intent_put(PublishIntent.of(record.race), self._table))
         try:
             self._client.transact_write_items(TransactItems=items)
         except ClientError as exc:
             if error_code(exc) != "TransactionCanceledException":
-                raise translate_common(exc, _SERVICE) from exc
+                raise translate_common(exc, _SERVICE, write=True) from exc
             if self.get_outcome(device_id, key) is not None:
                 return False
             raise StaleRace(record.race.race_id if record else key) from exc
         except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+            raise translate_common(exc, _SERVICE, write=True) from exc
         return True
 
-    def delete(self, event_id: str, race_id: str) -> None:
-        self._call("delete_item", TableName=self._table, Key=race_key(event_id, race_id))
+    def delete(self, record: RaceRecord) -> None:
+        """Delete a finished race together with a publish intent for its racer's row (which it no longer counts in)."""
+        race = record.race
+        self._transact([
+            {"Delete": {"TableName": self._table, "Key": race_key(race.event_id, race.race_id)}},
+            _intent_put(PublishIntent.of(race, deleted=True), self._table),
+        ], race.race_id)
+
+    # --- publish intents -----------------------------------------------------------------------------------------
+
+    def pending_publishes(self, older_than_ms: int = 0) -> list[PublishIntent]:
+        """Intents still stored, written at least `older_than_ms` ago (by this adapter's wall clock: younger ones
+        usually belong to a request that is publishing right now)."""
+        kwargs = {"TableName": self._table, "ConsistentRead": True, "KeyConditionExpression": "pk = :pk",
+                  "ExpressionAttributeValues": {":pk": _s(PUBLISH_PK)}}
+        cutoff = _wall_ms() - older_than_ms
+        return [_intent(item) for item in self._pages("query", kwargs)
+                if older_than_ms <= 0 or int(item.get("at_ms", {"N": "0"})["N"]) <= cutoff]
+
+    def complete_publish(self, intent: PublishIntent) -> None:
+        """Drop the intent once its board row is rebuilt; a newer write's intent (another token) stays."""
+        try:
+            self._client.delete_item(TableName=self._table,
+                                     Key=intent_key(intent.event_id, intent.track_id, intent.racer_sub),
+                                     ConditionExpression="#token = :token", ExpressionAttributeNames={"#token": "token"},
+                                     ExpressionAttributeValues={":token": _s(intent.token)})
+        except ClientError as exc:
+            if error_code(exc) != "ConditionalCheckFailedException":
+                raise translate_common(exc, _SERVICE) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
 
     # --- plumbing ------------------------------------------------------------------------------------------------
 
@@ -197,9 +252,9 @@ class DynamoRaceStore:
         except ClientError as exc:
             if error_code(exc) == "TransactionCanceledException":
                 raise StaleRace(race_id) from exc
-            raise translate_common(exc, _SERVICE) from exc
+            raise translate_common(exc, _SERVICE, write=True) from exc
         except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+            raise translate_common(exc, _SERVICE, write=True) from exc
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
         return call(self._client, operation, _SERVICE, **kwargs)

@@ -11,13 +11,13 @@ from botocore.exceptions import BotoCoreError, ClientError
 from chalicelib.domain.errors import Conflict, DremError, InvalidInput, NotFound
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.domain.users import DirectoryUser, UserPage
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import error_code, is_write, translate_common
 
 _SERVICE = "The account service"
 COUNTRY_ATTRIBUTE = "custom:countryCode"
 
 
-def translate_account_error(exc: Exception, username: str = "") -> DremError:
+def translate_account_error(exc: Exception, username: str = "", *, write: bool = False) -> DremError:
     """Cognito error codes → what the person filling in the form should do."""
     if isinstance(exc, ClientError):
         code = error_code(exc)
@@ -34,7 +34,7 @@ def translate_account_error(exc: Exception, username: str = "") -> DremError:
             return InvalidInput(f"This password is too weak. {password_policy_text()}", field="password")
         if code == "InvalidParameterException":
             return InvalidInput("Cognito rejected one of the values; check the username, email and country.")
-    return translate_common(exc, _SERVICE)
+    return translate_common(exc, _SERVICE, write=write)
 
 
 class CognitoUserDirectory:
@@ -66,6 +66,11 @@ class CognitoUserDirectory:
                            UserAttributes=[*_attributes(email, country_code),
                                            {"Name": "email_verified", "Value": "true"}])
         return _user(reply["User"]).sub
+
+    def reset_temporary_password(self, username: str, temporary_password: str) -> None:
+        """A new temporary password for an account that never signed in (the old one stops working)."""
+        self._call(username, "admin_set_user_password", UserPoolId=self._pool_id, Username=username,
+                   Password=temporary_password, Permanent=False)
 
     def get_user(self, username: str) -> DirectoryUser:
         reply = self._call(username, "admin_get_user", UserPoolId=self._pool_id, Username=username)
@@ -127,7 +132,7 @@ class CognitoUserDirectory:
         try:
             return getattr(self._client, operation)(**kwargs)
         except (ClientError, BotoCoreError) as exc:
-            raise translate_account_error(exc, username) from exc
+            raise translate_account_error(exc, username, write=is_write(operation)) from exc
 
     def _paginate(self, username: str, operation: str, **kwargs: Any) -> list[dict[str, Any]]:
         try:

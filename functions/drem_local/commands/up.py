@@ -65,18 +65,28 @@ def run(args: argparse.Namespace) -> int:
         print("drem up: interrupted while starting; everything started so far was stopped.", file=sys.stderr)
         return 1
 
+    from drem_local.supervise import GaveUp, Supervisor
+
     demo = None
+    supervisor = Supervisor(stack, say=lambda line: print(line, file=sys.stderr, flush=True))
     try:
-        _print_ready(stack)
+        _print_ready(stack, admin_password_from_env=password is not None)
         if args.demo:
             demo = _start_demo(stack)
             if demo is None:
                 stack.stop()
                 return 1
-        while stack.app.alive() and stack.storage.alive():
+        while True:
+            supervisor.check()  # a crashed storage or app server is restarted; only repeated crashes end the loop
             if demo is not None:
                 demo.step()
             time.sleep(1.0 if demo is not None else 0.5)
+    except GaveUp as exc:
+        if demo is not None:
+            demo.stop()
+        print(f"drem up: {exc}", file=sys.stderr)
+        stack.stop()
+        return 1
     except _Stop:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the snapshot short
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -91,14 +101,6 @@ def run(args: argparse.Namespace) -> int:
             return 1
         print("drem stopped cleanly. Your data is in " f"{config.state_dir.resolve()}.")
         return 0
-
-    if demo is not None:
-        demo.stop()
-    died = stack.app if not stack.app.alive() else stack.storage
-    print(f"drem up: the {died.name} stopped unexpectedly (exit code {died.popen.returncode}). "
-          f"Last lines of {died.log_path}:\n{died.log_tail()}", file=sys.stderr)
-    stack.stop()
-    return 1
 
 
 def _start_demo(stack):  # type: ignore[no-untyped-def]
@@ -124,7 +126,7 @@ def _start_demo(stack):  # type: ignore[no-untyped-def]
     return demo
 
 
-def _print_ready(stack) -> None:
+def _print_ready(stack, *, admin_password_from_env: bool) -> None:
     config, admin = stack.config, stack.admin
     lines = [
         f"drem is running (ready in {stack.timings['total_s']:.1f}s).",
@@ -141,11 +143,20 @@ def _print_ready(stack) -> None:
         f"  Data directory:      {config.state_dir.resolve()}",
         f"  Logs:                {config.log_dir.resolve()}",
     ]
-    if admin.created and admin.password and not os.environ.get("DREM_ADMIN_PASSWORD"):
-        lines.append(f"  Admin login:         {admin.username} / {admin.password}")
+    lines.append(f"  Admin login:         {admin_login(admin, admin_password_from_env)}")
+    if admin.created and not admin_password_from_env:
         lines.append("  (This password is shown only now. Write it down: drem keeps it only in the data directory, "
                      "which only your user account can read.)")
-    else:
-        lines.append(f"  Admin login:         {admin.username} (password unchanged)")
     lines.append("Press Ctrl-C to stop. `drem status` in another terminal shows what is running.")
     print("\n".join(lines), flush=True)
+
+
+def admin_login(admin, password_from_env: bool) -> str:  # type: ignore[no-untyped-def]
+    """What the banner says about the admin account: exactly what this start did to it."""
+    if admin.created:
+        if password_from_env:
+            return f"{admin.username} (created now, with the password in DREM_ADMIN_PASSWORD)"
+        return f"{admin.username} / {admin.password}"
+    if password_from_env:
+        return f"{admin.username} (password set from DREM_ADMIN_PASSWORD)"
+    return f"{admin.username} (password unchanged)"

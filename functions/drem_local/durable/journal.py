@@ -5,7 +5,9 @@ The file is zero-filled ahead of the write position (like a database WAL segment
 that also has to commit a new file size costs a journal commit (~4 ms on our virtual disk), while one over
 already-allocated blocks costs ~0.1 ms. So the journal's end is not the file's end: reading stops at the first
 zero, torn, corrupt or out-of-order record. `Journal.open` overwrites a torn tail with zeros, so records appended
-after recovery are never hidden behind garbage. Emptying the journal after a snapshot only zeroes its first
+after recovery are never hidden behind garbage. Every append writes a zero header right after its record, so what
+follows the last record is always a zero header, unless the process died while writing that very record (a torn
+tail, at most one record long). Emptying the journal after a snapshot only zeroes its first
 header; older records left further on have lower sequence numbers than anything written next, so reading stops
 before them (and the snapshot holds them anyway).
 """
@@ -26,6 +28,7 @@ _HEADER = struct.Struct("<II")
 # No single request comes near this; a larger length can only be garbage from a torn write.
 _MAX_RECORD_BYTES = 1 << 30
 SEGMENT_BYTES = 4 << 20
+_END_MARK = b"\0" * _HEADER.size
 # Past this the file is cut back to one segment when emptied, so a burst of big uploads does not pin disk space.
 _SHRINK_ABOVE_BYTES = 4 * SEGMENT_BYTES
 
@@ -109,7 +112,8 @@ class Journal:
         self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
         self._capacity = os.fstat(self._fd).st_size
         if existing.torn_bytes:
-            log.warning("journal %s: cutting off a torn tail of %d bytes after %d intact records",
+            log.warning("journal %s: the last record (%d bytes) was only partly written when the server stopped, "
+                        "so it was never acknowledged; zeroing it after %d intact records",
                         self.path, existing.torn_bytes, len(existing.records))
             os.pwrite(self._fd, b"\0" * existing.torn_bytes, existing.valid_bytes)
             os.fsync(self._fd)
@@ -119,10 +123,12 @@ class Journal:
         return existing
 
     def append(self, record: JournalRecord) -> None:
+        # The record and a zero header after it, in one write: a reader always finds where the journal ends, even
+        # when the record ends inside a longer record of an earlier cycle (left behind by `truncate`). Without it,
+        # recovery took those leftovers for a torn tail of megabytes.
         data = encode(record)
-        # Keep a zero header after the record so a reader always finds where the journal ends.
         self._ensure_capacity(self.bytes + len(data) + _HEADER.size)
-        os.pwrite(self._fd, data, self.bytes)
+        os.pwrite(self._fd, data + _END_MARK, self.bytes)
         if self.fsync:
             os.fdatasync(self._fd)
         self.bytes += len(data)
