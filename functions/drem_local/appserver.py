@@ -21,7 +21,6 @@ import os
 import signal
 import sys
 import threading
-from pathlib import Path
 from typing import Any
 
 from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
