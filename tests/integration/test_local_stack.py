@@ -154,8 +154,9 @@ def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on
             while (answer := http_get(f"http://127.0.0.1:{app_port}/healthz")) is None or answer[0] != 200:
                 assert time.monotonic() < deadline, answer
                 time.sleep(0.1)
-        cognito = boto3.client("cognito-idp", endpoint_url=f"http://127.0.0.1:{storage_port}", region_name="us-east-1",
-                               config=Config(account_id_endpoint_mode="disabled"))
+        from drem_local.storage_keys import load, local_client
+
+        cognito = local_client("cognito-idp", f"http://127.0.0.1:{storage_port}", load(state_dir))
         client_id = read_stack_file(state_dir)["outputs"]["user_pool_client_id"]
         cognito.initiate_auth(ClientId=client_id, AuthFlow="USER_PASSWORD_AUTH",
                               AuthParameters={"USERNAME": "admin", "PASSWORD": "Admin-Pass-123!"})
