@@ -86,9 +86,15 @@ class CarPhysics:
         return self.point_ahead(self.spec.front_point_x)
 
     def wheel_points(self) -> list[tuple[float, float]]:
+        """The four wheel contact points: `point_ahead`'s arithmetic with the body read once, not four times."""
         sp = self.spec
         half = sp.axle_track / 2
-        return [self.point_ahead(fx, side) for fx in (sp.front_axle_x, sp.rear_axle_x) for side in (half, -half)]
+        body = self.body
+        angle = body.angle
+        c, s = math.cos(angle), math.sin(angle)
+        px, py = body.position
+        return [(px + fx * c - side * s, py + fx * s + side * c)
+                for fx in (sp.front_axle_x, sp.rear_axle_x) for side in (half, -half)]
 
     # ---- control + integration -----------------------------------------------------------
     def command(self, steering_deg: float, speed: float) -> None:
