@@ -172,8 +172,8 @@ class RaceEnv:
         """(signed offset, half width) of each wheel contact point. The answer depends only on the pose and the
         segment hint, so it is kept for that key: the last substep's on-track check and the params of the same
         decision ask for the same pose."""
-        body = self.physics.body
-        key = (*body.position, body.angle, self._hint)
+        physics = self.physics
+        key = (physics.x, physics.y, physics.heading, self._hint)
         if key == self._wheel_key:
             return self._wheel_cache
         out = []
