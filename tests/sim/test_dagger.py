@@ -32,12 +32,13 @@ def dagger_run(tmp_path_factory: pytest.TempPathFactory):
                           eval_tracks=[TrackDirection("reinvent_base")], rounds=1, demo_laps=1, first_epochs=1,
                           round_epochs=1, eval_laps=1, seed=3)
     train = TrainConfig(batch_size=64, num_threads=1, augmentation=Augmentation.from_names(["brightness", "shift", "blur"]))
-    reports = run_dagger(config, out, "dagger-test", train, progress=io.StringIO())
-    return out, reports
+    progress = io.StringIO()
+    reports = run_dagger(config, out, "dagger-test", train, progress=progress)
+    return out, reports, progress.getvalue()
 
 
 def test_each_round_adds_model_driven_runs_labelled_by_the_demonstrator(dagger_run) -> None:
-    out, reports = dagger_run
+    out, reports, _progress = dagger_run
     assert [r.round for r in reports] == [0, 1]
     assert reports[1].frames > reports[0].frames and reports[1].runs == reports[0].runs + 2
     dagger_runs = sorted((out / "runs" / "round-1").rglob("controls.jsonl"))
@@ -56,7 +57,7 @@ def test_each_round_adds_model_driven_runs_labelled_by_the_demonstrator(dagger_r
 
 
 def test_rounds_are_recorded_in_the_archive_lineage_and_plotted(dagger_run) -> None:
-    out, reports = dagger_run
+    out, reports, _progress = dagger_run
     with tarfile.open(out / "dagger-test.tar.gz") as archive:
         lineage = json.load(archive.extractfile("training/lineage.json"))
     assert lineage["dagger"]["round"] == 1
@@ -111,3 +112,11 @@ def test_train_refuses_a_hold_out_that_leaves_nothing_and_unknown_tracks(tmp_pat
                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "unknown track 'drem_ovale'" in done.stderr
     assert not (tmp_path / "m").exists()
+
+
+def test_progress_shows_recording_driving_and_training(dagger_run) -> None:
+    _out, _reports, progress = dagger_run
+    assert "round 0 recording [####################] 2/2" in progress
+    assert "round 1 driving [##########..........] 1/2 drem_oval:reverse" in progress
+    assert "round 1 driving [####################] 2/2" in progress
+    assert "epoch 1/1 train" in progress and "held out: reinvent_base" in progress

@@ -71,7 +71,7 @@ class RoundReport:
 
 
 def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps: int, noise_deg: float,
-                          seed: int) -> list[Path]:
+                          seed: int, progress: TextIO | None = None) -> list[Path]:
     """The demonstrator laps each track and direction once per `laps` (one run per lap, its own noise seed)."""
     from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
     from drem_sim.env import RaceEnv
@@ -79,6 +79,7 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
 
     runs = []
     for number, direction in enumerate(directions):
+        _bar(progress, "round 0 recording", number, len(directions), direction.label)
         track = direction.load()
         for lap in range(laps):
             run_seed = seed * 1000 + number * 50 + lap + 1
@@ -86,6 +87,7 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
                                    rng=np.random.default_rng(run_seed))
             runs.append(record_run(RaceEnv(track), lambda _obs, params, t=teacher: t.act(params), root, laps=1,
                                    driver="demonstrator", seed=run_seed))
+    _bar(progress, "round 0 recording", len(directions), len(directions), "done")
     return runs
 
 
@@ -137,7 +139,7 @@ def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any
         _say(progress, f"round 0: demonstrator, {config.demo_laps} lap(s) on each of {len(config.train_tracks)} "
                        f"track direction(s)")
         runs += record_demonstrations(config.train_tracks, runs_root / "round-0", config.demo_laps,
-                                      config.demo_noise_deg, config.seed)
+                                      config.demo_noise_deg, config.seed, progress)
     scale = load_snapshot(runs).scale  # fixed from round 0 on: later rounds' targets keep their meaning
     reports: list[RoundReport] = []
     state = None
@@ -147,9 +149,11 @@ def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any
             _say(progress, f"round {round_number}: model drives, demonstrator labels (beta {beta:.2f})")
             previous = reports[-1].archive
             for number, direction in enumerate(config.train_tracks):
+                _bar(progress, f"round {round_number} driving", number, len(config.train_tracks), direction.label)
                 runs.append(collect_dagger_run(previous, direction, runs_root / f"round-{round_number}",
                                                config.dagger_laps, beta,
                                                config.seed * 1000 + round_number * 100 + number, round_number))
+            _bar(progress, f"round {round_number} driving", len(config.train_tracks), len(config.train_tracks), "done")
         epochs = config.first_epochs if round_number == 0 else config.round_epochs
         lineage = {"dagger": {"round": round_number, "rounds": config.rounds,
                               "train_tracks": [d.label for d in config.train_tracks],
@@ -175,6 +179,16 @@ def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any
     (out_dir / "rounds.json").write_text(json.dumps([r.as_dict() for r in reports], indent=2) + "\n")
     plot_rounds(reports, out_dir / "rounds.png")
     return reports
+
+
+def _bar(stream: TextIO | None, label: str, done: int, total: int, current: str) -> None:
+    """One redrawn line per track: collection is minutes on a big track set, so show where it is."""
+    if stream is None:
+        return
+    filled = int(20 * done / max(total, 1))
+    end = "\n" if done >= total else ""
+    stream.write(f"\r{label} [{'#' * filled}{'.' * (20 - filled)}] {done}/{total} {current:<32}{end}")
+    stream.flush()
 
 
 def _say(stream: TextIO | None, text: str) -> None:
