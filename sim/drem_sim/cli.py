@@ -39,10 +39,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     evaluate = sub.add_parser("eval", help="drive a model archive round a track and write metrics")
     evaluate.add_argument("--model", required=True, type=Path, help="model archive (.tar.gz) or folder")
-    evaluate.add_argument("--track", required=True)
+    evaluate.add_argument("--track", required=True, action="append",
+                          help="track name, NAME:reverse for the other way round, or all (closed tracks); "
+                               "repeat or comma-separate for a per-track report")
+    evaluate.add_argument("--both-directions", action="store_true", help="drive every track both ways round")
     evaluate.add_argument("--laps", type=int, default=3)
     evaluate.add_argument("--seed", type=int, default=0)
-    evaluate.add_argument("--out", type=Path, help="metrics file (*.json) or folder to write metrics.json into")
+    evaluate.add_argument("--out", type=Path, help="metrics file (*.json) or folder to write metrics.json into; "
+                                                    "several tracks: a folder with metrics-<track>.json and suite.json")
 
 
 def _track_arguments(parser: argparse.ArgumentParser) -> None:
@@ -188,4 +192,12 @@ def _eval(args: argparse.Namespace) -> int:
     except ImportError as error:
         print(f"drem sim eval: model evaluation is not available in this build ({error})", file=sys.stderr)
         return 2
-    return int(main_eval(args) or 0)
+    from drem_sim.learn.track_sets import split_specs
+
+    specs = split_specs(args.track)
+    if len(specs) == 1 and specs[0] != "all" and not specs[0].endswith(":reverse") and not args.both_directions:
+        args.track = specs[0]
+        return int(main_eval(args) or 0)
+    from drem_sim.learn.suite import main_suite
+
+    return main_suite(args)

@@ -78,6 +78,8 @@ class RaceEnv:
         self.np_random = np.random.default_rng()
         self._length = self.track.length
         self._half_wheel = spec.axle_track / 2
+        self._wheel_key: tuple[float, ...] | None = None
+        self._wheel_cache: list[tuple[float, float]] = []
         self._new_episode(0.0)
 
     # ---- episode --------------------------------------------------------------------------
@@ -167,11 +169,18 @@ class RaceEnv:
         return self._observe(), self._params, terminated, truncated, self._info(events, went_off, lap_done)
 
     def _wheel_offsets(self) -> list[tuple[float, float]]:
-        """(signed offset, half width) of each wheel contact point."""
+        """(signed offset, half width) of each wheel contact point. The answer depends only on the pose and the
+        segment hint, so it is kept for that key: the last substep's on-track check and the params of the same
+        decision ask for the same pose."""
+        physics = self.physics
+        key = (physics.x, physics.y, physics.heading, self._hint)
+        if key == self._wheel_key:
+            return self._wheel_cache
         out = []
         for wx, wy in self.physics.wheel_points():
             _, _, offset, half = self.track.locate(wx, wy, self._hint, back=4, ahead=2)
             out.append((offset, half))
+        self._wheel_key, self._wheel_cache = key, out
         return out
 
     def _any_wheel_on_track(self) -> bool:

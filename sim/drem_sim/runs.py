@@ -52,7 +52,7 @@ class RunRecorder:
                       "source": "sim", "seed": seed, "camera": camera.as_dict() if camera else None, **(extra or {})}
 
     def add(self, frame: np.ndarray, action: dict[str, float], params: dict[str, Any], *, t_ms: int, lap: int,
-            offtrack: bool) -> None:
+            offtrack: bool, extra: dict[str, Any] | None = None) -> None:
         if frame.shape != (120, 160) or frame.dtype != np.uint8:
             raise RunError(f"a run frame is 160x120 uint8 grayscale, got {frame.shape} {frame.dtype}")
         name = f"frames/{self.frames:06d}.png"
@@ -62,9 +62,17 @@ class RunRecorder:
                "steering_angle": round(float(action["steering_angle"]), 4), "speed": round(float(action["speed"]), 4),
                "progress": round(float(params["progress"]), 3), "x": round(float(params["x"]), 4),
                "y": round(float(params["y"]), 4), "heading": round(float(params["heading"]), 3), "lap": lap,
-               "offtrack": bool(offtrack)}
+               "offtrack": bool(offtrack), **(extra or {})}
         self._controls.write(json.dumps(row) + "\n")
         self.frames += 1
+
+    def add_labelled(self, frame: np.ndarray, label: dict[str, float], executed: dict[str, float],
+                     params: dict[str, Any], *, t_ms: int, lap: int, executed_offtrack: bool) -> None:
+        """A DAgger row: `label` (what the demonstrator would do) is the training target; what was really
+        executed, and whether that left the track, is kept beside it."""
+        self.add(frame, label, params, t_ms=t_ms, lap=lap, offtrack=False,
+                 extra={"executed_steering_angle": round(float(executed["steering_angle"]), 4),
+                        "executed_speed": round(float(executed["speed"]), 4), "model_offtrack": executed_offtrack})
 
     def close(self, *, laps: int, lap_times_ms: list[int], resets: int = 0) -> Path:
         self._controls.close()

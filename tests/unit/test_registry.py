@@ -111,3 +111,22 @@ def test_svg_plots_escape_labels() -> None:
                                  title="t", y_label="s", testid="p")
     assert "<script>" not in chart and "&lt;script&gt;" in chart and "a&amp;b" in chart
     assert str(svg_plots.bar_chart([], title="none", y_label="s", testid="q")).startswith('<p class="plot-empty"')
+
+
+def test_detail_shows_the_training_recipe_and_dagger_rounds(alice: ModelsApi, client: Any) -> None:
+    lineage = {**LINEAGE, "augmentation": {"names": ["brightness", "shift", "blur"]},
+               "dagger": {"round": 2, "rounds": 2, "train_tracks": ["reinvent_base", "reinvent_base:reverse"],
+                          "held_out_tracks": ["reInvent2019_track"],
+                          "previous_rounds": [{"round": 0, "evaluation": [
+                              {"track": "reInvent2019_track", "laps_completed": 1, "attempts": 5}]},
+                              {"round": 1, "evaluation": [
+                                  {"track": "<b>reInvent2019_track</b>", "laps_completed": 4, "attempts": 5}]}]}}
+    model = alice.upload_and_complete("dagger-r2.tar.gz", tar_gz([
+        ("model.onnx", onnx_policy(0.1)), ("model_metadata.json", json.dumps(DREM_METADATA).encode()),
+        ("training/lineage.json", json.dumps(lineage).encode())]))
+    html = client.http.get(f"/models/registry/{model['model_id']}",
+                           headers={"Authorization": alice.headers["Authorization"]}).body.decode()
+    assert "brightness, shift, blur" in html and "2 of 2" in html
+    assert "reinvent_base, reinvent_base:reverse" in html
+    assert "reInvent2019_track 1/5" in html  # each earlier round's held-out result
+    assert "&lt;b&gt;reInvent2019_track&lt;/b&gt; 4/5" in html and "<b>reInvent2019_track" not in html

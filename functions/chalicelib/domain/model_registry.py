@@ -154,6 +154,7 @@ class RegistryService:
         shown = [(key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
                                                      "learning_rate", "augment", "train_frames", "validation_frames",
                                                      "train_seconds") if key in lineage]
+        shown += _training_recipe(lineage)
         dataset = lineage.get("dataset") if isinstance(lineage.get("dataset"), dict) else {}
         runs = [str(r.get("run_id") or r.get("run")) + (f" ({r.get('track_id') or r.get('track')})"
                                                         if r.get("track_id") or r.get("track") else "")
@@ -164,6 +165,30 @@ class RegistryService:
         loss_plot = svg_plots.line_chart([c for c in curves if c.points], [str(i + 1) for i in range(epochs)],
                                          title="Training loss per epoch", y_label="loss", testid="plot-loss")
         return ModelDetail(model, verdict(model), evaluations, shown, runs, loss_plot)
+
+
+def _training_recipe(lineage: dict[str, Any]) -> list[tuple[str, str]]:
+    """Augmentation and the DAgger block of a drem-trained model's lineage (archive content: shapes checked,
+    lengths bounded; the template escapes)."""
+    rows: list[tuple[str, str]] = []
+    augmentation = lineage.get("augmentation")
+    if isinstance(augmentation, dict) and isinstance(augmentation.get("names"), list):
+        rows.append(("augmentation", ", ".join(str(n) for n in augmentation["names"][:10]) or "none"))
+    dagger = lineage.get("dagger")
+    if not isinstance(dagger, dict):
+        return rows
+    rows.append(("DAgger round", f"{dagger.get('round')} of {dagger.get('rounds')}"))
+    for label, key in (("trained on", "train_tracks"), ("held out", "held_out_tracks")):
+        tracks = dagger.get(key)
+        if isinstance(tracks, list):
+            rows.append((label, ", ".join(str(t) for t in tracks[:40])[:600] or "-"))
+    for earlier in (dagger.get("previous_rounds") or [])[:20]:
+        if not isinstance(earlier, dict):
+            continue
+        results = [f"{e.get('track')} {e.get('laps_completed')}/{e.get('attempts')}"
+                   for e in (earlier.get("evaluation") or [])[:20] if isinstance(e, dict)]
+        rows.append((f"round {earlier.get('round')} held-out laps", ", ".join(results)[:600] or "-"))
+    return rows
 
 
 def verdict(model: ModelRecord) -> str:

@@ -189,23 +189,85 @@ def _run_identity(run_dir: Path) -> dict[str, Any]:
     return {key: meta[key] for key in keys if key in meta}
 
 
+AUGMENTATIONS = ("brightness", "noise", "flip", "shift", "blur")
+
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Training-time image changes that match what the car's camera really does; each one switchable.
+
+    brightness: gain/offset (venue lighting, auto-exposure); noise: sensor noise; flip: mirror image with the
+    steering sign negated (a left bend becomes a right one); shift: a few pixels of translation and a small roll
+    (the camera mount is never exactly where the simulator puts it; small enough to keep the label); blur: a
+    light Gaussian blur on some frames (motion and focus blur).
+    """
+    brightness: float = 0.25
+    noise: float = 6.0
+    flip: bool = True
+    shift_px: float = 0.0
+    rotate_deg: float = 0.0
+    blur_probability: float = 0.0
+
+    @classmethod
+    def from_names(cls, names: Iterable[str]) -> "Augmentation":
+        """`["brightness", "shift", ...]` → those switched on (camera-matched strengths), the rest off."""
+        chosen = {name.strip() for name in names if name.strip()}
+        unknown = chosen - set(AUGMENTATIONS) - {"none"}
+        if unknown:
+            raise DatasetError(f"unknown augmentation(s) {sorted(unknown)}; choose from {', '.join(AUGMENTATIONS)} or none")
+        return cls(brightness=0.25 if "brightness" in chosen else 0.0, noise=6.0 if "noise" in chosen else 0.0,
+                   flip="flip" in chosen, shift_px=4.0 if "shift" in chosen else 0.0,
+                   rotate_deg=2.0 if "shift" in chosen else 0.0, blur_probability=0.3 if "blur" in chosen else 0.0)
+
+    @property
+    def names(self) -> list[str]:
+        on = {"brightness": self.brightness > 0, "noise": self.noise > 0, "flip": self.flip,
+              "shift": self.shift_px > 0 or self.rotate_deg > 0, "blur": self.blur_probability > 0}
+        return [name for name in AUGMENTATIONS if on[name]]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"names": self.names, **self.__dict__}
+
+
 def augment_batch(images: np.ndarray, targets: np.ndarray, rng: np.random.Generator,
-                  flip: bool = True, brightness: float = 0.25, noise: float = 6.0) -> tuple[np.ndarray, np.ndarray]:
-    """Random brightness/contrast, pixel noise and mirror images (mirroring negates steering)."""
+                  flip: bool = True, brightness: float = 0.25, noise: float = 6.0,
+                  augmentation: Augmentation | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Apply `augmentation` (default: brightness/contrast, pixel noise and mirroring, as the keyword arguments say)."""
+    aug = augmentation or Augmentation(brightness=brightness, noise=noise, flip=flip)
     out = images.astype(np.float32)
     targets = targets.copy()
     count = out.shape[0]
-    if brightness > 0:
-        gain = rng.uniform(1 - brightness, 1 + brightness, size=(count, 1, 1)).astype(np.float32)
-        offset = rng.uniform(-brightness * 60, brightness * 60, size=(count, 1, 1)).astype(np.float32)
+    if aug.shift_px > 0 or aug.rotate_deg > 0:
+        out = _shift_and_roll(out, rng, aug.shift_px, aug.rotate_deg)
+    if aug.blur_probability > 0:
+        for i in np.flatnonzero(rng.random(count) < aug.blur_probability):
+            out[i] = cv2.GaussianBlur(out[i], (5, 5), float(rng.uniform(0.6, 1.2)))
+    if aug.brightness > 0:
+        gain = rng.uniform(1 - aug.brightness, 1 + aug.brightness, size=(count, 1, 1)).astype(np.float32)
+        offset = rng.uniform(-aug.brightness * 60, aug.brightness * 60, size=(count, 1, 1)).astype(np.float32)
         out = out * gain + offset
-    if noise > 0:
-        out = out + rng.normal(0.0, noise, size=out.shape).astype(np.float32)
-    if flip:
+    if aug.noise > 0:
+        out = out + rng.normal(0.0, aug.noise, size=out.shape).astype(np.float32)
+    if aug.flip:
         mirrored = rng.random(count) < 0.5
         out[mirrored] = out[mirrored, :, ::-1]
         targets[mirrored, 0] = -targets[mirrored, 0]
     return np.clip(out, 0, 255), targets
+
+
+def _shift_and_roll(images: np.ndarray, rng: np.random.Generator, shift_px: float, rotate_deg: float) -> np.ndarray:
+    """Per image: translate by up to ±shift_px and roll by up to ±rotate_deg about the centre (edge pixels repeat,
+    as a slightly moved camera still sees floor there, not black)."""
+    count, height, width = images.shape
+    shifts = rng.uniform(-shift_px, shift_px, size=(count, 2))
+    angles = rng.uniform(-rotate_deg, rotate_deg, size=count)
+    out = np.empty_like(images)
+    for i in range(count):
+        matrix = cv2.getRotationMatrix2D((width / 2, height / 2), float(angles[i]), 1.0)
+        matrix[:, 2] += shifts[i]
+        out[i] = cv2.warpAffine(images[i], matrix, (width, height), flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+    return out
 
 
 def iter_run_dirs(root: Path) -> Iterable[Path]:

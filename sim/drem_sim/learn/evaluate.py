@@ -3,6 +3,10 @@
 A *lap attempt* starts at the start line (or where the car was put back after leaving the track)
 and ends either with a completed lap or with the car leaving the track. Completion % is the mean
 progress of the attempts (100 for a completed lap), as in a DeepRacer evaluation.
+
+A completed lap is a clean one: when the car leaves the track the attempt ends there, and the next
+attempt starts afresh (lap distance and lap clock at zero) from where the car was put back. A lap
+stitched together across a reset therefore never counts as completed, and its time is never a lap time.
 """
 from __future__ import annotations
 
@@ -51,7 +55,8 @@ class EvalMetrics(BaseModel):
 
 def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_name: str,
           max_steps: int | None = None) -> EvalMetrics:
-    """Run ``policy`` until ``attempts`` lap attempts have ended; the env's own lap/reset bookkeeping is trusted."""
+    """Run ``policy`` until ``attempts`` lap attempts have ended. A lap counts only when the car drove it
+    without leaving the track: after an off-track the env is restarted where it put the car back."""
     observation, info = env.reset(seed=seed)
     params: dict[str, Any] = dict(info.get("params", {})) if isinstance(info, dict) else {}
     step_seconds = float(getattr(env, "step_seconds", 1.0 / 15.0))
@@ -70,18 +75,22 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
         observation, params, terminated, truncated, info = env.step(action)
         steps += 1
         best_progress = max(best_progress, float(params.get("progress", 0.0)))
+        resets_now = _resets(info)
+        if resets_now > resets_before or params.get("is_offtrack"):
+            offtrack += 1
+            progress_log.append(min(best_progress, 99.9))
+            best_progress = 0.0
+            # A fresh attempt from where the car was put back: the rest of this lap is not a lap.
+            observation, info = env.reset(options={"start_offset_m": float(params.get("projection_distance", 0.0))})
+            params = dict(info.get("params", {})) if isinstance(info, dict) else {}
+            laps_before, resets_before = _laps(info), _resets(info)
+            continue
         laps_now = _laps(info)
         if laps_now > laps_before:
             new_times = list(info.get("lap_times_s", info.get("lap_times", [])))[laps_before:laps_now]
             lap_times.extend(float(t) for t in new_times)
             progress_log.extend([100.0] * (laps_now - laps_before))
             laps_before, best_progress = laps_now, 0.0
-        resets_now = _resets(info)
-        if resets_now > resets_before or params.get("is_offtrack"):
-            offtrack += 1
-            progress_log.append(min(best_progress, 99.9))
-            best_progress = 0.0
-            resets_before = resets_now
         if terminated or truncated:
             observation, info = env.reset(seed=seed + len(progress_log) + 1)
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
@@ -91,11 +100,12 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
     progress_log = progress_log[:attempts]
     completed = sum(1 for p in progress_log if p >= 100.0)
     deltas = np.diff(np.asarray(steering)) if len(steering) > 1 else np.zeros(1)
+    lap_times = lap_times[:completed]
     return EvalMetrics(
         model=label, track=track_name, seed=seed, laps_requested=attempts, attempts=len(progress_log),
         laps_completed=completed, laps_completed_pct=round(100.0 * completed / max(len(progress_log), 1), 2),
         completion_pct=round(float(np.mean(progress_log)), 2), attempt_progress=[round(p, 2) for p in progress_log],
-        offtrack_count=offtrack, resets=_resets(info), lap_times_s=[round(t, 3) for t in lap_times],
+        offtrack_count=offtrack, resets=offtrack, lap_times_s=[round(t, 3) for t in lap_times],
         mean_lap_time_s=round(float(np.mean(lap_times)), 3) if lap_times else None,
         best_lap_time_s=round(float(np.min(lap_times)), 3) if lap_times else None,
         steering_jitter_deg=round(float(np.std(deltas)), 3), steps=steps, sim_seconds=round(steps * step_seconds, 2),

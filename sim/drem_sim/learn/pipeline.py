@@ -6,11 +6,11 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Any, Sequence, TextIO
 
 import numpy as np
 
-from drem_sim.learn.dataset import DatasetSnapshot, load_snapshot
+from drem_sim.learn.dataset import ActionScale, DatasetSnapshot, load_snapshot
 from drem_sim.learn.export import export_onnx, verify_onnx
 from drem_sim.learn.model import NETWORK_NAME, parameter_count
 from drem_sim.learn.package import build_archive, build_metadata
@@ -32,11 +32,13 @@ class TrainedModel:
 
 
 def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, config: TrainConfig,
-                     progress: TextIO | None = sys.stderr) -> TrainedModel:
+                     progress: TextIO | None = sys.stderr, initial_state: dict | None = None,
+                     extra_lineage: dict[str, Any] | None = None, scale: ActionScale | None = None) -> TrainedModel:
+    """`extra_lineage` (e.g. the DAgger round and its tracks) is added to lineage.json and the archive's lineage."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    snapshot = load_snapshot(runs)
-    result = train_behaviour_cloning(snapshot, config, progress=progress)
+    snapshot = load_snapshot(runs, scale=scale)
+    result = train_behaviour_cloning(snapshot, config, progress=progress, initial_state=initial_state)
     onnx_path = export_onnx(result.model, out_dir / "model.onnx")
     picks = np.random.default_rng(config.seed).choice(len(snapshot), size=min(VERIFY_SAMPLES, len(snapshot)), replace=False)
     difference = verify_onnx(result.model, onnx_path, snapshot.images[np.sort(picks)])
@@ -53,12 +55,14 @@ def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, confi
         "batch_size": config.batch_size,
         "learning_rate": config.learning_rate,
         "augment": config.augment,
+        "augmentation": aug.as_dict() if (aug := config.effective_augmentation) is not None else None,
         "train_frames": result.train_frames,
         "validation_frames": result.validation_frames,
         "train_losses": [round(v, 6) for v in result.train_losses],
         "validation_losses": [round(v, 6) for v in result.validation_losses],
         "train_seconds": round(result.seconds, 2),
         "onnx_max_abs_difference": difference,
+        **(extra_lineage or {}),
     }
     (out_dir / "lineage.json").write_text(json.dumps(lineage, indent=2, sort_keys=True) + "\n")
     archive = build_archive(out_dir / f"{name}.tar.gz", onnx_path, build_metadata(snapshot.scale), lineage)

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drem_sim.learn.dataset import DatasetSnapshot, augment_batch
+from drem_sim.learn.dataset import Augmentation, DatasetSnapshot, augment_batch
 from drem_sim.learn.model import BehaviourCloningCNN
 
 STEERING_LOSS_WEIGHT = 2.0  # steering errors crash the car; speed errors only cost time
@@ -29,7 +29,15 @@ class TrainConfig:
     num_threads: int = 1
     augment: bool = True
     flip: bool = True
+    augmentation: Augmentation | None = None  # None: brightness, noise and (if flip) mirroring, as before
     max_seconds: float | None = None  # stop early (after a whole batch) when a time budget is spent
+
+    @property
+    def effective_augmentation(self) -> Augmentation | None:
+        """What training really applies (None when augmentation is off); recorded in the lineage."""
+        if not self.augment:
+            return None
+        return self.augmentation or Augmentation(flip=self.flip)
 
 
 @dataclass
@@ -61,10 +69,14 @@ def split_indices(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
 
 
 def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
-                            progress: TextIO | None = sys.stderr) -> TrainResult:
+                            progress: TextIO | None = sys.stderr,
+                            initial_state: dict[str, torch.Tensor] | None = None) -> TrainResult:
+    """Fit from scratch, or go on from `initial_state` (a previous round's weights, as DAgger rounds do)."""
     seed_everything(config.seed, config.num_threads)
     rng = np.random.default_rng(config.seed)
     model = BehaviourCloningCNN()
+    if initial_state is not None:
+        model.load_state_dict(initial_state)
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=max(1, config.epochs))
     targets = snapshot.targets
@@ -81,7 +93,7 @@ def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
             batch = order[start:start + config.batch_size]
             images, batch_targets = snapshot.images[batch], targets[batch]
             if config.augment:
-                images, batch_targets = augment_batch(images, batch_targets, rng, flip=config.flip)
+                images, batch_targets = augment_batch(images, batch_targets, rng, augmentation=config.effective_augmentation)
             inputs = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32))[..., None]
             loss = _weighted_mse(model(inputs), torch.from_numpy(batch_targets), weights)
             optimiser.zero_grad()

@@ -1,0 +1,239 @@
+"""DAgger: the model drives, the demonstrator says what it should have done, the data grows each round.
+
+Behaviour cloning only sees the states the demonstrator visits; a model that drifts a little wide meets
+frames it never learned from and drifts further. DAgger (Ross, Gordon & Bagnell 2011) closes that gap:
+
+    round 0   the demonstrator laps every training track and direction (with steering noise) → runs
+              train model 0 on them
+    round r   model r-1 drives every training track and direction (with probability beta_r per decision
+              the demonstrator's action is executed instead, beta_r = beta · 0.5^(r-1)); every frame is
+              labelled with the demonstrator's action for the state the *model* reached → more runs;
+              train model r on all runs so far, starting from model r-1's weights
+    each round the model is evaluated on the held-out tracks (never trained on), so the rounds show
+    whether it generalises, not only whether it fits.
+
+A DAgger run folder is an ordinary run folder (driver `dagger-round-<r>`): its `steering_angle`/`speed` are
+the demonstrator's labels and `offtrack` is false (the label did not leave the track, the executed action may
+have: `executed_steering_angle`, `executed_speed` and `model_offtrack` keep what really happened).
+"""
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence, TextIO
+
+import numpy as np
+
+from drem_sim.learn.dataset import load_snapshot
+from drem_sim.learn.evaluate import EvalMetrics
+from drem_sim.learn.track_sets import TrackDirection
+
+SECONDS_PER_LAP_LIMIT = 60.0  # a collection lap slower than this is a stuck model: stop collecting there
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    train_tracks: Sequence[TrackDirection]
+    eval_tracks: Sequence[TrackDirection] = ()
+    rounds: int = 2
+    demo_laps: int = 2  # demonstrator laps per training track and direction (round 0)
+    demo_noise_deg: float = 6.0
+    dagger_laps: int = 1  # laps the model drives per training track and direction in each DAgger round
+    beta: float = 0.5  # chance that the demonstrator's action is executed in round 1 (halved every round)
+    first_epochs: int = 10
+    round_epochs: int = 4
+    eval_laps: int = 2
+    seed: int = 0
+
+
+@dataclass
+class RoundReport:
+    round: int
+    archive: Path
+    runs: int
+    frames: int
+    train_seconds: float
+    final_train_loss: float
+    final_validation_loss: float | None
+    evaluation: list[EvalMetrics] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"round": self.round, "archive": str(self.archive), "runs": self.runs, "frames": self.frames,
+                "train_seconds": round(self.train_seconds, 2), "final_train_loss": round(self.final_train_loss, 6),
+                "final_validation_loss": (round(self.final_validation_loss, 6)
+                                          if self.final_validation_loss is not None else None),
+                "evaluation": [{"track": m.track, "laps_completed": m.laps_completed, "attempts": m.attempts,
+                                "laps_completed_pct": m.laps_completed_pct, "completion_pct": m.completion_pct,
+                                "offtrack_count": m.offtrack_count, "mean_lap_time_s": m.mean_lap_time_s}
+                               for m in self.evaluation]}
+
+
+def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps: int, noise_deg: float,
+                          seed: int, progress: TextIO | None = None) -> list[Path]:
+    """The demonstrator laps each track and direction once per `laps` (one run per lap, its own noise seed)."""
+    from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
+    from drem_sim.env import RaceEnv
+    from drem_sim.runs import record_run
+
+    runs = []
+    for number, direction in enumerate(directions):
+        _bar(progress, "round 0 recording", number, len(directions), direction.label)
+        track = direction.load()
+        for lap in range(laps):
+            run_seed = seed * 1000 + number * 50 + lap + 1
+            teacher = Demonstrator(track, DemonstratorConfig(steering_noise_deg=noise_deg),
+                                   rng=np.random.default_rng(run_seed))
+            runs.append(record_run(RaceEnv(track), lambda _obs, params, t=teacher: t.act(params), root, laps=1,
+                                   driver="demonstrator", seed=run_seed))
+    _bar(progress, "round 0 recording", len(directions), len(directions), "done")
+    return runs
+
+
+def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, laps: int, beta: float,
+                       seed: int, round_number: int) -> Path:
+    """The model drives (the demonstrator's action is executed with probability `beta`); frames get the
+    demonstrator's labels. Off-tracks put the car back and driving goes on, so recovery states are recorded."""
+    from drem_sim.demonstrator import Demonstrator
+    from drem_sim.env import RaceEnv
+    from drem_sim.learn.pilot import OnnxPilot
+    from drem_sim.runs import RunRecorder
+
+    track = direction.load()
+    env = RaceEnv(track)
+    pilot = OnnxPilot.from_archive(archive)
+    teacher = Demonstrator(track)
+    rng = np.random.default_rng(seed)
+    recorder = RunRecorder(root, track.track_id, direction="reverse" if track.is_reversed else "forward",
+                           driver=f"dagger-round-{round_number}", seed=seed, camera=env.camera.config if env.camera else None,
+                           extra={"track_direction": track.direction, "decision_hz": env.config.decision_hz,
+                                  "dagger": {"round": round_number, "beta": beta, "model": archive.name}})
+    obs, info = env.reset(seed=seed)
+    params = info["params"]
+    limit = int(laps * SECONDS_PER_LAP_LIMIT * env.config.decision_hz)
+    for _ in range(limit):
+        label = teacher.act(params)
+        executed = label if rng.random() < beta else pilot.act(obs)
+        t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
+        next_obs, params, terminated, truncated, _info = env.step(executed)
+        recorder.add_labelled(obs, label, executed, seen, t_ms=t_ms, lap=lap,
+                              executed_offtrack=bool(params["is_offtrack"]))
+        obs = next_obs
+        if env.laps >= laps or terminated or truncated:
+            break
+    return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
+
+
+def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any,
+               seed_runs: Sequence[str | Path] = (), progress: TextIO | None = sys.stderr) -> list[RoundReport]:
+    """Round 0 (demonstrations, or `seed_runs`) and `config.rounds` DAgger rounds; `out_dir/round-<r>/` holds each
+    round's archive, `out_dir/<name>.tar.gz` is the last one, `out_dir/rounds.json` and `rounds.png` the story."""
+    from drem_sim.learn.pipeline import train_to_archive
+    from drem_sim.learn.suite import evaluate_archive
+
+    out_dir = Path(out_dir)
+    runs_root = out_dir / "runs"
+    runs: list[str | Path] = list(seed_runs)
+    if config.demo_laps > 0:
+        _say(progress, f"round 0: demonstrator, {config.demo_laps} lap(s) on each of {len(config.train_tracks)} "
+                       f"track direction(s)")
+        runs += record_demonstrations(config.train_tracks, runs_root / "round-0", config.demo_laps,
+                                      config.demo_noise_deg, config.seed, progress)
+    scale = load_snapshot(runs).scale  # fixed from round 0 on: later rounds' targets keep their meaning
+    reports: list[RoundReport] = []
+    state = None
+    for round_number in range(config.rounds + 1):
+        if round_number > 0:
+            beta = config.beta * 0.5 ** (round_number - 1)
+            _say(progress, f"round {round_number}: model drives, demonstrator labels (beta {beta:.2f})")
+            previous = reports[-1].archive
+            for number, direction in enumerate(config.train_tracks):
+                _bar(progress, f"round {round_number} driving", number, len(config.train_tracks), direction.label)
+                runs.append(collect_dagger_run(previous, direction, runs_root / f"round-{round_number}",
+                                               config.dagger_laps, beta,
+                                               config.seed * 1000 + round_number * 100 + number, round_number))
+            _bar(progress, f"round {round_number} driving", len(config.train_tracks), len(config.train_tracks), "done")
+        epochs = config.first_epochs if round_number == 0 else config.round_epochs
+        lineage = {"dagger": {"round": round_number, "rounds": config.rounds,
+                              "train_tracks": [d.label for d in config.train_tracks],
+                              "held_out_tracks": [d.label for d in config.eval_tracks],
+                              "demo_laps_per_track": config.demo_laps, "demo_noise_deg": config.demo_noise_deg,
+                              "dagger_laps_per_track": config.dagger_laps, "beta": config.beta,
+                              "previous_rounds": [r.as_dict() for r in reports]}}
+        trained = train_to_archive(runs, out_dir / f"round-{round_number}", name,
+                                   replace(train_config, epochs=epochs, seed=config.seed + round_number),
+                                   progress=progress, initial_state=state, extra_lineage=lineage, scale=scale)
+        state = {key: value.detach().clone() for key, value in trained.result.model.state_dict().items()}
+        evaluation = evaluate_archive(trained.archive, config.eval_tracks, config.eval_laps, config.seed) \
+            if config.eval_tracks and config.eval_laps > 0 else []
+        report = RoundReport(round_number, trained.archive, len(runs), len(trained.snapshot),
+                             trained.result.seconds, trained.result.train_losses[-1],
+                             trained.result.final_validation_loss, evaluation)
+        reports.append(report)
+        held = ", ".join(f"{m.track} {m.laps_completed}/{m.attempts}" for m in evaluation) or "-"
+        _say(progress, f"round {round_number}: {report.frames} frames, {report.train_seconds:.0f}s training; "
+                       f"held out: {held}")
+    final = reports[-1].archive
+    (out_dir / f"{name}.tar.gz").write_bytes(final.read_bytes())
+    (out_dir / "rounds.json").write_text(json.dumps([r.as_dict() for r in reports], indent=2) + "\n")
+    plot_rounds(reports, out_dir / "rounds.png")
+    return reports
+
+
+def _bar(stream: TextIO | None, label: str, done: int, total: int, current: str) -> None:
+    """One redrawn line per track: collection is minutes on a big track set, so show where it is."""
+    if stream is None:
+        return
+    filled = int(20 * done / max(total, 1))
+    end = "\n" if done >= total else ""
+    stream.write(f"\r{label} [{'#' * filled}{'.' * (20 - filled)}] {done}/{total} {current:<32}{end}")
+    stream.flush()
+
+
+def _say(stream: TextIO | None, text: str) -> None:
+    if stream is not None:
+        stream.write(text + "\n")
+        stream.flush()
+
+
+def plot_rounds(reports: Sequence[RoundReport], path: Path, width: int = 640, height: int = 360) -> Path:
+    """Held-out laps completed % per round (one line per track) and the final training loss, with OpenCV."""
+    import cv2
+
+    canvas = np.full((height, width, 3), 255, np.uint8)
+    left, right, top, bottom = 50, width - 170, 30, height - 40
+    cv2.rectangle(canvas, (left, top), (right, bottom), (0, 0, 0), 1)
+    count = max(len(reports), 2)
+
+    def x_of(i: int) -> int:
+        return int(left + (right - left) * i / (count - 1))
+
+    tracks = sorted({m.track for r in reports for m in r.evaluation})
+    palette = [(200, 80, 0), (0, 120, 230), (0, 160, 0), (160, 0, 160), (0, 0, 200), (120, 120, 0), (90, 90, 90)]
+    for n, track in enumerate(tracks):
+        colour = palette[n % len(palette)]
+        points = [(x_of(i), int(bottom - (bottom - top) * m.laps_completed_pct / 100.0))
+                  for i, r in enumerate(reports) for m in r.evaluation if m.track == track]
+        for a, b in zip(points, points[1:]):
+            cv2.line(canvas, a, b, colour, 2, cv2.LINE_AA)
+        for point in points:
+            cv2.circle(canvas, point, 3, colour, -1)
+        cv2.putText(canvas, track[:22], (right + 8, top + 14 + 16 * n), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1)
+    losses = [r.final_train_loss for r in reports]
+    if losses:
+        peak = max(losses) * 1.05 or 1.0
+        points = [(x_of(i), int(bottom - (bottom - top) * v / peak)) for i, v in enumerate(losses)]
+        for a, b in zip(points, points[1:]):
+            cv2.line(canvas, a, b, (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(canvas, f"train loss (peak {peak:.3f})", (right + 8, bottom), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                    (0, 0, 0), 1)
+    cv2.putText(canvas, "held-out laps completed % per DAgger round", (left, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                (0, 0, 0), 1)
+    cv2.putText(canvas, "100", (15, top + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+    cv2.putText(canvas, "0", (30, bottom), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+    for i in range(len(reports)):
+        cv2.putText(canvas, str(i), (x_of(i) - 4, bottom + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+    if not cv2.imwrite(str(path), canvas):
+        raise OSError(f"could not write {path}")
+    return path
