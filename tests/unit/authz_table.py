@@ -181,6 +181,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/api/models/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("DELETE", "/api/models/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("POST", "/api/models/{model_id}/complete"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("POST", "/api/models/{model_id}/scrutineer"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     # model assignments to cars
     ("PUT", "/api/cars/{device_id}/models"): Case(allow("admin", "operator"), car_x_device),
     ("GET", "/api/cars/{device_id}/models"): Case(allow(*STAFF), car_x_device),

@@ -35,7 +35,8 @@ from typing import IO, BinaryIO, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.domain.model_metadata import ModelMetadata, ModelMetadataError, parse_model_metadata_json
+from chalicelib.domain.model_metadata import (ModelMetadata, ModelMetadataError, check_for_stock_car,
+                                              parse_model_metadata_json)
 
 KiB = 1024
 MiB = 1024 * KiB
@@ -458,6 +459,11 @@ class _Scanner:
         except ModelMetadataError as error:
             raise _not_valid(error.message) from None
         model_kind, model_member = self._model_file()
+        if model_kind == "tensorflow":  # a .pb is for stock cars: judge its metadata as the car will
+            try:
+                check_for_stock_car(metadata)
+            except ModelMetadataError as error:
+                raise _not_valid(error.message) from None
         return self._report(
             ArchiveStatus.AVAILABLE,
             None,

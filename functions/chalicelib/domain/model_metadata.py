@@ -206,6 +206,26 @@ class ModelMetadata(BaseModel):
         return len(self.action_space) if isinstance(self.action_space, list) else None
 
 
+# What a stock car accepts (aws-deepracer-webserver-pkg webserver_pkg/constants.py: TrainingAlgorithms,
+# SensorInputKeys, ActionSpaceTypes): the car refuses a model whose metadata names anything else.
+CAR_TRAINING_ALGORITHMS = frozenset({TrainingAlgorithm.CLIPPED_PPO, TrainingAlgorithm.SAC})
+CAR_SENSORS = frozenset({"observation", "LIDAR", "SECTOR_LIDAR", "LEFT_CAMERA", "FRONT_FACING_CAMERA",
+                         "STEREO_CAMERAS"})
+
+
+def check_for_stock_car(metadata: ModelMetadata) -> None:
+    """Raise ModelMetadataError when a DeepRacer car would refuse a TensorFlow model with this metadata."""
+    if metadata.training_algorithm not in CAR_TRAINING_ALGORITHMS:
+        raise ModelMetadataError(
+            f"model_metadata.json: training_algorithm: a DeepRacer car loads only clipped_ppo or sac models "
+            f"(got {metadata.training_algorithm.value!r})", field="training_algorithm")
+    unknown = [name for name in metadata.sensor if name not in CAR_SENSORS]
+    if unknown:
+        raise ModelMetadataError(
+            f"model_metadata.json: sensor: a DeepRacer car does not know {unknown[0]!r} "
+            f"(it knows {', '.join(sorted(CAR_SENSORS))})", field="sensor")
+
+
 def parse_model_metadata(document: Any) -> ModelMetadata:
     """Validate an already-decoded JSON document; raise ModelMetadataError naming the field at fault."""
     if not isinstance(document, dict):
@@ -289,6 +309,7 @@ __all__ = [
     "ModelMetadata",
     "ModelMetadataError",
     "TrainingAlgorithm",
+    "check_for_stock_car",
     "parse_model_metadata",
     "parse_model_metadata_json",
 ]

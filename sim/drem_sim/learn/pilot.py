@@ -30,12 +30,12 @@ class OnnxPilot:
 
     @classmethod
     def from_archive(cls, source: Path | str) -> "OnnxPilot":
+        """An ONNX archive drives as is; a console archive (agent/model.pb) is converted to ONNX first."""
         files = read_model_files(Path(source))
         metadata = load_metadata(files)
         if ONNX_MEMBER not in files:
             if TENSORFLOW_MEMBER in files:
-                raise TensorFlowModelError("cannot scrutineer: TensorFlow model (agent/model.pb); "
-                                           "the simulator runs ONNX models only")
+                return cls(metadata, _converted(files[TENSORFLOW_MEMBER], metadata))
             raise ArchiveError(f"the archive has no {ONNX_MEMBER}")
         return cls(metadata, files[ONNX_MEMBER])
 
@@ -69,6 +69,25 @@ class OnnxPilot:
                                f"{len(self.action_space)} actions")
         chosen = self.action_space[int(np.argmax(output))]
         return {"steering_angle": float(chosen["steering_angle"]), "speed": float(chosen["speed"])}
+
+
+def _converted(pb: bytes, metadata: dict[str, Any]) -> bytes:
+    """The console graph as ONNX (OpenVINO reads it, both runtimes must agree), or TensorFlowModelError saying why."""
+    import importlib.util
+    import tempfile
+
+    if importlib.util.find_spec("openvino") is None:
+        raise TensorFlowModelError("cannot scrutineer: TensorFlow model (agent/model.pb) and the model converter "
+                                   "(OpenVINO, the 'convert' extra) is not installed")
+    from drem_sim.console.convert import convert
+
+    with tempfile.TemporaryDirectory(prefix="console-model-") as folder:
+        pb_path, onnx_path = Path(folder) / "model.pb", Path(folder) / "model.onnx"
+        pb_path.write_bytes(pb)
+        result = convert(pb_path, metadata, onnx_path)
+        if result.outcome != "converted":
+            raise TensorFlowModelError(f"cannot scrutineer: {result.reason}")
+        return onnx_path.read_bytes()
 
 
 def _rescale(unit: float, bounds: dict[str, float]) -> float:
