@@ -458,8 +458,8 @@ class _Scanner:
             metadata = parse_model_metadata_json(facts.metadata_bytes[metadata_member])
         except ModelMetadataError as error:
             raise _not_valid(error.message) from None
-        model_kind, model_member = self._model_file()
-        if model_kind == "tensorflow":  # a .pb is for stock cars: judge its metadata as the car will
+        model_kind, model_member = self._model_file(metadata)
+        if any(m in facts.sizes for m in TENSORFLOW_MEMBERS):  # a .pb is for stock cars: judge as the car will
             try:
                 check_for_stock_car(metadata)
             except ModelMetadataError as error:
@@ -477,11 +477,15 @@ class _Scanner:
             metadata=metadata,
         )
 
-    def _model_file(self) -> tuple[ModelKind, str]:
+    def _model_file(self, metadata: ModelMetadata) -> tuple[ModelKind, str]:
         sizes = self._facts.sizes
         tensorflow = next((member for member in TENSORFLOW_MEMBERS if member in sizes), None)
         onnx = ONNX_MEMBER if ONNX_MEMBER in sizes else None
-        if tensorflow and onnx:
+        # drem's own exports carry the same network twice: model.onnx (simulator, drem cars) and agent/model.pb
+        # (stock cars), and say so in their metadata. Any other archive with both is ambiguous.
+        drem_block = getattr(metadata, "drem", None)
+        dual = isinstance(drem_block, dict) and drem_block.get("car_model_file") == tensorflow
+        if tensorflow and onnx and not dual:
             raise _not_valid(f"the archive holds both {onnx} and {tensorflow}; upload one model per archive")
         if not tensorflow and not onnx:
             raise _not_valid("the archive has no model file: expected agent/model.pb (DeepRacer console) or "
