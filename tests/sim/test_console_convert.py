@@ -96,3 +96,56 @@ def test_a_continuous_head_with_tanh_and_transposed_dense_translates_exactly() -
     actual = onnx_session(translated.SerializeToString()).run(None, {"camera": frames})[0]
     assert actual.shape == (3, 2)
     assert np.max(np.abs(actual - expected)) <= TOLERANCE
+
+
+def _tiny_pb(path: Path, *, network: str, head: str, extra_op: str | None = None, second_head: str | None = None,
+             outputs: int = 2) -> Path:
+    """A small frozen graph with Coach's names, written with drem's own GraphDef encoder (no TensorFlow)."""
+    from drem_sim.console.graphdef import DT_FLOAT, DT_INT32, Attr, Node, graph_def
+
+    rng = np.random.default_rng(5)
+    camera = f"main_level/agent/{network}/online/network_0/FRONT_FACING_CAMERA/FRONT_FACING_CAMERA"
+    t = {"T": Attr.type(DT_FLOAT)}
+    nodes = [Node(camera, "Placeholder", attrs={"dtype": Attr.type(DT_FLOAT), "shape": Attr.shape([-1, 120, 160, 1])}),
+             Node("scale", "Const", attrs={"dtype": Attr.type(DT_FLOAT), "value": Attr.tensor(np.array(1 / 255, np.float32))}),
+             Node("scaled", "Mul", [camera, "scale"], dict(t)),
+             Node("shape", "Const", attrs={"dtype": Attr.type(DT_INT32), "value": Attr.tensor(np.array([-1, 19200], np.int32))}),
+             Node("flat", "Reshape", ["scaled", "shape"], {**t, "Tshape": Attr.type(DT_INT32)})]
+    last = "flat"
+    if extra_op:
+        nodes.append(Node("odd", extra_op, ["flat"], dict(t)))
+        last = "odd"
+    for name, size in ((head, outputs), (second_head, 1)):
+        if name is None:
+            continue
+        weights = rng.normal(0, 0.02, (19200, size)).astype(np.float32)
+        nodes += [Node(f"{name}/w", "Const", attrs={"dtype": Attr.type(DT_FLOAT), "value": Attr.tensor(weights)}),
+                  Node(f"{name}/MatMul", "MatMul", [last, f"{name}/w"], {**t, "transpose_a": Attr.boolean(False),
+                                                                           "transpose_b": Attr.boolean(False)}),
+                  Node(name, "Identity", [f"{name}/MatMul"], dict(t))]
+    path.write_bytes(graph_def(nodes))
+    return path
+
+
+def test_sac_graphs_use_the_policy_network_names_and_the_policy_head(tmp_path: Path) -> None:
+    from drem_sim.console.heads import input_node, output_node
+
+    pb = _tiny_pb(tmp_path / "sac.pb", network="policy", head=output_node("sac"),
+                  second_head="main_level/agent/policy/online/network_0/sac_q_head_0/q")
+    metadata = {"sensor": ["FRONT_FACING_CAMERA"], "training_algorithm": "sac"}
+
+    result = convert(pb, metadata, tmp_path / "sac.onnx")
+
+    assert result.outcome == "converted", result.reason
+    session = onnx_session(tmp_path / "sac.onnx")
+    assert session.get_inputs()[0].name == input_node("sac", "FRONT_FACING_CAMERA")
+    assert [o.name for o in session.get_outputs()] == [output_node("sac")]  # the q head is left out
+    assert session.get_outputs()[0].shape[-1] == 2
+
+
+def test_an_operation_openvino_reads_but_drem_cannot_translate_is_named(tmp_path: Path) -> None:
+    pb = _tiny_pb(tmp_path / "odd.pb", network="main", head="main_level/agent/main/online/network_1/ppo_head_0/policy",
+                  extra_op="Sin")
+    result = convert(pb, {"sensor": ["FRONT_FACING_CAMERA"]}, tmp_path / "odd.onnx")
+    assert result.outcome == "cannot_scrutineer"
+    assert "operation Sin" in (result.reason or "") and "not supported" in (result.reason or "")

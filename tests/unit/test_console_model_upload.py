@@ -101,3 +101,16 @@ def test_console_metadata_a_car_would_refuse_is_not_valid_with_the_field_named(
                        converter=None)
     assert model.status is ModelStatus.NOT_VALID
     assert f"{field}:" in (model.reason or "") and words in (model.reason or "")
+
+
+def test_a_graph_with_an_operation_drem_cannot_translate_stays_raceable(stack: Any, aws_clients: Any,
+                                                                        tmp_path: Any) -> None:
+    from tests.sim.test_console_convert import _tiny_pb
+
+    pb = _tiny_pb(tmp_path / "odd.pb", network="main", outputs=9, extra_op="Sin",
+                  head="main_level/agent/main/online/network_1/ppo_head_0/policy").read_bytes()
+
+    _, model = _upload(aws_clients, stack, console_fixture.console_archive(pb=pb), "odd-op")
+
+    assert model.status is ModelStatus.AVAILABLE
+    assert model.scrutiny_text.startswith("cannot be scrutineered: operation Sin")

@@ -20,6 +20,8 @@ from chalicelib.domain.models import ModelChanged, ModelRecord, ModelService, Mo
 
 MAX_LAPS = 3
 DEFAULT_TRACK_TYPE = "REINVENT_2018"
+# The event track types drem_sim has a twin for (drem_sim.learn.scrutineer.EVENT_TRACKS); others drive the fallback.
+TRACK_TYPES = ("REINVENT_2018", "REINVENT_2019", "ATOZ_SPEEDWAY", "SUMMIT_SPEEDWAY", "FOREVER_RACEWAY")
 _MEMBERS = ("model_metadata.json", "model.onnx")
 _READ_LIMITS = ExportLimits(max_file_bytes=128 * 1024 * 1024, max_total_read_bytes=160 * 1024 * 1024)
 

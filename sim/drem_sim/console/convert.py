@@ -112,6 +112,10 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
     if expected.shape != actual.shape:
         return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
                           reason=f"the converted graph outputs {actual.shape[1:]} but OpenVINO {expected.shape[1:]}")
+    wanted = _output_size(metadata)
+    if wanted is not None and expected.shape[-1] != wanted:
+        return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
+                          reason=f"the graph outputs {expected.shape[-1]} values but the action space needs {wanted}")
     difference = float(np.max(np.abs(expected.astype(np.float64) - actual)))
     result = Conversion(outcome="converted", max_abs_diff=difference, frames_checked=len(frames),
                         seconds=time.perf_counter() - started, **names)
@@ -121,6 +125,14 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
             "reason": f"the converted graph disagrees with OpenVINO by {difference:.1e} (more than {TOLERANCE:.0e})"})
     onnx.save(translated, str(onnx_path))
     return result
+
+
+def _output_size(metadata: dict[str, Any]) -> int | None:
+    """One probability per discrete action, or two means (steering, speed) for a continuous space."""
+    space = metadata.get("action_space")
+    if metadata.get("action_space_type", "discrete") == "continuous":
+        return 2
+    return len(space) if isinstance(space, list) else None
 
 
 def onnx_session(model: bytes | Path) -> Any:
