@@ -107,3 +107,24 @@ def test_a_model_that_leaves_the_track_fails_with_its_completion(tmp_path: Path)
     assert report.laps_completed == 0 and report.offtrack_count >= 1
     assert 0.0 <= report.completion_pct < 50.0
     assert report.message.startswith("0/2 laps completed")
+
+
+def test_a_model_with_the_wrong_number_of_outputs_is_invalid_not_a_crash(tmp_path: Path) -> None:
+    import onnx
+    from onnx import TensorProto, helper
+
+    image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 120, 160, 1])
+    mean = helper.make_tensor_value_info("mean", TensorProto.FLOAT, [1])
+    graph = helper.make_graph([helper.make_node("ReduceMean", ["image"], ["mean"], axes=[1, 2, 3], keepdims=0)],
+                              "one_output", [image], [mean])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    continuous = {"action_space": {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}},
+                  "action_space_type": "continuous", "sensor": ["FRONT_FACING_CAMERA"]}
+    archive = _archive(tmp_path / "one-output.tar.gz", {"model_metadata.json": json.dumps(continuous).encode(),
+                                                        "model.onnx": model.SerializeToString()})
+
+    report = scrutineer(archive, "reinvent_base", laps=1)
+
+    assert report.verdict == "invalid"
+    assert "must output 2 means" in report.message

@@ -6,6 +6,7 @@ ONNX models drive as they are. The drive runs synchronously and is bounded (a fe
 """
 from __future__ import annotations
 
+import logging
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import logs
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.errors import Conflict, NotFound
 from chalicelib.domain.league_export import ExportLimits, read_tar_gz
@@ -47,7 +49,11 @@ def simulator_drive(folder: Path, track_type: str, laps: int) -> Any:
         from drem_sim.learn.scrutineer import scrutineer_for_event
     except ModuleNotFoundError:
         raise Conflict("Scrutineering needs the simulator, which is not installed on this server.") from None
-    return scrutineer_for_event(folder, track_type, laps)
+    try:
+        return scrutineer_for_event(folder, track_type, laps)
+    except Exception as error:  # a racer's graph can fail in ways of its own: say so, never a 500
+        logs.log(logging.WARNING, "scrutineering drive failed", error=repr(error)[:300])
+        raise Conflict(f"The simulator could not drive this model: {str(error)[:200]}") from None
 
 
 class ScrutineerService:

@@ -53,7 +53,12 @@ class OnnxPilot:
 
     def raw_output(self, observation: np.ndarray) -> np.ndarray:
         frame = np.asarray(observation, dtype=np.float32).reshape(1, observation.shape[0], observation.shape[1], 1)
-        return self.session.run([self.output_name], {self.input_name: frame})[0][0]
+        try:
+            output = self.session.run([self.output_name], {self.input_name: frame})[0]
+        except Exception as error:  # onnxruntime raises its own types for a graph that cannot run this input
+            raise ArchiveError(f"the model cannot run a 120x160 camera frame: {str(error)[:200]}") from None
+        # One frame in: [1, N] or (for graphs that drop the batch axis) [N] out; both are the N values.
+        return np.asarray(output).reshape(-1)
 
     def act(self, observation: np.ndarray) -> dict[str, float]:
         return self.action_from_output(self.raw_output(observation))
@@ -61,6 +66,9 @@ class OnnxPilot:
     def action_from_output(self, output: np.ndarray) -> dict[str, float]:
         output = np.asarray(output, dtype=np.float64).reshape(-1)
         if self.kind == "continuous":
+            if output.shape[0] != 2:
+                raise ArchiveError(f"a continuous model must output 2 means (steering, speed), this one outputs "
+                                   f"{output.shape[0]}")
             steering, speed = np.clip(output[:2], -1.0, 1.0)
             return {"steering_angle": _rescale(steering, self.action_space["steering_angle"]),
                     "speed": _rescale(speed, self.action_space["speed"])}
