@@ -10,6 +10,7 @@ never has two AVAILABLE records (and never appears twice in the car-assignment p
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import re
 import secrets
@@ -92,6 +93,7 @@ class ModelRecord(BaseModel):
     # Console models: the ONNX conversion stored beside the untouched archive (models/...onnx), and whether the
     # model can be test-driven in the simulator ("ready") or not ("cannot_scrutineer", with scrutiny_reason).
     converted_key: str | None = None
+    converted_md5: str | None = None
     scrutiny: str | None = None
     scrutiny_reason: str | None = None
     conversion_max_diff: float | None = None
@@ -347,6 +349,7 @@ class ModelService:
             key = converted_key(record.owner_sub, record.model_id)
             self.files.put(key, outcome.onnx)
             facts["converted_key"] = key
+            facts["converted_md5"] = hashlib.md5(outcome.onnx, usedforsecurity=False).hexdigest()
         logs.log(logging.INFO, "console model converted", model_id=record.model_id, scrutiny=outcome.scrutiny,
                  reason=outcome.reason, max_abs_diff=outcome.max_abs_diff, seconds=outcome.seconds)
         return facts
@@ -401,6 +404,12 @@ class ModelService:
         if record.status is not ModelStatus.AVAILABLE or record.s3_key is None:
             raise Conflict(f"Model '{record.name}' cannot be downloaded ({record.status.value}).")
         return self.files.presign_download(record.s3_key, expires_s=DOWNLOAD_EXPIRES_S)
+
+    def converted_download_url(self, record: ModelRecord) -> str | None:
+        """The ONNX conversion of an AVAILABLE console model (drem car agents drive it), if there is one."""
+        if record.status is not ModelStatus.AVAILABLE or record.converted_key is None:
+            return None
+        return self.files.presign_download(record.converted_key, expires_s=DOWNLOAD_EXPIRES_S)
 
     def _visible(self, principal: Principal, model_id: str) -> ModelRecord:
         """The model if it exists (not deleted) and the caller owns it or is model staff (403 for other racers)."""
