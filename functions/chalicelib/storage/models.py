@@ -209,7 +209,7 @@ def build_model_service(settings: Settings | None = None, **options: Any) -> Mod
     settings = settings or get_settings()
     options.setdefault("converter", ConsoleConverter())
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
-                        S3ModelFiles(clients.s3(), settings.bucket("models")), **options)
+                        S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)
 
 
 class EventTrackTypes:
