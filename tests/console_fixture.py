@@ -27,7 +27,8 @@ def members() -> dict[str, bytes]:
         return {m.name.removeprefix("./"): archive.extractfile(m).read() for m in archive if m.isreg()}
 
 
-def console_archive(*, metadata: dict | None = None, pb: bytes | None = None, flat: bool = False) -> bytes:
+def console_archive(*, metadata: dict | None = None, pb: bytes | None = None, flat: bool = False,
+                    extra: dict[str, bytes] | None = None) -> bytes:
     """The fixture repacked, optionally with other metadata or graph bytes, or in DROA's flat layout."""
     files = members()
     document = json.loads(files["model_metadata.json"])
@@ -36,7 +37,7 @@ def console_archive(*, metadata: dict | None = None, pb: bytes | None = None, fl
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w:gz") as archive:
         for name, data in (("model_metadata.json", json.dumps(document).encode()),
-                           ("model.pb" if flat else "agent/model.pb", graph)):
+                           ("model.pb" if flat else "agent/model.pb", graph), *(extra or {}).items()):
             info = tarfile.TarInfo(name)
             info.size = len(data)
             archive.addfile(info, io.BytesIO(data))

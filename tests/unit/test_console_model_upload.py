@@ -114,3 +114,12 @@ def test_a_graph_with_an_operation_drem_cannot_translate_stays_raceable(stack: A
 
     assert model.status is ModelStatus.AVAILABLE
     assert model.scrutiny_text.startswith("cannot be scrutineered: operation Sin")
+
+
+def test_the_openvino_ir_some_tools_add_beside_the_pb_is_accepted(stack: Any, aws_clients: Any) -> None:
+    extra = {"agent/model.xml": b"<?xml version='1.0'?><net/>", "agent/model.bin": b"\x00" * 64,
+             "agent/model.mapping": b"<mapping/>"}
+    _, model = _upload(aws_clients, stack, console_fixture.console_archive(extra=extra), "with-ir", converter=None)
+    assert model.status is ModelStatus.AVAILABLE and model.model_kind == "tensorflow"
+    files = console_fixture.members()
+    assert model.model_md5 == hashlib.md5(files["agent/model.pb"]).hexdigest()  # the car's checksum.txt
