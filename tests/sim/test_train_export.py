@@ -62,6 +62,7 @@ def test_archive_passes_the_upload_validator_and_loads_in_onnxruntime(trained) -
     assert report.status == ArchiveStatus.AVAILABLE, report.reason
     assert report.model_kind == "onnx"
     assert report.action_space_type == "continuous"
+    assert report.training_algorithm == "behaviour_cloning", "drem shows the real origin, the car reads clipped_ppo"
     with tarfile.open(model.archive) as archive:
         graph_bytes = archive.extractfile("model.onnx").read()
         metadata = json.loads(archive.extractfile("model_metadata.json").read())

@@ -473,7 +473,7 @@ class _Scanner:
             metadata_md5=facts.md5[metadata_member],
             sensor=list(metadata.sensor),
             action_space_type=metadata.action_space_type.value,
-            training_algorithm=metadata.training_algorithm.value,
+            training_algorithm=metadata.training_origin,
             metadata=metadata,
         )
 

@@ -197,6 +197,14 @@ class ModelMetadata(BaseModel):
         return next(name for name in self.sensor if name in CAMERA_SENSORS)
 
     @property
+    def training_origin(self) -> str:
+        """The algorithm that really trained the model. drem's exports name `clipped_ppo` for the car (the only
+        algorithm a DeepRacer accepts beside sac) and keep the truth in `drem.training_algorithm`."""
+        drem = getattr(self, "drem", None)
+        real = drem.get("training_algorithm") if isinstance(drem, dict) else None
+        return real if real in {algorithm.value for algorithm in TrainingAlgorithm} else self.training_algorithm.value
+
+    @property
     def lidar(self) -> str | None:
         return next((name for name in self.sensor if name in LIDAR_SENSORS), None)
 
