@@ -63,7 +63,7 @@ $(VENV)/.installed-test: $(DEV_LOCK) pyproject.toml | $(VENV)/bin/python
 ## make lock: re-resolve requirements/*.txt from pyproject.toml (keeps current pins; UPGRADE=1 takes the newest)
 lock: | $(UV)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras -o $(DEV_LOCK)
-	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --constraint $(DEV_LOCK) \
+	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --extra convert --constraint $(DEV_LOCK) \
 		-o $(RUNTIME_LOCK)
 	$(UV_COMPILE) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
 

@@ -249,11 +249,13 @@ class CarAgent:
         if existing is not None or (model_id, md5) in self._failed:
             return existing  # installed (maybe unloadable: the load loop skips those), or a failed download
         self._report(model_id, "downloading")
+        onnx = entry.get("onnx") if isinstance(entry.get("onnx"), dict) else None  # a console model's conversion
         try:
             return self.store.install(
                 model_id, entry["name"], entry.get("folder") or entry["name"], md5,
                 download=lambda handle: self.client.download(entry["url"], handle),
-                on_verified=lambda actual: self._report(model_id, "verified", md5=actual))
+                on_verified=lambda actual: self._report(model_id, "verified", md5=actual),
+                converted=(lambda handle: self.client.download(onnx["url"], handle), onnx["md5"]) if onnx else None)
         except Unreachable as exc:
             log.warning("model %s download: %s (will retry)", model_id, exc)
             self._reported.pop(model_id, None)

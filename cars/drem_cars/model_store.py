@@ -77,7 +77,9 @@ class ModelStore:
 
     def install(self, model_id: str, name: str, folder: str, expected_md5: str,
                 download: Callable[[BinaryIO], None], on_verified: Callable[[str], None] | None = None,
-                ) -> InstalledModel:
+                converted: tuple[Callable[[BinaryIO], None], str] | None = None) -> InstalledModel:
+        """`converted`: (download, md5) of the server's ONNX conversion of a console model (agent/model.pb), added
+        as model.onnx so the drem agent can drive it; the archive itself stays as the console downloaded it."""
         work = self._staging / uuid.uuid4().hex
         work.mkdir()
         try:
@@ -97,6 +99,8 @@ class ModelStore:
                 raise ModelInstallError(f"unsafe or broken archive: {exc}") from None
             if not (unpacked / METADATA_FILE).is_file():
                 raise ModelInstallError(f"the archive has no {METADATA_FILE}")
+            if converted is not None and not (unpacked / "model.onnx").exists():
+                _fetch_verified(unpacked / "model.onnx", *converted)
             shutil.move(str(archive), unpacked / ARCHIVE_COPY)
             final = self.root / f"{safe_folder(folder)}@{actual[:12]}"
             model = InstalledModel(model_id=model_id, name=name, folder=safe_folder(folder), archive_md5=actual,
@@ -136,6 +140,14 @@ class ModelStore:
         for model in models:
             shutil.rmtree(model.path, ignore_errors=True)
         return len(models)
+
+
+def _fetch_verified(target: Path, download: Callable[[BinaryIO], None], expected_md5: str) -> None:
+    with open(target, "wb") as handle:
+        download(handle)
+    actual = md5_of(target)
+    if actual != expected_md5:
+        raise ModelInstallError(f"checksum mismatch: downloaded model.onnx md5 {actual}, expected {expected_md5}")
 
 
 def md5_of(path: Path) -> str:

@@ -108,6 +108,10 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
         assert bars.nth(index).evaluate("bar => bar.value > 0 && bar.value === bar.max")
     states = page.get_by_test_id("upload-state").all_inner_texts()
     assert states == ["uploaded: AVAILABLE", "uploaded: NOT_VALID"]
+    # Scrutineer the good one in the simulator: the result replaces the form's cell and stays after a reload.
+    good.get_by_role("button", name="Scrutineer").click()
+    good.get_by_test_id("scrutineer-result").wait_for(timeout=180_000)
+    assert "on REINVENT_2018:" in good.get_by_test_id("scrutineer-result").inner_text()
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "models.png"), full_page=True)
 
@@ -118,3 +122,4 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
     page.reload()
     good.wait_for()
     assert bad.count() == 0
+    assert "laps completed" in good.get_by_test_id("scrutineer-result").inner_text()

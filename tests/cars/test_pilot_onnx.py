@@ -67,3 +67,25 @@ def test_deepracer_speed_curve_and_steering_normalisation() -> None:
     assert unit_throttle(1.0, 2.0) == pytest.approx(0.8)
     mapping = ActionToDrive(lambda: None)
     assert mapping.run(10.0, 1.0) == (0.0, 0.0), "no model loaded: no motion"
+
+
+def test_a_converted_console_model_drives_the_car_agent_like_the_console_graph(tmp_path: Path) -> None:
+    """The real-structure console graph, converted: raw 0..255 frames in, argmax over its 9 actions out."""
+    from drem_sim.console.convert import convert
+    from tests import console_fixture
+
+    files = console_fixture.members()
+    metadata = json.loads(files["model_metadata.json"])
+    (tmp_path / "model.pb").write_bytes(files["agent/model.pb"])
+    folder = tmp_path / "console-model"
+    folder.mkdir()
+    assert convert(tmp_path / "model.pb", metadata, folder / "model.onnx").outcome == "converted"
+    (folder / "model_metadata.json").write_text(json.dumps(metadata))
+
+    pilot = OnnxPilot(folder)
+    frames = np.load(console_fixture.FRAMES)
+    expected = np.load(console_fixture.EXPECTED)
+    for camera_frame, probabilities in zip(frames, expected):
+        chosen = metadata["action_space"][int(np.argmax(probabilities))]
+        steering, speed, _ = pilot.run(camera_frame[:, :, 0])
+        assert (steering, speed) == (chosen["steering_angle"], chosen["speed"])

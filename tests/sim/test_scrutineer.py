@@ -29,7 +29,7 @@ def _archive(path: Path, members: dict[str, bytes]) -> Path:
     return path
 
 
-def test_console_tensorflow_model_is_reported_as_not_scrutineerable(tmp_path: Path) -> None:
+def test_a_console_graph_openvino_cannot_read_is_reported_as_not_scrutineerable(tmp_path: Path) -> None:
     archive = _archive(tmp_path / "console-model.tar.gz", {
         "model_metadata.json": json.dumps(CONSOLE_METADATA).encode(),
         "agent/model.pb": b"\x0a\x0bfrozen-graph-bytes",
@@ -38,8 +38,19 @@ def test_console_tensorflow_model_is_reported_as_not_scrutineerable(tmp_path: Pa
     report = scrutineer(archive, "reinvent_base", laps=1)
 
     assert report.verdict == "cannot_scrutineer"
-    assert report.message.startswith("cannot scrutineer: TensorFlow model")
+    assert report.message.startswith("cannot scrutineer: OpenVINO cannot read agent/model.pb")
     assert report.completion_pct is None
+
+
+def test_a_real_console_model_is_converted_and_driven(tmp_path: Path) -> None:
+    from tests import console_fixture
+
+    report = scrutineer(console_fixture.require_fixture(), "reinvent_base", laps=1)
+
+    # Untrained (random) weights: it drives, badly; what matters is that it was driven and measured.
+    assert report.verdict in ("passed", "failed"), report.message
+    assert report.completion_pct is not None and report.offtrack_count >= 0
+    assert "laps completed on reinvent_base" in report.message
 
 
 def test_archive_without_metadata_is_invalid_with_a_clear_reason(tmp_path: Path) -> None:
@@ -96,3 +107,24 @@ def test_a_model_that_leaves_the_track_fails_with_its_completion(tmp_path: Path)
     assert report.laps_completed == 0 and report.offtrack_count >= 1
     assert 0.0 <= report.completion_pct < 50.0
     assert report.message.startswith("0/2 laps completed")
+
+
+def test_a_model_with_the_wrong_number_of_outputs_is_invalid_not_a_crash(tmp_path: Path) -> None:
+    import onnx
+    from onnx import TensorProto, helper
+
+    image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 120, 160, 1])
+    mean = helper.make_tensor_value_info("mean", TensorProto.FLOAT, [1])
+    graph = helper.make_graph([helper.make_node("ReduceMean", ["image"], ["mean"], axes=[1, 2, 3], keepdims=0)],
+                              "one_output", [image], [mean])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    continuous = {"action_space": {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}},
+                  "action_space_type": "continuous", "sensor": ["FRONT_FACING_CAMERA"]}
+    archive = _archive(tmp_path / "one-output.tar.gz", {"model_metadata.json": json.dumps(continuous).encode(),
+                                                        "model.onnx": model.SerializeToString()})
+
+    report = scrutineer(archive, "reinvent_base", laps=1)
+
+    assert report.verdict == "invalid"
+    assert "must output 2 means" in report.message

@@ -62,6 +62,7 @@ def test_archive_passes_the_upload_validator_and_loads_in_onnxruntime(trained) -
     assert report.status == ArchiveStatus.AVAILABLE, report.reason
     assert report.model_kind == "onnx"
     assert report.action_space_type == "continuous"
+    assert report.training_algorithm == "behaviour_cloning", "drem shows the real origin, the car reads clipped_ppo"
     with tarfile.open(model.archive) as archive:
         graph_bytes = archive.extractfile("model.onnx").read()
         metadata = json.loads(archive.extractfile("model_metadata.json").read())
@@ -108,3 +109,33 @@ def test_the_car_agent_reads_the_archive_like_the_simulator(trained, run_dir: Pa
     expected = SimPilot.from_archive(model.archive).act(frame)
     assert steering == pytest.approx(expected["steering_angle"], abs=1e-4)
     assert speed == pytest.approx(expected["speed"], abs=1e-4)
+
+
+def test_the_archive_also_carries_a_pb_a_stock_car_accepts(trained, run_dir: Path, tmp_path: Path) -> None:
+    import openvino as ov
+
+    from chalicelib.domain.model_metadata import check_for_stock_car, parse_model_metadata_json
+    from drem_sim.console.convert import convert
+    from drem_sim.console.tf_export import INPUT_NODE, OUTPUT_NODE
+
+    model, _ = trained
+    with tarfile.open(model.archive) as archive:
+        pb = archive.extractfile("agent/model.pb").read()
+        raw_metadata = archive.extractfile("model_metadata.json").read()
+    metadata = json.loads(raw_metadata)
+    # what the car validates (webserver_pkg constants.py): clipped_ppo; our real origin kept in the drem block
+    assert metadata["training_algorithm"] == "clipped_ppo"
+    assert metadata["drem"]["training_algorithm"] == "behaviour_cloning"
+    check_for_stock_car(parse_model_metadata_json(raw_metadata))
+    assert model.lineage["car_model"]["openvino_max_abs_difference"] <= 1e-4
+    (tmp_path / "model.pb").write_bytes(pb)
+    graph = ov.Core().read_model(str(tmp_path / "model.pb"))  # OpenVINO's TensorFlow frontend, as on the car
+    assert {n.split(":")[0] for n in graph.inputs[0].get_names()} == {INPUT_NODE}
+    assert {n.split(":")[0] for n in graph.outputs[0].get_names()} == {OUTPUT_NODE}
+    frames = np.stack([cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+                       for p in sorted((run_dir / "frames").glob("*.png"))[:8]]).astype(np.float32)[..., None]
+    compiled = ov.Core().compile_model(graph, "CPU", {"INFERENCE_PRECISION_HINT": "f32"})
+    session = onnxruntime.InferenceSession(str(model.onnx), providers=["CPUExecutionProvider"])
+    np.testing.assert_allclose(compiled(frames)[0], session.run(["policy"], {"observation": frames})[0], atol=1e-4)
+    # and drem's own upload converter reads it back like any console model
+    assert convert(tmp_path / "model.pb", metadata, tmp_path / "back.onnx").outcome == "converted"

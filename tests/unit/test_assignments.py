@@ -7,6 +7,7 @@ import json
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 import requests
 from chalice.test import Client
@@ -193,3 +194,39 @@ def create_event(fleet_id: str) -> str:
         "name": "Summit", "event_type": "AWS_SUMMIT", "date": datetime.date.today().isoformat(),
         "country_code": "GB", "tracks": [{"fleet_id": fleet_id}]})))
     return event.event_id
+
+
+def test_a_console_model_reaches_a_drem_car_with_its_onnx_conversion(racer: ModelsApi, operator: ModelsApi,
+                                                                     car_x: tuple[str, ModelsApi],
+                                                                     tmp_path: Any) -> None:
+    from drem_cars.model_store import ModelStore
+    from drem_cars.parts.pilot_onnx import OnnxPilot
+    from tests import console_fixture
+
+    original = console_fixture.require_fixture().read_bytes()
+    console_model = racer.upload_and_complete("console.tar.gz", original)
+    drem_model = racer.upload_and_complete("drem.tar.gz", onnx_archive(0.5))
+    assert console_model["scrutiny"] == "ready", console_model
+    device_id, car = car_x
+    assert assign(operator, device_id, [console_model["model_id"], drem_model["model_id"]]).status_code == 200
+
+    entries = {e["name"]: e for e in car.call("GET", "/api/devices/self/assignment").json_body["models"]}
+    assert "onnx" not in entries["drem"], "an ONNX archive needs no conversion"
+    entry = entries["console"]
+    assert entry["md5"] == hashlib.md5(original).hexdigest(), "the archive is still the upload, byte for byte"
+
+    def fetch(url: str):  # noqa: ANN202
+        return lambda handle: handle.write(requests.get(url, timeout=30).content)
+
+    store = ModelStore(tmp_path / "models")
+    installed = store.install(entry["model_id"], entry["name"], entry["folder"], entry["md5"], download=fetch(entry["url"]),
+                              converted=(fetch(entry["onnx"]["url"]), entry["onnx"]["md5"]))
+    assert (installed.path / "agent" / "model.pb").is_file() and (installed.path / "model.onnx").is_file()
+    steering, speed, _ = OnnxPilot(installed.path).run(np.zeros((120, 160), np.uint8))
+    assert (steering, speed) in {(a["steering_angle"], a["speed"])
+                                 for a in json.loads((installed.path / "model_metadata.json").read_text())["action_space"]}
+
+    from drem_cars.model_store import ModelInstallError
+    with pytest.raises(ModelInstallError, match="model.onnx md5"):
+        store.install(entry["model_id"], entry["name"], "other", entry["md5"], download=fetch(entry["url"]),
+                      converted=(fetch(entry["onnx"]["url"]), "0" * 32))

@@ -151,3 +151,23 @@ def test_nav_shows_a_racer_only_their_own_screens(app: Any, users: Any) -> None:
     assert [link for link in ("/console/my-models", "/console/my-races", "/console/profile") if link in nav]
     for staff in ("/console/users", "/console/models\"", "/console/registration", "/console/events"):
         assert staff not in nav
+
+
+def test_a_racer_scrutineers_a_model_from_my_models_and_sees_the_result(app: Any, users: Any) -> None:
+    ada = signed_in(app, users, "ada", "racer")
+    bob = signed_in(app, users, "bob", "racer")
+    model = ModelsApi(app, bearer(users.sign_in("ada")["AccessToken"])).upload_and_complete(
+        "drive-me.tar.gz", onnx_archive(0.001))
+    assert 'data-testid="scrutineer-button"' in body(ada.get("/console/my-models"))
+
+    refused = post(bob, f"/console/models/{model['model_id']}/scrutineer", {"track_type": "REINVENT_2018"}, htmx=True)
+    assert refused.status_code == 403
+    driven = post(ada, f"/console/models/{model['model_id']}/scrutineer",
+                  {"track_type": "REINVENT_2018", "laps": "1"}, htmx=True)
+
+    assert driven.status_code == 200, text(driven)
+    shown = text(driven)
+    assert re.search(r"(passed|failed) on REINVENT_2018: [01]/1 laps completed, best lap .+, \d+ off-tracks?", shown)
+    assert "scrutineer-result" in body(ada.get(f"/console/my-models/{model['model_id']}/row"))  # kept on the model
+    bad = post(ada, f"/console/models/{model['model_id']}/scrutineer", {"laps": "9"}, htmx=True)
+    assert bad.status_code == 400 and "laps" in text(bad).lower()

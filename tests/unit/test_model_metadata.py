@@ -160,3 +160,14 @@ def test_json_with_a_byte_order_mark_is_read() -> None:
     raw = b"\xef\xbb\xbf" + json.dumps({"action_space": FIVE_ACTIONS}).encode()
 
     assert parse_model_metadata_json(raw).action_count == 5
+
+
+def test_a_drem_export_names_clipped_ppo_for_the_car_but_keeps_its_real_origin() -> None:
+    document = {"action_space": {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2.0}},
+                "action_space_type": "continuous", "sensor": ["FRONT_FACING_CAMERA"],
+                "neural_network": "DREM_BC_CNN_SMALL", "training_algorithm": "clipped_ppo",
+                "drem": {"training_algorithm": "behaviour_cloning", "car_model_file": "agent/model.pb"}}
+    metadata = parse_model_metadata(document)
+    assert metadata.training_algorithm.value == "clipped_ppo"  # what the car validates
+    assert metadata.training_origin == "behaviour_cloning"  # what drem shows
+    assert parse_model_metadata({**document, "drem": {"training_algorithm": "magic"}}).training_origin == "clipped_ppo"

@@ -172,9 +172,15 @@ class AssignmentService:
                            "folder": f"{model.owner_username}-{model.name}", "md5": record.archive_md5,
                            "model_md5": record.model_md5, "url": self._models.download_url(record),
                            "expires_in": DOWNLOAD_EXPIRES_S,
-                           "progress": _progress_json(assignment.progress_of(model.model_id))})
+                           "progress": _progress_json(assignment.progress_of(model.model_id)),
+                           **self._converted(record)})
         return {"device_id": car.device_id, "assigned_at": assignment.assigned_at, "version": assignment.version,
                 "models": models, "withdrawn": withdrawn}
+
+    def _converted(self, record: ModelRecord) -> dict[str, Any]:
+        """Console models: the ONNX conversion too, so a drem car agent can drive them (a DeepRacer takes the .pb)."""
+        url = self._models.converted_download_url(record)
+        return {"onnx": {"url": url, "md5": record.converted_md5}} if url and record.converted_md5 else {}
 
     def report(self, device: Device, report: StatusReport) -> ModelProgress:
         car = _require_car_device(device)

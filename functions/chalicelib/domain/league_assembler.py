@@ -76,7 +76,7 @@ def assemble(files: ExportFiles, *, racer: str, track: str, model_name: str | No
     name = model_name or _MODEL_NAME_UNSAFE.sub("-", files.source_name).strip("-.") or "model"
     try:
         return SubmissionInput(racer=racer, track=track, model_name=name[:80], layout=layout,
-                               sensor=list(metadata.sensor), algorithm=metadata.training_algorithm.value,
+                               sensor=list(metadata.sensor), algorithm=metadata.training_origin,
                                action_space_type=metadata.action_space_type.value,
                                action_space=action_space_summary(metadata), **parts)
     except ValueError as error:  # pydantic: a value out of range (e.g. a negative lap time)

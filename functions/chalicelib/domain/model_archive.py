@@ -35,7 +35,8 @@ from typing import IO, BinaryIO, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.domain.model_metadata import ModelMetadata, ModelMetadataError, parse_model_metadata_json
+from chalicelib.domain.model_metadata import (ModelMetadata, ModelMetadataError, check_for_stock_car,
+                                              parse_model_metadata_json)
 
 KiB = 1024
 MiB = 1024 * KiB
@@ -457,7 +458,12 @@ class _Scanner:
             metadata = parse_model_metadata_json(facts.metadata_bytes[metadata_member])
         except ModelMetadataError as error:
             raise _not_valid(error.message) from None
-        model_kind, model_member = self._model_file()
+        model_kind, model_member = self._model_file(metadata)
+        if any(m in facts.sizes for m in TENSORFLOW_MEMBERS):  # a .pb is for stock cars: judge as the car will
+            try:
+                check_for_stock_car(metadata)
+            except ModelMetadataError as error:
+                raise _not_valid(error.message) from None
         return self._report(
             ArchiveStatus.AVAILABLE,
             None,
@@ -467,15 +473,19 @@ class _Scanner:
             metadata_md5=facts.md5[metadata_member],
             sensor=list(metadata.sensor),
             action_space_type=metadata.action_space_type.value,
-            training_algorithm=metadata.training_algorithm.value,
+            training_algorithm=metadata.training_origin,
             metadata=metadata,
         )
 
-    def _model_file(self) -> tuple[ModelKind, str]:
+    def _model_file(self, metadata: ModelMetadata) -> tuple[ModelKind, str]:
         sizes = self._facts.sizes
         tensorflow = next((member for member in TENSORFLOW_MEMBERS if member in sizes), None)
         onnx = ONNX_MEMBER if ONNX_MEMBER in sizes else None
-        if tensorflow and onnx:
+        # drem's own exports carry the same network twice: model.onnx (simulator, drem cars) and agent/model.pb
+        # (stock cars), and say so in their metadata. Any other archive with both is ambiguous.
+        drem_block = getattr(metadata, "drem", None)
+        dual = isinstance(drem_block, dict) and drem_block.get("car_model_file") == tensorflow
+        if tensorflow and onnx and not dual:
             raise _not_valid(f"the archive holds both {onnx} and {tensorflow}; upload one model per archive")
         if not tensorflow and not onnx:
             raise _not_valid("the archive has no model file: expected agent/model.pb (DeepRacer console) or "

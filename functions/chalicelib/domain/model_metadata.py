@@ -197,6 +197,14 @@ class ModelMetadata(BaseModel):
         return next(name for name in self.sensor if name in CAMERA_SENSORS)
 
     @property
+    def training_origin(self) -> str:
+        """The algorithm that really trained the model. drem's exports name `clipped_ppo` for the car (the only
+        algorithm a DeepRacer accepts beside sac) and keep the truth in `drem.training_algorithm`."""
+        drem = getattr(self, "drem", None)
+        real = drem.get("training_algorithm") if isinstance(drem, dict) else None
+        return real if real in {algorithm.value for algorithm in TrainingAlgorithm} else self.training_algorithm.value
+
+    @property
     def lidar(self) -> str | None:
         return next((name for name in self.sensor if name in LIDAR_SENSORS), None)
 
@@ -204,6 +212,26 @@ class ModelMetadata(BaseModel):
     def action_count(self) -> int | None:
         """Number of discrete actions (the policy's output size); None for a continuous space."""
         return len(self.action_space) if isinstance(self.action_space, list) else None
+
+
+# What a stock car accepts (aws-deepracer-webserver-pkg webserver_pkg/constants.py: TrainingAlgorithms,
+# SensorInputKeys, ActionSpaceTypes): the car refuses a model whose metadata names anything else.
+CAR_TRAINING_ALGORITHMS = frozenset({TrainingAlgorithm.CLIPPED_PPO, TrainingAlgorithm.SAC})
+CAR_SENSORS = frozenset({"observation", "LIDAR", "SECTOR_LIDAR", "LEFT_CAMERA", "FRONT_FACING_CAMERA",
+                         "STEREO_CAMERAS"})
+
+
+def check_for_stock_car(metadata: ModelMetadata) -> None:
+    """Raise ModelMetadataError when a DeepRacer car would refuse a TensorFlow model with this metadata."""
+    if metadata.training_algorithm not in CAR_TRAINING_ALGORITHMS:
+        raise ModelMetadataError(
+            f"model_metadata.json: training_algorithm: a DeepRacer car loads only clipped_ppo or sac models "
+            f"(got {metadata.training_algorithm.value!r})", field="training_algorithm")
+    unknown = [name for name in metadata.sensor if name not in CAR_SENSORS]
+    if unknown:
+        raise ModelMetadataError(
+            f"model_metadata.json: sensor: a DeepRacer car does not know {unknown[0]!r} "
+            f"(it knows {', '.join(sorted(CAR_SENSORS))})", field="sensor")
 
 
 def parse_model_metadata(document: Any) -> ModelMetadata:
@@ -289,6 +317,7 @@ __all__ = [
     "ModelMetadata",
     "ModelMetadataError",
     "TrainingAlgorithm",
+    "check_for_stock_car",
     "parse_model_metadata",
     "parse_model_metadata_json",
 ]

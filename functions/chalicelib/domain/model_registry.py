@@ -194,7 +194,12 @@ def _training_recipe(lineage: dict[str, Any]) -> list[tuple[str, str]]:
 def verdict(model: ModelRecord) -> str:
     """The scrutineering result in words."""
     if model.status is ModelStatus.AVAILABLE:
-        return f"passed ({model.model_kind or 'model'})"
+        text = f"passed ({model.model_kind or 'model'})"
+        if model.scrutineer_result is not None:
+            return f"{text}; simulator drive: {model.scrutineer_result.verdict}, {model.scrutineer_result.message}"
+        if model.scrutiny == "cannot_scrutineer":
+            return f"{text}; {model.scrutiny_text}"
+        return text
     if model.status is ModelStatus.UPLOADED:
         return "waiting for the upload"
     return f"{model.status.value.lower().replace('_', ' ')}: {model.reason or 'no reason given'}"

@@ -10,6 +10,7 @@ never has two AVAILABLE records (and never appears twice in the car-assignment p
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import re
 import secrets
@@ -26,6 +27,7 @@ from chalicelib.auth.principals import Principal, Role
 from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
 from chalicelib.domain.model_archive import (DEFAULT_LIMITS, ArchiveLimits, ArchiveStatus, inspect_archive,
                                              model_name_from_filename)
+from chalicelib.domain.model_conversion import ConversionOutcome
 from chalicelib.domain.ownership import require_owner_or_role
 
 SAMPLE_OWNER = "default"
@@ -48,6 +50,21 @@ class ModelRef(BaseModel):
     model_config = ConfigDict(frozen=True)
     model_id: str
     name: str
+
+
+class ScrutineerResult(BaseModel):
+    """The last test drive of a model in the simulator, on an event's track."""
+    model_config = ConfigDict(frozen=True)
+    verdict: str
+    message: str
+    track: str
+    track_type: str | None = None
+    laps: int = 0
+    laps_completed: int = 0
+    best_lap_time_s: float | None = None
+    mean_lap_time_s: float | None = None
+    offtrack_count: int = 0
+    at: str = ""
 
 
 class ModelRecord(BaseModel):
@@ -73,10 +90,26 @@ class ModelRecord(BaseModel):
     duplicate_of: ModelRef | None = None
     # Where the archive lives now: models/... when AVAILABLE, quarantine/... when QUARANTINED.
     s3_key: str | None = None
+    # Console models: the ONNX conversion stored beside the untouched archive (models/...onnx), and whether the
+    # model can be test-driven in the simulator ("ready") or not ("cannot_scrutineer", with scrutiny_reason).
+    converted_key: str | None = None
+    converted_md5: str | None = None
+    scrutiny: str | None = None
+    scrutiny_reason: str | None = None
+    conversion_max_diff: float | None = None
+    scrutineer_result: ScrutineerResult | None = None
+
+    @property
+    def scrutiny_text(self) -> str:
+        if self.scrutiny == "cannot_scrutineer":
+            return f"cannot be scrutineered: {self.scrutiny_reason or 'no reason given'}"
+        if self.scrutiny == "ready" and self.model_kind == "tensorflow":
+            return f"converted to ONNX (agrees with OpenVINO to {self.conversion_max_diff or 0:.1e})"
+        return "ready" if self.status is ModelStatus.AVAILABLE else ""
 
     def public(self) -> dict[str, Any]:
         """What API callers see (storage keys stay inside)."""
-        return self.model_dump(mode="json", exclude={"upload_key", "s3_key"})
+        return self.model_dump(mode="json", exclude={"upload_key", "s3_key", "converted_key"})
 
 
 class ModelPage(BaseModel):
@@ -168,6 +201,10 @@ def model_key(owner_sub: str, model_id: str) -> str:
     return f"models/{owner_sub}/{model_id}.tar.gz"
 
 
+def converted_key(owner_sub: str, model_id: str) -> str:
+    return f"models/{owner_sub}/{model_id}.onnx"
+
+
 def quarantine_key(owner_sub: str, model_id: str) -> str:
     return f"quarantine/{owner_sub}/{model_id}.tar.gz"
 
@@ -185,14 +222,23 @@ def _size(count: int) -> str:
     return f"{count / (1024 * 1024):.1f} MiB" if count >= 1024 * 1024 else f"{count} bytes"
 
 
+class Converter(Protocol):
+    def convert(self, archive: IO[bytes]) -> ConversionOutcome: ...
+
+
 class ModelService:
     def __init__(self, store: ModelStore, files: ModelFiles, *, limits: ArchiveLimits = DEFAULT_LIMITS,
-                 clock: Callable[[], str] = utc_now, new_id: Callable[[], str] = new_model_id) -> None:
+                 clock: Callable[[], str] = utc_now, new_id: Callable[[], str] = new_model_id,
+                 converter: Converter | None = None) -> None:
         self.store = store
         self.files = files
         self.limits = limits
+        self.converter = converter
         self._clock = clock
         self._new_id = new_id
+
+    def now(self) -> str:
+        return self._clock()
 
     @property
     def max_upload_bytes(self) -> int:
@@ -277,9 +323,36 @@ class ModelService:
                 **facts, "duplicate_of": ModelRef(model_id=first.model_id, name=first.name),
                 "reason": f"this is the same model as your model '{first.name}' (identical model file); "
                           "that one is kept, so this copy was not added"})
+        if report.model_kind == "tensorflow":
+            facts.update(self._convert(record))
+        else:
+            facts.update(scrutiny="ready")
         destination = model_key(record.owner_sub, record.model_id)
-        self.files.copy(record.upload_key, destination)
+        self.files.copy(record.upload_key, destination)  # byte for byte: what a stock car receives
         return self._verdict(record, ModelStatus.AVAILABLE, s3_key=destination, **facts)
+
+    def _convert(self, record: ModelRecord) -> dict[str, Any]:
+        """Console model: convert agent/model.pb to ONNX (contained worker) and store it beside the archive.
+
+        Whatever happens, the model stays AVAILABLE for stock cars; only its scrutiny changes."""
+        if self.converter is None:
+            return {"scrutiny": "cannot_scrutineer",
+                    "scrutiny_reason": "the model converter (OpenVINO) is not installed on this server"}
+        download = self.files.download_bounded(record.upload_key, limit=self.max_upload_bytes)
+        if download is None or download.too_large:
+            return {"scrutiny": "cannot_scrutineer", "scrutiny_reason": "the archive could not be read again"}
+        with download.body:
+            outcome = self.converter.convert(download.body)
+        facts: dict[str, Any] = {"scrutiny": outcome.scrutiny, "scrutiny_reason": outcome.reason,
+                                 "conversion_max_diff": outcome.max_abs_diff}
+        if outcome.scrutiny == "ready" and outcome.onnx:
+            key = converted_key(record.owner_sub, record.model_id)
+            self.files.put(key, outcome.onnx)
+            facts["converted_key"] = key
+            facts["converted_md5"] = hashlib.md5(outcome.onnx, usedforsecurity=False).hexdigest()
+        logs.log(logging.INFO, "console model converted", model_id=record.model_id, scrutiny=outcome.scrutiny,
+                 reason=outcome.reason, max_abs_diff=outcome.max_abs_diff, seconds=outcome.seconds)
+        return facts
 
     def _verdict(self, record: ModelRecord, status: ModelStatus, **facts: Any) -> ModelRecord:
         return record.model_copy(update={"status": status, "updated_at": self._clock(), **facts})
@@ -331,6 +404,12 @@ class ModelService:
         if record.status is not ModelStatus.AVAILABLE or record.s3_key is None:
             raise Conflict(f"Model '{record.name}' cannot be downloaded ({record.status.value}).")
         return self.files.presign_download(record.s3_key, expires_s=DOWNLOAD_EXPIRES_S)
+
+    def converted_download_url(self, record: ModelRecord) -> str | None:
+        """The ONNX conversion of an AVAILABLE console model (drem car agents drive it), if there is one."""
+        if record.status is not ModelStatus.AVAILABLE or record.converted_key is None:
+            return None
+        return self.files.presign_download(record.converted_key, expires_s=DOWNLOAD_EXPIRES_S)
 
     def _visible(self, principal: Principal, model_id: str) -> ModelRecord:
         """The model if it exists (not deleted) and the caller owns it or is model staff (403 for other racers)."""

@@ -6,16 +6,17 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.assignments import Assignment
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
 from chalicelib.domain.models import ListQuery, ModelRecord, ModelStatus
 from chalicelib.routes.console_forms import SHOWN_ON_FORM, error_status, field_errors, submitted, submitted_list
 from chalicelib.routes.devices import device_service
 from chalicelib.storage.assignments import build_assignment_service
-from chalicelib.storage.models import build_model_service
+from chalicelib.storage.models import build_model_service, build_scrutineer_service
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -41,14 +42,15 @@ def models_page(principal: User) -> Response:
     listed = _listed(principal)
     query, errors, models = _filtered(listed)
     return render.page("console/models", status=400 if errors else 200, query=query, errors=errors, models=models,
-                       statuses=STATUSES, cars=_cars(),
+                       statuses=STATUSES, cars=_cars(), track_types=TRACK_TYPES,
                        assignable=[m for m in listed if m.status is ModelStatus.AVAILABLE])
 
 
 @route(bp, "/console/models/rows", allow=MODEL_STAFF)
 def model_rows(principal: User) -> Response:
     query, errors, models = _filtered(_listed(principal))
-    return render.fragment("console/model_rows", status=400 if errors else 200, errors=errors, models=models)
+    return render.fragment("console/model_rows", status=400 if errors else 200, errors=errors, models=models,
+                           track_types=TRACK_TYPES)
 
 
 @route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
@@ -98,3 +100,19 @@ def _filtered(listed: list[ModelRecord]) -> tuple[dict[str, str], dict[str, str]
 
 def _cars() -> list:
     return [d for d in device_service().list_devices() if d.kind is DeviceKind.CAR]
+
+
+# --- scrutineering (owner or model staff: the service decides, another racer's model answers 403) ----------------
+
+@route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
+def scrutineer_model(principal: User, model_id: str) -> Response:
+    form = submitted(bp.current_request, "track_type", "event_id", "laps")
+    error, status = "", 200
+    try:
+        request = ScrutineerRequest.model_validate({key: value for key, value in form.items() if value})
+        model = build_scrutineer_service().scrutineer(principal, model_id, request)
+    except SHOWN_ON_FORM as exc:
+        model = build_model_service().get(principal, model_id)
+        error, status = " ".join(field_errors(exc, "model_id").values()), error_status(exc)
+    return render.fragment("console/model_scrutiny", status=status, model=model, error=error,
+                           track_types=TRACK_TYPES)

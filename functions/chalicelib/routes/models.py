@@ -13,9 +13,10 @@ from chalice import Blueprint, Response
 from chalicelib import logs
 from chalicelib.auth.access import SIGNED_IN, route
 from chalicelib.auth.principals import User
+from chalicelib.domain.model_scrutiny import ScrutineerRequest
 from chalicelib.domain.models import ListQuery, UploadRequest
 from chalicelib.settings import get_settings
-from chalicelib.storage.models import build_model_service
+from chalicelib.storage.models import build_model_service, build_scrutineer_service
 
 bp = Blueprint(__name__)
 
@@ -45,6 +46,12 @@ def get_model(principal: User, model_id: str) -> dict:
 @route(bp, "/api/models/{model_id}", methods=["DELETE"], allow=SIGNED_IN)
 def delete_model(principal: User, model_id: str) -> dict:
     return {"model": build_model_service().delete(principal, model_id).public()}
+
+
+@route(bp, "/api/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN, body=ScrutineerRequest)
+def scrutineer_model(principal: User, model_id: str, body: ScrutineerRequest) -> dict:
+    """Test-drive the model in the simulator on an event's track (owner, admins, operators); the result is kept."""
+    return {"model": build_scrutineer_service().scrutineer(principal, model_id, body).public()}
 
 
 def handle_upload_complete_event(event: dict[str, Any]) -> dict[str, Any]:

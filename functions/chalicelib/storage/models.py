@@ -14,7 +14,9 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.errors import InvalidInput, NotFound
+from chalicelib.domain.model_conversion import ConsoleConverter
+from chalicelib.domain.model_scrutiny import ScrutineerService
 from chalicelib.domain.models import ModelChanged, ModelPage, ModelRecord, ModelService, ModelStatus
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
@@ -150,7 +152,7 @@ def decode_token(token: str, *, required: dict[str, str], key_names: tuple[str, 
 
 
 _FACT_FIELDS = ("reason", "model_kind", "model_md5", "metadata_md5", "archive_md5", "action_space_type",
-                "training_algorithm", "s3_key")
+                "training_algorithm", "s3_key", "converted_key", "converted_md5", "scrutiny", "scrutiny_reason", "conversion_max_diff")
 
 
 def _to_item(record: ModelRecord) -> dict[str, Any]:
@@ -172,6 +174,8 @@ def _to_item(record: ModelRecord) -> dict[str, Any]:
         value = getattr(record, name)
         if value is not None:
             item[name] = {"S": str(value)}
+    if record.scrutineer_result is not None:
+        item["scrutineer_result"] = {"S": record.scrutineer_result.model_dump_json()}
     if record.duplicate_of is not None:
         item["duplicate_of"] = {"M": {"model_id": {"S": record.duplicate_of.model_id},
                                       "name": {"S": record.duplicate_of.name}}}
@@ -192,6 +196,8 @@ def _from_item(item: dict[str, Any]) -> ModelRecord:
     for name in _FACT_FIELDS:
         if name in item:
             values[name] = item[name]["S"]
+    if "scrutineer_result" in item:
+        values["scrutineer_result"] = json.loads(item["scrutineer_result"]["S"])
     if "duplicate_of" in item:
         duplicate = item["duplicate_of"]["M"]
         values["duplicate_of"] = {"model_id": duplicate["model_id"]["S"], "name": duplicate["name"]["S"]}
@@ -201,5 +207,27 @@ def _from_item(item: dict[str, Any]) -> ModelRecord:
 def build_model_service(settings: Settings | None = None, **options: Any) -> ModelService:
     """The model service over the configured table and bucket (clients built lazily, on first use)."""
     settings = settings or get_settings()
+    options.setdefault("converter", ConsoleConverter())
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
                         S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)
+
+
+class EventTrackTypes:
+    """The track type an event races on (what scrutineering drives on), read from the events table."""
+
+    def __init__(self, store: Any) -> None:
+        self._store = store
+
+    def track_type_of(self, event_id: str) -> str:
+        event = self._store.get(event_id)
+        if event is None:
+            raise NotFound(f"There is no event {event_id[:64]!r}.", field="event_id")
+        return event.race_config.track_type.value
+
+
+def build_scrutineer_service(settings: Settings | None = None) -> ScrutineerService:
+    from chalicelib.storage.events import DynamoEventStore
+
+    settings = settings or get_settings()
+    return ScrutineerService(build_model_service(settings),
+                             EventTrackTypes(DynamoEventStore(clients.dynamodb(), settings.table("events"))))

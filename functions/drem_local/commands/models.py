@@ -6,7 +6,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-HELP = "list, upload, delete model archives and assign them to cars (via the drem API)"
+# A scrutineering drive is synchronous: up to 3 laps with a per-lap time limit in the simulator.
+SCRUTINEER_TIMEOUT_S = 600.0
+HELP = "list, upload, delete, scrutineer model archives and assign them to cars (via the drem API)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,6 +23,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     upload.add_argument("file", type=Path, help="the archive, named like my-model.tar.gz")
     delete = actions.add_parser("delete", help="delete one of your models")
     delete.add_argument("model_id")
+    scrutineer = actions.add_parser("scrutineer", help="test-drive a model in the simulator on an event's track")
+    scrutineer.add_argument("model_id")
+    scrutineer.add_argument("--event", dest="event_id", help="drive on this event's track type")
+    scrutineer.add_argument("--track-type", help="or name the track type, e.g. ATOZ_SPEEDWAY (default REINVENT_2018)")
+    scrutineer.add_argument("--laps", type=int, default=1, help="lap attempts (1-3)")
     assign = actions.add_parser("assign", help="give models to a car (no model ids: clear the car)")
     assign.add_argument("car", help="the car's device id")
     assign.add_argument("model_ids", nargs="*", metavar="MODEL")
@@ -31,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         api = ApiClient.from_args(args)
-        return {"list": _list, "upload": _upload, "delete": _delete, "assign": _assign}[args.action](api, args)
+        return {"list": _list, "upload": _upload, "delete": _delete, "assign": _assign,
+                "scrutineer": _scrutineer}[args.action](api, args)
     except ApiError as exc:
         print(f"drem models {args.action}: {exc}", file=sys.stderr)
         return 1
@@ -83,7 +91,22 @@ def _upload(api: Any, args: argparse.Namespace) -> int:
     print(f"{model['name']} ({model['model_id']}): {model['status']}")
     if model.get("reason"):
         print(f"reason: {model['reason']}")
+    if model.get("scrutiny") == "cannot_scrutineer":
+        print(f"cannot be scrutineered: {model.get('scrutiny_reason')}")
     return 0 if model["status"] == "AVAILABLE" else 3
+
+
+def _scrutineer(api: Any, args: argparse.Namespace) -> int:
+    body = {"laps": args.laps, **({"event_id": args.event_id} if args.event_id else {}),
+            **({"track_type": args.track_type} if args.track_type else {})}
+    api.timeout_s = max(api.timeout_s, SCRUTINEER_TIMEOUT_S)  # the drive runs inside the request
+    model = api.post(f"/api/models/{args.model_id}/scrutineer", body)["model"]
+    result = model["scrutineer_result"]
+    best = f"{result['best_lap_time_s']:.2f}s" if result.get("best_lap_time_s") is not None else "-"
+    print(f"{model['name']} ({model['model_id']}) on {result['track_type'] or result['track']}: {result['verdict']}")
+    print(f"laps completed {result['laps_completed']}/{result['laps']}, best lap {best}, "
+          f"off-tracks {result['offtrack_count']}")
+    return 0 if result["verdict"] == "passed" else 3
 
 
 def _delete(api: Any, args: argparse.Namespace) -> int:

@@ -31,8 +31,10 @@ class ArchiveError(ValueError):
     """The archive is not a usable model package."""
 
 
-def build_metadata(scale: ActionScale) -> dict[str, Any]:
-    return {
+def build_metadata(scale: ActionScale, *, car_loadable: bool = False) -> dict[str, Any]:
+    """DeepRacer metadata; `car_loadable` (the archive also holds agent/model.pb) names the algorithm as a stock car
+    requires (it accepts only clipped_ppo / sac) and keeps the real training origin in the drem block."""
+    metadata = {
         "action_space": {
             "steering_angle": {"low": scale.steering_low, "high": scale.steering_high},
             "speed": {"low": scale.speed_low, "high": scale.speed_high},
@@ -49,16 +51,26 @@ def build_metadata(scale: ActionScale) -> dict[str, Any]:
                       "dtype": "float32", "color": "grayscale", "scale": "raw 0..255 (the graph divides by 255)"},
             "output": {"name": OUTPUT_NAME, "shape": [None, 2], "kind": "continuous_means",
                        "order": ["steering_angle", "speed"], "range": [-1.0, 1.0]},
+            "training_algorithm": "behaviour_cloning",
         },
     }
+    if car_loadable:
+        # The .pb is laid out like a Coach clipped-PPO graph (input/output node names), so that is what the car reads.
+        metadata["training_algorithm"] = "clipped_ppo"
+        metadata["drem"]["car_model_file"] = TENSORFLOW_MEMBER
+    return metadata
 
 
-def build_archive(path: Path, onnx_path: Path, metadata: dict[str, Any], lineage: dict[str, Any]) -> Path:
+def build_archive(path: Path, onnx_path: Path, metadata: dict[str, Any], lineage: dict[str, Any],
+                  pb_path: Path | None = None) -> Path:
     if not ARCHIVE_NAME.match(path.name):
         raise ArchiveError(f"archive name {path.name!r} must match [A-Za-z0-9_-]+.tar.gz")
+    if (pb_path is not None) != (metadata.get("drem", {}).get("car_model_file") == TENSORFLOW_MEMBER):
+        raise ArchiveError("agent/model.pb and the metadata's drem.car_model_file go together")
     members = {
         METADATA_MEMBER: json.dumps(metadata, indent=2).encode() + b"\n",
         ONNX_MEMBER: Path(onnx_path).read_bytes(),
+        **({TENSORFLOW_MEMBER: Path(pb_path).read_bytes()} if pb_path is not None else {}),
         LINEAGE_MEMBER: json.dumps(lineage, indent=2, sort_keys=True).encode() + b"\n",
     }
     mtime = int(lineage.get("created_epoch_s", time.time()))

@@ -30,12 +30,12 @@ class OnnxPilot:
 
     @classmethod
     def from_archive(cls, source: Path | str) -> "OnnxPilot":
+        """An ONNX archive drives as is; a console archive (agent/model.pb) is converted to ONNX first."""
         files = read_model_files(Path(source))
         metadata = load_metadata(files)
         if ONNX_MEMBER not in files:
             if TENSORFLOW_MEMBER in files:
-                raise TensorFlowModelError("cannot scrutineer: TensorFlow model (agent/model.pb); "
-                                           "the simulator runs ONNX models only")
+                return cls(metadata, _converted(files[TENSORFLOW_MEMBER], metadata))
             raise ArchiveError(f"the archive has no {ONNX_MEMBER}")
         return cls(metadata, files[ONNX_MEMBER])
 
@@ -53,7 +53,12 @@ class OnnxPilot:
 
     def raw_output(self, observation: np.ndarray) -> np.ndarray:
         frame = np.asarray(observation, dtype=np.float32).reshape(1, observation.shape[0], observation.shape[1], 1)
-        return self.session.run([self.output_name], {self.input_name: frame})[0][0]
+        try:
+            output = self.session.run([self.output_name], {self.input_name: frame})[0]
+        except Exception as error:  # onnxruntime raises its own types for a graph that cannot run this input
+            raise ArchiveError(f"the model cannot run a 120x160 camera frame: {str(error)[:200]}") from None
+        # One frame in: [1, N] or (for graphs that drop the batch axis) [N] out; both are the N values.
+        return np.asarray(output).reshape(-1)
 
     def act(self, observation: np.ndarray) -> dict[str, float]:
         return self.action_from_output(self.raw_output(observation))
@@ -61,6 +66,9 @@ class OnnxPilot:
     def action_from_output(self, output: np.ndarray) -> dict[str, float]:
         output = np.asarray(output, dtype=np.float64).reshape(-1)
         if self.kind == "continuous":
+            if output.shape[0] != 2:
+                raise ArchiveError(f"a continuous model must output 2 means (steering, speed), this one outputs "
+                                   f"{output.shape[0]}")
             steering, speed = np.clip(output[:2], -1.0, 1.0)
             return {"steering_angle": _rescale(steering, self.action_space["steering_angle"]),
                     "speed": _rescale(speed, self.action_space["speed"])}
@@ -69,6 +77,25 @@ class OnnxPilot:
                                f"{len(self.action_space)} actions")
         chosen = self.action_space[int(np.argmax(output))]
         return {"steering_angle": float(chosen["steering_angle"]), "speed": float(chosen["speed"])}
+
+
+def _converted(pb: bytes, metadata: dict[str, Any]) -> bytes:
+    """The console graph as ONNX (OpenVINO reads it, both runtimes must agree), or TensorFlowModelError saying why."""
+    import importlib.util
+    import tempfile
+
+    if importlib.util.find_spec("openvino") is None:
+        raise TensorFlowModelError("cannot scrutineer: TensorFlow model (agent/model.pb) and the model converter "
+                                   "(OpenVINO, the 'convert' extra) is not installed")
+    from drem_sim.console.convert import convert
+
+    with tempfile.TemporaryDirectory(prefix="console-model-") as folder:
+        pb_path, onnx_path = Path(folder) / "model.pb", Path(folder) / "model.onnx"
+        pb_path.write_bytes(pb)
+        result = convert(pb_path, metadata, onnx_path)
+        if result.outcome != "converted":
+            raise TensorFlowModelError(f"cannot scrutineer: {result.reason}")
+        return onnx_path.read_bytes()
 
 
 def _rescale(unit: float, bounds: dict[str, float]) -> float:

@@ -64,6 +64,22 @@ def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, confi
         "onnx_max_abs_difference": difference,
         **(extra_lineage or {}),
     }
+    pb_path, pb_note = _car_graph(result.model, onnx_path, out_dir / "model.pb", snapshot.images[np.sort(picks)])
+    lineage["car_model"] = pb_note
     (out_dir / "lineage.json").write_text(json.dumps(lineage, indent=2, sort_keys=True) + "\n")
-    archive = build_archive(out_dir / f"{name}.tar.gz", onnx_path, build_metadata(snapshot.scale), lineage)
+    metadata = build_metadata(snapshot.scale, car_loadable=pb_path is not None)
+    archive = build_archive(out_dir / f"{name}.tar.gz", onnx_path, metadata, lineage, pb_path)
     return TrainedModel(archive, onnx_path, manifest_path, loss_curve, lineage, result, snapshot, difference)
+
+
+def _car_graph(model, onnx_path: Path, pb_path: Path, frames: np.ndarray) -> tuple[Path | None, dict]:  # noqa: ANN001
+    """Write agent/model.pb for stock cars, but ship it only once OpenVINO (the car's runtime) reproduces the ONNX."""
+    import importlib.util
+
+    if importlib.util.find_spec("openvino") is None:
+        return None, {"written": False, "reason": "OpenVINO is not installed, so the .pb could not be verified"}
+    from drem_sim.console.tf_export import verify_pb, write_pb
+
+    write_pb(model, pb_path)
+    difference = verify_pb(pb_path, onnx_path, frames)  # raises PbExportError: never ship a graph that differs
+    return pb_path, {"written": True, "file": "agent/model.pb", "openvino_max_abs_difference": difference}

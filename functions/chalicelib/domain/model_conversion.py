@@ -1,0 +1,140 @@
+"""Console models (`agent/model.pb`) become scrutineerable: convert them to ONNX in a contained worker process.
+
+The conversion itself (OpenVINO reads the `.pb`, `onnx` writes the graph, both runtimes must agree to 1e-4) lives in
+`drem_sim.console.convert`; this module only decides how it runs. A `.pb` is hostile input and OpenVINO is native
+code, so the worker is a separate process with a wall-clock limit, a CPU-time limit and an address-space limit: a
+graph that crashes the converter, loops or balloons costs that process only, and the upload gets a clear verdict.
+
+The converter is optional: where OpenVINO is not installed (the Lambda bundle, a car), console models stay AVAILABLE
+for stock cars and are marked "cannot be scrutineered: the model converter is not installed on this server".
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import IO, Literal
+
+from pydantic import BaseModel, ValidationError
+
+from chalicelib.domain.model_archive import ArchiveRejected, safe_extract
+
+GiB = 1024 ** 3
+WORKER_MODULE = "drem_sim.console.convert"
+Scrutiny = Literal["ready", "cannot_scrutineer"]
+
+
+class ConversionLimits(BaseModel):
+    wall_seconds: float = 60.0
+    cpu_seconds: int = 120
+    memory_bytes: int = 6 * GiB  # address space: OpenVINO maps far more than it touches
+
+
+class ConversionOutcome(BaseModel):
+    scrutiny: Scrutiny
+    reason: str | None = None
+    max_abs_diff: float | None = None
+    seconds: float | None = None
+    onnx: bytes | None = None  # the converted graph when scrutiny is ready
+
+
+class _WorkerAnswer(BaseModel):
+    outcome: Literal["converted", "cannot_scrutineer"]
+    reason: str | None = None
+    max_abs_diff: float | None = None
+    seconds: float = 0.0
+
+
+def converter_installed() -> bool:
+    return all(importlib.util.find_spec(name) is not None for name in ("openvino", "onnx", "drem_sim"))
+
+
+def _cannot(reason: str) -> ConversionOutcome:
+    return ConversionOutcome(scrutiny="cannot_scrutineer", reason=reason)
+
+
+class ConsoleConverter:
+    def __init__(self, limits: ConversionLimits | None = None, *, python: str = sys.executable) -> None:
+        self.limits = limits or ConversionLimits()
+        self.python = python
+
+    def convert(self, archive: IO[bytes]) -> ConversionOutcome:
+        """Extract the (already judged AVAILABLE) archive into a sandbox and convert its `.pb` in a worker."""
+        if not converter_installed():
+            return _cannot("the model converter (OpenVINO) is not installed on this server")
+        workdir = Path(tempfile.mkdtemp(prefix="convert-"))
+        try:
+            try:
+                extracted = safe_extract(archive, workdir)
+            except ArchiveRejected as rejected:
+                return _cannot(f"the archive could not be unpacked again: {rejected.message}")
+            if extracted.report.model_kind != "tensorflow":
+                return _cannot("the archive holds no TensorFlow graph to convert")
+            out = workdir / "converted.onnx"
+            answer = self._run_worker(extracted.model_path, extracted.metadata_path, out)
+            if isinstance(answer, ConversionOutcome):
+                return answer
+            if answer.outcome != "converted" or not out.is_file():
+                return ConversionOutcome(scrutiny="cannot_scrutineer", reason=answer.reason,
+                                         max_abs_diff=answer.max_abs_diff, seconds=answer.seconds)
+            return ConversionOutcome(scrutiny="ready", max_abs_diff=answer.max_abs_diff, seconds=answer.seconds,
+                                     onnx=out.read_bytes())
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+
+    def _run_worker(self, pb: Path, metadata: Path, out: Path) -> _WorkerAnswer | ConversionOutcome:
+        limits = self.limits
+        environment = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+        command = [self.python, "-m", WORKER_MODULE, str(pb), str(metadata), str(out)]
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
+                                   cwd=out.parent, start_new_session=True, preexec_fn=_limit(limits))
+        try:
+            stdout, stderr = process.communicate(timeout=limits.wall_seconds)
+        except subprocess.TimeoutExpired:
+            _kill_group(process)
+            process.communicate()
+            return _cannot(f"the conversion took longer than {limits.wall_seconds:.0f} s and was stopped")
+        if process.returncode != 0:
+            return _cannot(_crash_reason(process.returncode, stderr, limits))
+        try:
+            return _WorkerAnswer.model_validate_json(stdout.decode("utf-8", "replace").strip().splitlines()[-1])
+        except (ValidationError, IndexError):
+            return _cannot("the converter gave no answer")
+
+
+def _limit(limits: ConversionLimits):  # noqa: ANN202 - a preexec_fn
+    def apply() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
+        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    return apply
+
+
+def _kill_group(process: subprocess.Popen) -> None:
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def _crash_reason(returncode: int, stderr: bytes, limits: ConversionLimits) -> str:
+    text = stderr.decode("utf-8", "replace")
+    if returncode < 0:
+        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
+        if name == "SIGXCPU":
+            return f"the conversion used more than {limits.cpu_seconds} s of CPU and was stopped"
+        return f"the converter crashed ({name})"
+    if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
+        return f"the conversion needed more than {limits.memory_bytes // GiB} GiB of memory and was stopped"
+    last = next((line for line in reversed(text.strip().splitlines()) if line.strip()), "")
+    return f"the converter failed (exit {returncode}): {last[:200]}".rstrip(": ")
+
+
+__all__ = ["ConsoleConverter", "ConversionLimits", "ConversionOutcome", "Scrutiny", "converter_installed"]

@@ -1,0 +1,169 @@
+"""Convert a DeepRacer console model (`agent/model.pb`, TensorFlow 1 frozen graph) to ONNX, and prove it.
+
+1. OpenVINO's TensorFlow frontend reads the `.pb` (no TensorFlow needed; it is what the car itself runs).
+2. `graph_to_onnx` writes the same operations as ONNX.
+3. The same frames go through OpenVINO (on the original graph) and onnxruntime (on the converted file); the
+   conversion counts only if they agree to `TOLERANCE`.
+
+Outcomes are plain data (`Conversion`): `converted`, or `cannot_scrutineer` with a reason a racer can read (a
+stereo or lidar network the simulator cannot feed, an unknown operation, a mismatch). Run as a module it is the
+worker the upload runs in a subprocess with time and memory limits (`python -m drem_sim.console.convert`): a
+hostile or enormous graph can crash or exhaust only that process.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel
+
+from drem_sim.console.heads import IMAGE_SHAPE, SINGLE_CAMERAS, input_node, output_node
+
+TOLERANCE = 1e-4
+CHECK_FRAME_COUNT = 6
+Outcome = Literal["converted", "cannot_scrutineer"]
+
+
+class Conversion(BaseModel):
+    outcome: Outcome
+    reason: str | None = None
+    max_abs_diff: float | None = None
+    frames_checked: int = 0
+    seconds: float = 0.0
+    input_name: str | None = None
+    output_name: str | None = None
+
+
+class CannotScrutineer(ValueError):
+    """The graph is fine for a car but not for the simulator (or the converter); the message says why."""
+
+
+def check_frames(count: int = CHECK_FRAME_COUNT, seed: int = 0) -> np.ndarray:
+    """Frames that exercise the whole input range: black, white, a gradient and seeded noise (uint8 pixels)."""
+    height, width, _ = IMAGE_SHAPE
+    frames = [np.zeros((height, width), np.uint8), np.full((height, width), 255, np.uint8),
+              np.tile(np.linspace(0, 255, width, dtype=np.uint8), (height, 1))]
+    rng = np.random.default_rng(seed)
+    while len(frames) < count:
+        frames.append(rng.integers(0, 256, (height, width), dtype=np.uint8))
+    return np.stack(frames[:count]).reshape(count, height, width, 1)
+
+
+def sim_can_feed(metadata: dict[str, Any]) -> None:
+    """Raise CannotScrutineer for sensors the simulator has no twin of (it renders one grayscale camera)."""
+    sensors = metadata.get("sensor") or ["observation"]
+    extra = [s for s in sensors if s not in SINGLE_CAMERAS]
+    if extra:
+        raise CannotScrutineer(f"the model reads {', '.join(extra)}; the simulator feeds one front camera only")
+
+
+def read_graph(pb_path: Path, metadata: dict[str, Any]) -> Any:
+    """The OpenVINO model of the `.pb`, narrowed to the camera input and the policy output."""
+    import openvino as ov
+
+    sim_can_feed(metadata)
+    try:
+        model = ov.Core().read_model(str(pb_path))
+    except Exception as error:  # OpenVINO raises its own types for a graph it cannot read
+        raise CannotScrutineer(f"OpenVINO cannot read agent/model.pb: {_first_line(error)}") from None
+    if len(model.inputs) != 1:
+        names = ", ".join(p.get_any_name() for p in model.inputs)
+        raise CannotScrutineer(f"the graph has {len(model.inputs)} inputs ({names}); the simulator feeds one camera")
+    shape = model.inputs[0].get_partial_shape()
+    if shape.rank.is_dynamic or shape.rank.get_length() != 4 or [
+            d.get_length() if d.is_static else -1 for d in list(shape)[1:]] != list(IMAGE_SHAPE):
+        raise CannotScrutineer(f"the graph's input is {shape}, not a 120x160 grayscale camera [?,120,160,1]")
+    if len(model.outputs) > 1:
+        wanted = output_node(str(metadata.get("training_algorithm", "clipped_ppo")))
+        heads = [o for o in model.outputs if any(n.split(":")[0] == wanted for n in o.get_names())]
+        if not heads:
+            raise CannotScrutineer(f"the graph has {len(model.outputs)} outputs and none is {wanted}")
+        model = ov.Model([heads[0]], model.get_parameters(), "policy")
+    return model
+
+
+def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Conversion:
+    """Convert and verify; write `onnx_path` only for a conversion that passed."""
+    import openvino as ov
+    import onnx
+
+    from drem_sim.console.graph_to_onnx import UnsupportedGraph, openvino_to_onnx
+
+    started = time.perf_counter()
+    algorithm = str(metadata.get("training_algorithm", "clipped_ppo"))
+    camera = next((s for s in metadata.get("sensor") or ["observation"] if s in SINGLE_CAMERAS), "observation")
+    names = {"input_name": input_node(algorithm, camera), "output_name": output_node(algorithm)}
+    try:
+        model = read_graph(pb_path, metadata)
+        translated = openvino_to_onnx(model, names["input_name"], names["output_name"])
+    except (CannotScrutineer, UnsupportedGraph) as error:
+        return Conversion(outcome="cannot_scrutineer", reason=str(error), seconds=time.perf_counter() - started)
+    frames = check_frames().astype(np.float32)
+    compiled = ov.Core().compile_model(model, "CPU", {"INFERENCE_NUM_THREADS": 1, "INFERENCE_PRECISION_HINT": "f32"})
+    expected = np.stack([compiled(frame[None])[0][0] for frame in frames])
+    data = translated.SerializeToString()
+    session = onnx_session(data)
+    actual = np.stack([session.run(None, {names["input_name"]: frame[None]})[0][0] for frame in frames])
+    if expected.shape != actual.shape:
+        return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
+                          reason=f"the converted graph outputs {actual.shape[1:]} but OpenVINO {expected.shape[1:]}")
+    wanted = _output_size(metadata)
+    if wanted is not None and expected.shape[-1] != wanted:
+        return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
+                          reason=f"the graph outputs {expected.shape[-1]} values but the action space needs {wanted}")
+    difference = float(np.max(np.abs(expected.astype(np.float64) - actual)))
+    result = Conversion(outcome="converted", max_abs_diff=difference, frames_checked=len(frames),
+                        seconds=time.perf_counter() - started, **names)
+    if not difference <= TOLERANCE:  # also catches NaN
+        return result.model_copy(update={
+            "outcome": "cannot_scrutineer",
+            "reason": f"the converted graph disagrees with OpenVINO by {difference:.1e} (more than {TOLERANCE:.0e})"})
+    onnx.save(translated, str(onnx_path))
+    return result
+
+
+def _output_size(metadata: dict[str, Any]) -> int | None:
+    """One probability per discrete action, or two means (steering, speed) for a continuous space."""
+    space = metadata.get("action_space")
+    if metadata.get("action_space_type", "discrete") == "continuous":
+        return 2
+    return len(space) if isinstance(space, list) else None
+
+
+def onnx_session(model: bytes | Path) -> Any:
+    """onnxruntime on one thread, as the car and the simulator run it (torch-free, unlike learn.export)."""
+    import onnxruntime
+
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = 1
+    options.inter_op_num_threads = 1
+    options.log_severity_level = 3
+    return onnxruntime.InferenceSession(model if isinstance(model, bytes) else str(model), options,
+                                        providers=["CPUExecutionProvider"])
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    return (text[0] if text else type(error).__name__)[:300]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Worker: convert PB (with METADATA) into OUT; print one JSON line (the Conversion) on stdout."""
+    parser = argparse.ArgumentParser(prog="python -m drem_sim.console.convert")
+    parser.add_argument("pb", type=Path)
+    parser.add_argument("metadata", type=Path)
+    parser.add_argument("out", type=Path)
+    args = parser.parse_args(argv)
+    metadata = json.loads(args.metadata.read_text())
+    result = convert(args.pb, metadata if isinstance(metadata, dict) else {}, args.out)
+    sys.stdout.write(result.model_dump_json() + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
