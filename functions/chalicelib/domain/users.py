@@ -170,6 +170,7 @@ class RegisteredUser(BaseModel):
 class UserDirectory(Protocol):
     def sign_up(self, username: str, password: str, email: str, country_code: str) -> str: ...
     def confirm_sign_up(self, username: str, code: str) -> None: ...
+    def confirm_without_code(self, username: str) -> None: ...
     def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str: ...
     def get_user(self, username: str) -> DirectoryUser: ...
     def list_users(self, prefix: str | None, limit: int, next_token: str | None) -> UserPage: ...
@@ -222,15 +223,22 @@ class ModelsEraser:
 
 class UserService:
     def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
-                 erasers: tuple[OwnedDataEraser, ...] = ()) -> None:
+                 erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False) -> None:
         self._directory = directory
         self._profiles = profiles
         self._erasers = erasers
+        # Local stacks send no email, so no code could ever arrive: a self sign-up is confirmed at once (it only
+        # ever gets the racer role; staff can disable it). On AWS, Cognito emails the code and checks it.
+        self._confirm_sign_ups = confirm_sign_ups
 
     def sign_up(self, form: SignUpForm) -> SignUpResult:
         sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
         self._directory.set_only_group(form.username, Role.RACER.value)
         self._profiles.create_for(sub, form.username, form.country_code)
+        if self._confirm_sign_ups:
+            self._directory.confirm_without_code(form.username)
+            return SignUpResult(username=form.username, sub=sub, confirmed=True,
+                                message="Your account is ready; you can sign in now.")
         return SignUpResult(username=form.username, sub=sub, confirmed=False,
                             message=f"Check {form.email} for a confirmation code, then confirm your account.")
 

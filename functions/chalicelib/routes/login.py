@@ -2,23 +2,22 @@
 the JSON token exchange for API clients (`POST /api/auth/token`, `POST /api/auth/refresh`)."""
 from __future__ import annotations
 
-import base64
-import json
-
 from chalice import Blueprint, Response
 from typing import Literal
 
 from pydantic import BaseModel, Field, ValidationError
 
 from chalicelib.auth import cookies
+from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, form_fields, route
 from chalicelib.auth.principals import Principal
 from chalicelib.auth.sessions import identity_provider
 from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
-from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, password_policy_text
+from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
 from chalicelib.http_errors import status_for
 from chalicelib.routes.responses import redirect, safe_next
 from chalicelib.settings import get_settings
+from chalicelib.storage.sessions import CHALLENGE_TTL_S, session_store
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -44,13 +43,12 @@ def login(principal: Principal) -> Response:
         return _login_form(exc, username=form.get("username", ""), next_path=next_path)
     if isinstance(result, NewPasswordChallenge):
         return redirect(_CHALLENGE_PATH, cookies=[_challenge_cookie(result, secure)])
-    return redirect(next_path, cookies=cookies.session_cookies(
-        result.access_token, result.refresh_token, result.expires_in, secure=secure))
+    return redirect(next_path, cookies=_new_session(result, secure))
 
 
 @route(bp, _CHALLENGE_PATH, allow=PUBLIC)
 def new_password_page(principal: Principal) -> Response:
-    challenge = _challenge_from(bp.current_request.headers)
+    challenge = session_store().challenge(_challenge_id(bp.current_request.headers))
     if challenge is None:
         return redirect("/login")
     return _new_password_form(challenge)
@@ -58,8 +56,9 @@ def new_password_page(principal: Principal) -> Response:
 
 @route(bp, _CHALLENGE_PATH, methods=["POST"], allow=PUBLIC)
 def new_password(principal: Principal) -> Response:
-    request = bp.current_request
-    challenge, secure = _challenge_from(request.headers), get_settings().cookie_secure
+    request, store = bp.current_request, session_store()
+    challenge_id, secure = _challenge_id(request.headers), get_settings().cookie_secure
+    challenge = store.challenge(challenge_id)
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
@@ -68,9 +67,9 @@ def new_password(principal: Principal) -> Response:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     except _SHOWN_ON_FORM as exc:
         return _new_password_form(challenge, exc)
+    store.forget_challenge(challenge_id)  # used once: the id cannot be replayed
     done = cookies.clear_cookie(cookies.CHALLENGE_COOKIE, secure=secure, path=_CHALLENGE_PATH, same_site="Strict")
-    return redirect("/", cookies=[*cookies.session_cookies(
-        tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure), done])
+    return redirect("/", cookies=[*_new_session(tokens, secure), done])
 
 
 @route(bp, "/logout", methods=["POST"], allow=PUBLIC)
@@ -151,15 +150,19 @@ def _field_errors(exc: Exception | None, default_field: str) -> dict[str, str]:
     return {getattr(exc, "field", None) or default_field: getattr(exc, "message", str(exc))}
 
 
+def _new_session(tokens: Tokens, secure: bool) -> list[str]:
+    """Session cookies plus a CSRF token bound to the new session (a token planted before sign-in stops working)."""
+    secret = tokens.refresh_token or tokens.access_token
+    return [*cookies.session_cookies(tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure),
+            double_submit.bound_cookie(secret, secure=secure)]
+
+
 def _challenge_cookie(challenge: NewPasswordChallenge, secure: bool) -> str:
-    value = base64.urlsafe_b64encode(challenge.model_dump_json().encode()).decode()
-    return cookies.set_cookie(cookies.CHALLENGE_COOKIE, value, secure=secure, path=_CHALLENGE_PATH,
-                              same_site="Strict", max_age=cookies.CHALLENGE_MAX_AGE_S)
+    # The username and Cognito session stay on the server; the browser holds only a random id for them.
+    challenge_id = session_store().hold_challenge(challenge)
+    return cookies.set_cookie(cookies.CHALLENGE_COOKIE, challenge_id, secure=secure, path=_CHALLENGE_PATH,
+                              same_site="Strict", max_age=CHALLENGE_TTL_S)
 
 
-def _challenge_from(headers) -> NewPasswordChallenge | None:
-    raw = cookies.request_cookies(headers).get(cookies.CHALLENGE_COOKIE)
-    try:
-        return NewPasswordChallenge.model_validate(json.loads(base64.urlsafe_b64decode(raw or "")))
-    except (ValueError, ValidationError):
-        return None
+def _challenge_id(headers) -> str:
+    return cookies.request_cookies(headers).get(cookies.CHALLENGE_COOKIE, "")

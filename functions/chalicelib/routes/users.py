@@ -33,7 +33,8 @@ def owned_data_erasers() -> tuple[OwnedDataEraser, ...]:
 def user_service() -> UserService:
     from chalicelib.routes.profiles import profile_service
 
-    return UserService(user_directory(), profile_service(), owned_data_erasers())
+    return UserService(user_directory(), profile_service(), owned_data_erasers(),
+                       confirm_sign_ups=get_settings().local_identity)
 
 
 @route(bp, "/api/signup", methods=["POST"], allow=PUBLIC, body=SignUpForm, status_code=201)
