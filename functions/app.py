@@ -5,6 +5,7 @@ from __future__ import annotations
 from chalice import Chalice
 
 from chalicelib import logs
+from chalicelib.security_headers import security_headers_middleware
 from chalicelib.auth.principals import set_device_credential_verifier
 from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
                                 console_racer, console_races, console_registration, console_timekeeper, console_users,
@@ -14,6 +15,7 @@ from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
+app.register_middleware(security_headers_middleware, "http")
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,

@@ -32,6 +32,8 @@ PASSWORD = "Correct-Horse-9"
 
 
 def _reset_app_caches() -> None:
+    from chalicelib.auth import rate_limits
+    from chalicelib.auth.revocation import REVOKED
     from chalicelib.auth.tokens import JWKS, PINNED
     from chalicelib.settings import get_settings
     from chalicelib.storage.clients import reset_clients
@@ -40,6 +42,9 @@ def _reset_app_caches() -> None:
     reset_clients()
     JWKS.clear()
     PINNED.clear()
+    REVOKED.clear()
+    for window in rate_limits.ALL:
+        window.clear()
 
 
 @pytest.fixture(scope="session")

@@ -145,3 +145,12 @@ def verify_token(token: str, settings: Settings, token_use: Literal["access", "i
     if token_use == "access" and claims.get("client_id") != settings.user_pool_client_id:
         raise NotAuthenticated("The token was issued to another app client.")
     return VerifiedToken(claims)
+
+
+def unverified_claim(token: str, name: str) -> str | None:
+    """A claim of a token the caller has already verified (e.g. the session cookie this request was accepted with)."""
+    try:
+        value = jwt.get_unverified_claims(token).get(name)
+    except JWTError:
+        return None
+    return str(value) if value is not None else None

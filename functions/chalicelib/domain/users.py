@@ -186,6 +186,24 @@ class ProfileKeeper(Protocol):
     def tombstone(self, sub: str, username: str) -> None: ...
 
 
+class SessionEnder(Protocol):
+    """Makes already issued tokens stop working (satisfied by chalicelib.routes.users.RevokingSessions)."""
+    def ended(self, sub: str) -> None: ...
+    def reopened(self, sub: str) -> None: ...
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None: ...
+
+
+class _KeepSessions:
+    def ended(self, sub: str) -> None:
+        pass
+
+    def reopened(self, sub: str) -> None:
+        pass
+
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None:
+        pass
+
+
 class OwnedDataEraser(Protocol):
     """Removes or anonymises what a user owns (their models) when they delete themselves; returns how many items."""
     def erase_owned_by(self, sub: str) -> int: ...
@@ -223,8 +241,10 @@ class ModelsEraser:
 
 class UserService:
     def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
-                 erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False) -> None:
+                 erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False,
+                 sessions: SessionEnder = _KeepSessions()) -> None:
         self._directory = directory
+        self._sessions = sessions
         self._profiles = profiles
         self._erasers = erasers
         # Local stacks send no email, so no code could ever arrive: a self sign-up is confirmed at once (it only
@@ -267,12 +287,17 @@ class UserService:
         self._not_self(caller, username, "change your own role")
         target = self._directory.get_user(username)
         self._directory.set_only_group(target.username, change.role.value)
+        self._sessions.roles_changed(target.sub, frozenset({change.role.value}))  # a demoted admin's token must not stay admin for the hour
         return {"username": target.username, "role": change.role.value}
 
     def set_enabled(self, caller: User, username: str, enabled: bool) -> DirectoryUser:
         self._not_self(caller, username, "disable or enable yourself")
         target = self._directory.get_user(username)
         self._directory.set_enabled(target.username, enabled)
+        if enabled:
+            self._sessions.reopened(target.sub)
+        else:
+            self._sessions.ended(target.sub)
         return target.model_copy(update={"enabled": enabled})
 
     def delete_self(self, caller: User, form: DeleteSelfForm) -> dict[str, object]:
@@ -285,6 +310,7 @@ class UserService:
         self._profiles.tombstone(caller.sub, caller.username)
         # Last, so a failure above leaves an account the user can retry the deletion with.
         self._directory.delete_user(caller.username)
+        self._sessions.ended(caller.sub)
         return {"deleted": caller.username, "items_erased": erased}
 
     @staticmethod

@@ -11,10 +11,13 @@ from chalicelib.auth import cookies
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, form_fields, route
 from chalicelib.auth.principals import Principal
+from chalicelib.auth.rate_limits import client_address, guarded_sign_in
+from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.sessions import identity_provider
+from chalicelib.auth.tokens import unverified_claim
 from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
 from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
-from chalicelib.http_errors import status_for
+from chalicelib.http_errors import retry_after_headers, status_for
 from chalicelib.routes.responses import redirect, safe_next
 from chalicelib.settings import get_settings
 from chalicelib.storage.sessions import CHALLENGE_TTL_S, session_store
@@ -38,7 +41,7 @@ def login(principal: Principal) -> Response:
     next_path, secure = safe_next(form.get("next")), get_settings().cookie_secure
     try:
         credentials = SignInForm.model_validate(form)
-        result = identity_provider().sign_in(credentials.username, credentials.password)
+        result = _sign_in(credentials)
     except _SHOWN_ON_FORM as exc:
         return _login_form(exc, username=form.get("username", ""), next_path=next_path)
     if isinstance(result, NewPasswordChallenge):
@@ -77,6 +80,8 @@ def logout(principal: Principal) -> Response:
     access_token = cookies.request_cookies(bp.current_request.headers).get(cookies.SESSION_COOKIE)
     if principal.is_user and access_token:
         identity_provider().sign_out_everywhere(access_token)
+        # Cognito revokes the refresh tokens; the access tokens already issued are revoked here.
+        REVOKED.signed_out(session_store(), principal.sub, unverified_claim(access_token, "origin_jti"))
     return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
 
 
@@ -103,7 +108,7 @@ class ChallengeAnswer(BaseModel):
        response=TokenGrant | ChallengeAnswer, tags=("auth",))
 def issue_token(principal: Principal, body: SignInForm) -> Response:
     """Exchange a username and password for Bearer tokens (for API clients and scripts)."""
-    result = identity_provider().sign_in(body.username, body.password)
+    result = _sign_in(body)
     if isinstance(result, NewPasswordChallenge):
         return _no_store(ChallengeAnswer(session=result.session))
     return _no_store(TokenGrant(**result.model_dump()))
@@ -117,6 +122,11 @@ def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
     return _no_store(TokenGrant(**identity_provider().refresh(body.refresh_token).model_dump()))
 
 
+def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
+    return guarded_sign_in(lambda: identity_provider().sign_in(credentials.username, credentials.password),
+                           credentials.username, client_address(bp.current_request))
+
+
 def _no_store(answer: BaseModel) -> Response:
     # Credentials must not linger in shared caches or the browser's back/forward cache.
     return Response(answer.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
@@ -125,7 +135,7 @@ def _no_store(answer: BaseModel) -> Response:
 def _login_form(exc: Exception | None = None, *, username: str = "", next_path: str = "/",
                 notice: str = "") -> Response:
     return render.page("login", status=status_for(exc) if exc else 200, errors=_field_errors(exc, "password"),
-                       username=username, next_path=next_path, notice=notice)
+                       username=username, next_path=next_path, notice=notice, headers=retry_after_headers(exc))
 
 
 def _new_password_form(challenge: NewPasswordChallenge, exc: Exception | None = None) -> Response:

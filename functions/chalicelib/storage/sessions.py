@@ -4,8 +4,8 @@ Items:
 * `CHALLENGE#{id}` / `-`: a pending NEW_PASSWORD_REQUIRED step: the username and Cognito session Cognito answered,
   and `expires_at`. The browser holds only the random id (cookie `drem_challenge`), so it cannot name another
   account; the item is deleted when the step completes, so it cannot be replayed.
-* `USER#{sub}` / `REVOKED`: `not_before` (epoch seconds): tokens of that user issued earlier are refused. Written on
-  sign-out, disable, role change and deletion (chalicelib.auth.revocation).
+* `USER#{sub}` / `REVOKED`: `mark`, the user's RevocationMark as JSON: tokens of that user issued before it are
+  refused. Written on sign-out, disable, enable, role change and deletion (chalicelib.auth.revocation).
 """
 from __future__ import annotations
 
@@ -13,12 +13,11 @@ import secrets
 import time
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
+from chalicelib.auth.revocation import RevocationMark
 from chalicelib.domain.identity import NewPasswordChallenge
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import call
 
 _SERVICE = "The session store"
 CHALLENGE_TTL_S = 180
@@ -53,23 +52,14 @@ class DynamoSessionStore:
 
     # --- revocation --------------------------------------------------------------------------------------------
 
-    def revoke_before(self, sub: str, not_before: int) -> None:
-        """Tokens of `sub` issued before `not_before` are no longer honoured (the mark never moves backwards)."""
-        try:
-            self._client.update_item(
-                TableName=self._table, Key=_revocation_key(sub), UpdateExpression="SET not_before = :t",
-                ConditionExpression="attribute_not_exists(not_before) OR not_before < :t",
-                ExpressionAttributeValues={":t": {"N": str(not_before)}})
-        except ClientError as exc:
-            if error_code(exc) != "ConditionalCheckFailedException":  # failed check: a later mark is already there
-                raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
-
-    def not_before(self, sub: str) -> int | None:
+    def mark(self, sub: str) -> RevocationMark | None:
         item = call(self._client, "get_item", _SERVICE, TableName=self._table, Key=_revocation_key(sub),
                     ConsistentRead=True).get("Item")
-        return int(item["not_before"]["N"]) if item and "not_before" in item else None
+        return RevocationMark.model_validate_json(item["mark"]["S"]) if item and "mark" in item else None
+
+    def put_mark(self, sub: str, mark: RevocationMark) -> None:
+        call(self._client, "put_item", _SERVICE, TableName=self._table,
+             Item={**_revocation_key(sub), "mark": {"S": mark.model_dump_json()}})
 
 
 def _challenge_key(challenge_id: str) -> dict[str, dict[str, str]]:
