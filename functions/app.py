@@ -5,12 +5,12 @@ from __future__ import annotations
 from chalice import Chalice
 
 from chalicelib import logs
-from chalicelib.security_headers import security_headers_middleware
 from chalicelib.auth.principals import set_device_credential_verifier
 from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
                                 console_racer, console_races, console_registration, console_timekeeper, console_users,
                                 devices, events, fleets, health, leaderboards, league, login, models, pages, ping,
                                 profiles, public_pages, races, registry, timing, users)
+from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")

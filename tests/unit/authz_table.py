@@ -178,7 +178,8 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/api/devices/self/rotate"): Case(allow(*DEVICE_PRINCIPALS), consumes_caller=True),
     ("POST", "/api/devices/self/heartbeat"): DEVICES,
     ("GET", "/api/devices/self/commands"): DEVICES,
-    ("POST", "/api/devices/self/commands/{command_id}/ack"): Case(allow("car_x", deny404=("car_y", "timer")), car_x_command),
+    ("POST", "/api/devices/self/commands/{command_id}/ack"): Case(allow("car_x", deny404=("car_y", "timer")),
+                                                                  car_x_command),
     # models: racer A's model — racer B is refused, model staff (admin, operator) may act for racers
     ("POST", "/api/models"): SIGNED_IN,
     ("GET", "/api/models"): SIGNED_IN,

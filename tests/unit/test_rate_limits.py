@@ -90,7 +90,8 @@ def test_sign_up_flood_from_one_address_is_limited(api, source_ip):
 def test_activation_code_guessing_is_limited(client, stack, source_ip):
     def guess(n: int):
         return client.http.post("/api/devices/activate", headers={"Content-Type": "application/json"},
-                                body=json.dumps({"code": f"ABCD-{n:04d}", "hostname": "car-1", "device_kind": "car"}).encode())
+                                body=json.dumps({"code": f"ABCD-{n:04d}", "hostname": "car-1",
+                                                 "device_kind": "car"}).encode())
 
     answers = [guess(n).status_code for n in range(11)]
 

@@ -106,7 +106,8 @@ def _public_half(path: Path) -> dict[str, Any]:
         private = json.loads(path.read_text())
         return {"kty": "RSA", "alg": _ALGORITHM, "kid": str(private["kid"]), "n": private["n"], "e": private["e"]}
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ServiceUnavailable("The installation's token signing key cannot be read; restart with `drem up`.") from exc
+        raise ServiceUnavailable("The installation's token signing key cannot be read; "
+                                 "restart with `drem up`.") from exc
 
 
 PINNED = PinnedKey()

@@ -287,7 +287,8 @@ class UserService:
         self._not_self(caller, username, "change your own role")
         target = self._directory.get_user(username)
         self._directory.set_only_group(target.username, change.role.value)
-        self._sessions.roles_changed(target.sub, frozenset({change.role.value}))  # a demoted admin's token must not stay admin for the hour
+        # A demoted admin's token must not stay admin for the rest of its hour.
+        self._sessions.roles_changed(target.sub, frozenset({change.role.value}))
         return {"username": target.username, "role": change.role.value}
 
     def set_enabled(self, caller: User, username: str, enabled: bool) -> DirectoryUser:
