@@ -70,7 +70,7 @@ def test_the_principals_are_who_they_claim_to_be(world: World):
         assert (me["username"], me["roles"]) == (world.usernames[name], groups)
     for device, kind in (("car_x", "car"), ("car_y", "car"), ("timer", "timer")):
         me = world.ok("GET", "/api/devices/self", device)
-        assert (me["device_id"], me["device_kind"]) == (world.device_ids[device], kind)
+        assert (me["device_id"], me["kind"]) == (world.device_ids[device], kind)
     cookie_me = world.call("GET", "/api/me", "admin_cookie")
     assert cookie_me.status == 200 and cookie_me.json["roles"] == ["admin"] and "drem_session" in \
         world.headers["admin_cookie"]["Cookie"] and "Authorization" not in world.headers["admin_cookie"]

@@ -27,7 +27,10 @@
 
   // htmx puts focus back where it was before the swap; some forms want it on their first field instead.
   document.addEventListener("htmx:afterSettle", function (event) {
-    var box = event.target.closest ? event.target.closest("[data-refocus-autofocus]") : null;
+    // An outerHTML swap settles on the new element or on its parent, so look both up and down.
+    var target = event.target;
+    var box = target.closest && target.closest("[data-refocus-autofocus]");
+    box = box || (target.querySelector && target.querySelector("[data-refocus-autofocus]"));
     if (box) {
       setTimeout(function () {
         var field = box.querySelector("[autofocus]");
