@@ -3,7 +3,8 @@
 * Content-Security-Policy: scripts only from drem itself (no inline scripts or handlers: drem.js attaches them; htmx
   runs without eval), no plugins, forms and `<base>` only to drem; `connect-src` adds the storage origin browsers
   upload models to (the local storage server, or S3 on AWS). Inline `style` attributes stay allowed: templates set
-  racer colours as CSS variables, and a style cannot run code.
+  racer colours as CSS variables, and a style cannot run code. `/_storage/...` (the local storage gateway) is
+  answered before the app runs, with its own `Content-Security-Policy: sandbox`.
 * frame-ancestors: 'none' (with X-Frame-Options DENY for old browsers) except the overlay and leaderboard pages,
   which stream producers embed in a browser source or a production dashboard's frame. They are public and
   read-only, so a framing page has nothing to trick anyone into clicking.
@@ -63,7 +64,9 @@ def content_security_policy(settings: Settings, *, embeddable: bool) -> str:
 
 def _upload_origin(settings: Settings) -> str:
     if settings.endpoint_url:
-        parts = urlsplit(settings.endpoint_url)
+        # Presigned links point at the app's storage gateway under the public URL, which may be another origin than
+        # the one a page was opened from (127.0.0.1 on the laptop, the LAN address in the links).
+        parts = urlsplit(settings.public_url)
         return f"{parts.scheme}://{parts.netloc}"
     return "https://*.amazonaws.com"  # presigned S3 POSTs go to the bucket's own host
 

@@ -15,6 +15,8 @@ log = logging.getLogger("drem.durable")
 STABLE_ID_ENV = {
     "MOTO_COGNITO_IDP_USER_POOL_ID_STRATEGY": "HASH",
     "MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY": "HASH",
+    # moto's Flask apps otherwise answer every Origin with Access-Control-Allow-Origin (flask_cors).
+    "MOTO_DISABLE_GLOBAL_CORS": "true",
 }
 EXIT_VERSION_MISMATCH = 3
 
@@ -33,14 +35,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.update(STABLE_ID_ENV)
+    os.umask(0o077)  # journal, snapshots and logs hold plaintext passwords: readable by this user only
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("werkzeug").setLevel(logging.ERROR)
 
     from werkzeug.serving import make_server
 
+    from drem_local.durable.guard import StorageGuard
     from drem_local.durable.server import DurableApp
     from drem_local.durable.state import DurableState, MotoVersionMismatch
+    from drem_local.storage_keys import load_or_create
 
+    keys = load_or_create(args.state_dir)  # also makes the state dir 0700 and its files 0600
     try:
         state = DurableState(args.state_dir, fsync=not args.no_fsync)
     except MotoVersionMismatch as exc:
@@ -56,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     token_signing.install(ensure_signing_key(args.state_dir))
 
     os.environ.setdefault("MOTO_PORT", str(args.port))
-    app = DurableApp(DomainDispatcherApplication(create_backend_app), state)
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys))
     report = app.recover()
     log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
              "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,

@@ -11,6 +11,7 @@ from typing import Any, Callable
 from werkzeug.test import run_wsgi_app
 
 from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.state import DurableState, replay_environ
 
@@ -32,9 +33,11 @@ def read_body(environ: dict[str, Any]) -> bytes:
 class DurableApp:
     """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
 
-    def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState) -> None:
+    def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState,
+                 guard: StorageGuard | None = None) -> None:
         self.moto_app = moto_app
         self.state = state
+        self.guard = guard  # None only in tests that drive the middleware in-process
         self.lock = threading.Lock()
 
     def recover(self):
@@ -59,6 +62,9 @@ class DurableApp:
         body = read_body(environ)
         environ["wsgi.input"] = io.BytesIO(body)  # moto's dispatcher and Flask may each read it
         environ["CONTENT_LENGTH"] = str(len(body))
+        refusal = self.guard.check(environ, body) if self.guard is not None else None
+        if refusal is not None:  # before the journal: a refused request leaves no trace in the state
+            return refuse(refusal, environ, start_response)
         service = service_of(environ)
         changing = is_state_changing(environ)
         captured: dict[str, Any] = {}
@@ -79,7 +85,7 @@ class DurableApp:
                 self._snapshot_service(service)
             elif changing and service == MOTO_API:
                 self.state.after_moto_api_call()
-        start_response(captured["status"], captured["headers"])
+        start_response(captured["status"], without_cors(captured["headers"]))
         return [payload]
 
     def _snapshot_service(self, service: str) -> None:
