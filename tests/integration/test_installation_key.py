@@ -72,11 +72,7 @@ def test_two_installations_have_different_keys(durable_server_factory):
 
 
 def test_the_live_app_refuses_an_admin_token_minted_with_motos_shipped_key(live_stack):
-    import boto3
-    from botocore.config import Config
-
-    cognito = boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
-                           config=Config(account_id_endpoint_mode="disabled"))
+    cognito = live_stack.client("cognito-idp")
     real = cognito.initiate_auth(ClientId=live_stack.outputs.user_pool_client_id, AuthFlow="USER_PASSWORD_AUTH",
                                  AuthParameters={"USERNAME": live_stack.admin_username,
                                                  "PASSWORD": live_stack.admin_password})
