@@ -10,10 +10,12 @@ from chalicelib.routes import (accounts, api_docs, assignments, commentator, con
                                 console_racer, console_races, console_registration, console_timekeeper, console_users,
                                 devices, events, fleets, health, leaderboards, league, login, models, pages, ping,
                                 profiles, public_pages, races, registry, timing, users)
+from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
+app.register_middleware(security_headers_middleware, "http")
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,

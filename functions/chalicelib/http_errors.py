@@ -74,6 +74,20 @@ def wants_json(request: Request | None) -> bool:
 
 
 def to_response(exc: Exception, request: Request | None) -> Response:
+    response = _error_response(exc, request)
+    if isinstance(exc, e.RateLimited) and exc.retry_after:
+        response.headers["Retry-After"] = str(exc.retry_after)
+    return response
+
+
+def retry_after_headers(exc: Exception | None) -> dict[str, str]:
+    """Retry-After for a form page that shows a RateLimited error next to its field."""
+    if isinstance(exc, e.RateLimited) and exc.retry_after:
+        return {"Retry-After": str(exc.retry_after)}
+    return {}
+
+
+def _error_response(exc: Exception, request: Request | None) -> Response:
     status = status_for(exc)
     request_id = logs.current_request_id()
     if status == 500:

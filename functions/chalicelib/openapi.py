@@ -50,7 +50,7 @@ SECURITY_SCHEMES: dict[str, Any] = {
     "cookieAuth": {"type": "apiKey", "in": "cookie", "name": SESSION_COOKIE,
                    "description": "The browser session cookie; state-changing requests also need the "
                                   "`X-CSRF-Token` header (or `csrf_token` form field) equal to the `drem_csrf` "
-                                  "cookie."},
+                                  "cookie (bound to the session) and no `Origin` of another site."},
     "deviceAuth": {"type": "apiKey", "in": "header", "name": "Authorization",
                    "description": "A car's or timer's credential: `Authorization: Device <device_id>.<secret>`."},
 }

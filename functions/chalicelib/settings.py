@@ -26,17 +26,25 @@ class Settings(BaseModel):
     endpoint_url: str | None = None
     public_url: str = "http://127.0.0.1:8000"
     state_dir: Path = Path(".drem")
+    # Local stacks: the installation's token signing key (the only key local tokens may be signed with). None on AWS,
+    # where Cognito's published JWKS is trusted.
+    token_key_file: Path | None = None
 
     @classmethod
     def from_env(cls, env: Mapping[str, str]) -> Settings:
+        endpoint_url = env.get("AWS_ENDPOINT_URL") or None
+        state_dir = env.get("DREM_STATE_DIR") or ".drem"
+        token_key_file = env.get(resources.TOKEN_SIGNING_KEY_ENV) or (
+            str(Path(state_dir) / resources.TOKEN_SIGNING_KEY_FILE) if endpoint_url else None)
         values = {
             "region": env.get("AWS_DEFAULT_REGION") or env.get("AWS_REGION") or "us-east-1",
             "stage": env.get("DREM_STAGE") or "local",
             "user_pool_id": env.get("DREM_USER_POOL_ID") or None,
             "user_pool_client_id": env.get("DREM_USER_POOL_CLIENT_ID") or None,
-            "endpoint_url": env.get("AWS_ENDPOINT_URL") or None,
+            "endpoint_url": endpoint_url,
             "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
-            "state_dir": env.get("DREM_STATE_DIR") or ".drem",
+            "state_dir": state_dir,
+            "token_key_file": token_key_file,
         }
         return cls.model_validate(values)
 
@@ -44,6 +52,11 @@ class Settings(BaseModel):
     def cookie_secure(self) -> bool:
         # Browsers drop Secure cookies on plain http, which would make local sign-in impossible.
         return self.public_url.lower().startswith("https://")
+
+    @property
+    def local_identity(self) -> bool:
+        """The user pool is drem's local Cognito (tokens pinned to the installation key, no email delivery)."""
+        return self.token_key_file is not None
 
     @property
     def issuer(self) -> str:

@@ -111,6 +111,8 @@ TABLES: tuple[TableSpec, ...] = (
     # gsi1 lists every model newest first for operators (gsi1pk "MODELS", gsi1sk "{uploadedAt}#{modelId}").
     TableSpec("models", gsis=(GsiSpec("gsi1", "gsi1pk", "gsi1sk"),)),
     TableSpec("league"),
+    # Per-user "tokens issued before this are revoked" records and the pending new-password sign-in steps.
+    TableSpec("sessions"),
 )
 
 BUCKETS: tuple[BucketSpec, ...] = (
@@ -177,3 +179,9 @@ def stage_environment(stage: str, user_pool_id: str, user_pool_client_id: str,
     env.update({table_env_var(logical): name for logical, name in tables.items()})
     env.update({bucket_env_var(logical): name for logical, name in buckets.items()})
     return env
+
+
+# Local stacks only: the per-installation RSA key the local Cognito signs tokens with and the app pins (0600 JWK in
+# the state dir, generated at the first `drem up`). On AWS, Cognito's own keys (its JWKS) are used instead.
+TOKEN_SIGNING_KEY_FILE = "token-signing-key.json"
+TOKEN_SIGNING_KEY_ENV = "DREM_TOKEN_KEY_FILE"

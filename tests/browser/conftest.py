@@ -27,12 +27,17 @@ def chromium() -> Iterator[Any]:
 
 @pytest.fixture
 def page(chromium: Any) -> Iterator[Any]:
-    """A fresh browser context (no cookies) per test."""
+    """A fresh browser context (no cookies) per test. Fails the test if the page broke the Content-Security-Policy
+    (chromium logs every blocked script, handler, style or connection to the console)."""
     context = chromium.new_context()
     context.set_default_timeout(10_000)
     page = context.new_page()
+    violations: list[str] = []
+    page.on("console", lambda message: violations.append(message.text)
+            if "Content Security Policy" in message.text else None)
     yield page
     context.close()
+    assert violations == [], f"the page broke the Content-Security-Policy: {violations}"
 
 
 @pytest.fixture(scope="session")

@@ -50,11 +50,12 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
     page.locator("#q").press_sequentially(desk[:7])  # active search: the table narrows as the admin types
     row = page.locator(f'[data-testid="user-row"][data-username="{desk}"]')
     row.wait_for()
-    page.wait_for_function("document.querySelectorAll('[data-testid=user-row]').length === 1")
+    page.wait_for_function("() => document.querySelectorAll('[data-testid=user-row]').length === 1")
     row.get_by_test_id("user-role").select_option("registration")
     row.get_by_role("button", name="Set role").click()
     page.wait_for_function(
-        f"document.querySelector('[data-username=\"{desk}\"] [data-testid=user-role]').value === 'registration'")
+        f"() => document.querySelector('[data-username=\"{desk}\"] [data-testid=user-role]').value"
+        " === 'registration'")
     page.context.clear_cookies()
 
     # The colleague signs in (temporary password → their own) and sees only the desk among staff screens.

@@ -20,7 +20,7 @@ def _laps(page) -> int:
 
 
 def _wait_laps(page, count: int) -> None:
-    page.wait_for_function(f"document.querySelectorAll('[data-testid=laps] tr[data-lap]').length === {count}")
+    page.wait_for_function(f"() => document.querySelectorAll('[data-testid=laps] tr[data-lap]').length === {count}")
 
 
 def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin(live_stack, app_url, page):
@@ -45,18 +45,18 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     assert page.get_by_test_id("time-left").inner_text() == "3:00.000"
 
     page.keyboard.press("Space")  # start
-    page.wait_for_function("document.querySelector('[data-testid=race-status]').textContent === 'Running'")
+    page.wait_for_function("() => document.querySelector('[data-testid=race-status]').textContent === 'Running'")
     page.wait_for_timeout(1200)
     assert page.get_by_test_id("time-left").inner_text() < "2:59.000"  # ticking down between polls
 
     page.keyboard.press("l")  # lap 1, clean
     _wait_laps(page, 1)
     page.keyboard.press("r")  # a reset on lap 2 ...
-    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
+    page.wait_for_function("() => document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
     page.keyboard.press("r")
-    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '2 / 0'")
+    page.wait_for_function("() => document.querySelector('[data-testid=resets]').textContent.trim() === '2 / 0'")
     page.keyboard.press("Shift+R")  # ... one taken back
-    page.wait_for_function("document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
+    page.wait_for_function("() => document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
     page.wait_for_timeout(300)
     page.keyboard.press("Enter")  # lap 2: one reset, over the limit of 0 → invalid
     _wait_laps(page, 2)
@@ -66,7 +66,7 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     _wait_laps(page, 2)
     page.keyboard.press("d")  # DNF: an invalid lap 3, and the race pauses
     _wait_laps(page, 3)
-    page.wait_for_function("document.querySelector('[data-testid=race-status]').textContent === 'Paused'")
+    page.wait_for_function("() => document.querySelector('[data-testid=race-status]').textContent === 'Paused'")
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "timekeeper.png"), full_page=True)
 

@@ -1,8 +1,10 @@
-"""The nine principals of the authorization matrix, with real credentials, in ONE stack per test module.
+"""The eleven principals of the authorization matrix, with real credentials, in ONE stack per test module.
 
 Anonymous (no credentials, but a valid CSRF cookie/header pair so a PUBLIC form post is not refused for CSRF),
-racer A and B, registration, commentator, operator, admin (real moto Cognito access tokens, sent as Bearer), and
-cars X and Y (activated through the real activation API, sent as `Authorization: Device <id>.<secret>`).
+racer A and B, registration, commentator, operator, admin (real Cognito access tokens from the local pool, sent as
+Bearer), admin_cookie (an admin signed in through /login like a browser: session cookies and the session-bound CSRF
+token, so the cookie + CSRF path is covered too), cars X and Y and a timer (activated through the real activation
+API, sent as `Authorization: Device <id>.<secret>`).
 
 The matrix makes ~900 calls; bootstrapping the stack for each would take minutes, so this module replaces the
 per-test wipe (`fresh_moto`) with one wipe per module. The test module imports `fresh_moto` from here to override
@@ -25,12 +27,15 @@ from chalice.test import Client
 from moto.core.base_backend import BackendDict
 
 from drem_local.bootstrap import clients_for, ensure_stack
-from tests.unit.conftest import REGION, STAGE, Users, _reset_app_caches, bearer
+from tests.unit.conftest import PASSWORD, REGION, STAGE, Users, _reset_app_caches, bearer, set_cookie_headers
 
-PRINCIPALS = ("anonymous", "racer_a", "racer_b", "registration", "commentator", "operator", "admin", "car_x", "car_y")
+PRINCIPALS = ("anonymous", "racer_a", "racer_b", "registration", "commentator", "operator", "admin", "admin_cookie",
+              "car_x", "car_y", "timer")
 USER_GROUPS = {"racer_a": ("racer",), "racer_b": ("racer",), "registration": ("registration",),
                "commentator": ("commentator",), "operator": ("operator",), "admin": ("admin",)}
 CARS = ("car_x", "car_y")
+TIMERS = ("timer",)
+COOKIE_USERS = {"admin_cookie": ("admin",)}
 
 def route_modules() -> list[Any]:
     """Every module of chalicelib.routes that defines a Blueprint `bp`."""
@@ -111,8 +116,12 @@ class World:
         name = f"{principal}__{self._minted}"
         if principal in USER_GROUPS:
             self._add_user(name, USER_GROUPS[principal])
+        elif principal in COOKIE_USERS:
+            self._add_cookie_user(name, COOKIE_USERS[principal])
         elif principal in CARS:
             self._add_car(name)
+        elif principal in TIMERS:
+            self._add_car(name, "timer")
         else:
             self.headers[name] = dict(self.headers[principal])
         return name
@@ -122,12 +131,27 @@ class World:
         self.headers[name] = bearer(self.users.access_token(username, groups))
         self.usernames[name] = username
 
-    def _add_car(self, name: str) -> None:
+    def _add_cookie_user(self, name: str, groups: tuple[str, ...]) -> None:
+        """Signed in through the login form, as a browser: the matrix then sends its cookies and CSRF token."""
+        username = name.replace("_", "-")
+        self.users.create(username, groups)
+        csrf = self.headers["anonymous"]["X-CSRF-Token"]
+        reply = self.client.http.post("/login", headers={"Cookie": f"drem_csrf={csrf}",
+                                                         "Content-Type": "application/x-www-form-urlencoded"},
+                                      body=f"username={username}&password={PASSWORD}&csrf_token={csrf}".encode())
+        assert reply.status_code == 303, reply.body
+        cookies = dict(c.split(";", 1)[0].split("=", 1) for c in set_cookie_headers(reply.headers))
+        jar = {k: cookies[k] for k in ("drem_session", "drem_refresh", "drem_csrf")}
+        self.headers[name] = {"Accept": "application/json", "X-CSRF-Token": jar["drem_csrf"],
+                              "Cookie": "; ".join(f"{k}={v}" for k, v in jar.items())}
+        self.usernames[name] = username
+
+    def _add_car(self, name: str, kind: str = "car") -> None:
         hostname = name.replace("_", "-")
         code = self.ok("POST", "/api/devices/activation-codes", "admin",
-                       {"fleet_id": self.fleet_id, "hostname": hostname, "device_kind": "car"})["code"]
+                       {"fleet_id": self.fleet_id, "hostname": hostname, "device_kind": kind})["code"]
         issued = self.ok("POST", "/api/devices/activate", "anonymous",
-                         {"code": code, "hostname": hostname, "device_kind": "car"})
+                         {"code": code, "hostname": hostname, "device_kind": kind})
         self.headers[name] = {"Authorization": f"Device {issued['credential']}", "Accept": "application/json"}
         self.device_ids[name] = issued["device_id"]
 
@@ -155,6 +179,9 @@ def world(fresh_moto: None, chalice_app: Any, tmp_path_factory: pytest.TempPathF
             built.fleet_id = built.ok("POST", "/api/fleets", "admin", {"name": "Matrix cars"})["fleet_id"]
             for car in CARS:
                 built._add_car(car)
+            built._add_car("timer", "timer")
+            for principal, groups in COOKIE_USERS.items():
+                built._add_cookie_user(principal, groups)
             yield built
     finally:
         patch.undo()

@@ -19,6 +19,7 @@ from tests.unit.authz_principals import PRINCIPALS, World
 USERS = ("racer_a", "racer_b", "registration", "commentator", "operator", "admin")
 RACERS = ("racer_a", "racer_b")
 CARS = ("car_x", "car_y")
+DEVICE_PRINCIPALS = (*CARS, "timer")
 STAFF = ("registration", "commentator", "operator", "admin")
 EVERYONE = PRINCIPALS
 
@@ -26,6 +27,9 @@ EVERYONE = PRINCIPALS
 def allow(*who: str, deny404: tuple[str, ...] = ()) -> dict[str, str]:
     unknown = (set(who) | set(deny404)) - set(PRINCIPALS)
     assert not unknown, f"unknown principals {unknown}"
+    # The admin signed in with a browser session (cookies + CSRF token) may do exactly what the Bearer admin may.
+    who = (*who, "admin_cookie") if "admin" in who else who
+    deny404 = (*deny404, "admin_cookie") if "admin" in deny404 else deny404
     return {p: "allow" if p in who else "deny404" if p in deny404 else "deny" for p in PRINCIPALS}
 
 
@@ -112,7 +116,7 @@ SIGNED_IN = Case(allow(*USERS))
 ADMIN_ONLY = Case(allow("admin"))
 ADMIN_OPERATOR = Case(allow("admin", "operator"))
 ALL_STAFF = Case(allow(*STAFF))
-DEVICES = Case(allow(*CARS))
+DEVICES = Case(allow(*DEVICE_PRINCIPALS))
 
 TABLE: dict[tuple[str, str], Case] = {
     # pages, static files, sign-in forms: public (they carry their own CSRF protection)
@@ -123,7 +127,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/login"): PUBLIC,
     ("GET", "/login/new-password"): PUBLIC,
     ("POST", "/login/new-password"): PUBLIC,
-    ("POST", "/logout"): PUBLIC,
+    ("POST", "/logout"): Case(allow(*EVERYONE), consumes_caller=True),  # a real sign-out ends its caller
     # JSON sign-in for API clients: public, CSRF-exempt (the password / refresh token in the body is the credential)
     ("POST", "/api/auth/token"): PUBLIC,
     ("POST", "/api/auth/refresh"): PUBLIC,
@@ -171,10 +175,11 @@ TABLE: dict[tuple[str, str], Case] = {
     # devices: the device itself (acts on its own id only)
     ("POST", "/api/devices/activate"): PUBLIC,
     ("GET", "/api/devices/self"): DEVICES,
-    ("POST", "/api/devices/self/rotate"): Case(allow(*CARS), consumes_caller=True),
+    ("POST", "/api/devices/self/rotate"): Case(allow(*DEVICE_PRINCIPALS), consumes_caller=True),
     ("POST", "/api/devices/self/heartbeat"): DEVICES,
     ("GET", "/api/devices/self/commands"): DEVICES,
-    ("POST", "/api/devices/self/commands/{command_id}/ack"): Case(allow("car_x", deny404=("car_y",)), car_x_command),
+    ("POST", "/api/devices/self/commands/{command_id}/ack"): Case(allow("car_x", deny404=("car_y", "timer")),
+                                                                  car_x_command),
     # models: racer A's model — racer B is refused, model staff (admin, operator) may act for racers
     ("POST", "/api/models"): SIGNED_IN,
     ("GET", "/api/models"): SIGNED_IN,

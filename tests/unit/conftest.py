@@ -1,6 +1,10 @@
 """Unit-test fixtures: ONE in-process moto (`mock_aws`) for the whole run, wiped before every test, plus the drem
 stack bootstrapped from `drem_infra.resources`, a Chalice test client, and helpers for users with real moto tokens.
 
+moto is patched the way the durable server patches it (drem_local.durable.token_signing): every pool signs with a
+per-session installation key, the app pins that key (DREM_TOKEN_KEY_FILE), sign-up codes never match and the
+new-password session is bound to its user. `aws_mode` turns the pinning off to exercise the AWS (JWKS) path.
+
 Wiping uses `BackendDict.reset()`, not `mock_aws().reset()`: the latter also drops moto's interception of `requests`
 calls, after which the app's JWKS fetch would try the real internet.
 """
@@ -10,6 +14,7 @@ import base64
 import json
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -17,6 +22,7 @@ from chalice.test import Client
 from moto import mock_aws
 from moto.core.base_backend import BackendDict
 
+from drem_infra.resources import TOKEN_SIGNING_KEY_ENV
 from drem_local.bootstrap import StackOutputs, clients_for, ensure_stack
 
 STAGE = "test"
@@ -26,20 +32,39 @@ PASSWORD = "Correct-Horse-9"
 
 
 def _reset_app_caches() -> None:
-    from chalicelib.auth.tokens import JWKS
+    from chalicelib.auth import rate_limits
+    from chalicelib.auth.revocation import REVOKED
+    from chalicelib.auth.tokens import JWKS, PINNED
     from chalicelib.settings import get_settings
     from chalicelib.storage.clients import reset_clients
 
     get_settings.cache_clear()
     reset_clients()
     JWKS.clear()
+    PINNED.clear()
+    REVOKED.clear()
+    for window in rate_limits.ALL:
+        window.clear()
+
+
+@pytest.fixture(scope="session")
+def installation_key_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from drem_local.token_key import ensure_signing_key, key_path
+
+    state_dir = tmp_path_factory.mktemp("installation")
+    ensure_signing_key(state_dir)
+    return key_path(state_dir)
 
 
 @pytest.fixture(scope="session", autouse=True)
-def moto_session() -> Iterator[None]:
+def moto_session(installation_key_file: Path) -> Iterator[None]:
+    from drem_local.durable import token_signing
+
     mock = mock_aws()
     mock.start()
+    token_signing.install(json.loads(installation_key_file.read_text()))
     yield
+    token_signing.uninstall()
     mock.stop()
 
 
@@ -57,14 +82,24 @@ def aws_clients() -> Any:
 
 
 @pytest.fixture
-def stack(aws_clients: Any, monkeypatch: pytest.MonkeyPatch) -> StackOutputs:
-    """Tables, buckets, user pool, app client and groups, with the app's env pointing at them."""
+def stack(aws_clients: Any, monkeypatch: pytest.MonkeyPatch, installation_key_file: Path) -> StackOutputs:
+    """Tables, buckets, user pool, app client and groups, with the app's env pointing at them (tokens pinned to the
+    installation key, as a local stack runs)."""
     outputs = ensure_stack(aws_clients, STAGE)
     for name, value in outputs.to_env().items():
         monkeypatch.setenv(name, value)
+    monkeypatch.setenv(TOKEN_SIGNING_KEY_ENV, str(installation_key_file))
     monkeypatch.delenv("DREM_PUBLIC_URL", raising=False)
     _reset_app_caches()
     return outputs
+
+
+@pytest.fixture
+def aws_mode(stack: StackOutputs, monkeypatch: pytest.MonkeyPatch) -> StackOutputs:
+    """The app as deployed on AWS: no pinned key, the pool's JWKS (served by moto) decides."""
+    monkeypatch.delenv(TOKEN_SIGNING_KEY_ENV)
+    _reset_app_caches()
+    return stack
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,5 @@
-"""Bearer tokens: real moto tokens are accepted with their groups; every forgery is refused with 401."""
+"""Bearer tokens: real tokens from the (patched) local Cognito are accepted with their groups; every forgery is
+refused with 401, above all a token minted with the RSA key that ships inside moto."""
 from __future__ import annotations
 
 import gzip
@@ -31,9 +32,19 @@ def _moto_private_key() -> dict[str, Any]:
     return _moto_jwks("private")
 
 
-def _sign_with_moto_key(claims: dict[str, Any]) -> str:
+def _sign_with_moto_key(claims: dict[str, Any], kid: str | None = None) -> str:
     key = _moto_private_key()
-    return jwt.encode(claims, key, algorithm="RS256", headers={"kid": key["kid"]})
+    return jwt.encode(claims, key, algorithm="RS256", headers={"kid": kid or key["kid"]})
+
+
+@pytest.fixture
+def sign_with_installation_key(installation_key_file):
+    key = json.loads(installation_key_file.read_text())
+
+    def sign(claims: dict[str, Any]) -> str:
+        return jwt.encode(claims, key, algorithm="RS256", headers={"kid": key["kid"]})
+
+    return sign
 
 
 def _claims_of(token: str, **changes: Any) -> dict[str, Any]:
@@ -79,11 +90,48 @@ def test_admin_asking_for_an_unknown_user_gets_404_naming_the_field(client, admi
     assert response.json_body["error"]["field"] == "username"
 
 
-def test_token_signed_by_moto_key_with_our_claims_is_accepted(client, racer_token):
+def test_token_signed_by_the_installation_key_with_our_claims_is_accepted(client, racer_token,
+                                                                          sign_with_installation_key):
     # Control for the forgeries below: the same signing machinery with honest claims must pass.
-    token = _sign_with_moto_key(_claims_of(racer_token, exp=int(time.time()) + 600))
+    token = sign_with_installation_key(_claims_of(racer_token, exp=int(time.time()) + 600))
 
     assert client.http.get("/api/me", headers=bearer(token)).status_code == 200
+
+
+def test_local_cognito_signs_with_the_installation_key_not_motos(racer_token, installation_key_file):
+    header, _, _ = jwt_parts(racer_token)
+    assert header["kid"] == json.loads(installation_key_file.read_text())["kid"]
+    assert header["kid"] != _moto_private_key()["kid"]
+
+
+@pytest.mark.parametrize("kid", ["moto's own kid", "the installation's kid"])
+def test_admin_token_minted_with_motos_shipped_key_is_refused(client, racer_token, installation_key_file, kid):
+    # The attack: copy iss/client_id/sub from your own racer token, add the admin group, sign with the key every
+    # moto install ships (moto/cognitoidp/resources/jwks-private.json).
+    installation_kid = json.loads(installation_key_file.read_text())["kid"]
+    forged = _sign_with_moto_key(_claims_of(racer_token, **{"cognito:groups": ["admin"]}),
+                                 kid=installation_kid if kid == "the installation's kid" else None)
+
+    for path in ("/api/me", ADMIN_ONLY.format(username="rita")):
+        response = client.http.get(path, headers=bearer(forged))
+        assert response.status_code == 401, (path, response.body)
+
+
+def test_local_jwks_publishes_only_the_installation_key(aws_clients, stack, installation_key_file):
+    import requests
+
+    published = requests.get(f"https://cognito-idp.us-east-1.amazonaws.com/{stack.user_pool_id}"
+                             "/.well-known/jwks.json", timeout=5).json()["keys"]
+    assert [k["kid"] for k in published] == [json.loads(installation_key_file.read_text())["kid"]]
+    assert "d" not in published[0]
+
+
+def test_on_aws_the_pools_jwks_decides(aws_mode, client, users):
+    token = users.access_token("awsuser", ("racer",))
+
+    assert client.http.get("/api/me", headers=bearer(token)).status_code == 200
+    forged = _sign_with_moto_key(_claims_of(token, **{"cognito:groups": ["admin"]}))
+    assert client.http.get("/api/me", headers=bearer(forged)).status_code == 401
 
 
 def _alg_none(token: str) -> str:
@@ -110,17 +158,34 @@ def _wrong_key(token: str) -> str:
                       headers={"kid": "dummy"})
 
 
+def _sign_with_test_installation_key(claims: dict[str, Any]) -> str:
+    from chalicelib.settings import get_settings
+
+    key = json.loads(get_settings().token_key_file.read_text())
+    return jwt.encode(claims, key, algorithm="RS256", headers={"kid": key["kid"]})
+
+
 def _expired(token: str) -> str:
     now = int(time.time())
-    return _sign_with_moto_key(_claims_of(token, iat=now - 7200, exp=now - 3600))
+    return _sign_with_test_installation_key(_claims_of(token, iat=now - 7200, exp=now - 3600))
 
 
 def _wrong_issuer(token: str) -> str:
-    return _sign_with_moto_key(_claims_of(token, iss="https://cognito-idp.us-east-1.amazonaws.com/us-east-1_Other"))
+    return _sign_with_test_installation_key(
+        _claims_of(token, iss="https://cognito-idp.us-east-1.amazonaws.com/us-east-1_Other"))
 
 
 def _wrong_client(token: str) -> str:
-    return _sign_with_moto_key(_claims_of(token, client_id="some-other-app-client"))
+    return _sign_with_test_installation_key(_claims_of(token, client_id="some-other-app-client"))
+
+
+def _installation_kid_other_key(token: str) -> str:
+    private = rsa.generate_private_key(public_exponent=65537, key_size=2048)
+    pem = private.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                serialization.NoEncryption())
+    kid = jwt_parts(token)[0]["kid"]
+    return jwt.encode(_claims_of(token, **{"cognito:groups": ["admin"]}), pem, algorithm="RS256",
+                      headers={"kid": kid})
 
 
 def _groups_edited(token: str) -> str:
@@ -134,7 +199,8 @@ def _groups_edited(token: str) -> str:
 FORGERIES = {
     "alg none": (_alg_none, "not signed with RS256"),
     "HS256 signed with the public key": (_hs256_with_public_key, "not signed with RS256"),
-    "signed with another RSA key": (_wrong_key, "Signature verification failed"),
+    "signed with another RSA key": (_wrong_key, "unknown key"),
+    "another RSA key under our kid": (_installation_kid_other_key, "Signature verification failed"),
     "expired": (_expired, "expired"),
     "wrong issuer": (_wrong_issuer, "Invalid issuer"),
     "wrong client_id": (_wrong_client, "another app client"),
@@ -172,7 +238,7 @@ def test_token_for_another_audience_in_an_id_token_is_refused(client, users):
 
     users.create("ivy", ("racer",))
     id_token = users.sign_in("ivy")["IdToken"]
-    forged = _sign_with_moto_key(_claims_of(id_token, aud="some-other-app-client"))
+    forged = _sign_with_test_installation_key(_claims_of(id_token, aud="some-other-app-client"))
 
     assert verify_token(id_token, get_settings(), token_use="id").username == "ivy"
     with pytest.raises(NotAuthenticated):

@@ -1,5 +1,6 @@
-"""The authorization matrix: every route × the nine principals, called with real credentials, against
-`tests/unit/authz_table.py`. deny ⇔ 401/403 (deny404: 401/403/404); allow ⇔ neither 401 nor 403."""
+"""The authorization matrix: every route × the eleven principals, called with real credentials, against
+`tests/unit/authz_table.py`. deny ⇔ 401/403 (deny404: 401/403/404); allow ⇔ an answer below 500 that is neither
+401 nor 403 (a 500 proves nothing about access: the route crashed)."""
 from __future__ import annotations
 
 import re
@@ -67,8 +68,12 @@ def test_the_principals_are_who_they_claim_to_be(world: World):
     for name, groups in {"racer_a": ["racer"], "operator": ["operator"], "admin": ["admin"]}.items():
         me = world.ok("GET", "/api/me", name)
         assert (me["username"], me["roles"]) == (world.usernames[name], groups)
-    for car in ("car_x", "car_y"):
-        assert world.ok("GET", "/api/devices/self", car)["device_id"] == world.device_ids[car]
+    for device, kind in (("car_x", "car"), ("car_y", "car"), ("timer", "timer")):
+        me = world.ok("GET", "/api/devices/self", device)
+        assert (me["device_id"], me["kind"]) == (world.device_ids[device], kind)
+    cookie_me = world.call("GET", "/api/me", "admin_cookie")
+    assert cookie_me.status == 200 and cookie_me.json["roles"] == ["admin"] and "drem_session" in \
+        world.headers["admin_cookie"]["Cookie"] and "Authorization" not in world.headers["admin_cookie"]
     assert world.call("GET", "/api/me", "anonymous").status == 401
 
 
@@ -84,5 +89,15 @@ def test_authz_matrix(world: World, method: str, path: str, principal: str):
     reply = world.call(method, concrete_path(path, call.params), caller, body)
 
     denied = reply.status in DENIED.get(expected, {401, 403})
-    assert denied == (expected != "allow"), (
+    assert denied == (expected != "allow") and reply.status < 500, (
         f"{method} {path} as {principal}: expected {expected}, got {reply.status} {reply.body[:300]!r}")
+
+
+def test_the_cookie_path_without_the_csrf_token_is_refused(world: World):
+    # The same admin session, minus the header: every state-changing route must refuse it (403), none may act.
+    headers = {"X-CSRF-Token": ""}
+    for (method, path), case in sorted(TABLE.items()):
+        if method == "GET" or case.expect["admin_cookie"] != "allow" or case.expect["anonymous"] == "allow":
+            continue  # public routes: nothing of the admin's to abuse (CSRF-exempt ones act as anonymous)
+        reply = world.call(method, concrete_path(path, {}), "admin_cookie", {}, headers=headers)
+        assert reply.status == 403, f"{method} {path} acted without a CSRF token: {reply.status}"

@@ -80,3 +80,86 @@ def test_bearer_authenticated_post_is_exempt(client, users):
     response = client.http.post("/logout", headers=bearer(token))
 
     assert response.status_code == 303
+
+
+# --- the session binding and the Origin check (issue 12: a cookie planted from another port forged an admin action)
+
+PLANTED = "planted-by-another-port-" + "p" * 24
+
+
+def _signed_in_admin(browser, users):
+    users.create("victim.admin", ("admin",))
+    users.create("target", ("racer",))
+    browser.get("/login")
+    reply = browser.post("/login", {"username": "victim.admin", "password": PASSWORD,
+                                    "csrf_token": browser.csrf_token})
+    assert reply.status_code == 303
+    return browser
+
+
+def _target_enabled(aws_clients, stack) -> bool:
+    return aws_clients.cognito.admin_get_user(UserPoolId=stack.user_pool_id, Username="target")["Enabled"]
+
+
+def test_a_planted_csrf_cookie_cannot_forge_an_admin_action(browser, users, aws_clients, stack):
+    _signed_in_admin(browser, users)
+    # What a page on 127.0.0.1:<another port> can do: set drem_csrf for the host (cookies ignore ports) and post
+    # a form carrying the same value; the browser adds the admin's session cookies.
+    browser.cookies["drem_csrf"] = PLANTED
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": PLANTED})
+
+    assert reply.status_code == 403
+    assert _target_enabled(aws_clients, stack)
+
+
+def test_sign_in_rotates_the_csrf_token_to_one_bound_to_the_session(browser, users):
+    browser.get("/login")
+    before = browser.csrf_token
+    _signed_in_admin(browser, users)
+
+    assert browser.csrf_token != before and "." in browser.csrf_token
+    page = browser.get("/").body.decode()
+    assert f'"X-CSRF-Token": "{browser.csrf_token}"' in page
+
+
+def test_a_token_of_another_session_is_refused(browser, client, users, aws_clients, stack):
+    from tests.unit.conftest import Browser
+
+    _signed_in_admin(browser, users)
+    users.create("other", ("racer",))
+    other = Browser(client)
+    other.get("/login")
+    other.post("/login", {"username": "other", "password": PASSWORD, "csrf_token": other.csrf_token})
+    browser.cookies["drem_csrf"] = other.csrf_token  # a valid token, but of the attacker's own session
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": other.csrf_token})
+
+    assert reply.status_code == 403
+    assert _target_enabled(aws_clients, stack)
+
+
+@pytest.mark.parametrize("header", [{"Origin": "http://127.0.0.1:8001"}, {"Origin": "null"},
+                                    {"Referer": "http://evil.example/page"}])
+def test_a_post_from_another_origin_is_refused_even_with_the_right_token(browser, users, aws_clients, stack,
+                                                                         header):
+    _signed_in_admin(browser, users)
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": browser.csrf_token},
+                         headers={"Host": "127.0.0.1:8000", **header})
+
+    assert reply.status_code == 403 and "another site" in reply.body.decode()
+    assert _target_enabled(aws_clients, stack)
+
+
+@pytest.mark.parametrize("header", [{"Origin": "http://127.0.0.1:8000"}, {"Origin": "http://192.168.1.20:8000"},
+                                    {"Referer": "http://192.168.1.20:8000/console/users"}, {}])
+def test_same_origin_posts_with_the_right_token_pass(browser, users, aws_clients, stack, header):
+    _signed_in_admin(browser, users)
+    host = (header.get("Origin") or header.get("Referer") or "http://127.0.0.1:8000").split("/")[2]
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": browser.csrf_token},
+                         headers={"Host": host, **header})
+
+    assert reply.status_code == 200, reply.body
+    assert not _target_enabled(aws_clients, stack)

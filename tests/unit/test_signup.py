@@ -55,24 +55,31 @@ def test_weak_password_and_bad_email_are_explained(api):
     assert (status, body["error"]["field"]) == (400, "email")
 
 
-def test_sign_up_then_confirm_then_sign_in_as_racer(api, users):
-    from chalicelib.auth.sessions import identity_provider
-
+def test_local_sign_up_is_ready_at_once_as_racer_and_no_code_confirms_anything(api, users):
     status, body = call(api, "POST", "/api/signup", sign_up_body("new.racer", country_code="de"))
     assert status == 201, body
-    assert body["confirmed"] is False and "confirmation code" in body["message"]
+    assert body["confirmed"] is True and "sign in now" in body["message"]
 
-    with pytest.raises(AccountNotReady, match="not confirmed"):
-        identity_provider().sign_in("new.racer", PASSWORD)
-
-    # moto accepts any code: this proves the flow, not Cognito's code check (see the Stubber test below).
+    # The old hole: moto confirmed any code. Locally no code exists, so every code is wrong.
     status, body = call(api, "POST", "/api/signup/confirm", {"username": "new.racer", "code": "123456"})
-    assert status == 200, body
+    assert status == 400 and body["error"]["field"] == "code"
+
     tokens = users.sign_in("new.racer")
     assert groups_claim(tokens["AccessToken"]) == ["racer"]
-
     status, profile = call(api, "GET", "/api/me/profile", token=tokens["AccessToken"])
     assert status == 200 and profile["country_code"] == "DE" and profile["username"] == "new.racer"
+
+
+def test_on_aws_sign_up_waits_for_the_emailed_code_and_a_guess_does_not_confirm(aws_mode, api, users):
+    from chalicelib.auth.sessions import identity_provider
+
+    status, body = call(api, "POST", "/api/signup", sign_up_body("new.racer"))
+    assert status == 201 and body["confirmed"] is False and "confirmation code" in body["message"]
+
+    status, body = call(api, "POST", "/api/signup/confirm", {"username": "new.racer", "code": "123456"})
+    assert status == 400 and "code is wrong" in error_message(body)
+    with pytest.raises(AccountNotReady, match="not confirmed"):
+        identity_provider().sign_in("new.racer", PASSWORD)
 
 
 def test_taken_name_is_a_conflict(api):

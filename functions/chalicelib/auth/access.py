@@ -257,9 +257,9 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
     settings = get_settings()
     cookies = request_cookies(request.headers)
     scope = RequestScope(request=request, csrf_token=cookies.get(CSRF_COOKIE, ""))
-    if not scope.csrf_token and "authorization" not in request.headers:
-        scope.csrf_token = double_submit.new_token()
-        scope.set_cookies.append(double_submit.csrf_cookie(scope.csrf_token, secure=settings.cookie_secure))
+    browser = "authorization" not in request.headers
+    if browser and not double_submit.fits(scope.csrf_token, None):
+        _issue_csrf_token(scope, None, settings.cookie_secure)
     _local.scope = scope
     htmx = request.headers.get("hx-request") == "true"
     render.bind_request(htmx=htmx, principal=ANONYMOUS, csrf_token=scope.csrf_token)
@@ -268,11 +268,16 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         scope.principal, scope.via = caller.principal, caller.via
         scope.set_cookies.extend(caller.set_cookies)
         logs.note_principal(caller.principal.id)
+        secret = double_submit.session_secret(cookies) if caller.via == "cookie" and caller.principal.is_user else None
+        if browser and secret and not double_submit.fits(scope.csrf_token, secret):
+            _issue_csrf_token(scope, secret, settings.cookie_secure)  # pages of this session get a bound token
         render.bind_request(htmx=htmx, principal=caller.principal, csrf_token=scope.csrf_token)
         declared.decide(caller.principal)
         checks_csrf = docs is None or docs.csrf
         if checks_csrf and request.method in double_submit.STATE_CHANGING_METHODS and caller.via != "header":
-            double_submit.require_matching_token(cookies.get(CSRF_COOKIE), request.headers, form_fields(request))
+            double_submit.require_same_origin(request.headers, settings.public_url)
+            double_submit.require_matching_token(cookies.get(CSRF_COOKIE), secret, request.headers,
+                                                 form_fields(request))
         # A CSRF-exempt view must not act as whoever's cookie came along (a forged cross-site post would).
         acting = caller.principal if checks_csrf else ANONYMOUS
         response = view(acting, **params, **_validated_input(request, docs))
@@ -283,6 +288,12 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         _local.scope = None
         render.bind_request()
     return _with_cookies(response, scope.set_cookies)
+
+
+def _issue_csrf_token(scope: RequestScope, secret: str | None, secure: bool) -> None:
+    scope.csrf_token = double_submit.new_token(secret)
+    scope.set_cookies = [c for c in scope.set_cookies if not c.startswith(f"{CSRF_COOKIE}=")]
+    scope.set_cookies.append(double_submit.csrf_cookie(scope.csrf_token, secure=secure))
 
 
 def _with_cookies(response: Any, cookies: list[str]) -> Response:

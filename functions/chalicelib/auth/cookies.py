@@ -15,7 +15,6 @@ CHALLENGE_COOKIE = "drem_challenge"
 
 # Cognito's default refresh-token validity; the cookie must not outlive what it holds for long.
 REFRESH_MAX_AGE_S = 30 * 24 * 3600
-CHALLENGE_MAX_AGE_S = 180
 
 
 def parse_cookies(header: str | None) -> dict[str, str]:

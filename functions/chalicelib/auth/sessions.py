@@ -6,11 +6,13 @@ from dataclasses import dataclass, field
 
 from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
+from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.tokens import VerifiedToken, verify_token
 from chalicelib.domain.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.cognito import CognitoIdentityProvider
+from chalicelib.storage.sessions import session_store
 
 
 @dataclass
@@ -32,13 +34,27 @@ def user_from(token: VerifiedToken) -> User:
     return User(sub=token.sub, username=token.username, groups=token.groups)
 
 
+class TokenRevoked(NotAuthenticated):
+    """Signed and unexpired, but its user signed out or changed since: a browser may still renew it."""
+
+
+def current_token(token: str, settings: Settings) -> VerifiedToken:
+    """A verified access token that has not been revoked since it was issued (chalicelib.auth.revocation)."""
+    verified = verify_token(token, settings)
+    try:
+        REVOKED.require_current(session_store(), verified.sub, verified.claims)
+    except NotAuthenticated as exc:
+        raise TokenRevoked(exc.message) from None
+    return verified
+
+
 def resolve_caller(headers: Mapping[str, str], cookies: Mapping[str, str]) -> ResolvedCaller:
     settings = get_settings()
     authorization = headers.get("authorization")
     if authorization is not None:
         scheme, _, credential = authorization.strip().partition(" ")
         if scheme.lower() == "bearer" and credential.strip():
-            return ResolvedCaller(user_from(verify_token(credential.strip(), settings)), "header")
+            return ResolvedCaller(user_from(current_token(credential.strip(), settings)), "header")
         if scheme.lower() == "device" and credential.strip():
             return ResolvedCaller(verify_device_credential(credential.strip()), "header")
         raise NotAuthenticated("Use 'Authorization: Bearer <access token>'.")
@@ -51,16 +67,16 @@ def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> Res
         return ResolvedCaller(ANONYMOUS, "none")
     if access:
         try:
-            return ResolvedCaller(user_from(verify_token(access, settings)), "cookie")
-        except TokenExpired:
-            pass  # renew below
+            return ResolvedCaller(user_from(current_token(access, settings)), "cookie")
+        except (TokenExpired, TokenRevoked):
+            pass  # renew below (after a role change the refresh token brings the new groups)
         except NotAuthenticated:
             return _signed_out(settings)
     if not refresh:
         return _signed_out(settings)
     try:
         tokens = identity_provider(settings).refresh(refresh)
-        user = user_from(verify_token(tokens.access_token, settings))
+        user = user_from(current_token(tokens.access_token, settings))
     except NotAuthenticated:
         return _signed_out(settings)
     renewed = session_cookies(tokens.access_token, None, tokens.expires_in, secure=settings.cookie_secure)

@@ -1,14 +1,19 @@
 """Verifying Cognito JWTs in the app (API Gateway's Cognito authorizer is not enforced by `chalice local`).
 
-Accepted: RS256 only, signed by a key from the pool's JWKS (looked up by `kid`), with our issuer, the right
-`token_use`, our app client (`client_id` for access tokens, `aud` for id tokens) and an `exp` in the future.
-Every pool in moto signs with the same key, so the issuer and client checks are what tell pools apart.
+Accepted: RS256 only, signed by the right key, with our issuer, the right `token_use`, our app client (`client_id`
+for access tokens, `aud` for id tokens) and an `exp` in the future.
+
+The right key: on AWS, a key from the pool's JWKS (looked up by `kid`). Locally, ONLY the installation's own key
+(`settings.token_key_file`, generated at the first `drem up`), whatever the local JWKS says: stock moto signs every
+pool with a key that ships inside the moto package, so anything it publishes proves nothing.
 """
 from __future__ import annotations
 
+import json
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import requests
@@ -77,6 +82,37 @@ class JwksCache:
 JWKS = JwksCache()
 
 
+class PinnedKey:
+    """The installation key from its file, read once per path (it never changes while the stack runs)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._keys: dict[Path, dict[str, Any]] = {}
+
+    def key_for(self, path: Path, kid: str) -> dict[str, Any] | None:
+        with self._lock:
+            key = self._keys.get(path)
+            if key is None:
+                key = self._keys[path] = _public_half(path)
+        return key if kid == key["kid"] else None
+
+    def clear(self) -> None:
+        with self._lock:
+            self._keys.clear()
+
+
+def _public_half(path: Path) -> dict[str, Any]:
+    try:
+        private = json.loads(path.read_text())
+        return {"kty": "RSA", "alg": _ALGORITHM, "kid": str(private["kid"]), "n": private["n"], "e": private["e"]}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ServiceUnavailable("The installation's token signing key cannot be read; "
+                                 "restart with `drem up`.") from exc
+
+
+PINNED = PinnedKey()
+
+
 def verify_token(token: str, settings: Settings, token_use: Literal["access", "id"] = "access",
                  jwks: JwksCache = JWKS) -> VerifiedToken:
     if not settings.user_pool_id or not settings.user_pool_client_id:
@@ -87,7 +123,11 @@ def verify_token(token: str, settings: Settings, token_use: Literal["access", "i
         raise NotAuthenticated("The token is not a JWT.") from exc
     if header.get("alg") != _ALGORITHM:
         raise NotAuthenticated("The token is not signed with RS256.")
-    key = jwks.key_for(settings.jwks_url, str(header.get("kid", "")))
+    kid = str(header.get("kid", ""))
+    if settings.token_key_file is not None:
+        key = PINNED.key_for(settings.token_key_file, kid)
+    else:
+        key = jwks.key_for(settings.jwks_url, kid)
     if key is None:
         raise NotAuthenticated("The token is signed by an unknown key.")
     try:
@@ -106,3 +146,12 @@ def verify_token(token: str, settings: Settings, token_use: Literal["access", "i
     if token_use == "access" and claims.get("client_id") != settings.user_pool_client_id:
         raise NotAuthenticated("The token was issued to another app client.")
     return VerifiedToken(claims)
+
+
+def unverified_claim(token: str, name: str) -> str | None:
+    """A claim of a token the caller has already verified (e.g. the session cookie this request was accepted with)."""
+    try:
+        value = jwt.get_unverified_claims(token).get(name)
+    except JWTError:
+        return None
+    return str(value) if value is not None else None

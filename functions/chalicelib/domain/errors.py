@@ -53,7 +53,11 @@ class PayloadTooLarge(DremError):
 
 
 class RateLimited(DremError):
-    pass
+    """Too many attempts (or a busy backend); `retry_after` seconds, when known, become the Retry-After header."""
+
+    def __init__(self, message: str, *, field: str | None = None, retry_after: int | None = None) -> None:
+        super().__init__(message, field=field)
+        self.retry_after = retry_after
 
 
 class ServiceUnavailable(DremError):

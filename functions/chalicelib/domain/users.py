@@ -172,6 +172,7 @@ class RegisteredUser(BaseModel):
 class UserDirectory(Protocol):
     def sign_up(self, username: str, password: str, email: str, country_code: str) -> str: ...
     def confirm_sign_up(self, username: str, code: str) -> None: ...
+    def confirm_without_code(self, username: str) -> None: ...
     def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str: ...
     def get_user(self, username: str) -> DirectoryUser: ...
     def groups_of(self, username: str) -> list[str]: ...
@@ -187,6 +188,24 @@ class ProfileKeeper(Protocol):
     """What account changes need from profiles (satisfied by `chalicelib.domain.profiles.ProfileService`)."""
     def create_for(self, sub: str, username: str, country_code: str | None) -> object: ...
     def tombstone(self, sub: str, username: str) -> None: ...
+
+
+class SessionEnder(Protocol):
+    """Makes already issued tokens stop working (satisfied by chalicelib.routes.users.RevokingSessions)."""
+    def ended(self, sub: str) -> None: ...
+    def reopened(self, sub: str) -> None: ...
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None: ...
+
+
+class _KeepSessions:
+    def ended(self, sub: str) -> None:
+        pass
+
+    def reopened(self, sub: str) -> None:
+        pass
+
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None:
+        pass
 
 
 class OwnedDataEraser(Protocol):
@@ -226,29 +245,40 @@ class ModelsEraser:
 
 class UserService:
     def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
-                 erasers: tuple[OwnedDataEraser, ...] = ()) -> None:
+                 erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False,
+                 sessions: SessionEnder = _KeepSessions()) -> None:
         self._directory = directory
+        self._sessions = sessions
         self._profiles = profiles
         self._erasers = erasers
+        # Local stacks send no email, so no code could ever arrive: a self sign-up is confirmed at once (it only
+        # ever gets the racer role; staff can disable it). On AWS, Cognito emails the code and checks it.
+        self._confirm_sign_ups = confirm_sign_ups
 
     # Registrations are three writes (account, profile, role group), in that order: an account is complete once it
     # has a group, so "no group" marks one a crash interrupted. Repeating the same registration finishes it
     # (`_resume`), races refuse a racer without a group, and `finish_interrupted_registrations` repairs them at start.
 
     def sign_up(self, form: SignUpForm) -> SignUpResult:
-        message = f"Check {form.email} for a confirmation code, then confirm your account."
+        resumed = False
         try:
             sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
+            username = form.username
         except Conflict:
-            # Only a half-created one (no group yet) is finished; a complete sign-up keeps answering "taken".
+            # The same sign-up again: finish what a crash left (no group yet), or, locally, the confirmation that
+            # never came. A complete sign-up of someone else, or one awaiting its emailed code, stays "taken".
             existing = self._resumable(form.username, form.email, status="UNCONFIRMED")
-            if self._directory.groups_of(existing.username):
+            if self._directory.groups_of(existing.username) and not self._confirm_sign_ups:
                 raise
-            self._finish(existing.username, existing.sub, form.country_code)
-            return SignUpResult(username=existing.username, sub=existing.sub, confirmed=False,
-                                message=f"This sign-up was already started. {message}")
-        self._finish(form.username, sub, form.country_code)
-        return SignUpResult(username=form.username, sub=sub, confirmed=False, message=message)
+            username, sub, resumed = existing.username, existing.sub, True
+        self._finish(username, sub, form.country_code)
+        if self._confirm_sign_ups:
+            self._directory.confirm_without_code(username)
+            return SignUpResult(username=username, sub=sub, confirmed=True,
+                                message="Your account is ready; you can sign in now.")
+        message = f"Check {form.email} for a confirmation code, then confirm your account."
+        return SignUpResult(username=username, sub=sub, confirmed=False,
+                            message=f"This sign-up was already started. {message}" if resumed else message)
 
     def confirm_sign_up(self, form: ConfirmSignUpForm) -> dict[str, str]:
         self._directory.confirm_sign_up(form.username.strip(), form.code.strip())
@@ -309,12 +339,18 @@ class UserService:
         self._not_self(caller, username, "change your own role")
         target = self._directory.get_user(username)
         self._directory.set_only_group(target.username, change.role.value)
+        # A demoted admin's token must not stay admin for the rest of its hour.
+        self._sessions.roles_changed(target.sub, frozenset({change.role.value}))
         return {"username": target.username, "role": change.role.value}
 
     def set_enabled(self, caller: User, username: str, enabled: bool) -> DirectoryUser:
         self._not_self(caller, username, "disable or enable yourself")
         target = self._directory.get_user(username)
         self._directory.set_enabled(target.username, enabled)
+        if enabled:
+            self._sessions.reopened(target.sub)
+        else:
+            self._sessions.ended(target.sub)
         return target.model_copy(update={"enabled": enabled})
 
     def delete_self(self, caller: User, form: DeleteSelfForm) -> dict[str, object]:
@@ -327,6 +363,7 @@ class UserService:
         self._profiles.tombstone(caller.sub, caller.username)
         # Last, so a failure above leaves an account the user can retry the deletion with.
         self._directory.delete_user(caller.username)
+        self._sessions.ended(caller.sub)
         return {"deleted": caller.username, "items_erased": erased}
 
     @staticmethod

@@ -12,12 +12,14 @@ from chalice import Blueprint, Response
 from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
+from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.domain.countries import COUNTRY_CODES
 from chalicelib.domain.models import ListQuery, ModelStatus
 from chalicelib.domain.passwords import PasswordChangeForm, PasswordService
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE, ProfileUpdate
 from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
 from chalicelib.domain.identity import password_policy_text
+from chalicelib.http_errors import retry_after_headers
 from chalicelib.routes.console_forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
 from chalicelib.routes.profiles import profile_service
 from chalicelib.routes.races import race_service
@@ -46,9 +48,12 @@ def signup_page(principal: Principal) -> Response:
 def signup(principal: Principal) -> Response:
     form = submitted(bp.current_request, *_SIGN_UP_FIELDS)
     try:
-        result = user_service().sign_up(SignUpForm.model_validate(form))
+        body = SignUpForm.model_validate(form)
+        result = guarded_sign_up(lambda: user_service().sign_up(body), client_address(bp.current_request))
     except SHOWN_ON_FORM as exc:
         return _signup_form(exc, form)
+    if result.confirmed:  # a local stack: no code to wait for
+        return render.page("console/confirm", username=result.username, errors={}, confirmed=True)
     return redirect(f"/signup/confirm?username={quote(result.username)}")
 
 
@@ -162,7 +167,7 @@ def _signup_form(exc: Exception | None = None, form: dict[str, str] | None = Non
     values = {name: (form or {}).get(name, "") for name in _SIGN_UP_FIELDS if name != "password"}
     return render.page("console/signup", status=error_status(exc) if exc else 200, values=values,
                        errors=field_errors(exc, "username") if exc else {}, countries=COUNTRIES,
-                       policy=password_policy_text())
+                       policy=password_policy_text(), headers=retry_after_headers(exc))
 
 
 def _password_form(exc: Exception | None = None, notice: str = "") -> Response:

@@ -13,6 +13,7 @@ import time
 from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
+from chalicelib.auth.rate_limits import client_address, guarded_activation
 from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, ActivationService,
                                          IssuedActivationCode, IssuedCredential)
 from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceService, DeviceView, MoveToFleet,
@@ -99,7 +100,7 @@ def device_commands(principal: User, device_id: str) -> dict:
 @route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC, csrf=False, body=ActivationExchange,
        response=IssuedCredential, status_code=201)
 def activate_device(principal: Principal, body: ActivationExchange) -> Response:
-    issued = activation_service().activate(body)
+    issued = guarded_activation(lambda: activation_service().activate(body), client_address(bp.current_request))
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 

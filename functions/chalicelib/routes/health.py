@@ -1,9 +1,12 @@
-"""GET /healthz: is storage reachable, and (locally) how is the durable server's state dir."""
+"""GET /healthz: is storage reachable, and (locally) how is the durable server's state dir.
+
+Anyone (load balancers, `drem up` waiting for the app) gets only `{"status": ...}` and 200/503; the details (storage
+URL, region, stage, state dir path, moto version) help an attacker map the install, so only staff see them."""
 from __future__ import annotations
 
 from chalice import Blueprint, Response
 
-from chalicelib.auth.access import PUBLIC, route
+from chalicelib.auth.access import PUBLIC, STAFF, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.health import check_health
 from chalicelib.settings import get_settings
@@ -22,5 +25,6 @@ def healthz(principal: Principal) -> Response:
         probe_table=lambda: probe_table(clients.dynamodb(), settings.table("events")),
         durable_health=(lambda: fetch_durable_health(endpoint)) if endpoint else None,
     )
-    return Response(body=report.model_dump(), status_code=200 if report.healthy else 503,
+    body = report.model_dump() if principal.roles & STAFF else {"status": report.status}
+    return Response(body=body, status_code=200 if report.healthy else 503,
                     headers={"Cache-Control": "no-store"})

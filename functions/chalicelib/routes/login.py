@@ -2,23 +2,25 @@
 the JSON token exchange for API clients (`POST /api/auth/token`, `POST /api/auth/refresh`)."""
 from __future__ import annotations
 
-import base64
-import json
-
 from chalice import Blueprint, Response
 from typing import Literal
 
 from pydantic import BaseModel, Field, ValidationError
 
 from chalicelib.auth import cookies
+from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, form_fields, route
 from chalicelib.auth.principals import Principal
+from chalicelib.auth.rate_limits import client_address, guarded_sign_in
+from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.sessions import identity_provider
+from chalicelib.auth.tokens import unverified_claim
 from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
-from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, password_policy_text
-from chalicelib.http_errors import status_for
+from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
+from chalicelib.http_errors import retry_after_headers, status_for
 from chalicelib.routes.responses import redirect, safe_next
 from chalicelib.settings import get_settings
+from chalicelib.storage.sessions import CHALLENGE_TTL_S, session_store
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -39,18 +41,17 @@ def login(principal: Principal) -> Response:
     next_path, secure = safe_next(form.get("next")), get_settings().cookie_secure
     try:
         credentials = SignInForm.model_validate(form)
-        result = identity_provider().sign_in(credentials.username, credentials.password)
+        result = _sign_in(credentials)
     except _SHOWN_ON_FORM as exc:
         return _login_form(exc, username=form.get("username", ""), next_path=next_path)
     if isinstance(result, NewPasswordChallenge):
         return redirect(_CHALLENGE_PATH, cookies=[_challenge_cookie(result, secure)])
-    return redirect(next_path, cookies=cookies.session_cookies(
-        result.access_token, result.refresh_token, result.expires_in, secure=secure))
+    return redirect(next_path, cookies=_new_session(result, secure))
 
 
 @route(bp, _CHALLENGE_PATH, allow=PUBLIC)
 def new_password_page(principal: Principal) -> Response:
-    challenge = _challenge_from(bp.current_request.headers)
+    challenge = session_store().challenge(_challenge_id(bp.current_request.headers))
     if challenge is None:
         return redirect("/login")
     return _new_password_form(challenge)
@@ -58,8 +59,9 @@ def new_password_page(principal: Principal) -> Response:
 
 @route(bp, _CHALLENGE_PATH, methods=["POST"], allow=PUBLIC)
 def new_password(principal: Principal) -> Response:
-    request = bp.current_request
-    challenge, secure = _challenge_from(request.headers), get_settings().cookie_secure
+    request, store = bp.current_request, session_store()
+    challenge_id, secure = _challenge_id(request.headers), get_settings().cookie_secure
+    challenge = store.challenge(challenge_id)
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
@@ -68,9 +70,9 @@ def new_password(principal: Principal) -> Response:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     except _SHOWN_ON_FORM as exc:
         return _new_password_form(challenge, exc)
+    store.forget_challenge(challenge_id)  # used once: the id cannot be replayed
     done = cookies.clear_cookie(cookies.CHALLENGE_COOKIE, secure=secure, path=_CHALLENGE_PATH, same_site="Strict")
-    return redirect("/", cookies=[*cookies.session_cookies(
-        tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure), done])
+    return redirect("/", cookies=[*_new_session(tokens, secure), done])
 
 
 @route(bp, "/logout", methods=["POST"], allow=PUBLIC)
@@ -78,6 +80,8 @@ def logout(principal: Principal) -> Response:
     access_token = cookies.request_cookies(bp.current_request.headers).get(cookies.SESSION_COOKIE)
     if principal.is_user and access_token:
         identity_provider().sign_out_everywhere(access_token)
+        # Cognito revokes the refresh tokens; the access tokens already issued are revoked here.
+        REVOKED.signed_out(session_store(), principal.sub, unverified_claim(access_token, "origin_jti"))
     return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
 
 
@@ -104,7 +108,7 @@ class ChallengeAnswer(BaseModel):
        response=TokenGrant | ChallengeAnswer, tags=("auth",))
 def issue_token(principal: Principal, body: SignInForm) -> Response:
     """Exchange a username and password for Bearer tokens (for API clients and scripts)."""
-    result = identity_provider().sign_in(body.username, body.password)
+    result = _sign_in(body)
     if isinstance(result, NewPasswordChallenge):
         return _no_store(ChallengeAnswer(session=result.session))
     return _no_store(TokenGrant(**result.model_dump()))
@@ -118,6 +122,11 @@ def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
     return _no_store(TokenGrant(**identity_provider().refresh(body.refresh_token).model_dump()))
 
 
+def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
+    return guarded_sign_in(lambda: identity_provider().sign_in(credentials.username, credentials.password),
+                           credentials.username, client_address(bp.current_request))
+
+
 def _no_store(answer: BaseModel) -> Response:
     # Credentials must not linger in shared caches or the browser's back/forward cache.
     return Response(answer.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
@@ -126,7 +135,7 @@ def _no_store(answer: BaseModel) -> Response:
 def _login_form(exc: Exception | None = None, *, username: str = "", next_path: str = "/",
                 notice: str = "") -> Response:
     return render.page("login", status=status_for(exc) if exc else 200, errors=_field_errors(exc, "password"),
-                       username=username, next_path=next_path, notice=notice)
+                       username=username, next_path=next_path, notice=notice, headers=retry_after_headers(exc))
 
 
 def _new_password_form(challenge: NewPasswordChallenge, exc: Exception | None = None) -> Response:
@@ -151,15 +160,19 @@ def _field_errors(exc: Exception | None, default_field: str) -> dict[str, str]:
     return {getattr(exc, "field", None) or default_field: getattr(exc, "message", str(exc))}
 
 
+def _new_session(tokens: Tokens, secure: bool) -> list[str]:
+    """Session cookies plus a CSRF token bound to the new session (a token planted before sign-in stops working)."""
+    secret = tokens.refresh_token or tokens.access_token
+    return [*cookies.session_cookies(tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure),
+            double_submit.bound_cookie(secret, secure=secure)]
+
+
 def _challenge_cookie(challenge: NewPasswordChallenge, secure: bool) -> str:
-    value = base64.urlsafe_b64encode(challenge.model_dump_json().encode()).decode()
-    return cookies.set_cookie(cookies.CHALLENGE_COOKIE, value, secure=secure, path=_CHALLENGE_PATH,
-                              same_site="Strict", max_age=cookies.CHALLENGE_MAX_AGE_S)
+    # The username and Cognito session stay on the server; the browser holds only a random id for them.
+    challenge_id = session_store().hold_challenge(challenge)
+    return cookies.set_cookie(cookies.CHALLENGE_COOKIE, challenge_id, secure=secure, path=_CHALLENGE_PATH,
+                              same_site="Strict", max_age=CHALLENGE_TTL_S)
 
 
-def _challenge_from(headers) -> NewPasswordChallenge | None:
-    raw = cookies.request_cookies(headers).get(cookies.CHALLENGE_COOKIE)
-    try:
-        return NewPasswordChallenge.model_validate(json.loads(base64.urlsafe_b64decode(raw or "")))
-    except (ValueError, ValidationError):
-        return None
+def _challenge_id(headers) -> str:
+    return cookies.request_cookies(headers).get(cookies.CHALLENGE_COOKIE, "")

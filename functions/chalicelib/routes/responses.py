@@ -1,7 +1,16 @@
 """Small response helpers shared by the route modules."""
 from __future__ import annotations
 
+import re
+from urllib.parse import unquote, urlsplit
+
 from chalice import Response
+
+# A same-site path: "/" then RFC 3986 path/query characters only. No whitespace or control characters (browsers
+# strip tabs and newlines, so "/\t/evil" becomes "//evil"), no backslash (browsers read "/\evil" as "//evil").
+_SAFE_PATH = re.compile(r"/[A-Za-z0-9\-._~!$&'()*+,;=:@/%?#]*")
+# Percent-decoding rounds to look through: an attacker may encode the dangerous part once or twice.
+_DECODE_ROUNDS = 3
 
 
 def redirect(location: str, *, cookies: list[str] | None = None) -> Response:
@@ -13,7 +22,24 @@ def redirect(location: str, *, cookies: list[str] | None = None) -> Response:
 
 
 def safe_next(path: str | None) -> str:
-    """Only same-site paths: "/races" yes; "//evil.example", "https://…" or "/\\evil" no (open redirects)."""
-    if not path or not path.startswith("/") or path.startswith("//") or "\\" in path or "\n" in path:
+    """Only same-site paths: "/races" yes; "//evil", "/\\evil", "/\\t/evil", "https://…", or any of those
+    percent-encoded, no (open redirects). Anything doubtful becomes "/"."""
+    if not path or len(path) > 2048 or not _SAFE_PATH.fullmatch(path):
         return "/"
-    return path
+    decoded = path
+    for _ in range(_DECODE_ROUNDS):
+        if not _same_site(decoded):
+            return "/"
+        decoded, previous = unquote(decoded), decoded
+        if decoded == previous:
+            return path
+    return "/"  # still changing after several rounds of decoding: nothing a real page link needs
+
+
+def _same_site(path: str) -> bool:
+    if not path.startswith("/") or path[1:2] in ("/", "\\"):
+        return False
+    if any(ch.isspace() or ord(ch) < 0x20 or ord(ch) == 0x7F or ch == "\\" for ch in path):
+        return False
+    parts = urlsplit(path)
+    return not parts.scheme and not parts.netloc

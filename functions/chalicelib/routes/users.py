@@ -5,12 +5,15 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
+from chalicelib.auth.rate_limits import client_address, guarded_sign_up
+from chalicelib.auth.revocation import REVOKED
 from chalicelib.domain.errors import InvalidInput, ServiceUnavailable
 from chalicelib.domain.users import (ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser, OwnedDataEraser,
                                      RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm, UserPage,
                                      UserService)
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
+from chalicelib.storage.sessions import session_store
 from chalicelib.storage.users import CognitoUserDirectory
 
 bp = Blueprint(__name__)
@@ -30,15 +33,29 @@ def owned_data_erasers() -> tuple[OwnedDataEraser, ...]:
     return (ModelsEraser(build_model_service()),)
 
 
+class RevokingSessions:
+    """UserService's SessionEnder: marks the user's tokens revoked (chalicelib.auth.revocation)."""
+
+    def ended(self, sub: str) -> None:
+        REVOKED.ended(session_store(), sub)
+
+    def reopened(self, sub: str) -> None:
+        REVOKED.reopened(session_store(), sub)
+
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None:
+        REVOKED.roles_changed(session_store(), sub, groups)
+
+
 def user_service() -> UserService:
     from chalicelib.routes.profiles import profile_service
 
-    return UserService(user_directory(), profile_service(), owned_data_erasers())
+    return UserService(user_directory(), profile_service(), owned_data_erasers(),
+                       confirm_sign_ups=get_settings().local_identity, sessions=RevokingSessions())
 
 
 @route(bp, "/api/signup", methods=["POST"], allow=PUBLIC, body=SignUpForm, status_code=201)
 def sign_up(principal: Principal, body: SignUpForm) -> Response:
-    result = user_service().sign_up(body)
+    result = guarded_sign_up(lambda: user_service().sign_up(body), client_address(bp.current_request))
     return Response(body=result.model_dump(exclude={"sub"}), status_code=201)
 
 

@@ -59,6 +59,9 @@ class CognitoUserDirectory:
         except BotoCoreError as exc:
             raise translate_common(exc, _SERVICE) from exc
 
+    def confirm_without_code(self, username: str) -> None:
+        self._call(username, "admin_confirm_sign_up", UserPoolId=self._pool_id, Username=username)
+
     def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str:
         # SUPPRESS: drem shows the temporary password to the staff member once; there is no mail server locally.
         reply = self._call(username, "admin_create_user", UserPoolId=self._pool_id, Username=username,

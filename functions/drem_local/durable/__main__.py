@@ -55,6 +55,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from moto.moto_server.werkzeug_app import DomainDispatcherApplication, MotoRequestHandler, create_backend_app
 
+    from drem_local.durable import token_signing
+    from drem_local.token_key import ensure_signing_key
+
+    # Before recovery: replayed sign-ins and every later token are signed with this installation's own key.
+    token_signing.install(ensure_signing_key(args.state_dir))
+
     os.environ.setdefault("MOTO_PORT", str(args.port))
     app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys))
     report = app.recover()
