@@ -5,10 +5,11 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.errors import InvalidInput, ServiceUnavailable
-from chalicelib.domain.users import (ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser, OwnedDataEraser,
-                                     RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm, UserPage,
-                                     UserService)
+from chalicelib.domain.errors import ServiceUnavailable
+from chalicelib.domain.numbers import whole_number
+from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser,
+                                     OwnedDataEraser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
+                                     UserPage, UserService)
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.users import CognitoUserDirectory
@@ -83,7 +84,6 @@ def delete_self(principal: User, body: DeleteSelfForm) -> dict:
 
 def _limit(raw: str | None) -> int:
     if raw is None:
-        return 60
-    if not raw.isdigit():
-        raise InvalidInput("limit is a whole number.", field="limit")
-    return int(raw)
+        return MAX_PAGE
+    return whole_number(raw, field="limit", message=f"limit is a whole number between 1 and {MAX_PAGE}.",
+                        minimum=1, maximum=MAX_PAGE)
