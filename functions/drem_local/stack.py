@@ -171,7 +171,9 @@ def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
         sys.executable, "-m", "drem_local.durable", "--state-dir", str(config.state_dir),
         "--host", config.host, "--port", str(config.storage_port),
         "--snapshot-interval", str(config.snapshot_interval),
-    ], config.log_dir / "storage.log", env=_child_env())
+        # The credential the app signs presigned POSTs with: the server checks upload policies against it.
+    ], config.log_dir / "storage.log", env={**_child_env(), "AWS_ACCESS_KEY_ID": _FAKE_KEY,
+                                            "AWS_SECRET_ACCESS_KEY": _FAKE_KEY})
     try:
         wait_for_ok(config.storage_url + HEALTH_PATH, process, timeout)
     except BaseException:

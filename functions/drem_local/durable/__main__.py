@@ -17,6 +17,13 @@ STABLE_ID_ENV = {
     "MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY": "HASH",
 }
 EXIT_VERSION_MISMATCH = 3
+DEFAULT_MAX_POST_BYTES = 256 * 1024 * 1024  # above the app's 128 MiB model limit plus the form's own fields
+
+
+def local_secret_for(environ: dict[str, str]):  # noqa: ANN201 - a small closure
+    """The credential the app signs presigned POSTs with (the stack passes its own; moto's fake key otherwise)."""
+    credentials = {environ.get("AWS_ACCESS_KEY_ID") or "testing": environ.get("AWS_SECRET_ACCESS_KEY") or "testing"}
+    return credentials.get
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -27,6 +34,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--snapshot-interval", type=float, default=5.0,
                         help="seconds between snapshots while something changed (default 5)")
     parser.add_argument("--no-fsync", action="store_true", help="skip fsync of the journal (faster, not crash-safe)")
+    parser.add_argument("--max-post-bytes", type=int, default=DEFAULT_MAX_POST_BYTES,
+                        help="largest browser-form upload body read at all (the signed policy's own size range is "
+                             "enforced on top; default 256 MiB)")
     return parser.parse_args(argv)
 
 
@@ -50,7 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     from moto.moto_server.werkzeug_app import DomainDispatcherApplication, MotoRequestHandler, create_backend_app
 
     os.environ.setdefault("MOTO_PORT", str(args.port))
-    app = DurableApp(DomainDispatcherApplication(create_backend_app), state)
+    from drem_local.durable.post_policy import PostPolicyGuard
+
+    guard = PostPolicyGuard(local_secret_for(dict(os.environ)), max_body_bytes=args.max_post_bytes)
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, upload_guard=guard)
     report = app.recover()
     log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
              "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,

@@ -1,4 +1,7 @@
-"""moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`."""
+"""moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`.
+
+Browser-form uploads (presigned POST) are checked against their signed policy first (`post_policy`), since moto
+ignores it: a refused upload is answered as S3 would and never reaches the journal or moto."""
 from __future__ import annotations
 
 import io
@@ -10,8 +13,10 @@ from typing import Any, Callable
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import (MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot,
+                                         service_of)
 from drem_local.durable.journal import JournalRecord
+from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
 from drem_local.durable.state import DurableState, replay_environ
 
 log = logging.getLogger("drem.durable")
@@ -32,9 +37,11 @@ def read_body(environ: dict[str, Any]) -> bytes:
 class DurableApp:
     """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
 
-    def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState) -> None:
+    def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState,
+                 upload_guard: PostPolicyGuard | None = None) -> None:
         self.moto_app = moto_app
         self.state = state
+        self.upload_guard = upload_guard
         self.lock = threading.Lock()
 
     def recover(self):
@@ -56,10 +63,15 @@ class DurableApp:
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
         if environ.get("PATH_INFO") == HEALTH_PATH:
             return self._health(start_response)
+        service = service_of(environ)
+        guarded = self.upload_guard is not None and service == S3 and is_form_upload(environ)
+        if guarded and (refusal := self.upload_guard.refusal_before_reading(environ)):
+            return refusal_response(refusal, start_response)
         body = read_body(environ)
+        if guarded and (refusal := self.upload_guard.refusal(environ, body)):
+            return refusal_response(refusal, start_response)
         environ["wsgi.input"] = io.BytesIO(body)  # moto's dispatcher and Flask may each read it
         environ["CONTENT_LENGTH"] = str(len(body))
-        service = service_of(environ)
         changing = is_state_changing(environ)
         captured: dict[str, Any] = {}
 
