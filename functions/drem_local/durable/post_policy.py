@@ -155,7 +155,7 @@ def _check_conditions(conditions: list[Any], fields: Mapping[str, str], file_siz
         if isinstance(condition, dict) and len(condition) == 1:
             (name, value), = condition.items()
             operator, field, expected = "eq", str(name).lower(), value
-        elif isinstance(condition, list) and len(condition) == 3 and str(condition[0]).lower() == "content-length-range":
+        elif _is_size_range(condition):
             try:
                 low, high = int(condition[1]), int(condition[2])
             except (TypeError, ValueError):
@@ -185,6 +185,10 @@ def _check_conditions(conditions: list[Any], fields: Mapping[str, str], file_siz
     if "key" not in covered:
         return _denied("Invalid according to Policy: the policy has no condition on the key.")
     return None
+
+
+def _is_size_range(condition: Any) -> bool:
+    return isinstance(condition, list) and len(condition) == 3 and str(condition[0]).lower() == "content-length-range"
 
 
 def _malformed(condition: Any) -> Refusal:
