@@ -2,7 +2,9 @@
 
 Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
 for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
-No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
+No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr. Every
+PURGE_INTERVAL_S it purges model uploads never completed (`ModelService.purge_stale_uploads`), which S3 would
+otherwise keep for ever.
 
     python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local]
 """
@@ -19,6 +21,7 @@ from typing import Any
 
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 REQUEST_QUEUE_SIZE = 1024
+PURGE_INTERVAL_S = 10 * 60
 
 
 def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local") -> Any:
@@ -38,6 +41,17 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local")
     # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
     logging.getLogger("botocore").setLevel(logging.WARNING)
     return factory.create_local_server(config.chalice_app, config, host, port)
+
+
+def _purge_stale_uploads(stopping: threading.Event) -> None:
+    from chalicelib import logs
+    from chalicelib.storage.models import build_model_service
+
+    while not stopping.wait(PURGE_INTERVAL_S):
+        try:
+            build_model_service().purge_stale_uploads()
+        except Exception as exc:  # the next round tries again; serving must go on
+            logs.log(logging.WARNING, "purging stale uploads failed", error=repr(exc))
 
 
 def _quiet(*_args: Any) -> None:
@@ -90,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
     host, port = server.server.server_address[:2]
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:
