@@ -21,7 +21,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 TEST_DEBS := chromium poppler-utils
 BENCH_DEBS := wrk nginx-light
 
-.PHONY: up demo test install install-test test-debs lock build bench clean-state
+.PHONY: up demo test install install-test test-debs lock build bench clean-state deploy destroy
 
 ## make up: install everything, then start the local event stack on http://127.0.0.1:8000
 up: install
@@ -65,6 +65,7 @@ lock: | $(UV)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras -o $(DEV_LOCK)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --constraint $(DEV_LOCK) \
 		-o $(RUNTIME_LOCK)
+	$(UV_COMPILE) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
 
 node_modules/.package-lock.json: package.json package-lock.json
 	npm ci --no-audit --no-fund
@@ -88,6 +89,42 @@ build: install
 	$(BIN)/drem build
 
 ## make bench: every bench/ script (each ends with a RESULT line); installs wrk and nginx for the spectator benches
+## make deploy STAGE=dev: deploy to the AWS account of your default credentials (docs/deploy.md); prints the URL
+STAGE ?= dev
+CDK := infra_cdk/node_modules/.bin/cdk
+CDK_RUN := cd infra_cdk && JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION=20 node_modules/.bin/cdk
+DEPLOYED := .drem-aws/$(STAGE).json
+CDK_OUTPUTS := .drem-aws/$(STAGE).cdk-outputs.json
+CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c certificate_arn=$(CERTIFICATE_ARN),)
+
+$(CDK): infra_cdk/package.json infra_cdk/package-lock.json
+	cd infra_cdk && npm ci --no-audit --no-fund
+	touch $@
+
+deploy: $(VENV)/.installed-test $(HTMX) $(CDK)
+	$(BIN)/drem build
+	mkdir -p .drem-aws
+	$(CDK_RUN) bootstrap $(CDK_CONTEXT)
+	$(CDK_RUN) deploy drem-$(STAGE) $(CDK_CONTEXT) --require-approval never --outputs-file ../$(CDK_OUTPUTS)
+	$(BIN)/drem aws record --stage $(STAGE) --outputs $(CDK_OUTPUTS)
+	@# CloudFront's domain is known only now; the functions need it as their public URL (QR codes, Secure cookies).
+	@url=$$($(BIN)/python -c "import json;print(json.load(open('$(DEPLOYED)'))['public_url'])"); \
+	if ! grep -q '"PublicUrl": "https' $(CDK_OUTPUTS); then \
+		echo "Second deploy: telling the app its public URL $$url"; \
+		($(CDK_RUN) deploy drem-$(STAGE) $(CDK_CONTEXT) -c public_url=$$url --require-approval never \
+			--outputs-file ../$(CDK_OUTPUTS)) && $(BIN)/drem aws record --stage $(STAGE) --outputs $(CDK_OUTPUTS); \
+	fi
+	$(BIN)/drem aws admin --stage $(STAGE)
+	@echo "drem $(STAGE) is deployed: $$($(BIN)/python -c "import json;print(json.load(open('$(DEPLOYED)'))['public_url'])")"
+
+## make destroy STAGE=dev: delete the stack; tables, buckets and the user pool are RETAINED (your event data stays)
+destroy: $(CDK)
+	@echo "Deleting stack drem-$(STAGE). Tables, buckets and the user pool are kept (RETAIN) with all event data;"
+	@echo "delete them in the AWS console if you no longer need them. Export first: drem export --aws --stage $(STAGE)"
+	@read -p "Type the stage name to confirm: " answer && [ "$$answer" = "$(STAGE)" ]
+	$(CDK_RUN) destroy drem-$(STAGE) $(CDK_CONTEXT) --force
+	rm -f $(DEPLOYED) $(CDK_OUTPUTS)
+
 bench: install-test
 	@$(call apt_install,$(BENCH_DEBS))
 	for b in bench/[!_]*.py; do $(BIN)/python $$b || exit 1; done

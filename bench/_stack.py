@@ -28,11 +28,11 @@ WRK = "/usr/bin/wrk"
 _NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))
 
 
-def serve(port: int) -> None:
+def serve(port: int, host: str = "127.0.0.1") -> None:
     """App-server mode: the real app (functions/app.py, every blueprint registered)."""
     from drem_local import appserver
 
-    appserver.make_server("127.0.0.1", port).serve_forever()
+    appserver.make_server(host, port).serve_forever()
 
 
 @dataclass

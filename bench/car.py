@@ -46,15 +46,13 @@ def upload(api, name: str, data: bytes) -> str:  # type: ignore[no-untyped-def]
 
 def second_owner(api, running):  # type: ignore[no-untyped-def]
     """A racer registered through the API; its password is set at the Cognito edge (no e-mail locally)."""
-    import boto3
-
     from drem_local.api_client import ApiClient
     from drem_local.bootstrap import generate_password
+    from drem_local.storage_keys import load, local_client
 
     api.post("/api/users", {"username": "bench-rita", "email": "bench-rita@example.test", "country_code": "NL"})
     password = generate_password()
-    boto3.client("cognito-idp", endpoint_url=running.config.storage_url, region_name="us-east-1",
-                 aws_access_key_id="testing", aws_secret_access_key="testing").admin_set_user_password(
+    local_client("cognito-idp", running.config.storage_url, load(running.config.state_dir)).admin_set_user_password(
         UserPoolId=running.outputs.user_pool_id, Username="bench-rita", Password=password, Permanent=True)
     racer = ApiClient(running.config.app_url)
     racer.sign_in("bench-rita", password)

@@ -32,14 +32,12 @@ def percentile(samples: list[float], pct: float) -> float:
 
 
 def measure(app_port: int, storage_url: str, env: dict[str, str], requests: int) -> tuple[list[float], list[float]]:
-    import boto3
-    from botocore.config import Config
-
     from drem_infra.resources import table_name
+    from drem_local.storage_keys import StorageKeys, local_client
 
-    dynamodb = boto3.session.Session(region_name="us-east-1", aws_access_key_id="testing",
-                                      aws_secret_access_key="testing").client(
-        "dynamodb", endpoint_url=storage_url, config=Config(account_id_endpoint_mode="disabled"))
+    # The app's own storage keys (drem_local.stack.app_environment puts them in its environment).
+    keys = StorageKeys(env["AWS_ACCESS_KEY_ID"], env["AWS_SECRET_ACCESS_KEY"])
+    dynamodb = local_client("dynamodb", storage_url, keys)
     key = {"pk": {"S": f"EVENT#{EVENT_ID}"}, "sk": {"S": "BOARD#1"}}
     table = table_name(env.get("DREM_STAGE", "local"), "leaderboards")
     connection = http.client.HTTPConnection("127.0.0.1", app_port, timeout=10)

@@ -1,10 +1,13 @@
 """CDK entry point: `cdk synth` / `cdk deploy` from infra_cdk/ (see cdk.json).
 
 Context:
-  stage    (default "dev")   names resources drem-{stage}-*; one stack per stage.
-  with_app (default "true")  "false" deploys only tables, buckets and the user pool (no Chalice packaging).
+  stage           (default "dev")   names resources drem-{stage}-*; one stack per stage.
+  with_app        (default "true")  "false" deploys only tables, buckets and the user pool (no Chalice packaging).
+  public_url      the URL people use (QR codes, cookies); `make deploy` passes CloudFront's after the first deploy.
+  domain_name, certificate_arn      optional custom domain for CloudFront (an ACM certificate in us-east-1).
 Before packaging the app this vendors drem_infra, drem_leaderboard and drem_web into functions/vendor/, so a
-deployment never ships stale copies. No AWS calls happen at synth.
+deployment never ships stale copies. The third-party wheels must already be there (`drem build`, which `make deploy`
+runs): synth downloads nothing and makes no AWS calls.
 """
 from __future__ import annotations
 
@@ -28,12 +31,16 @@ def main() -> None:
     if with_app:
         # Chalice packaging imports the app; that needs a region even though nothing calls AWS.
         os.environ.setdefault("AWS_DEFAULT_REGION", os.environ.get("CDK_DEFAULT_REGION", "us-east-1"))
-        from drem_local.commands.build import vendor_packages
+        from drem_local.commands.build import LAMBDA_LOCK, dependencies_current, vendor_packages
+        if not dependencies_current(FUNCTIONS_DIR):
+            raise SystemExit(f"functions/vendor/ does not hold the wheels of {LAMBDA_LOCK.name}: run `drem build` "
+                             "(or `make build`) first; synth never downloads packages")
         vendor_packages(FUNCTIONS_DIR)
         functions_dir = FUNCTIONS_DIR
         # The Chalice construct writes chalice.out/ into the working directory; keep it inside the (ignored) outdir.
         os.chdir(app.outdir)
-    DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir,
+    context = {name: app.node.try_get_context(name) or None for name in ("public_url", "domain_name", "certificate_arn")}
+    DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context,
               env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),
                                   region=os.environ.get("CDK_DEFAULT_REGION")))
     app.synth()

@@ -58,17 +58,21 @@ class DurableServer:
         assert answer is not None and answer[0] == 200, f"no health answer from {self.url}"
         return json.loads(answer[1])
 
+    @property
+    def keys(self) -> Any:
+        from drem_local.storage_keys import load
+
+        return load(self.state_dir)
+
     def clients(self, *, retries: int = 1) -> Any:
-        """boto3 clients that fail fast (no retries) so a killed server shows up as an error, not a wait."""
-        import boto3
+        """boto3 clients (signed with the installation's keys) that fail fast (no retries), so a killed server shows
+        up as an error, not a wait."""
         from botocore.config import Config
 
-        config = Config(account_id_endpoint_mode="disabled", retries={"total_max_attempts": retries},
-                        connect_timeout=2, read_timeout=10, signature_version="s3v4",
-                        s3={"addressing_style": "path"})
-        session = boto3.session.Session(region_name=local_stack.REGION, aws_access_key_id="testing",
-                                        aws_secret_access_key="testing")
-        return _Clients(*(session.client(name, endpoint_url=self.url, config=config)
+        from drem_local.storage_keys import local_client
+
+        config = Config(retries={"total_max_attempts": retries}, connect_timeout=2, read_timeout=10)
+        return _Clients(*(local_client(name, self.url, self.keys, local_stack.REGION, config)
                           for name in ("dynamodb", "s3", "cognito-idp")))
 
 
@@ -112,6 +116,12 @@ class LiveStack:
     admin_password: str
     state_dir: Path
     running: local_stack.RunningStack
+
+    def client(self, service: str) -> Any:
+        """A boto3 client for the stack's storage server, signed with the installation's keys."""
+        from drem_local.storage_keys import load, local_client
+
+        return local_client(service, self.storage_url, load(self.state_dir), local_stack.REGION)
 
 
 @pytest.fixture(scope="session")

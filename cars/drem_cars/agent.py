@@ -118,11 +118,13 @@ class CarAgent:
         return True
 
     def telemetry(self) -> dict[str, Any]:
+        readings = (("battery_pct", self.driver.battery_pct()), ("fps", self.driver.fps()),
+                    ("inference_latency_ms", self.driver.inference_ms()))
+        # faults after the readings: reading the battery is how a device-console car learns of its faults
         body: dict[str, Any] = {"agent_version": __version__, "faults": self.driver.faults()[:10]}
         if self.loaded is not None:
             body["model"] = {"name": self.loaded.name[:200], "md5": self.loaded.archive_md5}
-        for key, value in (("battery_pct", self.driver.battery_pct()), ("fps", self.driver.fps()),
-                           ("inference_latency_ms", self.driver.inference_ms())):
+        for key, value in readings:
             if value is not None:
                 body[key] = value
         return body
@@ -169,14 +171,17 @@ class CarAgent:
             if kind == "EMERGENCY_STOP":
                 self.driver.emergency_stop()
                 return True, "stopped"
+            if kind == "START_CAR":
+                self.driver.start_car()
+                return True, "started"
             if kind == "SET_THROTTLE_CAP":
                 self.driver.set_throttle_cap(int(parameters["throttle_cap_pct"]))
                 return True, f"throttle capped at {parameters['throttle_cap_pct']}%"
             if kind == "SET_TAIL_LIGHT":
-                self.driver.set_tail_light(str(parameters["colour"]))
-                return True, f"tail light {parameters['colour']}"
+                message = self.driver.set_tail_light(str(parameters["colour"]))
+                return True, message or f"tail light {parameters['colour']}"
             if kind == "DELETE_ALL_MODELS":
-                self.driver.unload_models()
+                self.driver.delete_all_models()
                 self.loaded = None
                 removed = self.store.delete_all() if self.store is not None else 0
                 self._reported.clear()

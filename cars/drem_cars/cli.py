@@ -38,11 +38,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="drive a DIY car: OpenCV camera + steering servo and motor on Linux sysfs PWM")
     run.add_argument("--camera", default="0", help="--pwm: camera index (0 = /dev/video0), video file or URL")
     run.add_argument("--pwm-root", default="/sys/class/pwm", help="--pwm: sysfs PWM root (default /sys/class/pwm)")
-    run.add_argument("--pwm-chip", type=int, default=0, help="--pwm: pwmchipN of the servo and motor (default 0)")
-    run.add_argument("--servo-channel", type=int, default=0, help="--pwm: steering servo channel (default 0)")
-    run.add_argument("--motor-channel", type=int, default=1, help="--pwm: drive motor (ESC) channel (default 1)")
+    run.add_argument("--pwm-chip", type=int, default=None,
+                     help="--pwm: pwmchipN of the servo and motor (default: the DeepRacer board's chip, found by "
+                          "its 0000:00:17.0 device link)")
+    run.add_argument("--servo-channel", type=int, default=1, help="--pwm: steering servo channel (DeepRacer: 1)")
+    run.add_argument("--motor-channel", type=int, default=0, help="--pwm: drive motor (ESC) channel (DeepRacer: 0)")
+    run.add_argument("--servo-enable-gpio", default="436",
+                     help="--pwm: GPIO that powers the servos, active low (DeepRacer: 436); 'none' if there is none")
+    run.add_argument("--gpio-root", default="/sys/class/gpio", help="--pwm: sysfs GPIO root (default /sys/class/gpio)")
     run.add_argument("--calibration", metavar="FILE",
-                     help="--pwm: DeepRacer calibration.json (default: DeepRacer's factory values)")
+                     help="--pwm: DeepRacer calibration.json (default: the car's /opt/aws/deepracer/calibration.json "
+                          "if present, else DeepRacer's factory values)")
     sub.add_parser("status", help="show this device's activation and local state")
 
 

@@ -15,15 +15,16 @@ from pathlib import Path
 from drem_cars import channels as ch
 from drem_cars.drivers.camera_cv import CameraUnavailable, OpenCvCamera
 from drem_cars.drivers.local import LocalDriver
-from drem_cars.drivers.pwm import (MOTOR_DEFAULT, SERVO_DEFAULT, SYSFS_PWM, Calibration, PwmActuator, PwmChannel,
-                                   PwmUnavailable, load_calibration)
+from drem_cars.drivers.pwm import (DEEPRACER_SERVO_ENABLE_GPIO, DEEPRACER_STEERING_CHANNEL,
+                                   DEEPRACER_THROTTLE_CHANNEL, MOTOR_DEFAULT, SERVO_DEFAULT, SYSFS_GPIO, SYSFS_PWM,
+                                   Calibration, PwmActuator, PwmChannel, PwmUnavailable, ServoEnable,
+                                   load_calibration, pwm_chip_dir)
 from drem_cars.parts.drive_mapping import ActionToDrive
 from drem_cars.parts.pilot_slot import PilotSlot
 from drem_cars.parts.safety import Safety
 from drem_cars.parts.telemetry import Telemetry
 from drem_cars.vehicle import Vehicle
 
-DEFAULT_CHIP, DEFAULT_SERVO_CHANNEL, DEFAULT_MOTOR_CHANNEL = 0, 0, 1
 
 
 class HardwareUnavailable(RuntimeError):
@@ -32,11 +33,14 @@ class HardwareUnavailable(RuntimeError):
 
 @dataclass(frozen=True)
 class PwmWiring:
+    """Defaults are a DeepRacer chassis (with `deepracer-core` stopped, so the car's own servo node lets go)."""
     root: Path = SYSFS_PWM
-    chip: int = DEFAULT_CHIP
-    servo_channel: int = DEFAULT_SERVO_CHANNEL
-    motor_channel: int = DEFAULT_MOTOR_CHANNEL
+    chip: int | None = None  # None: the DeepRacer board's chip, found by its device link; N: pwmchipN
+    servo_channel: int = DEEPRACER_STEERING_CHANNEL
+    motor_channel: int = DEEPRACER_THROTTLE_CHANNEL
     calibration: Path | None = None  # DeepRacer's calibration.json; None = DeepRacer's defaults
+    servo_enable_gpio: int | None = DEEPRACER_SERVO_ENABLE_GPIO  # None: the board has no servo power switch
+    gpio_root: Path = SYSFS_GPIO
 
 
 @dataclass
@@ -82,10 +86,19 @@ def build_pwm_car(camera: int | str, wiring: PwmWiring = PwmWiring(), *, safety:
 
 
 def _open_actuator(wiring: PwmWiring, servo_cal: Calibration, motor_cal: Calibration) -> PwmActuator:
-    servo = PwmChannel(wiring.chip, wiring.servo_channel, servo_cal, wiring.root)
+    """Both channels at neutral first, then the servos' power on: they wake up holding still."""
+    chip_dir = pwm_chip_dir(wiring.root, wiring.chip)
+    servo = PwmChannel(chip_dir, wiring.servo_channel, servo_cal)
     try:
-        motor = PwmChannel(wiring.chip, wiring.motor_channel, motor_cal, wiring.root)
+        motor = PwmChannel(chip_dir, wiring.motor_channel, motor_cal)
     except PwmUnavailable:
         servo.disable()
         raise
-    return PwmActuator(servo, motor)
+    try:
+        enable = (ServoEnable(wiring.servo_enable_gpio, wiring.gpio_root)
+                  if wiring.servo_enable_gpio is not None else None)
+    except PwmUnavailable:
+        motor.disable()
+        servo.disable()
+        raise
+    return PwmActuator(servo, motor, enable)

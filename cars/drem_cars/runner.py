@@ -65,11 +65,19 @@ def run_agent(args: argparse.Namespace) -> int:
 def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,
              deadline: float | None) -> int:
     from drem_cars.drivers.camera_cv import camera_source
+    from drem_cars.drivers.pwm import DEEPRACER_CALIBRATION
     from drem_cars.parts.safety import Safety
     from drem_cars.pwm_car import HardwareUnavailable, PwmWiring, build_pwm_car
 
-    wiring = PwmWiring(Path(args.pwm_root), args.pwm_chip, args.servo_channel, args.motor_channel,
-                       Path(args.calibration) if args.calibration else None)
+    calibration = (Path(args.calibration) if args.calibration
+                   else DEEPRACER_CALIBRATION if DEEPRACER_CALIBRATION.is_file() else None)
+    gpio = str(args.servo_enable_gpio).strip().lower()
+    if gpio != "none" and not gpio.isdigit():
+        print(f"--servo-enable-gpio takes a GPIO number or 'none', not {args.servo_enable_gpio!r}", file=sys.stderr)
+        return 2
+    enable_gpio = None if gpio == "none" else int(gpio)
+    wiring = PwmWiring(Path(args.pwm_root), args.pwm_chip, args.servo_channel, args.motor_channel, calibration,
+                       enable_gpio, Path(args.gpio_root))
     try:
         car = build_pwm_car(camera_source(args.camera), wiring, safety=Safety(heartbeat_limit_s=args.heartbeat_limit))
     except HardwareUnavailable as exc:

@@ -6,11 +6,15 @@ No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JS
 PURGE_INTERVAL_S it purges model uploads never completed (`ModelService.purge_stale_uploads`), which S3 would
 otherwise keep for ever.
 
-    python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local]
+With --storage-url it also forwards `/_storage/...` to the local storage server (drem_local.storage_gateway), so
+presigned uploads and downloads work from the venue network while storage itself stays on loopback.
+
+    python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local] [--storage-url URL]
 """
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import os
 import signal
@@ -19,13 +23,15 @@ import threading
 from pathlib import Path
 from typing import Any
 
-PROJECT_DIR = Path(__file__).resolve().parent.parent
+from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
+
 REQUEST_QUEUE_SIZE = 1024
 PURGE_INTERVAL_S = 10 * 60
 
 
-def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local") -> Any:
-    """A `chalice.local.LocalDevServer` bound to host:port (port 0 picks a free one: see `.server.server_address`)."""
+def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local", storage_url: str | None = None) -> Any:
+    """A `chalice.local.LocalDevServer` bound to host:port (port 0 picks a free one: see `.server.server_address`);
+    with `storage_url`, `/_storage/...` goes to that storage server instead of the app."""
     from chalice import local
     from chalice.cli.factory import CLIFactory
 
@@ -40,7 +46,26 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local")
     config = factory.create_config_obj(chalice_stage_name=stage)
     # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
     logging.getLogger("botocore").setLevel(logging.WARNING)
-    return factory.create_local_server(config.chalice_app, config, host, port)
+    server = factory.create_local_server(config.chalice_app, config, host, port)
+    if storage_url:
+        _add_storage_gateway(server, local.ChaliceRequestHandler, storage_url)
+    return server
+
+
+def _add_storage_gateway(server: Any, handler_class: type, storage_url: str) -> None:
+    from drem_local.storage_gateway import forward, is_gateway_path
+
+    class GatewayRequestHandler(handler_class):  # type: ignore[misc, valid-type]
+        def _route(self) -> None:
+            if is_gateway_path(self.path.split("?", 1)[0]):
+                forward(self, storage_url)
+            else:
+                self._generic_handle()
+
+        do_GET = do_PUT = do_POST = do_HEAD = do_DELETE = do_PATCH = do_OPTIONS = _route
+
+    wrapped = server._wrapped_handler  # functools.partial(handler_class, app_object=..., config=...)
+    server.server.RequestHandlerClass = functools.partial(GatewayRequestHandler, *wrapped.args, **wrapped.keywords)
 
 
 def _purge_stale_uploads(stopping: threading.Event) -> None:
@@ -60,8 +85,7 @@ def _quiet(*_args: Any) -> None:
 
 def _put_project_on_path() -> None:
     # chalicelib is not installed: like Chalice itself, import it from the project dir.
-    if str(PROJECT_DIR) not in sys.path:
-        sys.path.insert(0, str(PROJECT_DIR))
+    use_app_source()
 
 
 def _prefer_installed_packages() -> None:
@@ -84,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=int(os.environ.get("DREM_APP_PORT", "8000")))
     parser.add_argument("--stage", default=os.environ.get("DREM_STAGE", "local"))
+    parser.add_argument("--storage-url", default=None,
+                        help="forward /_storage/... (presigned uploads and downloads) to this storage server")
     return parser
 
 
@@ -93,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     from chalicelib import logs
 
     logs.configure(sys.stderr)
-    server = make_server(args.host, args.port, args.stage)
+    server = make_server(args.host, args.port, args.stage, args.storage_url)
     stopping = threading.Event()
 
     def stop(signum: int, _frame: Any) -> None:

@@ -19,9 +19,8 @@ from botocore.exceptions import ClientError
 
 from drem_infra import resources
 from drem_infra.resources import BucketSpec, TableSpec
+from drem_local.storage_keys import StorageKeys, sign_every_call
 
-# Fake keys for a local endpoint when the shell has none: moto accepts anything, boto3 insists on having some.
-_LOCAL_FAKE_KEY = "testing"
 _SYMBOLS = "!#%*+-=?@^_"
 
 
@@ -75,11 +74,15 @@ class AdminCredentials:
     created: bool
 
 
-def clients_for(endpoint_url: str | None, region: str) -> AwsClients:
-    """boto3 clients for a local endpoint (fake keys if none are set) or, with None, the default chain/mock_aws."""
+def clients_for(endpoint_url: str | None, region: str, keys: StorageKeys | None = None) -> AwsClients:
+    """boto3 clients for the local storage server (signed with the installation's `keys`, which it requires) or,
+    with no endpoint, the default chain / mock_aws."""
     credentials: dict[str, str] = {}
-    if endpoint_url and not os.environ.get("AWS_ACCESS_KEY_ID"):
-        credentials = {"aws_access_key_id": _LOCAL_FAKE_KEY, "aws_secret_access_key": _LOCAL_FAKE_KEY}
+    if endpoint_url:
+        if keys is None:
+            raise ValueError("the local storage server accepts only the installation's keys: pass them "
+                             "(drem_local.storage_keys.load_or_create(state_dir))")
+        credentials = keys.boto_kwargs()
     session = boto3.session.Session(region_name=region, **credentials)
     # botocore 1.44 otherwise routes some DynamoDB calls to account-specific hosts moto does not serve.
     base = Config(account_id_endpoint_mode="disabled", retries={"max_attempts": 3, "mode": "standard"})
@@ -90,7 +93,8 @@ def clients_for(endpoint_url: str | None, region: str) -> AwsClients:
     return AwsClients(
         dynamodb=session.client("dynamodb", endpoint_url=endpoint_url, config=base),
         s3=session.client("s3", endpoint_url=endpoint_url, config=s3_config),
-        cognito=session.client("cognito-idp", endpoint_url=endpoint_url, config=base),
+        cognito=sign_every_call(session.client("cognito-idp", endpoint_url=endpoint_url, config=base))
+        if endpoint_url else session.client("cognito-idp", config=base),
         region=region,
     )
 

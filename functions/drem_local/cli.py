@@ -10,6 +10,8 @@ import argparse
 import importlib
 import sys
 
+from drem_local.app_source import use_app_source
+
 SUBCOMMANDS: dict[str, str] = {
     "up": "drem_local.commands.up",
     "status": "drem_local.commands.status",
@@ -22,6 +24,7 @@ SUBCOMMANDS: dict[str, str] = {
     "export": "drem_local.commands.export",
     "import": "drem_local.commands.import_",
     "league": "drem_local.commands.league",
+    "aws": "drem_local.commands.aws",
     "car": "drem_cars.cli",
     "timer": "drem_cars.cli_timer",
     "sim": "drem_sim.cli",
@@ -61,6 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "_run", None) is None:
         parser.print_help()
         return 2
+    use_app_source()  # subcommands import chalicelib; it lives in functions/, not site-packages
     return int(args._run(args) or 0)
 
 

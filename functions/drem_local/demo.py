@@ -44,10 +44,11 @@ RACERS: tuple[tuple[str, str, str, int], ...] = (
 LIVE_STATUSES = {"READY", "RUNNING", "PAUSED", "OVER"}
 _SEED_SCRIPT = """
 import json, sys
-sys.path.insert(0, sys.argv[1])
+from drem_local.app_source import use_app_source
+use_app_source()
 from chalicelib.domain.models import seed_sample_models
 from chalicelib.storage.models import build_model_service
-records = seed_sample_models(build_model_service(), sys.argv[2:])
+records = seed_sample_models(build_model_service(), sys.argv[1:])
 print(json.dumps([{"model_id": r.model_id, "name": r.name, "status": r.status.value} for r in records]))
 """
 
@@ -120,10 +121,12 @@ class Demo:
 
     def _sign_in_director(self) -> None:
         from drem_local.bootstrap import clients_for, ensure_admin, generate_password
+        from drem_local.storage_keys import load
 
         config = self.stack.config
         password = generate_password()
-        ensure_admin(clients_for(config.storage_url, config.region), self.stack.outputs, DIRECTOR, password)
+        ensure_admin(clients_for(config.storage_url, config.region, load(config.state_dir)), self.stack.outputs,
+                     DIRECTOR, password)
         self._api = ApiClient(config.app_url)
         self._api.sign_in(DIRECTOR, password)
 
@@ -131,8 +134,7 @@ class Demo:
         import drem_sim
 
         archives = sorted(str(p) for p in (Path(drem_sim.__file__).parent / "samples").glob("*.tar.gz"))
-        functions_dir = str(Path(__file__).resolve().parent.parent)
-        done = subprocess.run([sys.executable, "-c", _SEED_SCRIPT, functions_dir, *archives], env=self.stack.env,
+        done = subprocess.run([sys.executable, "-c", _SEED_SCRIPT, *archives], env=self.stack.env,
                               capture_output=True, text=True, timeout=120)
         if done.returncode != 0:
             raise DemoError(f"seeding the sample models failed:\n{done.stderr[-2000:]}")

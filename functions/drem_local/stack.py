@@ -28,8 +28,10 @@ DEFAULT_STORAGE_PORT = 8001
 REGION = "us-east-1"
 HEALTH_PATH = "/_drem/health"
 APP_HEALTH_PATH = "/healthz"
-_FAKE_KEY = "testing"
 _PR_SET_PDEATHSIG = 1
+# Credentials a shell may hold that must never steer (or leak into) calls to the local storage server.
+_SHELL_AWS_VARIABLES = ("AWS_PROFILE", "AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_SESSION_TOKEN",
+                        "AWS_SECURITY_TOKEN")
 
 
 class StackError(RuntimeError):
@@ -38,6 +40,8 @@ class StackError(RuntimeError):
 
 @dataclass(frozen=True)
 class StackConfig:
+    """Storage always listens on `host` (loopback). The app listens there too, unless `app_bind` names the venue
+    network address (or 0.0.0.0, every interface); `announce` is the address people on that network use."""
     state_dir: Path
     host: str = DEFAULT_HOST
     app_port: int = DEFAULT_APP_PORT
@@ -45,14 +49,30 @@ class StackConfig:
     stage: str = "local"
     region: str = REGION
     snapshot_interval: float = 5.0
+    app_bind: str | None = None
+    announce: str | None = None
+    public_url: str | None = None  # a TLS proxy's URL in front of the app, when there is one
 
     @property
     def storage_url(self) -> str:
         return f"http://{self.host}:{self.storage_port}"
 
     @property
+    def app_host(self) -> str:
+        return self.app_bind or self.host
+
+    @property
     def app_url(self) -> str:
-        return f"http://{self.host}:{self.app_port}"
+        """The URL people open, QR codes carry and presigned links point at (DREM_PUBLIC_URL)."""
+        if self.public_url:
+            return self.public_url.rstrip("/")
+        return f"http://{self.announce or self.app_host}:{self.app_port}"
+
+    @property
+    def app_local_url(self) -> str:
+        """Where this machine reaches the app (health checks): loopback unless the app listens elsewhere only."""
+        host = self.host if self.app_host in (self.host, "0.0.0.0") else self.app_host
+        return f"http://{host}:{self.app_port}"
 
     @property
     def log_dir(self) -> Path:
@@ -106,15 +126,55 @@ def _die_with_parent() -> None:
         pass  # not Linux: children then outlive a killed parent, and `drem up` reports their pids next time
 
 
+def _child_setup() -> None:
+    os.umask(0o077)  # whatever a child writes into the state dir (logs, journal, snapshots) stays private
+    _die_with_parent()
+
+
 def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None = None) -> ManagedProcess:
-    log_path.parent.mkdir(parents=True, exist_ok=True)
-    log = open(log_path, "ab")
+    log_path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    log = os.fdopen(os.open(log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600), "ab")
     log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
     log.flush()
     popen = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                             start_new_session=True, preexec_fn=_die_with_parent)
+                             start_new_session=True, preexec_fn=_child_setup)
     log.close()
     return ManagedProcess(name, popen, log_path)
+
+
+def lan_address() -> str:
+    """This machine's address on the network its default route leaves by (the venue WiFi or switch)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))  # TEST-NET-1: connecting a UDP socket only picks a route, sends nothing
+            address = probe.getsockname()[0]
+        except OSError:
+            address = ""
+    if not address or address.startswith("127.") or address == "0.0.0.0":
+        raise StackError("this machine has no network address to serve the venue on (no default route). Join the "
+                         "venue network first, or name the address with --host ADDR (see `ip -4 addr`).")
+    return address
+
+
+def lan_config(config: StackConfig, host: str | None, public_url: str | None = None) -> StackConfig:
+    """`config` serving the app on the venue network: on `host` (an address of this machine; 0.0.0.0 or None means
+    every interface, announced as the default route's address). Storage stays on loopback whatever `host` is."""
+    from dataclasses import replace
+
+    bind = host or "0.0.0.0"
+    if bind != "0.0.0.0":
+        require_local_address(bind)
+    announce = lan_address() if bind == "0.0.0.0" and not public_url else (None if bind == "0.0.0.0" else bind)
+    return replace(config, app_bind=bind, announce=announce, public_url=public_url)
+
+
+def require_local_address(address: str) -> None:
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.bind((address, 0))
+    except OSError as exc:
+        raise StackError(f"{address} is not an IPv4 address of this machine ({exc.strerror}); `ip -4 addr` lists "
+                         "them") from None
 
 
 def port_in_use(host: str, port: int) -> bool:
@@ -166,14 +226,15 @@ def wait_for_ok(url: str, process: ManagedProcess, timeout: float) -> float:
 # --- the three steps ------------------------------------------------------------------------------------------
 
 def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
+    from drem_local.storage_keys import load_or_create
+
     _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
+    load_or_create(config.state_dir)  # before the log dir: the state dir must be 0700 from the start
     process = spawn("storage server", [
         sys.executable, "-m", "drem_local.durable", "--state-dir", str(config.state_dir),
         "--host", config.host, "--port", str(config.storage_port),
         "--snapshot-interval", str(config.snapshot_interval),
-        # The credential the app signs presigned POSTs with: the server checks upload policies against it.
-    ], config.log_dir / "storage.log", env={**_child_env(), "AWS_ACCESS_KEY_ID": _FAKE_KEY,
-                                            "AWS_SECRET_ACCESS_KEY": _FAKE_KEY})
+    ], config.log_dir / "storage.log", env=_child_env())
     try:
         wait_for_ok(config.storage_url + HEALTH_PATH, process, timeout)
     except BaseException:
@@ -185,20 +246,22 @@ def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
 def bootstrap(config: StackConfig, admin_username: str, admin_password: str | None):
     """Create the tables, buckets, user pool and admin (idempotent). Returns (StackOutputs, AdminCredentials)."""
     from drem_local.bootstrap import clients_for, ensure_admin, ensure_stack
+    from drem_local.storage_keys import load_or_create
 
-    clients = clients_for(config.storage_url, config.region)
+    clients = clients_for(config.storage_url, config.region, load_or_create(config.state_dir))
     outputs = ensure_stack(clients, config.stage)
     admin = ensure_admin(clients, outputs, admin_username, admin_password)
     return outputs, admin
 
 
 def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
+    from drem_local.storage_keys import load_or_create
+
     env = _child_env()
     env.update(outputs.to_env())
+    env.update(load_or_create(config.state_dir).environment())  # the only keys the storage server accepts
     env.update(
         AWS_ENDPOINT_URL=config.storage_url,
-        AWS_ACCESS_KEY_ID=_FAKE_KEY,
-        AWS_SECRET_ACCESS_KEY=_FAKE_KEY,
         AWS_DEFAULT_REGION=config.region,
         AWS_REGION=config.region,
         AWS_ACCOUNT_ID_ENDPOINT_MODE="disabled",
@@ -210,12 +273,13 @@ def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
 
 
 def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -> ManagedProcess:
-    _require_free_port(config.host, config.app_port, "app server", "--port")
+    _require_free_port(config.app_host, config.app_port, "app server", "--port")
     process = spawn("app server", [
-        sys.executable, "-m", "drem_local.appserver", "--host", config.host, "--port", str(config.app_port),
+        sys.executable, "-m", "drem_local.appserver", "--host", config.app_host, "--port", str(config.app_port),
+        "--storage-url", config.storage_url,
     ], config.log_dir / "app.log", env=env)
     try:
-        wait_for_ok(config.app_url + APP_HEALTH_PATH, process, timeout)
+        wait_for_ok(config.app_local_url + APP_HEALTH_PATH, process, timeout)
     except BaseException:
         process.stop(2)
         raise
@@ -223,8 +287,7 @@ def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -
 
 
 def _child_env() -> dict[str, str]:
-    env = dict(os.environ)
-    env.pop("AWS_PROFILE", None)  # a profile from the shell must never steer local calls
+    env = {name: value for name, value in os.environ.items() if name not in _SHELL_AWS_VARIABLES}
     env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
     env["PYTHONUNBUFFERED"] = "1"
     return env
@@ -265,8 +328,10 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
                 *, timeout: float = 30.0) -> RunningStack:
     refuse_if_running(config.state_dir)
     _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
-    _require_free_port(config.host, config.app_port, "app server", "--port")
-    config.state_dir.mkdir(parents=True, exist_ok=True)
+    _require_free_port(config.app_host, config.app_port, "app server", "--port")
+    from drem_local.storage_keys import load_or_create
+
+    load_or_create(config.state_dir)  # the state dir 0700, its files 0600, the storage keys drawn once
     started = time.perf_counter()
     storage = start_storage(config, timeout)
     storage_ready = time.perf_counter()
@@ -297,8 +362,9 @@ def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, 
         "outputs": json.loads(outputs.to_json()),
         "admin_username": admin_username,
         "host": config.host,
+        "app_host": config.app_host,
         "ports": {"app": config.app_port, "storage": config.storage_port},
-        "urls": {"app": config.app_url, "storage": config.storage_url},
+        "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url},
         "pids": {"storage": storage_pid, "app": app_pid, "drem_up": os.getpid()},
         "started_at": time.time(),
         "stopped_at": None,
@@ -314,7 +380,8 @@ def read_stack_file(state_dir: Path) -> dict[str, Any] | None:
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True))
+    with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w") as handle:
+        handle.write(json.dumps(data, indent=2, sort_keys=True))
     os.replace(tmp, path)
 
 

@@ -13,43 +13,52 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import aws_cdk as cdk
+from aws_cdk import aws_certificatemanager as acm
+from aws_cdk import aws_cloudfront as cloudfront
+from aws_cdk import aws_cloudfront_origins as origins
+from aws_cdk import aws_cloudwatch as cloudwatch
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
 from aws_cdk import aws_events as events
 from aws_cdk import aws_events_targets as targets
 from aws_cdk import aws_iam as iam
 from aws_cdk import aws_lambda as lambda_
+from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
 from constructs import Construct
 
-from drem_infra import resources
+from drem_infra import permissions, resources
 from drem_infra.resources import BucketSpec, TableSpec
 
-# What the app does with Cognito itself: staff registration, role changes, user listing, self-delete.
-_APP_COGNITO_ACTIONS = (
-    "cognito-idp:AdminCreateUser",
-    "cognito-idp:AdminDeleteUser",
-    "cognito-idp:AdminGetUser",
-    "cognito-idp:AdminAddUserToGroup",
-    "cognito-idp:AdminRemoveUserFromGroup",
-    "cognito-idp:AdminListGroupsForUser",
-    "cognito-idp:AdminUpdateUserAttributes",
-    "cognito-idp:ListUsers",
-    "cognito-idp:ListUsersInGroup",
-)
+# How long the functions' logs are kept (CloudWatch keeps them forever, and bills for them, unless told otherwise).
+LOG_RETENTION = logs.RetentionDays.ONE_MONTH
+# API Gateway stage throttling: well above an event's staff and timer traffic, far below the regional default
+# (10,000 rps), so a runaway client cannot take the account's whole API quota.
+API_RATE_LIMIT_RPS = 200
+API_BURST_LIMIT = 400
 
 
 class DremStack(cdk.Stack):
-    """Tables, buckets and the user pool; with `functions_dir`, also the Chalice app wired to them."""
+    """Tables, buckets and the user pool; with `functions_dir`, also the Chalice app wired to them, behind a
+    CloudFront distribution (the public URL: links are root-relative, and CloudFront maps / to the API's stage).
+
+    `public_url` is the URL people use (QR codes, activation commands, Secure cookies). CloudFront's own domain is
+    only known after the first deploy, and the functions cannot reference the distribution that fronts their own
+    API (a dependency cycle), so `make deploy` passes it in on a second deploy; with `domain_name` (and an ACM
+    `certificate_arn` in us-east-1) it is known from the start."""
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str,
-                 functions_dir: Path | None = None, **kwargs) -> None:
+                 functions_dir: Path | None = None, public_url: str | None = None,
+                 domain_name: str | None = None, certificate_arn: str | None = None, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
+        self.domain_name = domain_name
+        self.public_url = public_url or (f"https://{domain_name}" if domain_name else None)
         self.tables = {spec.logical: self._table(spec) for spec in resources.TABLES}
         self.buckets = {spec.logical: self._bucket(spec) for spec in resources.BUCKETS}
         self.user_pool, self.user_pool_client = self._user_pool()
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
+        self.distribution = self._distribution(certificate_arn) if self.app is not None else None
         self._outputs()
 
     # --- storage ------------------------------------------------------------------------------------------------
@@ -60,8 +69,9 @@ class DremStack(cdk.Stack):
 
         table = dynamodb.Table(
             self, f"{spec.logical.capitalize()}Table",
-            # env={} so a developer's local DREM_TABLE_* overrides never leak into a deployment.
-            table_name=resources.table_name(self.stage, spec.logical, env={}),
+            # No table_name: CloudFormation names it after the stack (drem-{stage}-...) plus a unique suffix, so a
+            # table retained by `make destroy` never collides with the next deploy. The app gets the name through
+            # DREM_TABLE_<LOGICAL>, the CLI through the stack outputs.
             partition_key=key(spec.pk),
             sort_key=key(spec.sk),
             billing_mode=dynamodb.BillingMode.PAY_PER_REQUEST,
@@ -125,6 +135,11 @@ class DremStack(cdk.Stack):
             "WebClient",
             user_pool_client_name=resources.client_name(self.stage),
             generate_secret=spec.generate_secret,
+            # The app signs users in with the API flows (USER_PASSWORD_AUTH, refresh) and serves its own pages; it
+            # uses no hosted UI, so no OAuth flows, scopes or callback URLs (CDK's default enables the implicit
+            # grant with https://example.com).
+            disable_o_auth=True,
+            prevent_user_existence_errors=True,
         )
         # Set the Cognito names verbatim so the template says exactly what resources.py says.
         cfn_client = client.node.default_child
@@ -139,10 +154,42 @@ class DremStack(cdk.Stack):
     # --- application --------------------------------------------------------------------------------------------
 
     def app_environment(self) -> dict[str, str]:
-        return resources.stage_environment(
+        env = resources.stage_environment(
             self.stage, self.user_pool.user_pool_id, self.user_pool_client.user_pool_client_id,
             {logical: t.table_name for logical, t in self.tables.items()},
             {logical: b.bucket_name for logical, b in self.buckets.items()},
+        )
+        if self.public_url:
+            env["DREM_PUBLIC_URL"] = self.public_url
+        return env
+
+    def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
+        """Everything through CloudFront: /static/* cached at the edge, the rest passed to the API uncached (with
+        cookies, query strings and headers, but not the viewer's Host, which API Gateway must see as its own)."""
+        api_domain = f"{self.app.get_resource('RestAPI').ref}.execute-api.{self.region}.{self.url_suffix}"
+        api = origins.HttpOrigin(api_domain, origin_path="/api",
+                                 protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)
+        certificate = (acm.Certificate.from_certificate_arn(self, "Certificate", certificate_arn)
+                       if certificate_arn else None)
+        return cloudfront.Distribution(
+            self, "Distribution",
+            comment=f"drem {self.stage}",
+            default_behavior=cloudfront.BehaviorOptions(
+                origin=api,
+                viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+                allowed_methods=cloudfront.AllowedMethods.ALLOW_ALL,
+                cache_policy=cloudfront.CachePolicy.CACHING_DISABLED,
+                origin_request_policy=cloudfront.OriginRequestPolicy.ALL_VIEWER_EXCEPT_HOST_HEADER,
+            ),
+            additional_behaviors={"/static/*": cloudfront.BehaviorOptions(
+                origin=api,
+                viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+                cache_policy=cloudfront.CachePolicy.CACHING_OPTIMIZED,
+            )},
+            domain_names=[self.domain_name] if self.domain_name and certificate else None,
+            certificate=certificate,
+            price_class=cloudfront.PriceClass.PRICE_CLASS_100,
+            http_version=cloudfront.HttpVersion.HTTP2_AND_3,
         )
 
     def _chalice_app(self, functions_dir: Path):
@@ -153,21 +200,63 @@ class DremStack(cdk.Stack):
         with _packaging_leaves_no_trace():
             app = Chalice(self, "App", source_dir=str(functions_dir),
                           stage_config={"environment_variables": self.app_environment()})
-        # By name (Ref of the role Chalice's template defines), so the grant policy attaches to it directly.
-        role = iam.Role.from_role_name(self, "AppRole", app.get_resource("DefaultRole").ref)
-        for table in self.tables.values():
-            table.grant_read_write_data(role)
-        for bucket in self.buckets.values():
-            bucket.grant_read_write(role)
-        self.user_pool.grant(role, *_APP_COGNITO_ACTIONS)
-
         sam = json.loads(Path(app._sam_package_dir, "sam.json").read_text())  # the template Chalice just wrote
+        functions = [name for name, r in sam["Resources"].items() if r["Type"] == "AWS::Serverless::Function"]
+        log_groups = self._log_groups(app, functions)
+        self._least_privilege(app, log_groups)
+        self._alarms(app, functions)
+        api = sam["Resources"].get("RestAPI")
+        if api is not None:
+            app.get_resource("RestAPI").add_property_override("MethodSettings", [{
+                "ResourcePath": "/*", "HttpMethod": "*",
+                "ThrottlingRateLimit": API_RATE_LIMIT_RPS, "ThrottlingBurstLimit": API_BURST_LIMIT}])
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
         if upload_fn in sam["Resources"]:
             for spec in resources.BUCKETS:
                 if spec.eventbridge:
                     self._route_uploads(self.buckets[spec.logical], app.get_function(upload_fn))
         return app
+
+    def _log_groups(self, app, functions: list[str]) -> list[logs.LogGroup]:
+        """One log group per function, with retention; each function is told to log there."""
+        groups = []
+        for name in functions:
+            group = logs.LogGroup(self, f"{name}Logs", retention=LOG_RETENTION,
+                                  removal_policy=cdk.RemovalPolicy.DESTROY)
+            app.get_resource(name).add_property_override("LoggingConfig", {"LogGroup": group.log_group_name})
+            groups.append(group)
+        return groups
+
+    def _least_privilege(self, app, log_groups: list[logs.LogGroup]) -> None:
+        """Replace Chalice's default role policy (logs on arn:*:logs:*:*:*) with exactly drem_infra.permissions."""
+        tables = list(self.tables.values())
+        statements = [
+            iam.PolicyStatement(actions=list(permissions.LOG_ACTIONS),
+                                resources=[f"{g.log_group_arn}" for g in log_groups]),
+            iam.PolicyStatement(actions=list(permissions.TABLE_ACTIONS),
+                                resources=[arn for t in tables for arn in (t.table_arn, f"{t.table_arn}/index/*")]),
+            iam.PolicyStatement(actions=list(permissions.USER_POOL_ACTIONS), resources=[self.user_pool.user_pool_arn]),
+        ]
+        for logical, actions in permissions.BUCKET_OBJECT_ACTIONS.items():
+            statements.append(iam.PolicyStatement(actions=list(actions),
+                                                  resources=[self.buckets[logical].arn_for_objects("*")]))
+        for logical, actions in permissions.BUCKET_ACTIONS.items():
+            statements.append(iam.PolicyStatement(actions=list(actions), resources=[self.buckets[logical].bucket_arn]))
+        document = iam.PolicyDocument(statements=statements)
+        app.get_resource("DefaultRole").add_property_override(
+            "Policies", [{"PolicyName": "DremApp", "PolicyDocument": self.resolve(document.to_json())}])
+
+    def _alarms(self, app, functions: list[str]) -> None:
+        """Errors and throttles of every function, so a broken deploy or a quota problem shows up on the dashboard."""
+        for name in functions:
+            function_name = app.get_resource(name).ref
+            for metric_name in ("Errors", "Throttles"):
+                metric = cloudwatch.Metric(namespace="AWS/Lambda", metric_name=metric_name, statistic="Sum",
+                                           period=cdk.Duration.minutes(5),
+                                           dimensions_map={"FunctionName": function_name})
+                metric.create_alarm(self, f"{name}{metric_name}Alarm", threshold=1, evaluation_periods=1,
+                                    alarm_description=f"drem {self.stage}: {name} {metric_name.lower()} in 5 minutes",
+                                    treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
 
     def _route_uploads(self, bucket: s3.Bucket, function) -> None:
         rule = events.Rule(
@@ -187,6 +276,11 @@ class DremStack(cdk.Stack):
                               source_arn=rule.rule_arn)
 
     def _outputs(self) -> None:
+        cdk.CfnOutput(self, "Stage", value=self.stage)
+        cdk.CfnOutput(self, "Region", value=self.region)
+        if self.distribution is not None:
+            cdk.CfnOutput(self, "DistributionUrl", value=f"https://{self.distribution.distribution_domain_name}")
+            cdk.CfnOutput(self, "PublicUrl", value=self.public_url or "")
         cdk.CfnOutput(self, "UserPoolId", value=self.user_pool.user_pool_id)
         cdk.CfnOutput(self, "UserPoolClientId", value=self.user_pool_client.user_pool_client_id)
         for logical, table in self.tables.items():

@@ -108,22 +108,32 @@ class Camera:
         # First row safely below the horizon; everything above is sky.
         self._row0 = min(self._h, max(0, int(math.floor(horizon)) + 2))
         t = self.texture
-        self._tex_to_world = np.array([[1 / t.px_per_m, 0, t.x_min], [0, -1 / t.px_per_m, t.y_max], [0, 0, 1]])
+        self._tex_scale, self._tex_x0, self._tex_y0 = 1 / t.px_per_m, t.x_min, t.y_max
         self._frame = np.full((self._h, self._w), SKY, np.uint8)
         self._ground = self._frame[self._row0:]
 
     def homography(self, x: float, y: float, heading: float) -> np.ndarray:
-        """Texture pixel -> (cropped, supersampled) image pixel for a car origin pose."""
+        """Texture pixel -> (cropped, supersampled) image pixel for a car origin pose.
+
+        K · [r1 r2 -R·c] · T with the camera's rows right, down (= forward × right) and forward, written out in
+        scalars: the same matrix numpy's cross/stack/matmul built, at a tenth of the cost per frame."""
         cfg = self.config
         ch, sh = math.cos(heading), math.sin(heading)
-        cam = np.array([x + cfg.mount_forward * ch, y + cfg.mount_forward * sh, cfg.mount_height])
-        forward = np.array([ch * self._cos_p, sh * self._cos_p, -self._sin_p])
-        right = np.array([sh, -ch, 0.0])
-        down = np.cross(forward, right)
-        rot = np.stack([right, down, forward])
-        k = np.array([[self._focal, 0, self._cx], [0, self._focal, self._cy - self._row0], [0, 0, 1]])
-        plane = np.column_stack([rot[:, 0], rot[:, 1], -rot @ cam])
-        return k @ plane @ self._tex_to_world
+        cp, sp = self._cos_p, self._sin_p
+        cx, cy, cz = x + cfg.mount_forward * ch, y + cfg.mount_forward * sh, cfg.mount_height
+        # Rows of R: right = (sh, -ch, 0); forward = (ch·cp, sh·cp, -sp); down = forward × right.
+        rx, ry = sh, -ch
+        fx, fy, fz = ch * cp, sh * cp, -sp
+        dx, dy, dz = fy * 0.0 - fz * ry, fz * rx - fx * 0.0, fx * ry - fy * rx
+        tr, td, tf = -(rx * cx + ry * cy), -(dx * cx + dy * cy + dz * cz), -(fx * cx + fy * cy + fz * cz)
+        f, px, py = self._focal, self._cx, self._cy - self._row0
+        # K · plane, where plane's columns are (R[:,0], R[:,1], -R·c).
+        m = ((f * rx + px * fx, f * ry + px * fy, f * tr + px * tf),
+             (f * dx + py * fx, f * dy + py * fy, f * td + py * tf),
+             (fx, fy, tf))
+        s, x0, y0 = self._tex_scale, self._tex_x0, self._tex_y0
+        # · T, where T maps a texture pixel (u, v) to the world point (x0 + u·s, y0 - v·s).
+        return np.array([(a * s, -b * s, a * x0 + b * y0 + c) for a, b, c in m])
 
     def render(self, x: float, y: float, heading: float, rng: np.random.Generator | None = None) -> np.ndarray:
         """The (height, width) uint8 frame for a car origin at (x, y) facing `heading` (radians)."""

@@ -11,10 +11,7 @@ PASSWORD = "Journey-Pass-9"
 
 
 def cognito(live_stack: Any) -> Any:
-    import boto3
-
-    return boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
-                        aws_access_key_id="testing", aws_secret_access_key="testing")
+    return live_stack.client("cognito-idp")
 
 
 def create_user(live_stack: Any, username: str, group: str) -> str:

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import secrets
 
-import boto3
 import pytest
-from botocore.config import Config
 
 
 pytestmark = pytest.mark.browser
@@ -20,9 +18,7 @@ STAFF_API = [("GET", "/api/users"), ("GET", "/api/devices"), ("GET", "/api/fleet
 
 def make_racer(live_stack) -> str:
     username = f"racer-{secrets.token_hex(3)}"
-    cognito = boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
-                           aws_access_key_id="testing", aws_secret_access_key="testing",
-                           config=Config(account_id_endpoint_mode="disabled"))
+    cognito = live_stack.client("cognito-idp")
     pool = live_stack.outputs.user_pool_id
     cognito.admin_create_user(UserPoolId=pool, Username=username, MessageAction="SUPPRESS",
                               UserAttributes=[{"Name": "email", "Value": f"{username}@example.test"}])

@@ -29,14 +29,11 @@ FOUR_TIMES_REAL_TIME_HZ = 60.0
 
 def user_with_password(live_stack, admin: ApiClient, username: str, role: str | None) -> ApiClient:
     """A user registered through the API; the password is set at the Cognito edge (no e-mail here), then signed in."""
-    import boto3
-
     admin.post("/api/users", {"username": username, "email": f"{username}@example.test", "country_code": "NL"})
     if role:
         admin.put(f"/api/users/{username}/role", {"role": role})
     password = generate_password()
-    boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
-                 aws_access_key_id="testing", aws_secret_access_key="testing").admin_set_user_password(
+    live_stack.client("cognito-idp").admin_set_user_password(
         UserPoolId=live_stack.outputs.user_pool_id, Username=username, Password=password, Permanent=True)
     client = ApiClient(live_stack.url)
     client.sign_in(username, password)

@@ -1,70 +1,397 @@
+"""The device-console driver against a console that behaves like a stock DeepRacer's
+(tests/cars/fake_deepracer_console.py: real Flask-WTF CSRF, asynchronous loading, one login at a time, LED only in
+calibration mode)."""
 from __future__ import annotations
 
 import gzip
 import io
 import json
 import tarfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import requests
 
-from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver
+from drem_cars.drivers.deepracer_console import (ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver,
+                                                 csrf_meta_token)
+from chalicelib.domain.devices import Telemetry
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
-from tests.cars.fake_deepracer_console import FakeConsole
+from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole
 
 pytestmark = pytest.mark.unit
 
+METADATA = {"action_space": [{"steering_angle": -30, "speed": 0.6}, {"steering_angle": 30, "speed": 0.6}],
+            "sensor": ["FRONT_FACING_CAMERA"], "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+            "training_algorithm": "clipped_ppo", "action_space_type": "discrete", "version": "5"}
 
-def console_model(tmp_path: Path, member: str) -> InstalledModel:
-    folder = tmp_path / "racer-fast"
-    (folder / "agent").mkdir(parents=True)
-    (folder / member).write_bytes(b"graph")
-    (folder / "model_metadata.json").write_text(json.dumps({"action_space": []}))
+
+def car_archive(members: dict[str, bytes]) -> bytes:
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w") as tar:
-        info = tarfile.TarInfo(member)
-        info.size = 5
-        tar.addfile(info, io.BytesIO(b"graph"))
-    (folder / ARCHIVE_COPY).write_bytes(gzip.compress(buffer.getvalue()))
+        for name, data in members.items():
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return gzip.compress(buffer.getvalue())
+
+
+def console_model(tmp_path: Path, *, metadata: dict | None = None, archive_members: dict[str, bytes] | None = None,
+                  local_member: str = "agent/model.pb") -> InstalledModel:
+    """An installed model as the agent's store leaves it: unpacked files plus the archive copy it uploads."""
+    metadata_bytes = json.dumps(METADATA if metadata is None else metadata).encode()
+    folder = tmp_path / "racer-fast"
+    (folder / "agent").mkdir(parents=True)
+    (folder / local_member).write_bytes(b"frozen graph")
+    (folder / "model_metadata.json").write_bytes(metadata_bytes)
+    members = archive_members if archive_members is not None else {
+        "agent/model.pb": b"frozen graph", "model_metadata.json": metadata_bytes}
+    (folder / ARCHIVE_COPY).write_bytes(car_archive(members))
     return InstalledModel(model_id="m1", name="fast", folder="racer-fast", archive_md5="0" * 32, path=folder)
 
 
-def test_driver_logs_in_with_csrf_uploads_loads_and_drives(tmp_path: Path) -> None:
-    with FakeConsole() as fake:
-        driver = DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password"))
-        model = console_model(tmp_path, "agent/model.pb")
+@pytest.fixture
+def fake() -> Iterator[FakeConsole]:
+    with FakeConsole(load_seconds=0.3) as console:
+        yield console
+
+
+def make_driver(fake: FakeConsole, **console_options: float) -> DeepRacerConsoleDriver:
+    return DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password", **console_options),
+                                  poll_s=0.05, settle_s=1.0, load_timeout_s=10.0)
+
+
+def paths(fake: FakeConsole) -> list[str]:
+    return [f"{method} {path}" for method, path, _ in fake.state.calls]
+
+
+def test_a_model_is_uploaded_loaded_and_reported_only_once_the_car_says_loaded(fake: FakeConsole,
+                                                                                 tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    state = fake.state
+    assert state.auto_loading_status == "loaded" and state.loaded_model == "racer-fast"
+    assert state.artifacts["racer-fast"]["model.pb"] == b"frozen graph"
+    assert paths(fake) == ["POST /login", "PUT /api/uploadModels", "PUT /api/start_stop", "PUT /api/drive_mode",
+                           "PUT /api/models/racer-fast/model", "PUT /api/max_nav_throttle"]
+    assert state.mode == AUTONOMOUS and state.throttle_scale == 1.0  # the car boots with 0
+    assert not state.driving, "a loaded car waits for staff to start it"
+
+
+def test_staff_start_and_stop_drive_the_car_at_the_throttle_cap(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    driver.set_throttle_cap(40)
+    driver.start_car()
+    assert fake.state.driving and fake.state.throttle_scale == 0.4
+    driver.emergency_stop()
+    assert not fake.state.driving and fake.state.auto_loading_status == "loaded"
+
+
+def test_a_cap_set_before_any_model_is_applied_once_the_car_is_autonomous(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.set_throttle_cap(55)
+    assert fake.state.throttle_scale == 0.0, "in manual mode (boot) the car ignores max_nav_throttle"
+    driver.load_model(console_model(tmp_path))
+    assert fake.state.throttle_scale == 0.55
+
+
+def test_bad_metadata_is_refused_at_once_with_the_cars_reason(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    with pytest.raises(ModelError, match="The training algorithm value is incorrect"):
+        driver.load_model(console_model(tmp_path, metadata={**METADATA, "training_algorithm": "behaviour_cloning"}))
+    assert fake.state.load_requests == 0
+
+
+def test_an_archive_without_a_pb_uploads_fine_then_cannot_be_loaded(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path, archive_members={"model_metadata.json": json.dumps(METADATA).encode()})
+    with pytest.raises(ModelError, match="Model optimization failed!"):
         driver.load_model(model)
-        driver.set_throttle_cap(40)
-        driver.set_tail_light("#FFA500")
-        driver.emergency_stop()
-        assert driver.battery_pct() == 70.0
-        assert fake.state.uploads["racer-fast"] == (model.path / ARCHIVE_COPY).read_bytes()
-        assert fake.state.calls == [
-            ("PUT", "/api/uploadModels", "racer-fast.tar.gz"), ("PUT", "/api/models/racer-fast/model.pb", None),
-            ("PUT", "/api/drive_mode", {"drive_mode": "auto"}), ("PUT", "/api/max_nav_throttle", {"throttle": 40}),
-            ("POST", "/api/set_led_color", {"red": 255, "green": 165, "blue": 0}),
-            ("PUT", "/api/start_stop", {"start_stop": "stop"})]
+    assert "PUT /api/uploadModels" in paths(fake)
 
 
-def test_wrong_password_is_a_clear_error() -> None:
-    with FakeConsole() as fake:
-        with pytest.raises(ConsoleError, match="refused the password"):
-            DeepRacerConsole(fake.url, "nope").login()
+def test_a_load_that_fails_on_the_car_is_reported_failed_with_its_status(fake: FakeConsole, tmp_path: Path) -> None:
+    fake.state.optimizer_fails = True
+    with pytest.raises(ModelError, match='isModelLoading says "error"'):
+        make_driver(fake).load_model(console_model(tmp_path))
 
 
-def test_an_onnx_model_is_refused_for_the_console_without_calling_it(tmp_path: Path) -> None:
-    with FakeConsole() as fake:
-        driver = DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password"))
-        with pytest.raises(ModelError, match="TensorFlow models only"):
-            driver.load_model(console_model(tmp_path, "model.onnx"))
-        assert fake.state.calls == []
+def test_an_onnx_model_is_refused_for_the_console_without_calling_it(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    with pytest.raises(ModelError, match="TensorFlow models only"):
+        driver.load_model(console_model(tmp_path, local_member="model.onnx"))
+    assert fake.state.calls == []
 
 
-def test_a_call_without_the_csrf_header_is_refused_by_the_console() -> None:
-    with FakeConsole() as fake:
-        console = DeepRacerConsole(fake.url, "car-password")
-        console.login()
-        console.csrf_token = "forged"
-        with pytest.raises(ConsoleError, match="CSRF token is missing or invalid"):
-            console.start_stop(False)
+def test_wrong_password_is_a_clear_error(fake: FakeConsole) -> None:
+    with pytest.raises(ConsoleError, match="refused the password"):
+        DeepRacerConsole(fake.url, "nope").login()
+
+
+def test_an_emergency_stop_works_after_the_login_and_csrf_token_expired(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    driver.start_car()
+    fake.advance_clock(3601)
+    driver.emergency_stop()
+    assert not fake.state.driving
+    assert paths(fake).count("POST /login") == 2
+
+
+def test_an_upload_retried_after_logging_in_again_sends_the_whole_archive(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.battery_pct()  # logged in
+    fake.advance_clock(3601)  # the upload's first attempt is refused (expired CSRF token), the second must be whole
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    assert fake.state.artifacts["racer-fast"]["model.pb"] == b"frozen graph"
+    assert paths(fake).count("POST /login") == 2
+
+
+def test_another_client_logging_in_is_survived_and_shown_to_staff(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    driver.start_car()
+    fake.log_in_elsewhere()
+    assert driver.battery_pct() is None
+    assert any("someone else logged in" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())  # the heartbeat accepts them (at most 120 characters each)
+    assert paths(fake).count("POST /login") == 2, "ours, theirs: a poll does not take the car's login back"
+    driver.emergency_stop()  # staff commands always do
+    assert not fake.state.driving and paths(fake).count("POST /login") == 3
+    assert driver.battery_pct() == 70.0 and driver.faults() == []
+
+
+def test_polls_take_the_login_back_after_the_yield_time(fake: FakeConsole) -> None:
+    clock = [0.0]
+    console = DeepRacerConsole(fake.url, "car-password", yield_login_s=120, clock=lambda: clock[0])
+    driver = DeepRacerConsoleDriver(console)
+    assert driver.battery_pct() == 70.0
+    fake.log_in_elsewhere()
+    assert driver.battery_pct() is None
+    clock[0] = 121.0
+    assert driver.battery_pct() == 70.0 and driver.faults() == []
+
+
+def test_the_tail_light_is_set_in_calibration_mode_while_stopped_and_the_model_stays_loaded(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    assert driver.set_tail_light("#FFA500") == "tail light #FFA500"
+    state = fake.state
+    assert state.tail_light == (255, 165, 0)
+    assert "GET /api/set_calibration_mode" in paths(fake)
+    assert state.mode == AUTONOMOUS and state.auto_loading_status == "loaded" and state.throttle_scale == 1.0
+    driver.start_car()
+    assert state.driving
+
+
+def test_a_tail_light_asked_for_while_the_car_drives_waits_for_the_next_stop(fake: FakeConsole,
+                                                                             tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    driver.start_car()
+    assert "next stops" in driver.set_tail_light("#00FF00")
+    assert fake.state.driving and fake.state.tail_light == (0, 0, 0)
+    driver.battery_pct()
+    assert any("waits for the car to stop" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())
+    driver.emergency_stop()
+    assert fake.state.tail_light == (0, 255, 0) and not fake.state.driving
+
+
+def test_battery_is_reported_as_the_car_reports_it(fake: FakeConsole) -> None:
+    driver = make_driver(fake)
+    fake.state.battery_level = 11  # above full
+    assert driver.battery_pct() == 100.0
+    fake.state.battery_level = -1
+    assert driver.battery_pct() is None
+    assert driver.faults() == ["the car cannot read its battery level (the console reports -1)"]
+
+
+def test_delete_all_models_stops_the_car_and_deletes_every_model_on_it(fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.state.artifacts["someone-elses"] = {"model.pb": b"x", "checksum.txt": b"1\n"}
+    driver.start_car()
+    assert driver.delete_all_models() == 2
+    assert fake.state.artifacts == {} and not fake.state.driving
+    assert ("PUT", "/api/deleteModels", {"filenames": ["racer-fast", "someone-elses"]}) in fake.state.calls
+
+
+# --- the fake console itself behaves like the car (what the driver above relies on) ---
+
+def logged_in_session(fake: FakeConsole) -> tuple[requests.Session, dict[str, str]]:
+    session = requests.Session()
+    token = session.get(f"{fake.url}/", timeout=5).text.split('name="csrf-token" content="')[1].split('"')[0]
+    for cookie in session.cookies:
+        cookie.secure = False  # the car's session cookie is Secure (HTTPS); this fake speaks plain http
+    headers = {"X-CSRFToken": token, "Referer": f"{fake.url}/"}
+    assert session.post(f"{fake.url}/login", data={"password": "car-password"}, headers=headers,
+                        timeout=5).text == "success"
+    return session, headers
+
+
+def wait_for_status(session: requests.Session, fake: FakeConsole, wanted: str) -> None:
+    for _ in range(200):
+        if session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == wanted:
+            return
+        fake.state.stopping.wait(0.02)
+    raise AssertionError(f"isModelLoading never said {wanted!r}")
+
+
+def test_fake_login_and_api_need_the_csrf_token(fake: FakeConsole) -> None:
+    session = requests.Session()
+    assert session.post(f"{fake.url}/login", data={"password": "car-password"}, timeout=5).status_code == 400
+    session, headers = logged_in_session(fake)
+    no_token = session.put(f"{fake.url}/api/start_stop", json={"start_stop": "stop"}, timeout=5)
+    assert no_token.status_code == 400 and "CSRF token is missing" in no_token.text
+    fake.advance_clock(3601)
+    expired = session.put(f"{fake.url}/api/start_stop", json={"start_stop": "stop"}, headers=headers, timeout=5)
+    assert expired.status_code == 400 and "CSRF token has expired" in expired.text
+
+
+def test_fake_keeps_one_login_at_a_time(fake: FakeConsole) -> None:
+    first, _ = logged_in_session(fake)
+    assert first.get(f"{fake.url}/api/get_battery_level", timeout=5).status_code == 200
+    logged_in_session(fake)
+    assert first.get(f"{fake.url}/api/get_battery_level", timeout=5).status_code == 401
+
+
+def test_fake_loads_asynchronously_and_hides_manual_mode_and_pb_name_failures(fake: FakeConsole) -> None:
+    session, headers = logged_in_session(fake)
+    archive = car_archive({"agent/model.pb": b"g", "model_metadata.json": json.dumps(METADATA).encode()})
+    upload = session.put(f"{fake.url}/api/uploadModels", headers=headers, timeout=5,
+                         files={"file": ("m.tar.gz", archive)})
+    assert upload.json() == {"success": True, "message": "Model uploaded successfully to your vehicle"}
+    assert fake.state.mode == MANUAL
+    manual = session.put(f"{fake.url}/api/models/m/model", headers=headers, timeout=5)
+    assert manual.json() == {"success": True}
+    wait_for_status(session, fake, "error")
+    session.put(f"{fake.url}/api/drive_mode", json={"drive_mode": "auto"}, headers=headers, timeout=5)
+    assert session.put(f"{fake.url}/api/models/m/model.pb", headers=headers, timeout=5).json() == {"success": True}
+    wait_for_status(session, fake, "loading")
+    wait_for_status(session, fake, "error")
+    assert session.put(f"{fake.url}/api/models/m/model", headers=headers, timeout=5).json() == {"success": True}
+    wait_for_status(session, fake, "loaded")
+
+
+def test_fake_changes_the_tail_light_only_in_calibration_mode(fake: FakeConsole) -> None:
+    session, headers = logged_in_session(fake)
+    colour = {"red": 10, "green": 20, "blue": 30}
+    assert session.post(f"{fake.url}/api/set_led_color", json=colour, headers=headers, timeout=5).json() == {
+        "success": True}
+    assert fake.state.tail_light == (0, 0, 0)
+    session.get(f"{fake.url}/api/set_calibration_mode", timeout=5)
+    session.post(f"{fake.url}/api/set_led_color", json=colour, headers=headers, timeout=5)
+    assert fake.state.mode == CALIBRATION and fake.state.tail_light == (10, 20, 30)
+    refused = session.post(f"{fake.url}/api/set_led_color", json={**colour, "red": 300}, headers=headers, timeout=5)
+    assert refused.json() == {"success": False, "reason": "Input is not valid"}
+
+
+class AckRecorder:
+    """The part of the device API client a command needs: acknowledgements, recorded."""
+
+    def __init__(self) -> None:
+        self.acks: dict[str, tuple[bool, str]] = {}
+
+    def acknowledge(self, command_id: str, ok: bool, message: str) -> None:
+        self.acks[command_id] = (ok, message)
+
+
+def test_staff_commands_reach_the_car_through_the_agent(fake: FakeConsole, tmp_path: Path) -> None:
+    from drem_cars.agent import CarAgent
+
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    client = AckRecorder()
+    agent = CarAgent(client, driver, outbox=None, store=None)  # type: ignore[arg-type]
+    agent.run_command({"command_id": "c1", "type": "SET_THROTTLE_CAP", "parameters": {"throttle_cap_pct": 30}})
+    agent.run_command({"command_id": "c2", "type": "START_CAR"})
+    assert fake.state.driving and fake.state.throttle_scale == 0.3
+    agent.run_command({"command_id": "c3", "type": "SET_TAIL_LIGHT", "parameters": {"colour": "#0000FF"}})
+    assert client.acks["c3"] == (True, "tail light #0000FF when the car next stops (it changes only in "
+                                       "calibration mode)")
+    agent.run_command({"command_id": "c4", "type": "EMERGENCY_STOP"})
+    assert not fake.state.driving and fake.state.tail_light == (0, 0, 255)
+    agent.run_command({"command_id": "c5", "type": "DELETE_ALL_MODELS"})
+    assert fake.state.artifacts == {}
+    assert all(ok for ok, _ in client.acks.values()), client.acks
+    assert "someone else" not in " ".join(agent.telemetry()["faults"])
+
+
+def test_an_unreachable_car_is_retried_later_not_reported_as_a_broken_model(tmp_path: Path) -> None:
+    from drem_cars.drivers.deepracer_console import ConsoleUnreachable
+
+    driver = DeepRacerConsoleDriver(DeepRacerConsole("http://127.0.0.1:9", "pw", timeout_s=2))
+    with pytest.raises(ConsoleUnreachable, match="cannot reach the DeepRacer console"):
+        driver.load_model(console_model(tmp_path))
+    assert driver.battery_pct() is None and driver.faults()[0].startswith("console: cannot reach")
+    Telemetry(faults=driver.faults())
+
+
+def test_the_csrf_token_is_read_from_the_meta_tag_whatever_the_attribute_order() -> None:
+    assert csrf_meta_token('<head><meta charset="utf-8"><meta name="csrf-token" content="abc.def"></head>') == "abc.def"
+    assert csrf_meta_token("<meta content='x-1' name='csrf-token' />") == "x-1"
+    assert csrf_meta_token('<meta name="viewport" content="width=device-width">') is None
+
+
+def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake: FakeConsole, tmp_path: Path) -> None:
+    """`drem car run --deepracer` as a user runs it: the installed entry point, from outside the repository."""
+    import subprocess
+    import sys
+
+    from drem_cars.credentials import CredentialStore, StoredCredential
+
+    config = tmp_path / "config"
+    CredentialStore(config).save(StoredCredential(api="http://127.0.0.1:9", device_id="car-1", device_kind="car",
+                                                  hostname="deepracer-07", fleet_id="f", credential="car-1.secret"))
+    drem = str(Path(sys.executable).with_name("drem"))
+
+    def run(password: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([drem, "car", "--config-dir", str(config), "run", "--deepracer", fake.url,
+                               "--seconds", "2"], cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                              env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": password,
+                                   "DREM_CAR_NO_REEXEC": "1"})
+
+    refused = run("wrong")
+    assert refused.returncode == 1 and "refused the password" in refused.stderr, refused.stderr
+    ran = run("car-password")
+    assert ran.returncode == 0, ran.stderr
+    assert "GET /api/get_battery_level" in paths(fake), "the heartbeat reads the car's battery (API unreachable)"
+
+
+def test_the_agents_two_threads_sharing_the_console_do_not_take_each_other_for_someone_else(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    import threading
+
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.advance_clock(3601)  # both threads' next calls are refused and log in again, at the same moment
+    errors: list[BaseException] = []
+
+    def hammer(action) -> None:  # type: ignore[no-untyped-def]
+        try:
+            for _ in range(15):
+                action()
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=hammer, args=(driver.battery_pct,)),
+               threading.Thread(target=hammer, args=(lambda: driver.set_throttle_cap(50),))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert errors == []
+    assert driver.console.held_by_other_since is None and driver.faults() == []
+    assert fake.state.throttle_scale == 0.5
+
+
+def test_a_strange_battery_answer_is_a_fault_not_a_broken_heartbeat(fake: FakeConsole) -> None:
+    driver = make_driver(fake)
+    fake.state.battery_level = "unknown"  # type: ignore[assignment]
+    assert driver.battery_pct() is None
+    assert driver.faults() == ["console: /api/get_battery_level: battery_level 'unknown' is not a number"]

@@ -66,16 +66,33 @@ def decoded_frames(path: Path) -> list[np.ndarray]:
         frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
 
 
-def pwm_tree(root: Path) -> Path:
-    """A temp stand-in for /sys/class/pwm with channels 0 and 1 of pwmchip0 already exported."""
+SERVO_CHANNEL, MOTOR_CHANNEL = 1, 0  # a DeepRacer board: steering on 1, throttle on 0
+
+
+def pwm_tree(base: Path) -> Path:
+    """A temp stand-in for a DeepRacer's sysfs: class/pwm/pwmchip3 links to the board's PWM device 0000:00:17.0
+    (channels 0 and 1 exported), class/gpio/gpio436 (the servo power switch) exported. Returns class/pwm."""
+    chip = base / "devices" / "pci0000:00" / "0000:00:17.0" / "pwm" / "pwmchip3"
     for channel in (0, 1):
-        (root / "pwmchip0" / f"pwm{channel}").mkdir(parents=True)
-    (root / "pwmchip0" / "export").write_text("")
-    return root
+        (chip / f"pwm{channel}").mkdir(parents=True)
+    (chip / "export").write_text("")
+    pwm = base / "class" / "pwm"
+    pwm.mkdir(parents=True)
+    (pwm / "pwmchip3").symlink_to(chip)
+    (base / "class" / "gpio" / "gpio436").mkdir(parents=True)
+    return pwm
+
+
+def gpio_root(pwm: Path) -> Path:
+    return pwm.parent / "gpio"
 
 
 def written(root: Path, channel: int, name: str) -> int:
-    return int((root / "pwmchip0" / f"pwm{channel}" / name).read_text())
+    return int((root / "pwmchip3" / f"pwm{channel}" / name).read_text())
+
+
+def servo_power(root: Path) -> str:
+    return (gpio_root(root) / "gpio436" / "value").read_text()
 
 
 class Recorder:
@@ -89,8 +106,9 @@ class Recorder:
     def run(self, image, steering, speed, stopped, reason, servo_ns, motor_ns):  # type: ignore[no-untyped-def]
         self.ticks.append({"image": None if image is None else image.copy(), "steering": steering, "speed": speed,
                            "stopped": stopped, "reason": reason, "servo_ns": servo_ns, "motor_ns": motor_ns,
-                           "servo_file": written(self.root, 0, "duty_cycle"),
-                           "motor_file": written(self.root, 1, "duty_cycle")})
+                           "servo_file": written(self.root, SERVO_CHANNEL, "duty_cycle"),
+                           "motor_file": written(self.root, MOTOR_CHANNEL, "duty_cycle"),
+                           "servo_power": servo_power(self.root)})
         action = self.at_tick.get(len(self.ticks))
         if action is not None:
             action()
@@ -98,7 +116,7 @@ class Recorder:
 
 def car_with_recorder(video: Path, root: Path, model: InstalledModel,
                       at_tick: dict[int, Any] | None = None) -> tuple[PwmCar, Recorder]:
-    car = build_pwm_car(str(video), PwmWiring(root=root))
+    car = build_pwm_car(str(video), PwmWiring(root=root, gpio_root=gpio_root(root)))
     car.driver.load_model(model)  # what the agent does once the assigned model is verified and unpacked
     recorder = Recorder(root, at_tick)
     car.vehicle.add(recorder, inputs=[ch.CAMERA_IMAGE, ch.PILOT_STEERING, ch.PILOT_SPEED, ch.SAFETY_STOPPED,
@@ -115,6 +133,7 @@ def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_en
     space = reference.action_space
     car, recorder = car_with_recorder(video, root, sample_model)
     assert written(root, 0, "period") == 20_000_000 and written(root, 1, "enable") == 1
+    assert servo_power(root) == "0", "GPIO 436 low: servos powered (after both channels went neutral)"
     car.vehicle.start(rate_hz=15, max_loops=45)  # 3 s: the 1.5 s video, then its last frame goes stale
 
     driving = [t for t in recorder.ticks if not t["stopped"]]
@@ -128,6 +147,7 @@ def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_en
         motor = MOTOR_DEFAULT.duty_ns(unit_throttle(speed, space.max_speed))
         assert (tick["servo_ns"], tick["motor_ns"]) == (servo, motor)
         assert (tick["servo_file"], tick["motor_file"]) == (servo, motor), "written to sysfs, in nanoseconds"
+        assert tick["servo_power"] == "0"
         assert 1_200_000 <= servo <= 1_700_000
         assert speed >= space.speed[0] > 0 and motor < NEUTRAL_MOTOR, "forward (polarity −1: below mid)"
     assert len(seen) >= VIDEO_FRAMES // 2, f"the video played through the camera part (frames {sorted(seen)})"
@@ -137,8 +157,9 @@ def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_en
     last = recorder.ticks[-5:]
     assert all(t["stopped"] and "camera frame is" in t["reason"] for t in last), [t["reason"] for t in last]
     assert all((t["servo_file"], t["motor_file"]) == (CENTRED_SERVO, NEUTRAL_MOTOR) for t in last)
-    assert written(root, 1, "duty_cycle") == NEUTRAL_MOTOR
+    assert written(root, MOTOR_CHANNEL, "duty_cycle") == NEUTRAL_MOTOR
     assert written(root, 0, "enable") == 0 and written(root, 1, "enable") == 0, "PWM disabled when the loop ends"
+    assert servo_power(root) == "1", "and the servos' power switched off"
 
 
 def test_throttle_cap_scales_the_motor_and_emergency_stop_puts_it_to_neutral(
@@ -164,7 +185,8 @@ def test_throttle_cap_scales_the_motor_and_emergency_stop_puts_it_to_neutral(
 def run_args(config_dir: Path, *extra: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser()
     cli.add_arguments(parser)
-    return parser.parse_args(["--config-dir", str(config_dir), "run", "--pwm", *extra])
+    return parser.parse_args(["--config-dir", str(config_dir), "run", "--pwm", "--gpio-root",
+                              str(config_dir / "no-gpio"), *extra])
 
 
 def activated(config_dir: Path) -> Path:
@@ -179,7 +201,7 @@ def test_a_missing_camera_is_a_clear_message_and_exit_1(tmp_path: Path, capsys: 
     assert cli.run(run_args(config, "--camera", str(tmp_path / "no-such.avi"), "--pwm-root", str(root))) == 1
     err = capsys.readouterr().err
     assert "cannot open camera" in err and "no-such.avi" in err and "Traceback" not in err
-    assert not (root / "pwmchip0" / "pwm0" / "duty_cycle").exists(), "nothing driven without a camera"
+    assert not (root / "pwmchip3" / "pwm0" / "duty_cycle").exists(), "nothing driven without a camera"
     assert cli.run(run_args(config, "--camera", "7", "--pwm-root", str(root))) == 1
     assert "cannot open camera '/dev/video7'" in capsys.readouterr().err
 
@@ -189,10 +211,23 @@ def test_a_missing_pwm_chip_or_bad_calibration_is_a_clear_message_and_exit_1(
     config = activated(tmp_path / "config")
     assert cli.run(run_args(config, "--camera", str(video), "--pwm-root", str(tmp_path / "nothing"))) == 1
     err = capsys.readouterr().err
-    assert f"no PWM chip at {tmp_path / 'nothing' / 'pwmchip0'}" in err and "Traceback" not in err
+    assert f"no PWM chip of the DeepRacer board (device 0000:00:17.0) under {tmp_path / 'nothing'}" in err
+    assert "Traceback" not in err
     calibration = tmp_path / "calibration.json"
     calibration.write_text(json.dumps({"Calibration": {"Servo": {"min": 1}}}))
     root = pwm_tree(tmp_path / "pwm")
     assert cli.run(run_args(config, "--camera", str(video), "--pwm-root", str(root),
                             "--calibration", str(calibration))) == 1
     assert f"calibration file {calibration}" in capsys.readouterr().err
+
+
+def test_servos_that_cannot_be_powered_are_a_clear_message_exit_1_and_leave_pwm_off(
+        video: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    config = activated(tmp_path / "config")
+    root = pwm_tree(tmp_path / "sys")
+    assert cli.run(run_args(config, "--camera", str(video), "--pwm-root", str(root))) == 1  # no gpio436 there
+    err = capsys.readouterr().err
+    assert "cannot switch the servos on through GPIO 436" in err and "Traceback" not in err
+    assert written(root, 0, "enable") == 0 and written(root, 1, "enable") == 0
+    assert cli.run(run_args(config, "--camera", str(video), "--servo-enable-gpio", "pin7")) == 2
+    assert "--servo-enable-gpio takes a GPIO number or 'none'" in capsys.readouterr().err

@@ -50,11 +50,8 @@ def _modules_in(names: list[str], top_levels: tuple[str, ...]) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def bundle(tmp_path_factory):
+def bundle(tmp_path_factory, lambda_build):
     work = tmp_path_factory.mktemp("bundle")
-    build = subprocess.run([sys.executable, "-m", "drem_local.cli", "build"], cwd=REPO_ROOT,
-                           capture_output=True, text=True, timeout=120)
-    assert build.returncode == 0, f"drem build failed:\n{build.stdout}\n{build.stderr}"
     package = subprocess.run([str(Path(sys.executable).with_name("chalice")), "package", str(work / "out")],
                              cwd=FUNCTIONS_DIR, capture_output=True, text=True, timeout=300,
                              env={**os.environ, "AWS_DEFAULT_REGION": os.environ.get("AWS_DEFAULT_REGION", "us-east-1")})

@@ -1,10 +1,8 @@
 """The synthesized AWS stack matches drem_infra.resources: every expectation below is derived from it, so a change
-to one without the other fails here. Synth is slow (seconds), so it happens once for the module."""
+to one without the other fails here. Synth is slow (seconds), so it happens once per session (tests/infra/conftest.py)."""
 from __future__ import annotations
 
 import os
-import textwrap
-from pathlib import Path
 
 import pytest
 
@@ -14,62 +12,7 @@ from drem_infra import resources  # noqa: E402
 
 pytestmark = pytest.mark.infra
 
-STAGE = "test"
-REPO_ROOT = Path(__file__).resolve().parents[2]
-
-# A stand-in Chalice project: it exercises the stack's wiring (env, grants, upload rule) without depending on the
-# real app, which tests/infra/test_bundle.py packages and imports on its own.
-WIRING_APP = textwrap.dedent(f"""
-    from chalice import Chalice
-    app = Chalice(app_name="drem")
-
-    @app.route("/")
-    def index():
-        return {{}}
-
-    @app.lambda_function(name="{resources.UPLOAD_COMPLETE_FUNCTION}")
-    def upload_complete(event, context):
-        return None
-""")
-
-
-@pytest.fixture(scope="module")
-def templates(tmp_path_factory):
-    import aws_cdk as cdk
-    from aws_cdk.assertions import Template
-
-    from drem_infra.stack import DremStack
-
-    work = tmp_path_factory.mktemp("cdk")
-    project = work / "functions"
-    (project / ".chalice").mkdir(parents=True)
-    (project / "chalicelib").mkdir()
-    (project / "chalicelib" / "__init__.py").write_text("")
-    (project / "app.py").write_text(WIRING_APP)
-    (project / "requirements.txt").write_text("")
-    (project / ".chalice" / "config.json").write_text(
-        (REPO_ROOT / "functions" / ".chalice" / "config.json").read_text())
-
-    cwd = os.getcwd()
-    os.chdir(work)  # the Chalice construct writes chalice.out/ into the working directory
-    try:
-        app = cdk.App(outdir=str(work / "cdk.out"))
-        storage_only = DremStack(app, "drem-storage", stage=STAGE)
-        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=project)
-        app.synth()
-        return Template.from_stack(storage_only), Template.from_stack(with_app)
-    finally:
-        os.chdir(cwd)
-
-
-@pytest.fixture(scope="module")
-def template(templates):
-    return templates[0]
-
-
-@pytest.fixture(scope="module")
-def app_template(templates):
-    return templates[1]
+STAGE = "test"  # the stage tests/infra/conftest.py synthesises
 
 
 def _of_type(template, resource_type: str) -> dict:
@@ -80,12 +23,18 @@ def _key_schema(pk: str, sk: str) -> list[dict]:
     return [{"AttributeName": pk, "KeyType": "HASH"}, {"AttributeName": sk, "KeyType": "RANGE"}]
 
 
-def test_every_table_has_the_defined_keys_indexes_and_name(template):
-    tables = {t["Properties"]["TableName"]: t["Properties"] for t in _of_type(template, "AWS::DynamoDB::Table").values()}
+def test_every_table_has_the_defined_keys_and_indexes_and_a_generated_name(template):
+    found = _of_type(template, "AWS::DynamoDB::Table")
+    tables = {spec.logical: next(t["Properties"] for logical_id, t in found.items()
+                                 if logical_id.startswith(f"{spec.logical.capitalize()}Table"))
+              for spec in resources.TABLES}
 
-    assert set(tables) == {f"drem-{STAGE}-{spec.logical}" for spec in resources.TABLES}
+    assert len(found) == len(resources.TABLES)
+    # Retained tables keep their data after `make destroy`; a fixed name would make the next deploy collide.
+    assert all("TableName" not in props for props in tables.values())
+    assert all(t["DeletionPolicy"] == "Retain" for t in found.values())
     for spec in resources.TABLES:
-        props = tables[resources.table_name(STAGE, spec.logical, env={})]
+        props = tables[spec.logical]
         assert props["KeySchema"] == _key_schema(spec.pk, spec.sk)
         assert props["BillingMode"] == "PAY_PER_REQUEST"
         assert {a["AttributeName"] for a in props["AttributeDefinitions"]} == set(spec.key_attributes)
@@ -154,6 +103,9 @@ def test_web_client_has_exactly_the_defined_flows_and_no_secret(template):
 
     assert client["ClientName"] == resources.client_name(STAGE)
     assert sorted(client["ExplicitAuthFlows"]) == sorted(spec.explicit_auth_flows)
+    # No hosted UI, so no OAuth: CDK's default would enable the implicit grant with https://example.com.
+    assert "AllowedOAuthFlows" not in client and "CallbackURLs" not in client
+    assert client.get("AllowedOAuthFlowsUserPoolClient") in (None, False)
     assert client["GenerateSecret"] is spec.generate_secret
     assert sorted(client["ReadAttributes"]) == sorted(spec.read_attributes)
 
@@ -169,20 +121,6 @@ def test_app_functions_get_the_environment_contract_for_every_resource(app_templ
         variables = function["Properties"]["Environment"]["Variables"]
         assert set(variables) >= expected
         assert variables["DREM_STAGE"] == STAGE
-
-
-def test_app_role_may_read_and_write_every_table_and_bucket(app_template):
-    statements = [s for p in _of_type(app_template, "AWS::IAM::Policy").values()
-                  if {"Ref": "DefaultRole"} in p["Properties"].get("Roles", [])
-                  for s in p["Properties"]["PolicyDocument"]["Statement"]]
-    granted = str(statements)
-
-    for logical_id, table in _of_type(app_template, "AWS::DynamoDB::Table").items():
-        assert logical_id in granted, f"no grant for table {table['Properties']['TableName']}"
-    for logical_id in _of_type(app_template, "AWS::S3::Bucket"):
-        assert logical_id in granted, f"no grant for bucket {logical_id}"
-    actions = {a for s in statements for a in (s["Action"] if isinstance(s["Action"], list) else [s["Action"]])}
-    assert {"dynamodb:PutItem", "dynamodb:Query", "s3:PutObject", "cognito-idp:AdminCreateUser"} <= actions
 
 
 def test_model_uploads_trigger_the_upload_complete_function(app_template):

@@ -11,16 +11,16 @@ import json
 import secrets
 from pathlib import Path
 
-import boto3
 import pytest
 import requests
-from botocore.config import Config
 
 from chalicelib.domain.event_transfer import ITEM_FILES, MANIFEST, remap_items
 from chalicelib.storage.event_archive import StackLocation, connect
 from drem_local import stack as local_stack
 from drem_local.api_client import ApiClient
 from drem_local.bootstrap import generate_password
+from drem_local.storage_keys import load as load_keys
+from drem_local.storage_keys import local_client
 from tests.unit.models_helpers import onnx_archive
 
 pytestmark = pytest.mark.integration
@@ -44,10 +44,8 @@ def _import(folder: Path, state_dir: Path, *extra: str) -> int:
     return _cli(import_, [str(folder), "--state-dir", str(state_dir), *extra])
 
 
-def _cognito(storage_url: str):
-    return boto3.session.Session(region_name=local_stack.REGION, aws_access_key_id="testing",
-                                 aws_secret_access_key="testing").client(
-        "cognito-idp", endpoint_url=storage_url, config=Config(account_id_endpoint_mode="disabled"))
+def _cognito(storage_url: str, state_dir: Path):
+    return local_client("cognito-idp", storage_url, load_keys(state_dir), local_stack.REGION)
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +80,7 @@ def source_event(live_stack) -> dict:
     assert activated.status_code in (200, 201), activated.text
 
     racers = {}
-    cognito = _cognito(live_stack.storage_url)
+    cognito = _cognito(live_stack.storage_url, live_stack.state_dir)
     for name, colour, country in (("ada", "#FF0000", "GB"), ("linus", "#0000FF", "FI")):
         username = f"{name}{suffix}"
         admin.post("/api/users", {"username": username, "email": f"{username}@example.com", "country_code": country})
@@ -194,7 +192,7 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
                               json={"username": ada, "password": password}).json()
     assert challenge["challenge"] == "NEW_PASSWORD_REQUIRED"
     new_password = generate_password()
-    _cognito(target_stack.config.storage_url).respond_to_auth_challenge(
+    _cognito(target_stack.config.storage_url, target_stack.config.state_dir).respond_to_auth_challenge(
         ClientId=target_stack.outputs.user_pool_client_id, ChallengeName="NEW_PASSWORD_REQUIRED",
         Session=challenge["session"], ChallengeResponses={"USERNAME": ada, "NEW_PASSWORD": new_password})
     racer = ApiClient(target_stack.config.app_url)
@@ -235,7 +233,7 @@ def test_a_corrupted_file_is_refused_before_anything_is_written(live_stack, targ
     assert _export(source_event["event_id"], folder, live_stack.state_dir) == 0
     races = folder / "races.json"
     races.write_text(races.read_text().replace('"status"', '"statuz"', 1))
-    users_before = _cognito(target_stack.config.storage_url).list_users(
+    users_before = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).list_users(
         UserPoolId=target_stack.outputs.user_pool_id)["Users"]
     capsys.readouterr()
 
@@ -245,7 +243,7 @@ def test_a_corrupted_file_is_refused_before_anything_is_written(live_stack, targ
     target = connect(StackLocation.from_state_dir(target_stack.config.state_dir))
     assert target.get_item("events", "EVENT#never-written", "META") is None
     assert target.partition("races", "EVENT#never-written") == []
-    users_after = _cognito(target_stack.config.storage_url).list_users(
+    users_after = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).list_users(
         UserPoolId=target_stack.outputs.user_pool_id)["Users"]
     assert len(users_after) == len(users_before)
 

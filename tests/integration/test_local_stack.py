@@ -8,9 +8,7 @@ import subprocess
 import sys
 import time
 
-import boto3
 import pytest
-from botocore.config import Config
 
 from drem_local.commands.status import describe, gather
 from drem_local.stack import free_port, http_get, read_stack_file
@@ -23,8 +21,7 @@ def test_live_stack_serves_the_app_and_its_admin_can_log_in(live_stack):
     health = json.loads(http_get(live_stack.storage_url + "/_drem/health")[1])
     assert health["writable"] and health["state_dir"] == str(live_stack.state_dir.resolve())
 
-    cognito = boto3.client("cognito-idp", endpoint_url=live_stack.storage_url, region_name="us-east-1",
-                           config=Config(account_id_endpoint_mode="disabled"))
+    cognito = live_stack.client("cognito-idp")
     tokens = cognito.initiate_auth(
         ClientId=live_stack.outputs.user_pool_client_id, AuthFlow="USER_PASSWORD_AUTH",
         AuthParameters={"USERNAME": live_stack.admin_username, "PASSWORD": live_stack.admin_password})

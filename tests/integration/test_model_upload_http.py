@@ -1,4 +1,4 @@
-"""Model upload over real HTTP: the app serves the API, the durable moto server takes the presigned POST."""
+"""Model upload over real HTTP: the app serves the API and forwards the presigned POST to the durable moto server."""
 from __future__ import annotations
 
 import argparse
@@ -23,7 +23,8 @@ def admin_api(live_stack) -> ApiClient:
 
 def upload(api: ApiClient, filename: str, data: bytes) -> dict:
     ticket = api.post("/api/models", {"filename": filename})
-    assert ticket["upload"]["url"].startswith("http://127.0.0.1:"), "locally the browser posts to the moto server"
+    # Locally the browser posts to the app's own storage gateway (same origin), never to the storage port.
+    assert ticket["upload"]["url"].startswith(api.base_url + "/_storage/"), ticket["upload"]["url"]
     posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
                            files={"file": (filename, data)}, timeout=30)
     assert posted.status_code in (200, 204), posted.text

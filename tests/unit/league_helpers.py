@@ -146,3 +146,33 @@ def raw_tar_gz(destination: Path, members: list[tuple[tarfile.TarInfo, bytes | N
         for info, data in members:
             archive.addfile(info, io.BytesIO(data) if data is not None else None)
     return destination
+
+
+def console_log(world: str, metrics_key: str) -> str:
+    """A console robomaker log as the simapp writes it: printenv, then the params dict, then roslaunch's summary."""
+    return (f"Executing simulation-entrypoint.sh script\nMETRICS_S3_OBJECT_KEY=leaderboard/private/acct-1/metrics/"
+            f"{metrics_key}\nNUMBER_OF_TRIALS=3\nWORLD_NAME={world}\n"
+            f"{{'JOB_TYPE': 'EVALUATION', 'RACE_TYPE': 'TIME_TRIAL', 'WORLD_NAME': '{world}', 'NUMBER_OF_TRIALS': '3'}}\n"
+            f"SUMMARY\n========\nPARAMETERS\n * /JOB_TYPE: EVALUATION\n * /WORLD_NAME: {world}\n")
+
+
+def droa_log(world: str, job: str) -> str:
+    """A DeepRacer-on-AWS simulation log: SageMaker's toolkit prints hyperparameters in lower case."""
+    return (f"2026-03-07 12:54:56,575 sagemaker-training-toolkit INFO     Failed to parse hyperparameter world_name "
+            f"value {world} to Json.\nReturning the value itself\nTraining Env:\n{{\n    \"hyperparameters\": {{\n"
+            f"        \"kinesis_stream_name\": \"{job}\",\n        \"track_direction_clockwise\": true,\n"
+            f"        \"world_name\": \"{world}\"\n    }}\n}}\n")
+
+
+def droa_export(root: Path, *, world: str, eval_world: str, laps: list[tuple[int, int]]) -> Path:
+    """DROA's layout: ISO-8601 timestamped job names, *-simulation.log, no params YAML."""
+    training_job, evaluation_job = "deepracerindy-training-ACGVRmRuFNU9NkQ", "deepracerindy-evaluation-9oJ3QbS0SYm7Iag"
+    return _write(root, {
+        f"logs/training/2026-03-06T20:36:57.936Z-{training_job}-simulation.log": droa_log(world, training_job),
+        f"logs/evaluation/2026-03-07T17:59:20.610Z-{evaluation_job}-simulation.log": droa_log(eval_world,
+                                                                                           evaluation_job),
+        f"metrics/training/2026-03-06T18:33:59.511Z-{training_job}.json": training_metrics([20, 100, 64]),
+        f"metrics/evaluation/2026-03-07T17:52:00.898Z-{evaluation_job}.json": evaluation_metrics(laps),
+        "model/model_metadata.json": DISCRETE_METADATA,
+        "ip/hyperparameters.json": HYPERPARAMETERS,
+    })

@@ -54,17 +54,31 @@ def test_car_actions_become_device_commands(console):
     car = _car(console, fleet)
     console.sign_in("op-web", "operator")
 
-    for form in ({"type": "RESTART_SERVICE"}, {"type": "EMERGENCY_STOP"},
+    assert 'value="START_CAR"' in console.web.get("/console/cars").body.decode()
+    for form in ({"type": "RESTART_SERVICE"}, {"type": "START_CAR"}, {"type": "EMERGENCY_STOP"},
                  {"type": "SET_TAIL_LIGHT", "colour": "sky blue"}, {"type": "DELETE_ALL_MODELS"}):
         reply = console.post(f"/console/cars/{car}/commands", form)
         assert reply.status_code == 303, reply.body
 
     queued = [(c["type"], c["parameters"]) for c in _commands(console, car)]
-    assert queued == [("RESTART_SERVICE", {}), ("EMERGENCY_STOP", {}), ("SET_TAIL_LIGHT", {"colour": "#87CEEB"}),
-                      ("DELETE_ALL_MODELS", {"with_system_logs": False})]
+    assert queued == [("RESTART_SERVICE", {}), ("START_CAR", {}), ("EMERGENCY_STOP", {}),
+                      ("SET_TAIL_LIGHT", {"colour": "#87CEEB"}), ("DELETE_ALL_MODELS", {"with_system_logs": False})]
 
     bad = console.post(f"/console/cars/{car}/commands", {"type": "SET_TAIL_LIGHT", "colour": "plaid"})
     assert bad.status_code == 400 and "colour must be" in text_of(bad.body.decode())
+
+
+def test_a_cars_heartbeat_faults_are_shown_on_its_row(console):
+    fleet = console.desk.fleet()
+    credential = console.desk.device(fleet, "deepracer-07", kind="car")
+    fault = "someone else logged in to the car's console; drem logs back in for staff commands and model loads"
+    beat = console.desk.client.http.post("/api/devices/self/heartbeat", body=json.dumps({"faults": [fault]}).encode(),
+                                         headers={"Authorization": f"Device {credential}",
+                                                  "Content-Type": "application/json", "Accept": "application/json"})
+    assert beat.status_code == 200, beat.body
+    console.sign_in("op-web", "operator")
+    page = console.web.get("/console/cars").body.decode()
+    assert "someone else logged in to the car&#39;s console" in page and 'data-testid="car-fault"' in page
 
 
 def test_moving_a_car_and_only_an_admin_may_deregister_it(console):

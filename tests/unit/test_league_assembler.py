@@ -11,8 +11,9 @@ import pytest
 from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
 from chalicelib.domain.league_assembler import ExportProblem, assemble
 from chalicelib.domain.league_export import ExportLimits, read_export
-from tests.unit.league_helpers import (HYPERPARAMETERS, console_new_export, console_old_export, drem_sim_export,
-                                       drfc_export, raw_tar_gz, tar_gz_of)
+from tests.unit.league_helpers import (HYPERPARAMETERS, console_log, console_new_export, console_old_export,
+                                       droa_export, drem_sim_export, drfc_export, raw_tar_gz, tar_gz_of,
+                                       training_metrics)
 
 pytestmark = pytest.mark.unit
 
@@ -177,3 +178,68 @@ def test_not_an_archive(tmp_path: Path) -> None:
     path.write_bytes(b"PK\x03\x04 a zip file")
     with pytest.raises(InvalidInput, match="not a .tar.gz"):
         read_export(path)
+
+
+# -- the track is read from every place the export names it (real console/DROA exports have no params YAML) --------
+
+CONSOLE_EVALUATION = "evaluation-20201021101010-XyXyXyXyXyXyXyXyXyXyXy"
+
+
+def test_console_evaluation_log_on_another_track_is_refused(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    log = folder / f"logs/evaluation/{CONSOLE_EVALUATION}-robomaker.log"
+    log.parent.mkdir(parents=True)
+    log.write_text(console_log("Oval_track", f"{CONSOLE_EVALUATION}.json"))
+    assert _problem(folder) == (f"logs/evaluation/{CONSOLE_EVALUATION}-robomaker.log: WORLD_NAME: the evaluation ran "
+                                "on 'Oval_track', not on 'reinvent_base'")
+    assert build(folder, track="Oval_track").trials[0].time_s == 16.468
+
+
+def test_only_the_submitted_evaluations_log_decides_when_an_export_holds_several(tmp_path: Path) -> None:
+    # A racer's console export keeps every evaluation; the laps submitted are the newest one's, on reinvent_base.
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    older = "evaluation-20201001101010-OldOldOldOldOldOldOldO"
+    (folder / f"metrics/evaluation/{older}.json").write_text("{}")  # older: not the one read
+    logs = folder / "logs/leaderboard"
+    logs.mkdir(parents=True)
+    (logs / f"leaderboard-20201001-{older}-robomaker.log").write_text(console_log("Oval_track", f"{older}.json"))
+    (logs / f"leaderboard-20201021-{CONSOLE_EVALUATION}-robomaker.log").write_text(
+        console_log("reinvent_base", f"{CONSOLE_EVALUATION}.json"))
+    assert [t.time_s for t in build(folder).trials] == [16.468, 16.267, 9.0]
+
+
+def test_an_unpaired_evaluation_log_for_another_track_is_refused(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    log = folder / "logs/evaluation/evaluation-elsewhere-robomaker.log"
+    log.parent.mkdir(parents=True)
+    log.write_text(console_log("Oval_track", "evaluation-elsewhere.json"))
+    assert "evaluation-elsewhere-robomaker.log: WORLD_NAME: the evaluation ran on 'Oval_track'" in _problem(folder)
+
+
+def test_droa_export_reads_the_lower_case_world_name_of_its_simulation_logs(tmp_path: Path) -> None:
+    folder = droa_export(tmp_path / "indy", world="Spain_track", eval_world="Spain_track", laps=LAPS)
+    submission = build(folder, track="Spain_track")
+    assert submission.layout == "console-new" and submission.training_track == "Spain_track"
+    assert submission.training_episodes == 3
+
+    pushed_elsewhere = droa_export(tmp_path / "indy2", world="Spain_track", eval_world="Spain_track", laps=LAPS)
+    message = _problem(pushed_elsewhere, track="reinvent_base")
+    assert message.startswith("logs/evaluation/2026-03-07T17:59:20.610Z-deepracerindy-evaluation-9oJ3QbS0SYm7Iag-"
+                              "simulation.log: WORLD_NAME: the evaluation ran on 'Spain_track'")
+
+
+def test_old_console_training_log_names_the_track_without_a_params_file(tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    for log in (folder / "logs/training").glob("*robomaker.log"):
+        log.write_text(console_log("reInvent2019_track", "training-x.json").replace("EVALUATION", "TRAINING"))
+    assert not list(folder.rglob("*params*.yaml"))
+    assert build(folder).training_track == "reInvent2019_track"
+
+
+def test_drfc_with_several_workers_counts_every_workers_episodes(tmp_path: Path) -> None:
+    folder = drfc_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    (folder / "metrics/TrainingMetrics_1.json").write_text(json.dumps(training_metrics([10, 20, 30])))
+    (folder / "metrics/TrainingMetrics_2.json").write_text(json.dumps(training_metrics([40, 100])))
+    submission = build(folder)
+    assert submission.training_episodes == 5 + 3 + 2  # the main worker's 5 plus workers 1 and 2
+    assert submission.training_best_completion_pct == 100.0

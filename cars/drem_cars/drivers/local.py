@@ -28,16 +28,25 @@ class LocalDriver:
     def unload_models(self) -> None:
         self.pilot.unload()
 
+    def delete_all_models(self) -> int:
+        self.pilot.unload()  # the agent deletes the files from its model store
+        return 0
+
+    def start_car(self) -> None:
+        """Staff START_CAR: lifts a staff emergency stop (the loop's other stops still apply)."""
+        self.safety.clear_emergency_stop()
+
     def emergency_stop(self) -> None:
         self.safety.emergency_stop()
 
     def set_throttle_cap(self, pct: int) -> None:
         self.safety.set_throttle_cap(pct)
 
-    def set_tail_light(self, colour_hex: str) -> None:
+    def set_tail_light(self, colour_hex: str) -> str | None:
         self.tail_light_colour = colour_hex
         if self._tail_light is not None:
             self._tail_light(colour_hex)
+        return None
 
     def heartbeat_ok(self) -> None:
         self.safety.heartbeat_ok()

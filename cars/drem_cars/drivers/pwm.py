@@ -1,18 +1,30 @@
-"""Steering servo and drive motor through Linux sysfs PWM, with DeepRacer's calibration.
+"""Steering servo and drive motor through Linux sysfs PWM, with DeepRacer's calibration and wiring.
 
 `/sys/class/pwm/pwmchipN/pwmM/{period,duty_cycle,enable}` in nanoseconds; 50 Hz (period 20 ms). A unit value v in
 [-1, 1] (× polarity) maps to duty = mid + v·(mid − min) when v < 0 and mid + v·(max − mid) when v > 0, as DeepRacer's
-servo node does. Defaults are DeepRacer's: servo 1.2/1.45/1.7 ms (polarity +1), motor 1.311/1.446/1.6035 ms
-(polarity −1). DeepRacer keeps them in `/opt/aws/deepracer/calibration.json`; `load_calibration` reads that file.
+servo node does. What the DeepRacer board does, read in aws-deepracer/aws-deepracer-servo-pkg:
+
+- `src/pwm.cpp`: the PWM chip is the `/sys/class/pwm/pwmchip*` entry whose link points at device `0000:00:17.0`
+  (its number is not fixed); `src/servo_mgr.cpp`: throttle (ESC) on channel 0, steering on channel 1.
+- `include/servo_pkg/servo_mgr.hpp`: the servos are powered through GPIO 436, active low (`calibrateServo` writes
+  0 to enable, 1 to disable); defaults servo 1.2/1.45/1.7 ms (polarity +1), motor 1.311/1.446/1.6035 ms (−1).
+- `src/servo_mgr.cpp`: the calibration lives in `/opt/aws/deepracer/calibration.json` as
+  `{"Calibration": {"Servo": {"min", "mid", "max", "polarity"}, "Motor": {...}, "version": 1}}`, values in ns.
 """
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 PERIOD_NS = 20_000_000  # 50 Hz
 SYSFS_PWM = Path("/sys/class/pwm")
+SYSFS_GPIO = Path("/sys/class/gpio")
+DEEPRACER_PWM_DEVICE = "0000:00:17.0"
+DEEPRACER_THROTTLE_CHANNEL, DEEPRACER_STEERING_CHANNEL = 0, 1
+DEEPRACER_SERVO_ENABLE_GPIO = 436
+DEEPRACER_CALIBRATION = Path("/opt/aws/deepracer/calibration.json")
 
 
 class PwmUnavailable(RuntimeError):
@@ -54,10 +66,41 @@ def load_calibration(path: Path) -> tuple[Calibration, Calibration]:
                              '{"Calibration": {"Servo": {"min", "mid", "max", "polarity"}, "Motor": {...}}})') from None
 
 
+def pwm_chip_dir(root: Path = SYSFS_PWM, chip: int | None = None) -> Path:
+    """pwmchip<chip>, or (chip None) the DeepRacer board's chip: the entry linked to device 0000:00:17.0."""
+    if chip is not None:
+        return root / f"pwmchip{chip}"
+    entries = sorted(root.iterdir()) if root.is_dir() else []
+    for entry in entries:
+        if entry.name.startswith("pwmchip") and entry.is_symlink() and DEEPRACER_PWM_DEVICE in os.readlink(entry):
+            return entry
+    raise PwmUnavailable(f"no PWM chip of the DeepRacer board (device {DEEPRACER_PWM_DEVICE}) under {root}; "
+                         "on other hardware pass --pwm-chip N (and --servo-enable-gpio none)")
+
+
+class ServoEnable:
+    """The DeepRacer board's servo power switch, a GPIO that is active low (0 = servos on)."""
+
+    def __init__(self, gpio: int = DEEPRACER_SERVO_ENABLE_GPIO, root: Path = SYSFS_GPIO) -> None:
+        self.pin = root / f"gpio{gpio}"
+        try:
+            if not self.pin.is_dir():
+                (root / "export").write_text(str(gpio))
+            if not self.pin.is_dir():
+                raise PwmUnavailable(f"GPIO {gpio} (servo enable) did not appear under {root} after export")
+            (self.pin / "direction").write_text("out")
+            (self.pin / "value").write_text("0")
+        except OSError as exc:
+            raise PwmUnavailable(f"cannot switch the servos on through GPIO {gpio} ({self.pin}): "
+                                 f"{exc.strerror or exc} (may this user write to it?)") from None
+
+    def disable(self) -> None:
+        (self.pin / "value").write_text("1")
+
+
 class PwmChannel:
-    def __init__(self, chip: int, channel: int, calibration: Calibration, root: Path = SYSFS_PWM) -> None:
+    def __init__(self, chip_dir: Path, channel: int, calibration: Calibration) -> None:
         self.calibration = calibration
-        chip_dir = root / f"pwmchip{chip}"
         self.path = chip_dir / f"pwm{channel}"
         if not chip_dir.is_dir():
             raise PwmUnavailable(f"no PWM chip at {chip_dir}: enable hardware PWM (on a Raspberry Pi "
@@ -91,9 +134,10 @@ class PwmChannel:
 class PwmActuator:
     """Part: (unit steering, unit throttle) → servo and motor duty cycles; neutral and disabled on shutdown."""
 
-    def __init__(self, servo: PwmChannel, motor: PwmChannel) -> None:
+    def __init__(self, servo: PwmChannel, motor: PwmChannel, enable: ServoEnable | None = None) -> None:
         self.servo = servo
         self.motor = motor
+        self.enable = enable
 
     def run(self, steering: float | None, throttle: float | None) -> tuple[int, int]:
         return self.servo.set(steering or 0.0), self.motor.set(throttle or 0.0)
@@ -101,3 +145,5 @@ class PwmActuator:
     def shutdown(self) -> None:
         self.motor.disable()
         self.servo.disable()
+        if self.enable is not None:
+            self.enable.disable()

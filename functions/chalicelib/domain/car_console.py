@@ -28,6 +28,7 @@ class CarLine(BaseModel):
     last_seen: str
     loaded_model: str
     battery: str
+    faults: list[str]  # what the car's last heartbeat said is wrong (e.g. someone else holds a DeepRacer's console)
     assigned: list[AssignedLine]
 
 
@@ -71,7 +72,7 @@ def cars_overview(principal: User, devices: DeviceService, fleets: FleetService,
             last_seen=seen_text(view),
             loaded_model=telemetry.model.name if telemetry and telemetry.model else "—",
             battery=f"{telemetry.battery_pct:.0f} %" if telemetry and telemetry.battery_pct is not None else "—",
-            assigned=assigned))
+            faults=list(telemetry.faults) if telemetry else [], assigned=assigned))
     page = models.list_models(principal, ListQuery(limit=100))
     choices = [ModelChoice(model_id=m.model_id, label=f"{m.owner_username} · {m.name}")
                for m in page.models if m.status is ModelStatus.AVAILABLE]

@@ -110,6 +110,7 @@ class DeviceView(StatusEntry):
 class CommandType(StrEnum):
     RESTART_SERVICE = "RESTART_SERVICE"
     EMERGENCY_STOP = "EMERGENCY_STOP"
+    START_CAR = "START_CAR"  # a stock DeepRacer stays stopped after loading a model until staff start it
     SET_TAIL_LIGHT = "SET_TAIL_LIGHT"
     DELETE_ALL_MODELS = "DELETE_ALL_MODELS"
     SET_THROTTLE_CAP = "SET_THROTTLE_CAP"

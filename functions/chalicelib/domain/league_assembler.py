@@ -32,7 +32,15 @@ LAYOUT_DRFC = "drfc"
 LAYOUT_DREM = "drem-sim"
 
 _ISO_FOLDER = re.compile(r"(^|/)\d{4}-\d{2}-\d{2}T\d{2}[:-]?\d{2}")
-_WORLD_IN_LOG = re.compile(r"""WORLD_NAME['"]?\s*[:=]\s*['"]?([A-Za-z0-9_-]{1,64})""")
+# How the simulation logs name the track: the console's robomaker log prints `WORLD_NAME=reinvent_base` (env) and
+# `'WORLD_NAME': 'reinvent_base'` (params); DeepRacer-on-AWS (DROA) simulation logs print SageMaker's
+# `"world_name": "Spain_track"` and `hyperparameter world_name value Spain_track`.
+_WORLD_IN_LOG = re.compile(r"""world_name['"]?(?:\s*[:=]\s*|\s+value\s+)['"]?([A-Za-z0-9_-]{1,64})""", re.I)
+_EVALUATION_LOG = re.compile(r"(^|/)logs/(evaluation|leaderboard)/[^/]+\.log$")
+# A console/DROA metrics file is named after its job: "evaluation-20220703172413-wDhqXQC-SkGOinLUdZCQZQ.json",
+# "2026-03-07T17:52:00.898Z-deepracerindy-evaluation-9oJ3QbS0SYm7Iag.json"; the job's log mentions that name.
+_ISO_PREFIX = re.compile(r"^\d{4}-\d{2}-\d{2}T[\d:.-]+Z?-")
+_DRFC_TRAINING_METRICS = re.compile(r"(^|/)metrics/TrainingMetrics(_\d+)?\.json$")
 _MODEL_NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 _MAX_YAML_BYTES = 256 * 1024
 
@@ -93,13 +101,14 @@ def _deepracer_parts(files: ExportFiles, track: str) -> dict[str, Any]:
                         what="hyperparameters (ip/hyperparameters.json)")
     hyperparameters = _hyperparameters(files, hyper_file)
     training_track = _training_world(files)
-    training_file = _newest(files, r"(^|/)metrics/TrainingMetrics[^/]*\.json$|(^|/)metrics/training/.+\.json$",
-                            "training metrics (metrics/TrainingMetrics.json or metrics/training/*.json)")
-    episodes = _metric_entries(files, training_file, ("completion_percentage",))
-    training = [e for e in episodes if e.get("phase", "training") == "training"] or episodes
+    training: list[tuple[str, dict[str, Any]]] = []
+    for training_file in _training_metric_files(files):
+        episodes = _metric_entries(files, training_file, ("completion_percentage",))
+        in_training = [e for e in episodes if e.get("phase", "training") == "training"] or episodes
+        training += [(training_file, e) for e in in_training]
     evaluation_file = _newest(files, r"(^|/)metrics/EvaluationMetrics[^/]*\.json$|(^|/)metrics/evaluation/.+\.json$",
                               "evaluation metrics (metrics/EvaluationMetrics-*.json or metrics/evaluation/*.json)")
-    _check_evaluation_world(files, track)
+    _check_evaluation_world(files, track, evaluation_file)
     entries = _metric_entries(files, evaluation_file, ("completion_percentage", "elapsed_time_in_milliseconds"))
     trials = [EvaluationTrial(
         trial=_int(evaluation_file, entry, "trial", index, default=index + 1),
@@ -109,7 +118,7 @@ def _deepracer_parts(files: ExportFiles, track: str) -> dict[str, Any]:
         reset_count=_int(evaluation_file, entry, "reset_count", index, default=0),
         crash_count=_int(evaluation_file, entry, "crash_count", index, default=0),
         status=str(entry.get("episode_status", ""))[:40]) for index, entry in enumerate(entries)]
-    best = max(_number(training_file, e, "completion_percentage", i) for i, e in enumerate(training))
+    best = max(_number(name, e, "completion_percentage", i) for i, (name, e) in enumerate(training))
     return dict(hyperparameters=hyperparameters, training_track=training_track, training_episodes=len(training),
                 training_best_completion_pct=min(best, 100.0), trials=trials)
 
@@ -136,27 +145,57 @@ def _hyperparameters(files: ExportFiles, name: str) -> dict[str, Any]:
     return document
 
 
+def _training_metric_files(files: ExportFiles) -> list[str]:
+    """DRfC with several workers writes metrics/TrainingMetrics.json, TrainingMetrics_1.json, … (one per worker):
+    every worker's episodes count. Consoles write one file per training job under metrics/training/: the newest."""
+    workers = sorted(n for n in files.files if _DRFC_TRAINING_METRICS.search(n))
+    if workers:
+        return workers
+    return [_newest(files, r"(^|/)metrics/training/.+\.json$",
+                    "training metrics (metrics/TrainingMetrics.json or metrics/training/*.json)")]
+
+
 def _training_world(files: ExportFiles) -> str:
+    """The track the model trained on, from the training params or the training log (console and DROA exports have
+    no params file: their simulation logs print the world name)."""
     yaml_name = _matching(files, r"(^|/)training[-_]params\.ya?ml$")
     if yaml_name:
         return _world_name(files, yaml_name)
     log_name = _matching(files, r"(^|/)logs/training/[^/]*-(robomaker|simulation)\.log$")
     if log_name:
-        found = _WORLD_IN_LOG.search(files.read(log_name).decode("utf-8", "replace"))
-        if found:
-            return found.group(1)
-        raise ExportProblem(log_name, "the training log does not say which track (no WORLD_NAME)")
+        world = _world_in_log(files, log_name)
+        if world is None:
+            raise ExportProblem(log_name, "the training log does not say which track (no WORLD_NAME)")
+        return world
     raise ExportProblem("training_params.yaml", "missing (no training params YAML and no training log that names "
                         "the track)")
 
 
-def _check_evaluation_world(files: ExportFiles, track: str) -> None:
-    """An evaluation params YAML, when the export has one, must be for the track the racer submits to."""
+def _world_in_log(files: ExportFiles, name: str) -> str | None:
+    found = _WORLD_IN_LOG.search(files.read(name).decode("utf-8", "replace"))
+    return found.group(1) if found else None
+
+
+def _check_evaluation_world(files: ExportFiles, track: str, evaluation_file: str) -> None:
+    """Every place the export names the track of the evaluation whose laps are submitted must say `track`: the
+    evaluation params YAML (DRfC) and the evaluation's own simulation log (console: logs/evaluation or
+    logs/leaderboard; DROA: logs/evaluation/*-simulation.log). Real console/DROA exports have no params YAML, so the
+    log is what tells. The log of that evaluation is the one that mentions its metrics file's job name; when no log
+    does, every evaluation log in the export must name `track` (an export cannot hide a foreign evaluation)."""
     yaml_name = _matching(files, r"(^|/)eval(uation)?[-_]params\.ya?ml$")
     if yaml_name:
         world = _world_name(files, yaml_name)
         if world != track:
             raise ExportProblem(yaml_name, f"the evaluation ran on {world!r}, not on {track!r}", field="WORLD_NAME")
+    logs = sorted(n for n in files.files if _EVALUATION_LOG.search(n))
+    job = _ISO_PREFIX.sub("", evaluation_file.rsplit("/", 1)[-1].removesuffix(".json"))
+    texts = {name: files.read(name).decode("utf-8", "replace") for name in logs}
+    own = [name for name, text in texts.items() if len(job) >= 8 and job in text]
+    for name in own or logs:
+        found = _WORLD_IN_LOG.search(texts[name])
+        if found and found.group(1) != track:
+            raise ExportProblem(name, f"the evaluation ran on {found.group(1)!r}, not on {track!r}",
+                                field="WORLD_NAME")
 
 
 def _world_name(files: ExportFiles, name: str) -> str:

@@ -6,6 +6,7 @@ from functools import lru_cache
 from typing import Any
 
 import boto3
+from botocore import UNSIGNED
 from botocore.config import Config
 
 from chalicelib.settings import get_settings
@@ -21,7 +22,13 @@ def _client(service: str, region: str, endpoint_url: str | None) -> Any:
     if service == "s3":
         # s3v4 + path style: presigned URLs that moto (127.0.0.1) and browsers both accept.
         config = config.merge(Config(signature_version="s3v4", s3={"addressing_style": "path"} if endpoint_url else {}))
-    return boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    made = boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    # The local storage server accepts only requests signed with the installation's keys (from the environment).
+    return sign_every_call(made) if endpoint_url else made
+
+
+# The app server's same-origin path to the local storage server (drem_local.durable.guard.GATEWAY_PATH).
+STORAGE_GATEWAY_PATH = "/_storage"
 
 
 def client(service: str) -> Any:
@@ -41,5 +48,28 @@ def s3() -> Any:
     return client("s3")
 
 
+def s3_presigner() -> Any:
+    """The S3 client that signs links for browsers and cars. On AWS the S3 client itself; locally one whose
+    endpoint is the app's own storage gateway ({DREM_PUBLIC_URL}/_storage), because the storage server listens on
+    loopback only and people reach just the app (on the venue network with `drem up --lan`). Never sends requests."""
+    settings = get_settings()
+    if not settings.endpoint_url:
+        return s3()
+    return _client("s3", settings.region, settings.public_url.rstrip("/") + STORAGE_GATEWAY_PATH)
+
+
 def reset_clients() -> None:
     _client.cache_clear()
+
+
+def sign_every_call(client: Any) -> Any:
+    """Make `client` sign even the operations AWS serves unsigned (Cognito InitiateAuth, SignUp, ...).
+
+    Only for the local storage server, which refuses every unsigned request (drem_local.durable.sigv4); on AWS these
+    calls stay unsigned, as AWS expects."""
+    def always_v4(signature_version: Any = None, **_kwargs: Any) -> str | None:
+        return "v4" if signature_version in (UNSIGNED, "none") else None
+
+    # register_first: botocore's own choose-signer handler would otherwise answer "unsigned" before ours is asked.
+    client.meta.events.register_first(f"choose-signer.{client.meta.service_model.service_id.hyphenize()}", always_v4)
+    return client

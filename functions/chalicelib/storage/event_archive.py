@@ -21,7 +21,8 @@ from chalicelib.domain.event_transfer import Account, Item
 from chalicelib.storage.aws_errors import error_code, translate_common
 from chalicelib.storage.users import COUNTRY_ATTRIBUTE, translate_account_error
 
-_LOCAL_FAKE_KEY = "testing"
+# Where `drem up` keeps the keys its storage server accepts (drem_local.storage_keys.KEYS_FILE).
+_LOCAL_KEYS_FILE = "storage-keys.json"
 
 
 @dataclass(frozen=True)
@@ -32,16 +33,21 @@ class StackLocation:
     tables: dict[str, str] = field(default_factory=dict)
     buckets: dict[str, str] = field(default_factory=dict)
     endpoint_url: str | None = None
+    # The local storage server's keys (access key id, secret); None on AWS (default credential chain).
+    local_keys: tuple[str, str] | None = field(default=None, repr=False)
 
     @classmethod
     def from_state_dir(cls, state_dir: Path) -> StackLocation:
         try:
             info = json.loads((state_dir / "stack.json").read_text())
             outputs = info["outputs"]
+            keys = json.loads((state_dir / _LOCAL_KEYS_FILE).read_text())
             return cls(region=outputs["region"], user_pool_id=outputs["user_pool_id"], tables=dict(outputs["tables"]),
-                       buckets=dict(outputs["buckets"]), endpoint_url=info["urls"]["storage"])
+                       buckets=dict(outputs["buckets"]), endpoint_url=info["urls"]["storage"],
+                       local_keys=(keys["access_key_id"], keys["secret_access_key"]))
         except (OSError, ValueError, KeyError, TypeError):
-            raise InvalidInput(f"{state_dir / 'stack.json'} is missing or unreadable: start the local stack with "
+            raise InvalidInput(f"{state_dir / 'stack.json'} or {_LOCAL_KEYS_FILE} is missing or unreadable (or not "
+                               f"yours): start the local stack with "
                                f"`drem up --state-dir {state_dir}` first (or use --aws).", field="state_dir") from None
 
     @classmethod
@@ -64,17 +70,23 @@ def connect(location: StackLocation) -> StackStorage:
     import boto3
     from botocore.config import Config
 
+    from chalicelib.storage.clients import sign_every_call
+
     credentials: dict[str, str] = {}
-    if location.endpoint_url:  # a local moto endpoint: a shell profile must never steer these calls
-        credentials = {"aws_access_key_id": _LOCAL_FAKE_KEY, "aws_secret_access_key": _LOCAL_FAKE_KEY}
+    if location.endpoint_url:  # the local storage server: its own keys, never a shell profile's
+        if location.local_keys is None:
+            raise InvalidInput("the local storage server needs the installation's keys: give --state-dir",
+                               field="state_dir")
+        credentials = {"aws_access_key_id": location.local_keys[0], "aws_secret_access_key": location.local_keys[1]}
     session = boto3.session.Session(region_name=location.region, **credentials)
     base = Config(account_id_endpoint_mode="disabled", retries={"max_attempts": 3, "mode": "standard"})
     s3_config = base.merge(Config(signature_version="s3v4",
                                   s3={"addressing_style": "path"} if location.endpoint_url else {}))
+    cognito = session.client("cognito-idp", endpoint_url=location.endpoint_url, config=base)
     return StackStorage(location,
                         dynamodb=session.client("dynamodb", endpoint_url=location.endpoint_url, config=base),
                         s3=session.client("s3", endpoint_url=location.endpoint_url, config=s3_config),
-                        cognito=session.client("cognito-idp", endpoint_url=location.endpoint_url, config=base))
+                        cognito=sign_every_call(cognito) if location.endpoint_url else cognito)
 
 
 class StackStorage:

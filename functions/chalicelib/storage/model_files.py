@@ -31,18 +31,20 @@ class Download:
 
 
 class S3ModelFiles:
-    def __init__(self, client: Any, bucket: str) -> None:
+    def __init__(self, client: Any, bucket: str, presigner: Any = None) -> None:
         self._client = client
         self._bucket = bucket
+        # Links for browsers and cars may need another endpoint than the app's own calls (clients.s3_presigner).
+        self._presigner = presigner or client
 
     def presign_upload(self, key: str, *, max_bytes: int, expires_s: int) -> dict[str, Any]:
         """A presigned POST that S3 accepts only for this key and 1..max_bytes bytes (moto ignores the range)."""
-        return self._call("generate_presigned_post", Bucket=self._bucket, Key=key,
-                          Conditions=[["content-length-range", 1, max_bytes]], ExpiresIn=expires_s)
+        return call(self._presigner, "generate_presigned_post", _SERVICE, Bucket=self._bucket, Key=key,
+                    Conditions=[["content-length-range", 1, max_bytes]], ExpiresIn=expires_s)
 
     def presign_download(self, key: str, *, expires_s: int) -> str:
-        return self._call("generate_presigned_url", "get_object",
-                          Params={"Bucket": self._bucket, "Key": key}, ExpiresIn=expires_s)
+        return call(self._presigner, "generate_presigned_url", _SERVICE, "get_object",
+                    Params={"Bucket": self._bucket, "Key": key}, ExpiresIn=expires_s)
 
     def size_of(self, key: str) -> int | None:
         """The stored size, or None when nothing is there (yet)."""

@@ -205,4 +205,4 @@ def build_model_service(settings: Settings | None = None, **options: Any) -> Mod
     """The model service over the configured table and bucket (clients built lazily, on first use)."""
     settings = settings or get_settings()
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
-                        S3ModelFiles(clients.s3(), settings.bucket("models")), **options)
+                        S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)

@@ -1,14 +1,22 @@
-"""`drem build`: vendor the packages the Lambda bundle needs into functions/vendor/.
+"""`drem build`: vendor everything the Lambda bundle needs into functions/vendor/.
 
 Chalice ships only app.py, chalicelib/ and the contents of vendor/, so the shared packages that live elsewhere in
 the repo are copied there before `chalice package` or `cdk synth`. Each copy replaces the previous one entirely,
 so a deleted or renamed module never lingers in a deployment.
+
+The third-party packages come from requirements/lambda.txt (exact versions and hashes of manylinux wheels for the
+bundle's Python): pip installs them into vendor/ here, once, so packaging and synth never resolve or download
+anything (the functions folder has no requirements.txt for Chalice to fetch). A stamp records which lock filled
+vendor/; `cdk synth` refuses a stale one instead of downloading.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import shutil
+import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +25,16 @@ HELP = "copy drem_infra, drem_leaderboard and drem_web into functions/vendor/ fo
 REPO_ROOT = Path(__file__).resolve().parents[3]
 FUNCTIONS_DIR = REPO_ROOT / "functions"
 HTMX_RELATIVE = Path("static/vendor/htmx.min.js")
+LAMBDA_LOCK = REPO_ROOT / "requirements" / "lambda.txt"
+# Which lock filled vendor/ with wheels (its sha256), and which top-level names those wheels installed.
+DEPENDENCY_STAMP = ".drem-dependencies.json"
+# Lambda runs x86_64 Amazon Linux; these tags cover every wheel in the lock. Chalice picks the function's runtime
+# from the Python that packages it, so the wheels are for this interpreter's version.
+LAMBDA_PLATFORMS = ("manylinux2014_x86_64", "manylinux_2_28_x86_64")
+
+
+class BuildError(RuntimeError):
+    """The bundle could not be built; the message says why and what to do."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +75,65 @@ def vendor_packages(functions_dir: Path = FUNCTIONS_DIR, repo_root: Path = REPO_
     return copied
 
 
+def lock_digest(lock: Path = LAMBDA_LOCK) -> str:
+    return hashlib.sha256(lock.read_bytes()).hexdigest()
+
+
+def dependencies_current(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA_LOCK) -> bool:
+    """True when vendor/ holds exactly the wheels of this lock for this Python (no download needed)."""
+    import json
+
+    stamp = functions_dir / "vendor" / DEPENDENCY_STAMP
+    try:
+        recorded = json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        return False
+    return recorded.get("lock_sha256") == lock_digest(lock) and recorded.get("python") == _python_version()
+
+
+def vendor_dependencies(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA_LOCK) -> list[str]:
+    """Install the lock's wheels for Lambda into vendor/ (replacing the previous set); returns the top-level names."""
+    import json
+
+    vendor = functions_dir / "vendor"
+    vendor.mkdir(parents=True, exist_ok=True)
+    stamp = vendor / DEPENDENCY_STAMP
+    with tempfile.TemporaryDirectory(prefix="drem-lambda-deps-") as scratch:
+        target = Path(scratch) / "site"
+        command = [sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-compile",
+                   "--target", str(target), "--implementation", "cp", "--python-version", _python_version(),
+                   "--only-binary=:all:", "--no-deps", "--require-hashes", "-r", str(lock)]
+        for platform in LAMBDA_PLATFORMS:
+            command[4:4] = ["--platform", platform]
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise BuildError(f"installing {lock.name} for Lambda failed:\n{done.stderr.strip()[-2000:]}")
+        try:
+            previous = json.loads(stamp.read_text()).get("installed", [])
+        except (OSError, ValueError):
+            previous = []
+        for name in previous:
+            _remove(vendor / name)
+        installed = sorted(p.name for p in target.iterdir() if p.name not in ("bin", "__pycache__"))
+        for name in installed:
+            _remove(vendor / name)
+            shutil.move(str(target / name), vendor / name)
+    stamp.write_text(json.dumps({"lock_sha256": lock_digest(lock), "python": _python_version(),
+                                 "installed": installed}, indent=1) + "\n")
+    return installed
+
+
+def _python_version() -> str:
+    return f"{sys.version_info.major}.{sys.version_info.minor}"
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--functions-dir", type=Path, default=FUNCTIONS_DIR,
                         help="the Chalice project to vendor into (default: %(default)s)")
@@ -65,7 +142,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         copied = vendor_packages(args.functions_dir)
-    except FileNotFoundError as exc:
+        if dependencies_current(args.functions_dir):
+            print(f"dependencies in {args.functions_dir / 'vendor'} match {LAMBDA_LOCK.name}: nothing to install")
+        else:
+            installed = vendor_dependencies(args.functions_dir)
+            print(f"vendored {len(installed)} dependency folders from {LAMBDA_LOCK.name} (Lambda wheels)")
+    except (FileNotFoundError, BuildError) as exc:
         print(f"drem build: {exc}", file=sys.stderr)
         return 1
     for target in copied:

@@ -9,7 +9,8 @@ from typing import Any
 from urllib.parse import quote
 
 HELP = "list cars and timers, make activation codes, send commands, deregister (via the drem API)"
-COMMANDS = ("RESTART_SERVICE", "EMERGENCY_STOP", "SET_TAIL_LIGHT", "DELETE_ALL_MODELS", "SET_THROTTLE_CAP")
+COMMANDS = ("RESTART_SERVICE", "START_CAR", "EMERGENCY_STOP", "SET_TAIL_LIGHT", "DELETE_ALL_MODELS",
+            "SET_THROTTLE_CAP")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -20,8 +20,8 @@ def add_location_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--state-dir", type=Path, default=Path(os.environ.get("DREM_STATE_DIR", ".drem")),
                        help="the local stack's state dir (default .drem, or $DREM_STATE_DIR)")
     group.add_argument("--aws", action="store_true",
-                       help="use real AWS (default credential chain; names from $DREM_STAGE, $DREM_TABLE_*, "
-                            "$DREM_BUCKET_*, $DREM_USER_POOL_ID or the flags below)")
+                       help="use real AWS (default credential chain; names from .drem-aws/STAGE.json, which "
+                            "`make deploy` writes, or $DREM_TABLE_*, $DREM_BUCKET_*, $DREM_USER_POOL_ID)")
     group.add_argument("--stage", default=None, help="with --aws: the stage (default $DREM_STAGE)")
     group.add_argument("--user-pool-id", default=None, help="with --aws: the user pool (default $DREM_USER_POOL_ID)")
 
@@ -30,8 +30,13 @@ def open_stack(args: argparse.Namespace):
     from chalicelib.storage.event_archive import StackLocation, connect
 
     if args.aws:
+        from drem_local.deployment import DEFAULT_DIR, Deployment
+
         env = {k: v for k, v in os.environ.items() if k != "AWS_ENDPOINT_URL"}
-        return connect(StackLocation.from_environment(env, args.stage, args.user_pool_id))
+        stage = args.stage or env.get("DREM_STAGE")
+        if stage and (DEFAULT_DIR / f"{stage}.json").is_file():  # what `make deploy` recorded
+            env.update(Deployment.load(stage).environment())
+        return connect(StackLocation.from_environment(env, stage, args.user_pool_id))
     return connect(StackLocation.from_state_dir(args.state_dir))
 
 

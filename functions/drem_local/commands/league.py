@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 HELP = "push a model export to the virtual league; pull a track's board (table, CSV or JSON)"
-FUNCTIONS_DIR = Path(__file__).resolve().parents[2]  # chalicelib is imported from here, like Chalice does
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,8 +44,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if str(FUNCTIONS_DIR) not in sys.path:
-        sys.path.insert(0, str(FUNCTIONS_DIR))
     from chalicelib.domain.errors import DremError
     from drem_local.api_client import ApiError
 

@@ -52,7 +52,8 @@ def gather(state_dir: Path) -> dict:
         facts["last_snapshot_age_s"] = round(time.time() - json.loads(manifest.read_text())["written_at"], 1)
     storage_answer = http_get(urls["storage"] + HEALTH_PATH) if urls.get("storage") else None
     facts["storage_health"] = _json_or_none(storage_answer)
-    app_answer = http_get(urls["app"] + APP_HEALTH_PATH) if urls.get("app") else None
+    app_url = urls.get("app_local") or urls.get("app")  # the public URL may be a proxy this machine cannot reach
+    app_answer = http_get(app_url + APP_HEALTH_PATH) if app_url else None
     facts["app_answering"] = bool(app_answer and app_answer[0] == 200)
     return facts
 

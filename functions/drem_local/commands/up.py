@@ -14,9 +14,19 @@ HELP = "start the local stack (durable storage + app) and keep it running until 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--state-dir", type=Path, default=Path(os.environ.get("DREM_STATE_DIR", ".drem")),
                         help="where all local data lives (default .drem, or $DREM_STATE_DIR)")
-    parser.add_argument("--port", type=int, default=8000, help="app port on 127.0.0.1 (default 8000)")
+    parser.add_argument("--port", type=int, default=8000, help="app port (default 8000; on 127.0.0.1 unless --lan)")
     parser.add_argument("--storage-port", type=int, default=8001,
-                        help="durable moto (AWS API) port on 127.0.0.1 (default 8001)")
+                        help="durable moto (AWS API) port on 127.0.0.1, always loopback only (default 8001)")
+    network = parser.add_argument_group("the venue network (docs/operations.md)")
+    network.add_argument("--lan", action="store_true",
+                         help="serve the app to the venue network (phones, laptops, timers, cars), on every interface, "
+                              "announced as this machine's address on its default route")
+    network.add_argument("--host", metavar="ADDR", default=None,
+                         help="serve the app on this address of the machine only (implies --lan); QR codes and "
+                              "copy-paste commands carry it")
+    network.add_argument("--public-url", metavar="URL", default=None,
+                         help="the URL people use when a TLS proxy sits in front of the app (e.g. https://drem.lan); "
+                              "https here makes the session cookies Secure")
     parser.add_argument("--demo", action="store_true",
                         help="also run a demo: sample models, demo racers, sim cars and a race director that races "
                              "them, so the leaderboard and overlay fill live (see docs/cars.md)")
@@ -31,9 +41,16 @@ def _raise_stop(signum: int, _frame: object) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from drem_local.stack import StackConfig, StackError, start_stack
+    from drem_local.stack import StackConfig, StackError, lan_config, start_stack
 
-    config = StackConfig(state_dir=args.state_dir, app_port=args.port, storage_port=args.storage_port)
+    config = StackConfig(state_dir=args.state_dir, app_port=args.port, storage_port=args.storage_port,
+                         public_url=args.public_url)
+    if args.lan or args.host:
+        try:
+            config = lan_config(config, args.host, args.public_url)
+        except StackError as exc:
+            print(f"drem up: could not start. {exc}", file=sys.stderr)
+            return 1
     username = os.environ.get("DREM_ADMIN_USERNAME", "admin")
     password = os.environ.get("DREM_ADMIN_PASSWORD") or None
     signal.signal(signal.SIGTERM, _raise_stop)
@@ -112,13 +129,22 @@ def _print_ready(stack) -> None:
     lines = [
         f"drem is running (ready in {stack.timings['total_s']:.1f}s).",
         f"  Open the app:        {config.app_url}",
-        f"  AWS API (moto):      {config.storage_url}   (health: {config.storage_url}/_drem/health)",
+    ]
+    if config.app_host != config.host:
+        lines += [f"  Venue network:       listening on {config.app_host}:{config.app_port}; QR codes, activation "
+                  "commands and upload links carry the URL above"]
+        if not config.app_url.startswith("https://"):
+            lines.append("  Plain HTTP:          anyone on an open WiFi can read sessions; use a WPA2/WPA3 network "
+                         "(docs/security.md)")
+    lines += [
+        f"  Storage (moto):      {config.storage_url}   (this machine only; signed requests only)",
         f"  Data directory:      {config.state_dir.resolve()}",
         f"  Logs:                {config.log_dir.resolve()}",
     ]
     if admin.created and admin.password and not os.environ.get("DREM_ADMIN_PASSWORD"):
         lines.append(f"  Admin login:         {admin.username} / {admin.password}")
-        lines.append("  (This password is shown only now. Write it down; it is not stored anywhere readable.)")
+        lines.append("  (This password is shown only now. Write it down: drem keeps it only in the data directory, "
+                     "which only your user account can read.)")
     else:
         lines.append(f"  Admin login:         {admin.username} (password unchanged)")
     lines.append("Press Ctrl-C to stop. `drem status` in another terminal shows what is running.")

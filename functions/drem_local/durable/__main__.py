@@ -15,15 +15,11 @@ log = logging.getLogger("drem.durable")
 STABLE_ID_ENV = {
     "MOTO_COGNITO_IDP_USER_POOL_ID_STRATEGY": "HASH",
     "MOTO_COGNITO_IDP_USER_POOL_CLIENT_ID_STRATEGY": "HASH",
+    # moto's Flask apps otherwise answer every Origin with Access-Control-Allow-Origin (flask_cors).
+    "MOTO_DISABLE_GLOBAL_CORS": "true",
 }
 EXIT_VERSION_MISMATCH = 3
 DEFAULT_MAX_POST_BYTES = 256 * 1024 * 1024  # above the app's 128 MiB model limit plus the form's own fields
-
-
-def local_secret_for(environ: dict[str, str]):  # noqa: ANN201 - a small closure
-    """The credential the app signs presigned POSTs with (the stack passes its own; moto's fake key otherwise)."""
-    credentials = {environ.get("AWS_ACCESS_KEY_ID") or "testing": environ.get("AWS_SECRET_ACCESS_KEY") or "testing"}
-    return credentials.get
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -43,14 +39,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.update(STABLE_ID_ENV)
+    os.umask(0o077)  # journal, snapshots and logs hold plaintext passwords: readable by this user only
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("werkzeug").setLevel(logging.ERROR)
 
     from werkzeug.serving import make_server
 
+    from drem_local.durable.guard import StorageGuard
+    from drem_local.durable.post_policy import PostPolicyGuard
     from drem_local.durable.server import DurableApp
     from drem_local.durable.state import DurableState, MotoVersionMismatch
+    from drem_local.storage_keys import load_or_create
 
+    keys = load_or_create(args.state_dir)  # also makes the state dir 0700 and its files 0600
     try:
         state = DurableState(args.state_dir, fsync=not args.no_fsync)
     except MotoVersionMismatch as exc:
@@ -60,10 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     from moto.moto_server.werkzeug_app import DomainDispatcherApplication, MotoRequestHandler, create_backend_app
 
     os.environ.setdefault("MOTO_PORT", str(args.port))
-    from drem_local.durable.post_policy import PostPolicyGuard
-
-    guard = PostPolicyGuard(local_secret_for(dict(os.environ)), max_body_bytes=args.max_post_bytes)
-    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, upload_guard=guard)
+    upload_guard = PostPolicyGuard({keys.access_key_id: keys.secret_access_key}.get,
+                                   max_body_bytes=args.max_post_bytes)
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys), upload_guard)
     report = app.recover()
     log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
              "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,

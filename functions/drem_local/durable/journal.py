@@ -106,7 +106,7 @@ class Journal:
     def open(self) -> ReadResult:
         """Read what is there, zero out a torn tail, and get ready to write after the last good record."""
         existing = read_all(self.path)
-        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
         self._capacity = os.fstat(self._fd).st_size
         if existing.torn_bytes:
             log.warning("journal %s: cutting off a torn tail of %d bytes after %d intact records",

@@ -1,0 +1,56 @@
+"""What the deployed app may do on AWS: exactly the calls its storage adapters make, and nothing else.
+
+tests/infra/test_iam_policy.py derives the calls from functions/chalicelib/storage/ and checks the synthesised role
+against this table both ways (every call covered, no grant without a call), so a new adapter call without a
+permission (a 502 under IAM) or a permission nobody uses fails in CI, not on event day.
+Pure data (no aws_cdk import): stack.py builds the IAM statements from it.
+"""
+from __future__ import annotations
+
+# DynamoDB actions on every table (and its indexes, for Query). TransactWriteItems has no IAM action of its own: it
+# needs the item-level actions it performs (Put/Update/Delete/ConditionCheck) on each table it touches.
+TABLE_ACTIONS: tuple[str, ...] = (
+    "dynamodb:BatchGetItem",
+    "dynamodb:ConditionCheckItem",
+    "dynamodb:DeleteItem",
+    "dynamodb:DescribeTable",
+    "dynamodb:GetItem",
+    "dynamodb:PutItem",
+    "dynamodb:Query",
+    "dynamodb:Scan",
+    "dynamodb:UpdateItem",
+)
+
+# S3 object actions, per bucket logical name. Presigned POSTs (browser uploads) and GETs (cars) are signed with the
+# role, so the role itself needs PutObject/GetObject. HeadObject is authorised as GetObject; CopyObject needs both.
+BUCKET_OBJECT_ACTIONS: dict[str, tuple[str, ...]] = {
+    "models": ("s3:DeleteObject", "s3:GetObject", "s3:PutObject"),
+}
+# ListBucket lets HeadObject/GetObject of a missing key answer 404 (NoSuchKey) instead of 403, which the upload
+# completion relies on to say "the file never arrived".
+BUCKET_ACTIONS: dict[str, tuple[str, ...]] = {
+    "models": ("s3:ListBucket",),
+}
+
+# The Cognito admin API the app calls with its role. The user-facing calls (InitiateAuth, SignUp, ConfirmSignUp,
+# RespondToAuthChallenge, ChangePassword, GlobalSignOut, DeleteUser, GetUser) are authorised by the user's own
+# tokens or are public, and IAM does not evaluate them.
+USER_POOL_ACTIONS: tuple[str, ...] = (
+    "cognito-idp:AdminAddUserToGroup",
+    "cognito-idp:AdminCreateUser",
+    "cognito-idp:AdminDeleteUser",
+    "cognito-idp:AdminDisableUser",
+    "cognito-idp:AdminEnableUser",
+    "cognito-idp:AdminGetUser",
+    "cognito-idp:AdminListGroupsForUser",
+    "cognito-idp:AdminRemoveUserFromGroup",
+    "cognito-idp:AdminUserGlobalSignOut",
+    "cognito-idp:ListUsers",
+)
+COGNITO_CALLS_WITHOUT_IAM: frozenset[str] = frozenset({
+    "ChangePassword", "ConfirmSignUp", "DeleteUser", "GetUser", "GlobalSignOut", "InitiateAuth",
+    "RespondToAuthChallenge", "SignUp",
+})
+
+# Lambda writes its logs through these, into log groups the stack creates (with retention) and names.
+LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")

@@ -1,0 +1,162 @@
+"""Every `drem` subcommand, run the way docs/ tell users to: the installed entry point, as a subprocess, from a
+directory outside the repository, with no PYTHONPATH. In-process tests (calling `run()`) cannot see an import that
+only works because pytest put functions/ on sys.path; these can.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import requests
+
+from drem_local import stack as local_stack
+from drem_local.cli import SUBCOMMANDS
+
+pytestmark = pytest.mark.integration
+
+DREM = Path(sys.executable).parent / "drem"
+REPO_ROOT = Path(__file__).resolve().parents[2]
+SAMPLE_MODEL = REPO_ROOT / "sim" / "drem_sim" / "samples" / "drem-bc-oval.tar.gz"
+
+
+def drem(*args: str, cwd: Path, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    """The installed `drem`, from `cwd` (outside the repo), with the user's environment minus any PYTHONPATH."""
+    assert REPO_ROOT not in cwd.resolve().parents, "these tests must run from outside the repository"
+    full_env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    full_env.update(env or {})
+    return subprocess.run([str(DREM), *args], cwd=cwd, env=full_env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def ok(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 0, f"exit {result.returncode}\nstdout:\n{result.stdout}\nstderr:\n{result.stderr}"
+    assert "Traceback" not in result.stderr, result.stderr
+    return result.stdout
+
+
+@pytest.fixture(scope="module")
+def as_admin(live_stack) -> dict[str, str]:
+    """The connection a staff member gives the CLI: the API URL and their sign-in, through the environment."""
+    return {"DREM_API": live_stack.url, "DREM_USERNAME": live_stack.admin_username,
+            "DREM_PASSWORD": live_stack.admin_password}
+
+
+@pytest.fixture(scope="module")
+def outside(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("user-home")
+
+
+@pytest.mark.parametrize("subcommand", sorted(SUBCOMMANDS))
+def test_every_subcommand_starts_from_outside_the_repo(subcommand: str, outside: Path) -> None:
+    out = ok(drem(subcommand, "--help", cwd=outside))
+    assert out.startswith("usage: drem " + subcommand)
+
+
+def test_top_level_help_lists_every_subcommand(outside: Path) -> None:
+    out = drem("--help", cwd=outside).stdout
+    for name in SUBCOMMANDS:
+        assert re.search(rf"^\s+{re.escape(name)}\s", out, re.M), f"{name} missing from drem --help"
+
+
+def test_up_serves_and_stops_cleanly_on_ctrl_c(outside: Path, tmp_path: Path) -> None:
+    app_port, storage_port = local_stack.free_port(), local_stack.free_port()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    process = subprocess.Popen([str(DREM), "up", "--state-dir", str(tmp_path / "state"), "--port", str(app_port),
+                                "--storage-port", str(storage_port)], cwd=outside, env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and process.poll() is None:
+            try:
+                if requests.get(f"http://127.0.0.1:{app_port}/api/ping", timeout=2).status_code == 200:
+                    break
+            except requests.RequestException:
+                time.sleep(0.2)
+        assert process.poll() is None, process.stdout.read() if process.stdout else ""
+        assert requests.get(f"http://127.0.0.1:{app_port}/api/ping", timeout=5).status_code == 200
+    finally:
+        process.send_signal(signal.SIGINT)
+        out, _ = process.communicate(timeout=60)
+    assert process.returncode == 0, out
+    assert "Traceback" not in out and "stopped cleanly" in out, out
+
+
+def test_status_reports_the_running_stack(live_stack, outside: Path) -> None:
+    facts = json.loads(ok(drem("status", "--state-dir", str(live_stack.state_dir), "--json", cwd=outside)))
+    assert str(live_stack.url.rsplit(":", 1)[1]) in json.dumps(facts)
+
+
+def test_users_events_fleets_cars_and_devices(live_stack, as_admin, outside: Path, tmp_path: Path) -> None:
+    created = ok(drem("users", "create", "cli-racer-1", "--email", "cli1@example.com", "--country", "SE",
+                      cwd=outside, env=as_admin))
+    assert "cli-racer-1" in created and "password" in created.lower()
+    assert "cli-racer-1" in ok(drem("users", "list", "--prefix", "cli-", cwd=outside, env=as_admin))
+
+    fleet = json.loads(ok(drem("fleets", "--json", "create", "cli-fleet", cwd=outside, env=as_admin)))
+    fleet_id = fleet["fleet_id"]
+    assert "cli-fleet" in ok(drem("fleets", "list", cwd=outside, env=as_admin))
+
+    event = json.loads(ok(drem("events", "--json", "create", "CLI Cup", "--date", "2026-11-24", "--country", "SE",
+                               "--track", f"Main@{fleet_id}", cwd=outside, env=as_admin)))
+    assert "CLI Cup" in ok(drem("events", "list", cwd=outside, env=as_admin))
+
+    code = json.loads(ok(drem("cars", "--json", "activate-code", "cli-timer", "--fleet", fleet_id, "--kind", "timer",
+                              cwd=outside, env=as_admin)))
+    config = tmp_path / "timer-config"
+    ok(drem("car", "--config-dir", str(config), "activate", "--code", code["code"], "--api", live_stack.url,
+            "--hostname", "cli-timer", "--kind", "timer", cwd=outside))
+    assert "cli-timer" in ok(drem("car", "--config-dir", str(config), "status", cwd=outside))
+    # A laptop has no GPIO: gpiozero's mock pins stand in for the strips, the agent talks to the real stack.
+    timed = ok(drem("timer", "--config-dir", str(config), "--event", event["event_id"], "--seconds", "2",
+                    cwd=outside, env={"GPIOZERO_PIN_FACTORY": "mock"}))
+    assert "crossings queued 0" in timed
+    assert "cli-timer" in ok(drem("cars", "list", cwd=outside, env=as_admin))
+
+
+def test_models_upload_and_list(as_admin, outside: Path) -> None:
+    uploaded = ok(drem("models", "upload", str(SAMPLE_MODEL), cwd=outside, env=as_admin, timeout=180))
+    assert "drem-bc-oval" in uploaded
+    assert "drem-bc-oval" in ok(drem("models", "list", cwd=outside, env=as_admin))
+
+
+def test_export_then_import_under_a_new_id(live_stack, as_admin, outside: Path, tmp_path: Path) -> None:
+    event = json.loads(ok(drem("events", "--json", "create", "Exported Cup", "--date", "2026-11-24",
+                               "--country", "GB", cwd=outside, env=as_admin)))
+    folder = tmp_path / "export"
+    exported = ok(drem("export", event["event_id"], "--out", str(folder), "--state-dir", str(live_stack.state_dir),
+                       cwd=outside))
+    assert f"Exported event {event['event_id']}" in exported and (folder / "manifest.json").is_file()
+    imported = ok(drem("import", str(folder), "--event-id", "exported-cup-copy",
+                       "--state-dir", str(live_stack.state_dir), "--report", str(tmp_path / "report.json"),
+                       cwd=outside))
+    assert "as exported-cup-copy" in imported
+    assert "Exported Cup" in ok(drem("events", "show", "exported-cup-copy", cwd=outside, env=as_admin))
+
+
+def test_league_pull_answers_for_a_track(as_admin, outside: Path) -> None:
+    board = json.loads(ok(drem("league", "pull", "--track", "reinvent_base", "--json", cwd=outside, env=as_admin)))
+    assert isinstance(board, (dict, list))
+
+
+def test_sim_record_then_train_a_model(outside: Path, tmp_path: Path) -> None:
+    assert "drem_oval" in ok(drem("sim", "tracks", cwd=outside))
+    runs = tmp_path / "runs"
+    ok(drem("sim", "record", "--track", "drem_oval", "--laps", "1", "--out", str(runs), cwd=outside, timeout=240))
+    out = tmp_path / "model"
+    ok(drem("train", "--runs", str(runs), "--out", str(out), "--name", "cli-model", "--epochs", "1",
+            cwd=outside, timeout=300))
+    assert (out / "cli-model.tar.gz").is_file()
+
+
+def test_build_vendors_the_shared_packages_into_a_copy(outside: Path, tmp_path: Path) -> None:
+    functions = tmp_path / "functions"
+    functions.mkdir()
+    out = ok(drem("build", "--functions-dir", str(functions), cwd=outside))
+    assert "vendored drem_leaderboard" in out and (functions / "vendor" / "drem_leaderboard").is_dir()

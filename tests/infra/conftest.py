@@ -1,0 +1,66 @@
+"""One `drem build` per test session for the infra tests: it vendors the shared packages and installs the Lambda
+wheels of requirements/lambda.txt into functions/vendor/ (the only step that downloads; packaging and synth don't)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION", "20")
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+FUNCTIONS_DIR = REPO_ROOT / "functions"
+STAGE = "test"
+# What `make deploy` passes on its second deploy (CloudFront's domain, or the custom domain).
+PUBLIC_URL = "https://drem.example.org"
+
+
+@pytest.fixture(scope="session")
+def lambda_build() -> Path:
+    drem = Path(sys.executable).with_name("drem")
+    build = subprocess.run([str(drem), "build"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, f"drem build failed:\n{build.stdout}\n{build.stderr}"
+    return FUNCTIONS_DIR
+
+
+# Anything that tried to reach a package index during synth would fail against this.
+OFFLINE = {"PIP_NO_INDEX": "1", "PIP_INDEX_URL": "http://127.0.0.1:9/simple", "PIP_EXTRA_INDEX_URL": "",
+           "PIP_FIND_LINKS": "", "UV_OFFLINE": "1"}
+
+
+@pytest.fixture(scope="session")
+def templates(tmp_path_factory, lambda_build):
+    """The storage-only stack and the real app's stack (functions/ as `drem build` left it), synthesised offline."""
+    import aws_cdk as cdk
+    from aws_cdk.assertions import Template
+
+    from drem_infra.stack import DremStack
+
+    assert not (lambda_build / "requirements.txt").exists(), "Chalice would download requirements at synth"
+    work = tmp_path_factory.mktemp("cdk")
+    cwd, saved_env = os.getcwd(), dict(os.environ)
+    os.chdir(work)  # the Chalice construct writes chalice.out/ into the working directory
+    os.environ.update(OFFLINE)
+    try:
+        app = cdk.App(outdir=str(work / "cdk.out"))
+        storage_only = DremStack(app, "drem-storage", stage=STAGE)
+        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL)
+        app.synth()
+        return Template.from_stack(storage_only), Template.from_stack(with_app)
+    finally:
+        os.chdir(cwd)
+        os.environ.clear()
+        os.environ.update(saved_env)
+
+
+@pytest.fixture(scope="session")
+def template(templates):
+    return templates[0]
+
+
+@pytest.fixture(scope="session")
+def app_template(templates):
+    return templates[1]

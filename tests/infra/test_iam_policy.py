@@ -1,0 +1,136 @@
+"""The deployed role may make exactly the AWS calls the storage adapters make: derived from their source (every
+boto3 operation name they use), checked against the synthesised role both ways. A call without a permission is a
+502 under IAM on event day; a permission without a call is an attacker's head start."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import botocore.session
+import pytest
+from botocore import xform_name
+
+from drem_infra import permissions, resources
+
+pytestmark = pytest.mark.infra
+
+STORAGE_DIR = Path(__file__).resolve().parents[2] / "functions" / "chalicelib" / "storage"
+# The CLI's adapter for `drem export/import --aws`: it runs with the operator's own credentials, never in Lambda.
+CLI_ONLY = {"event_archive.py"}
+SERVICES = ("dynamodb", "s3", "cognito-idp")
+# Client methods that are not API operations but sign a request the role must be allowed to make.
+PRESIGNED = {"generate_presigned_post": ("s3", "PutObject"), "generate_presigned_url": ("s3", "GetObject")}
+# How an S3 operation is authorised (HeadObject is GetObject; CopyObject reads and writes).
+S3_AUTHORISED_AS = {"HeadObject": ("GetObject",), "CopyObject": ("GetObject", "PutObject")}
+DYNAMODB_AUTHORISED_AS = {"TransactWriteItems": ("PutItem", "UpdateItem", "DeleteItem", "ConditionCheckItem")}
+
+
+def adapter_calls() -> dict[str, set[str]]:
+    """{service: {OperationName}} for every operation name the Lambda's storage adapters mention."""
+    session = botocore.session.get_session()
+    operations = {svc: {xform_name(op): op for op in session.get_service_model(svc).operation_names}
+                  for svc in SERVICES}
+    calls: dict[str, set[str]] = {svc: set() for svc in SERVICES}
+    for path in sorted(STORAGE_DIR.glob("*.py")):
+        if path.name in CLI_ONLY:
+            continue
+        for name in _operation_names(ast.parse(path.read_text())):
+            if name in PRESIGNED:
+                service, operation = PRESIGNED[name]
+                calls[service].add(operation)
+            for service, ops in operations.items():
+                if name in ops:
+                    calls[service].add(ops[name])
+    return calls
+
+
+def _operation_names(tree: ast.AST):
+    """Names the adapters hand to boto3: `client.op(...)` called on a client attribute, and every string constant
+    (operation names reach the adapters' `_call(...)` wrappers and `get_paginator(...)` as strings, sometimes via a
+    variable). Attribute calls on other receivers are the adapters' own methods (`devices.get_device`), not AWS."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            yield node.value
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            receiver = ast.unparse(node.func.value)
+            if any(word in receiver for word in ("client", "cognito", "dynamodb", "s3")):
+                yield node.func.attr
+
+
+def required_actions(calls: dict[str, set[str]]) -> set[str]:
+    needed = set()
+    for operation in calls["dynamodb"]:
+        needed |= {f"dynamodb:{a}" for a in DYNAMODB_AUTHORISED_AS.get(operation, (operation,))}
+    for operation in calls["s3"]:
+        needed |= {f"s3:{a}" for a in S3_AUTHORISED_AS.get(operation, (operation,))}
+    needed |= {f"cognito-idp:{op}" for op in calls["cognito-idp"] - permissions.COGNITO_CALLS_WITHOUT_IAM}
+    return needed
+
+
+@pytest.fixture(scope="module")
+def role_statements(app_template) -> list[dict]:
+    functions = app_template.find_resources("AWS::Serverless::Function").values()
+    assert {str(f["Properties"]["Role"]) for f in functions} == {str({"Fn::GetAtt": ["DefaultRole", "Arn"]})}, \
+        "the functions share one role"
+    inline = app_template.find_resources("AWS::IAM::Role")["DefaultRole"]["Properties"]["Policies"]
+    attached = [p["Properties"]["PolicyDocument"] for p in app_template.find_resources("AWS::IAM::Policy").values()
+                if {"Ref": "DefaultRole"} in p["Properties"].get("Roles", [])]
+    return [s for doc in [p["PolicyDocument"] for p in inline] + attached for s in doc["Statement"]]
+
+
+def _actions(statement: dict) -> list[str]:
+    return statement["Action"] if isinstance(statement["Action"], list) else [statement["Action"]]
+
+
+def test_the_scan_finds_what_the_adapters_are_known_to_call():
+    calls = adapter_calls()
+    # Spot checks that the derivation itself works (a scan finding nothing would make the next test vacuous).
+    assert {"PutItem", "Query", "TransactWriteItems"} <= calls["dynamodb"]
+    assert {"AdminDisableUser", "AdminEnableUser", "AdminUserGlobalSignOut", "InitiateAuth"} <= calls["cognito-idp"]
+    assert {"PutObject", "GetObject"} <= calls["s3"]
+
+
+def test_every_call_the_adapters_make_is_granted_and_nothing_else(role_statements):
+    granted = {a for s in role_statements if s["Effect"] == "Allow" for a in _actions(s)}
+    needed = required_actions(adapter_calls())
+    # ListBucket: lets a missing object answer 404, not 403 (see permissions.py); logs: the functions' own.
+    infrastructure = {"s3:ListBucket", *permissions.LOG_ACTIONS}
+
+    assert needed - granted == set(), "calls the role may not make"
+    assert granted - needed - infrastructure == set(), "grants no adapter call needs"
+    assert not any("*" in a for a in granted), "no wildcard actions"
+
+
+def test_grants_are_scoped_to_the_stacks_own_resources(role_statements, app_template):
+    tables = app_template.find_resources("AWS::DynamoDB::Table")
+    buckets = app_template.find_resources("AWS::S3::Bucket")
+    for statement in role_statements:
+        resources_ = statement["Resource"] if isinstance(statement["Resource"], list) else [statement["Resource"]]
+        assert "*" not in resources_ and not any(isinstance(r, str) and ":*:" in r for r in resources_), statement
+        text = str(resources_)
+        if any(a.startswith("dynamodb:") for a in _actions(statement)):
+            assert all(logical_id in text for logical_id in tables)
+        if any(a.startswith("logs:") for a in _actions(statement)):
+            assert "Logs" in text and "arn:*:logs" not in text
+    bucket_grants = str([s["Resource"] for s in role_statements if any(a.startswith("s3:") for a in _actions(s))])
+    for spec in resources.BUCKETS:
+        logical_id = next(b for b in buckets if b.startswith(f"{spec.logical.capitalize()}Bucket"))
+        # Only buckets the adapters use: the runs bucket is written by the simulator with its own credentials.
+        assert (logical_id in bucket_grants) == (spec.logical in permissions.BUCKET_OBJECT_ACTIONS), spec.logical
+
+
+def test_every_function_logs_into_a_group_that_expires_and_has_alarms(app_template):
+    functions = app_template.find_resources("AWS::Serverless::Function")
+    groups = app_template.find_resources("AWS::Logs::LogGroup")
+    alarms = [a["Properties"] for a in app_template.find_resources("AWS::CloudWatch::Alarm").values()]
+    for logical_id, function in functions.items():
+        target = function["Properties"]["LoggingConfig"]["LogGroup"]["Ref"]
+        assert groups[target]["Properties"]["RetentionInDays"] > 0
+        watched = {a["MetricName"] for a in alarms if str(a["Dimensions"]).count(logical_id)}
+        assert watched == {"Errors", "Throttles"}, logical_id
+
+
+def test_the_api_stage_is_throttled(app_template):
+    api = next(iter(app_template.find_resources("AWS::Serverless::Api").values()))["Properties"]
+    settings = api["MethodSettings"][0]
+    assert settings["ThrottlingRateLimit"] > 0 and settings["ThrottlingBurstLimit"] >= settings["ThrottlingRateLimit"]
