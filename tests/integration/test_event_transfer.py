@@ -314,7 +314,7 @@ def test_an_admin_account_slipped_into_the_export_is_created_as_a_racer(target_s
     assert f"account {mallory}: roles granted: racer; NOT granted: admin (use --grant-roles)" in printed
     entry = next(a for a in json.loads(report_path.read_text())["accounts"] if a["username"] == mallory)
     assert (entry["roles_granted"], entry["roles_skipped"]) == (["racer"], ["admin"])
-    groups = _cognito(target_stack.config.storage_url).admin_list_groups_for_user(
+    groups = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).admin_list_groups_for_user(
         UserPoolId=target_stack.outputs.user_pool_id, Username=mallory)["Groups"]
     assert [g["GroupName"] for g in groups] == ["racer"]
 
@@ -332,7 +332,7 @@ def test_grant_roles_applies_the_exported_roles_and_says_so(target_stack, pristi
                    "--grant-roles") == 0
 
     assert f"account {desk}: roles granted: registration" in capsys.readouterr().out
-    groups = _cognito(target_stack.config.storage_url).admin_list_groups_for_user(
+    groups = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).admin_list_groups_for_user(
         UserPoolId=target_stack.outputs.user_pool_id, Username=desk)["Groups"]
     assert [g["GroupName"] for g in groups] == ["registration"]
 
