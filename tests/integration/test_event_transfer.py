@@ -297,20 +297,20 @@ def _bucket_keys(stack) -> set[str]:
 
 
 def test_an_admin_account_slipped_into_the_export_is_created_as_a_racer(target_stack, pristine_export,
-                                                                        tmp_path: Path,
-                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+                                                                        tmp_path: Path) -> None:
+    """Through the installed `drem import`, as the organiser runs it."""
+    from tests.cli.test_installed_cli import drem, ok
+
     folder = _copy_of(pristine_export, tmp_path)
     mallory = f"mallory{secrets.token_hex(3)}"
     _tamper_json(folder, "users.json", lambda users: users.append(
         {"username": mallory, "sub": "00000000-0000-4000-8000-0000000000aa", "email": None, "country_code": None,
          "groups": ["admin", "racer"], "enabled": True}))
     report_path = tmp_path / "report.json"
-    capsys.readouterr()
 
-    assert _import(folder, target_stack.config.state_dir, "--event-id", f"roles-{secrets.token_hex(3)}",
-                   "--report", str(report_path)) == 0
+    printed = ok(drem("import", str(folder), "--state-dir", str(target_stack.config.state_dir), "--event-id",
+                      f"roles-{secrets.token_hex(3)}", "--report", str(report_path), cwd=tmp_path))
 
-    printed = capsys.readouterr().out
     assert f"account {mallory}: roles granted: racer; NOT granted: admin (use --grant-roles)" in printed
     entry = next(a for a in json.loads(report_path.read_text())["accounts"] if a["username"] == mallory)
     assert (entry["roles_granted"], entry["roles_skipped"]) == (["racer"], ["admin"])
@@ -433,6 +433,23 @@ TAMPERINGS = {
     "board of a track the event lacks": (_board_of_a_track_the_event_lacks, None),
     "model record pointing at another key": (_model_record_moved_to_another_owner_key, None),
 }
+
+
+def test_the_installed_cli_refuses_a_tampered_export_and_writes_nothing(target_stack, pristine_export,
+                                                                        tmp_path: Path) -> None:
+    from tests.cli.test_installed_cli import drem
+
+    folder = _copy_of(pristine_export, tmp_path)
+    _archive_key_elsewhere(folder)
+    event_id = f"cli-tampered-{secrets.token_hex(3)}"
+    keys_before = _bucket_keys(target_stack)
+
+    refused = drem("import", str(folder), "--state-dir", str(target_stack.config.state_dir), "--event-id", event_id,
+                   cwd=tmp_path)
+
+    assert refused.returncode == 1 and "Traceback" not in refused.stderr
+    assert "archives are written only to their model's own key" in refused.stderr
+    _nothing_written(target_stack, event_id, keys_before)
 
 
 @pytest.mark.parametrize("case", TAMPERINGS, ids=list(TAMPERINGS))
