@@ -6,6 +6,8 @@ No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JS
 A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
 finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
 within seconds of a restart even if no race changes (see `RaceService`, `UserService`).
+Every PURGE_INTERVAL_S it also purges model uploads never completed (`ModelService.purge_stale_uploads`), which S3
+would otherwise keep for ever.
 
 With --storage-url it also forwards `/_storage/...` to the local storage server (drem_local.storage_gateway), so
 presigned uploads and downloads work from the venue network while storage itself stays on loopback.
@@ -27,6 +29,7 @@ from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
 
 REQUEST_QUEUE_SIZE = 1024
 SWEEP_INTERVAL_S = 2.0
+PURGE_INTERVAL_S = 10 * 60
 
 
 def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local", storage_url: str | None = None) -> Any:
@@ -104,6 +107,17 @@ def _finish_interrupted_registrations() -> None:
                  "at the desk (same name and email) to get a new one.", usernames=finished)
 
 
+def _purge_stale_uploads(stopping: threading.Event) -> None:
+    from chalicelib import logs
+    from chalicelib.storage.models import build_model_service
+
+    while not stopping.wait(PURGE_INTERVAL_S):
+        try:
+            build_model_service().purge_stale_uploads()
+        except Exception as exc:  # the next round tries again; serving must go on
+            logs.log(logging.WARNING, "purging stale uploads failed", error=repr(exc))
+
+
 def _quiet(*_args: Any) -> None:
     return None
 
@@ -156,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper", daemon=True).start()
+    threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
     host, port = server.server.server_address[:2]
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:

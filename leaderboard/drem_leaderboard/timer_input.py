@@ -16,10 +16,16 @@ from drem_leaderboard.race_clock import running_time_ms
 from drem_leaderboard.race_machine import begin_running, note_expiry, record_lap, resume_running
 
 
+# 2100-01-01T00:00:00Z. A device clock beyond it is a fault or an attack: 10**18 once froze a race (every later,
+# true crossing read as out of order) and 10**30 overflowed storage. A Pi without network time may start near 1970,
+# so there is no lower bound beyond 0.
+MAX_DEVICE_TIMESTAMP_MS = 4_102_444_800_000
+
+
 class StripEvent(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    timestamp_ms: int = Field(ge=0, description="device clock, ms since the epoch")
+    timestamp_ms: int = Field(ge=0, le=MAX_DEVICE_TIMESTAMP_MS, description="device clock, ms since the epoch")
     sensor: int = Field(ge=0, le=1000, description="GPIO number of the strip, e.g. 17 or 27")
     idempotency_key: str = Field(min_length=1, max_length=200)
 

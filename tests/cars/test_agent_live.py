@@ -150,12 +150,12 @@ def wait_until(condition, timeout_s: float, what: str, poll_s: float = 0.2) -> f
 
 
 def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin, tmp_path) -> None:
-    fleet_id, _device_id = activate_car(live_stack, admin, tmp_path, "car-race")
+    fleet_id, device_id = activate_car(live_stack, admin, tmp_path, "car-race")
     event = admin.post("/api/events", {"name": "Outage Cup", "event_type": "AWS_SUMMIT", "date": "2026-05-14",
                                        "country_code": "SE", "race_config": {"race_time_min": 10},
                                        "tracks": [{"track_id": "1", "fleet_id": fleet_id}]})
     event_id = event["event_id"]
-    race_id = admin.post(f"/api/events/{event_id}/races", {"track_id": "1",
+    race_id = admin.post(f"/api/events/{event_id}/races", {"track_id": "1", "car": device_id,  # a car times its race
                                                            "racer_username": live_stack.admin_username})["race_id"]
     car, agent, outbox = car_runtime(tmp_path, Safety(heartbeat_limit_s=60), event_id)
     agent.start()

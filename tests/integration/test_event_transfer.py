@@ -246,3 +246,268 @@ def test_a_corrupted_file_is_refused_before_anything_is_written(live_stack, targ
     users_after = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).list_users(
         UserPoolId=target_stack.outputs.user_pool_id)["Users"]
     assert len(users_after) == len(users_before)
+
+
+# --- a tampered export is hostile input -------------------------------------------------------------------------
+# Whoever edits an export can recompute the manifest's checksums, so each attack below re-signs the folder the way
+# an attacker would (`_tamper`); what stops it is import re-validating everything, not the checksums.
+
+@pytest.fixture(scope="module")
+def pristine_export(live_stack, source_event, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("pristine") / "export"
+    assert _export(source_event["event_id"], folder, live_stack.state_dir) == 0
+    return folder
+
+
+def _copy_of(folder: Path, tmp_path: Path) -> Path:
+    import shutil
+
+    return Path(shutil.copytree(folder, tmp_path / "tampered"))
+
+
+def _tamper(folder: Path, path: str, data: bytes) -> None:
+    """Write `path` and fix its checksums in the manifest, as an attacker with a text editor and sha256sum would."""
+    import hashlib
+
+    (folder / path).parent.mkdir(parents=True, exist_ok=True)
+    (folder / path).write_bytes(data)
+    manifest = json.loads((folder / MANIFEST).read_text())
+    manifest["files"][path] = {"bytes": len(data), "md5": hashlib.md5(data).hexdigest(),
+                               "sha256": hashlib.sha256(data).hexdigest()}
+    (folder / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+
+
+def _tamper_json(folder: Path, path: str, change) -> None:
+    document = json.loads((folder / path).read_text())
+    change(document)
+    _tamper(folder, path, (json.dumps(document, indent=2, sort_keys=True) + "\n").encode())
+
+
+def _nothing_written(target_stack, event_id: str, bucket_keys_before: set[str]) -> None:
+    target = connect(StackLocation.from_state_dir(target_stack.config.state_dir))
+    assert target.get_item("events", f"EVENT#{event_id}", "META") is None
+    assert target.partition("races", f"EVENT#{event_id}") == []
+    assert _bucket_keys(target_stack) == bucket_keys_before
+
+
+def _bucket_keys(stack) -> set[str]:
+    location = StackLocation.from_state_dir(stack.config.state_dir)
+    s3 = connect(location)._s3
+    return {o["Key"] for o in s3.list_objects_v2(Bucket=location.buckets["models"]).get("Contents", [])}
+
+
+def test_an_admin_account_slipped_into_the_export_is_created_as_a_racer(target_stack, pristine_export,
+                                                                        tmp_path: Path) -> None:
+    """Through the installed `drem import`, as the organiser runs it."""
+    from tests.cli.test_installed_cli import drem, ok
+
+    folder = _copy_of(pristine_export, tmp_path)
+    mallory = f"mallory{secrets.token_hex(3)}"
+    _tamper_json(folder, "users.json", lambda users: users.append(
+        {"username": mallory, "sub": "00000000-0000-4000-8000-0000000000aa", "email": None, "country_code": None,
+         "groups": ["admin", "racer"], "enabled": True}))
+    report_path = tmp_path / "report.json"
+
+    printed = ok(drem("import", str(folder), "--state-dir", str(target_stack.config.state_dir), "--event-id",
+                      f"roles-{secrets.token_hex(3)}", "--report", str(report_path), cwd=tmp_path))
+
+    assert f"account {mallory}: roles granted: racer; NOT granted: admin (use --grant-roles)" in printed
+    entry = next(a for a in json.loads(report_path.read_text())["accounts"] if a["username"] == mallory)
+    assert (entry["roles_granted"], entry["roles_skipped"]) == (["racer"], ["admin"])
+    groups = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).admin_list_groups_for_user(
+        UserPoolId=target_stack.outputs.user_pool_id, Username=mallory)["Groups"]
+    assert [g["GroupName"] for g in groups] == ["racer"]
+
+
+def test_grant_roles_applies_the_exported_roles_and_says_so(target_stack, pristine_export, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    folder = _copy_of(pristine_export, tmp_path)
+    desk = f"desk{secrets.token_hex(3)}"
+    _tamper_json(folder, "users.json", lambda users: users.append(
+        {"username": desk, "sub": "00000000-0000-4000-8000-0000000000bb", "email": None, "country_code": None,
+         "groups": ["registration"], "enabled": True}))
+    capsys.readouterr()
+
+    assert _import(folder, target_stack.config.state_dir, "--event-id", f"grant-{secrets.token_hex(3)}",
+                   "--grant-roles") == 0
+
+    assert f"account {desk}: roles granted: registration" in capsys.readouterr().out
+    groups = _cognito(target_stack.config.storage_url, target_stack.config.state_dir).admin_list_groups_for_user(
+        UserPoolId=target_stack.outputs.user_pool_id, Username=desk)["Groups"]
+    assert [g["GroupName"] for g in groups] == ["registration"]
+
+
+def _archive_key_elsewhere(folder: Path) -> str:
+    _tamper_json(folder, "archives.json", lambda entries: entries[0].update(key="public/index.html"))
+    return "public/index.html"
+
+
+def _traversal_archive_in_place_of_the_model(folder: Path) -> str:
+    from tests.unit.models_helpers import traversal_archive
+
+    entries = json.loads((folder / "archives.json").read_text())
+    hostile = traversal_archive()
+    _tamper(folder, entries[0]["file"], hostile)
+    import hashlib
+
+    _tamper_json(folder, "archives.json", lambda entries: entries[0].update(
+        md5=hashlib.md5(hostile).hexdigest(), bytes=len(hostile)))
+    return "fails the upload checks"
+
+
+def _other_valid_model_under_the_records_name(folder: Path) -> str:
+    import hashlib
+
+    entries = json.loads((folder / "archives.json").read_text())
+    other = onnx_archive(0.75)
+    _tamper(folder, entries[0]["file"], other)
+    _tamper_json(folder, "archives.json", lambda entries: entries[0].update(
+        md5=hashlib.md5(other).hexdigest(), bytes=len(other)))
+    return "does not match its record in models.json (model_md5)"
+
+
+def _live_pointer_in_races(folder: Path) -> str:
+    def add_live(document: dict) -> None:
+        race = document["items"][0]
+        document["items"].append({"pk": race["pk"], "sk": {"S": "LIVE#1"}, "race_id": {"S": race["sk"]["S"][5:]}})
+    _tamper_json(folder, "races.json", add_live)
+    return "finished races only"
+
+
+def _race_made_live_again(folder: Path) -> str:
+    def revive(document: dict) -> None:
+        doc = json.loads(document["items"][0]["doc"]["S"])
+        doc["race"]["status"] = "RUNNING"
+        document["items"][0]["doc"]["S"] = json.dumps(doc)
+    _tamper_json(folder, "races.json", revive)
+    return "only submitted or discarded races"
+
+
+def _deeply_nested_profiles(folder: Path) -> str:
+    _tamper(folder, "profiles.json", b"[" * 100_000 + b"]" * 100_000)
+    return "nested too deeply"
+
+
+def _board_of_a_track_the_event_lacks(folder: Path) -> str:
+    _tamper_json(folder, "leaderboards.json", lambda document: document["items"][0].update(sk={"S": "BOARD#99"}))
+    return "not a board or overlay of this event's tracks"
+
+
+def _model_record_moved_to_another_owner_key(folder: Path) -> str:
+    def move(document: dict) -> None:
+        record = next(i for i in document["items"] if i["pk"]["S"].startswith("OWNER#") and "s3_key" in i)
+        record["s3_key"] = {"S": "models/someone-else/" + record["model_id"]["S"] + ".tar.gz"}
+    _tamper_json(folder, "models.json", move)
+    return "is not this model's place in the bucket"
+
+
+def _board_body_edited_apart_from_its_rows(folder: Path) -> str:
+    def forge(document: dict) -> None:
+        item = next(i for i in document["items"] if i["sk"]["S"].startswith("BOARD#"))
+        body = json.loads(item["body"]["S"])
+        body["entries"] = [{**entry, "username": "Mallory", "fastest_lap_ms": 1} for entry in body["entries"]]
+        item["body"]["S"] = json.dumps(body)
+    _tamper_json(folder, "leaderboards.json", forge)
+    return "the board's public body does not match its rows"
+
+
+def _overlay_with_a_forged_lap(folder: Path) -> str:
+    def forge(document: dict) -> None:
+        overlay = next(i for i in document["items"] if i["sk"]["S"].startswith("OVERLAY#"))
+        body = json.loads(overlay["body"]["S"])
+        body["fastest_lap_ms"] = 1
+        overlay["body"]["S"] = json.dumps(body)
+    _tamper_json(folder, "leaderboards.json", forge)
+    return "the overlay does not describe race"
+
+
+TAMPERINGS = {
+    "board body edited apart from its rows": (_board_body_edited_apart_from_its_rows, None),
+    "overlay with a forged lap": (_overlay_with_a_forged_lap, None),
+    "archive key outside models/{owner}/": (_archive_key_elsewhere, "archives are written only to their model's"),
+    "traversal archive in place of the model": (_traversal_archive_in_place_of_the_model, None),
+    "another valid model under the record's name": (_other_valid_model_under_the_records_name, None),
+    "live pointer smuggled into races.json": (_live_pointer_in_races, None),
+    "race made live again": (_race_made_live_again, None),
+    "deeply nested JSON": (_deeply_nested_profiles, None),
+    "board of a track the event lacks": (_board_of_a_track_the_event_lacks, None),
+    "model record pointing at another key": (_model_record_moved_to_another_owner_key, None),
+}
+
+
+def test_the_installed_cli_refuses_a_tampered_export_and_writes_nothing(target_stack, pristine_export,
+                                                                        tmp_path: Path) -> None:
+    from tests.cli.test_installed_cli import drem
+
+    folder = _copy_of(pristine_export, tmp_path)
+    _archive_key_elsewhere(folder)
+    event_id = f"cli-tampered-{secrets.token_hex(3)}"
+    keys_before = _bucket_keys(target_stack)
+
+    refused = drem("import", str(folder), "--state-dir", str(target_stack.config.state_dir), "--event-id", event_id,
+                   cwd=tmp_path)
+
+    assert refused.returncode == 1 and "Traceback" not in refused.stderr
+    assert "archives are written only to their model's own key" in refused.stderr
+    _nothing_written(target_stack, event_id, keys_before)
+
+
+@pytest.mark.parametrize("case", TAMPERINGS, ids=list(TAMPERINGS))
+def test_a_tampered_export_is_refused_before_anything_is_written(case: str, target_stack, pristine_export,
+                                                                 tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    folder = _copy_of(pristine_export, tmp_path)
+    tamper, expected = TAMPERINGS[case]
+    said = tamper(folder)
+    event_id = f"tampered-{secrets.token_hex(3)}"
+    keys_before = _bucket_keys(target_stack)
+    capsys.readouterr()
+
+    assert _import(folder, target_stack.config.state_dir, "--event-id", event_id) == 1
+
+    err = capsys.readouterr().err
+    assert (expected or said) in err, err
+    assert "Traceback" not in err
+    _nothing_written(target_stack, event_id, keys_before)
+
+
+def test_forged_boards_with_matching_rows_are_recomputed_from_the_races(live_stack, target_stack, source_event,
+                                                                        pristine_export, tmp_path: Path) -> None:
+    """The careful forger edits the rows too and rebuilds body and etag with drem's own code: the import accepts the
+    file, but the boards the public sees are recomputed from the races (and the races are the app's own models)."""
+    from chalicelib.domain.leaderboards import BoardState, board_item_content
+    from drem_leaderboard.models import RankingMethod
+
+    folder = _copy_of(pristine_export, tmp_path)
+    method = RankingMethod(json.loads(json.loads((folder / "event.json").read_text())["items"][0]["doc"]["S"])
+                           ["race_config"]["ranking_method"])
+
+    def forge(document: dict) -> None:
+        boards = {i["sk"]["S"].removeprefix("BOARD#"): i for i in document["items"]
+                  if i["sk"]["S"].startswith("BOARD#")}
+        rows = {}
+        for track, item in boards.items():
+            if track == "combined":
+                continue
+            state = BoardState.model_validate_json(item["state"]["S"])
+            forged = [row.model_copy(update={"summary": row.summary.model_copy(update={"fastest_lap_ms": 1})})
+                      for row in state.rows]
+            rows[track] = forged
+            item["state"]["S"] = BoardState(rows=forged).model_dump_json()
+        for track, item in boards.items():
+            body = json.loads(item["body"]["S"])
+            chosen = rows[track] if track != "combined" else [r for t in sorted(rows) for r in rows[t]]
+            text, etag = board_item_content(body["event_id"], track, chosen, method, body["version"],
+                                            body["updated_at_ms"])
+            item["body"]["S"], item["etag"]["S"] = text, etag
+    _tamper_json(folder, "leaderboards.json", forge)
+    event_id = f"forged-{secrets.token_hex(3)}"
+
+    assert _import(folder, target_stack.config.state_dir, "--event-id", event_id) == 0
+
+    source_boards = _boards(live_stack.url, source_event["event_id"])
+    target_boards = _boards(target_stack.config.app_url, event_id)
+    for track in ("1", "2", "combined"):
+        assert [(e["username"], e["fastest_lap_ms"]) for e in target_boards[track]["entries"]] == \
+            [(e["username"], e["fastest_lap_ms"]) for e in source_boards[track]["entries"]]
+        assert all(e["fastest_lap_ms"] != 1 for e in target_boards[track]["entries"])

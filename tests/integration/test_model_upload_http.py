@@ -67,3 +67,24 @@ def test_cli_upload_prints_the_verdict(live_stack, tmp_path: Path, capsys: pytes
 def test_wrong_password_is_refused(live_stack) -> None:
     with pytest.raises(ApiError):
         ApiClient(live_stack.url).sign_in(live_stack.admin_username, "Not-the-password-1")
+
+
+def test_the_storage_server_enforces_the_ticket_the_app_signed(admin_api: ApiClient) -> None:
+    """moto alone ignores the presigned POST's policy; the durable server in front of it does not."""
+    ticket = admin_api.post("/api/models", {"filename": "ticket_abuse.tar.gz"})
+    upload = ticket["upload"]
+    other_key = upload["fields"]["key"].replace(ticket["model"]["model_id"], "someone-elses-model")
+
+    wrong_key = requests.post(upload["url"], data={**upload["fields"], "key": other_key},
+                              files={"file": ("x.tar.gz", onnx_archive(0.5))}, timeout=30)
+    empty = requests.post(upload["url"], data=upload["fields"], files={"file": ("x.tar.gz", b"")}, timeout=30)
+
+    assert wrong_key.status_code == 403 and "<Code>AccessDenied</Code>" in wrong_key.text
+    assert empty.status_code == 400 and "<Code>EntityTooSmall</Code>" in empty.text
+    with pytest.raises(ApiError) as not_arrived:  # nothing reached the ticket's own key either
+        admin_api.post(f"/api/models/{ticket['model']['model_id']}/complete")
+    assert "has not arrived yet" in str(not_arrived.value)
+    good = requests.post(upload["url"], data=upload["fields"], files={"file": ("x.tar.gz", onnx_archive(0.5))},
+                         timeout=30)
+    assert good.status_code in (200, 204), good.text
+    assert admin_api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]["status"] == "AVAILABLE"

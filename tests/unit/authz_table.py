@@ -49,9 +49,17 @@ class Case:
 # --- scenarios ------------------------------------------------------------------------------------------------------
 
 def racer_a_model(world: World, caller: str) -> Call:
-    """A model owned by racer A (racer B, and staff without model rights, must not reach it)."""
+    """A model owned by racer A (racer B, and staff without model rights, must not reach it). Uploaded and judged,
+    so racer A never holds more open upload tickets than a racer may (MAX_PENDING_UPLOADS)."""
+    import requests
+
     ticket = world.ok("POST", "/api/models", "racer_a", {"filename": "matrix-model.tar.gz"})
-    return Call({"model_id": ticket["model"]["model_id"]})
+    upload, model_id = ticket["upload"], ticket["model"]["model_id"]
+    posted = requests.post(upload["url"], data=upload["fields"], files={"file": ("m.tar.gz", b"not a model")},
+                           timeout=10)
+    assert posted.status_code in (200, 204), posted.text
+    world.ok("POST", f"/api/models/{model_id}/complete", "racer_a")
+    return Call({"model_id": model_id})
 
 
 def racer_a_model_evaluation(world: World, caller: str) -> Call:

@@ -199,6 +199,19 @@ def _control_characters(tmp: Path) -> list[Member]:
     return [*console_members(), Member("agent/model.pb\n\x1b[2Jfine.txt", b"owned")]
 
 
+def _bidi_override(tmp: Path) -> list[Member]:
+    # "Trojan Source": U+202E shows `model\u202egnp.pb` as `modelbp.png` to whoever reviews the listing.
+    return [*console_members(), Member("agent/model\u202egnp.pb", b"owned")]
+
+
+def _isolate_and_zero_width(tmp: Path) -> list[Member]:
+    return [*console_members(), Member("agent/\u2066model\u200b.pb\u2069", b"owned")]
+
+
+def _c1_control(tmp: Path) -> list[Member]:
+    return [*console_members(), Member("agent/next\x85line.txt", b"owned")]
+
+
 QUARANTINE_CASES: dict[str, tuple[Callable[[Path], list[Member]], str]] = {
     "path traversal": (_traversal, "'..'"),
     "traversal hidden in a folder": (_deep_traversal, "'..'"),
@@ -212,6 +225,9 @@ QUARANTINE_CASES: dict[str, tuple[Callable[[Path], list[Member]], str]] = {
     "backslash traversal": (_backslash_traversal, "backslash"),
     "drive letter": (_drive_letter, "drive letter"),
     "control characters in name": (_control_characters, "control characters"),
+    "bidi override in name": (_bidi_override, "U+202E"),
+    "bidi isolate and zero-width space in name": (_isolate_and_zero_width, "U+2066"),
+    "C1 control (NEL) in name": (_c1_control, "U+0085"),
 }
 
 
@@ -245,6 +261,59 @@ def test_traversal_in_the_middle_does_not_leave_earlier_files_behind(tmp_path: P
         safe_extract(io.BytesIO(archive), tmp_path)
 
     assert list(tmp_path.iterdir()) == []
+
+
+# --- data smuggled after the tar end marker: QUARANTINED ------------------------------------------------------------
+
+_HIDDEN = [Member("../escaped.txt", b"owned")]
+
+
+def _members_tar_i_would_extract(archive: bytes) -> list[str]:
+    """What `tar --ignore-zeros` (and bsdtar, which reads on past the marker) would unpack: the attack is real."""
+    with tarfile.open(fileobj=io.BytesIO(gzip.decompress(archive)), mode="r:", ignore_zeros=True) as reader:
+        return reader.getnames()
+
+
+def _without_end_marker(tar: bytes) -> bytes:
+    with tarfile.open(fileobj=io.BytesIO(tar), mode="r:") as reader:
+        reader.getmembers()
+        return tar[: reader.offset]
+
+
+SMUGGLED_CASES: dict[str, Callable[[], bytes]] = {
+    "tar member after the end marker": lambda: gzip.compress(tar_bytes(console_members()) + tar_bytes(_HIDDEN)),
+    "second gzip member": lambda: tar_gz(console_members()) + tar_gz(_HIDDEN),
+    "member after a lone zero block": lambda: gzip.compress(
+        _without_end_marker(tar_bytes(console_members())) + bytes(tarfile.BLOCKSIZE) + tar_bytes(_HIDDEN)),
+    "member far past tarfile's read-ahead": lambda: gzip.compress(
+        tar_bytes(console_members()) + bytes(256 * 1024) + tar_bytes(_HIDDEN)),
+}
+
+
+@pytest.mark.parametrize("case", SMUGGLED_CASES, ids=list(SMUGGLED_CASES))
+def test_data_after_the_tar_end_marker_is_quarantined(case: str, tmp_path: Path) -> None:
+    archive = SMUGGLED_CASES[case]()
+    assert "../escaped.txt" in _members_tar_i_would_extract(archive)
+
+    report = inspect_archive(io.BytesIO(archive))
+
+    assert report.status is QUARANTINED, report
+    assert "after the tar end marker" in (report.reason or "")
+    with pytest.raises(ArchiveRejected):
+        safe_extract(io.BytesIO(archive), tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("padding", [
+    pytest.param(lambda tar: gzip.compress(tar + bytes(64 * 1024)), id="extra zero records"),
+    pytest.param(lambda tar: gzip.compress(tar) + gzip.compress(bytes(4096)), id="a gzip member of zeros"),
+    pytest.param(lambda tar: gzip.compress(tar) + bytes(512), id="zeros after the gzip stream"),
+])
+def test_zero_padding_after_the_end_marker_is_still_a_valid_model(padding: Callable[[bytes], bytes]) -> None:
+    report = inspect_archive(io.BytesIO(padding(tar_bytes(console_members()))))
+
+    assert report.status is ArchiveStatus.AVAILABLE, report.reason
+    assert report.model_md5 == hashlib.md5(FAKE_FROZEN_GRAPH).hexdigest()
 
 
 # --- broken or unusable: NOT_VALID --------------------------------------------------------------------------------

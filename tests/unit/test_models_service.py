@@ -89,3 +89,78 @@ def test_seed_sample_models_is_idempotent_and_validates_like_any_upload(stack: A
     staff = User(sub="sub-op", username="olga", groups=frozenset({"operator"}))
     listed = service.list_models(staff, ListQuery())
     assert sorted(m.name for m in listed.models) == ["Centerline-AtoZ", "evil"]
+
+
+class SteppedClock:
+    """The service's clock (ISO text, as records store it), moved by hand."""
+
+    def __init__(self) -> None:
+        from datetime import UTC, datetime
+
+        self.now = datetime(2026, 5, 14, 9, 0, tzinfo=UTC)
+
+    def __call__(self) -> str:
+        return self.now.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+    def advance(self, **delta: float) -> None:
+        from datetime import timedelta
+
+        self.now += timedelta(**delta)
+
+
+def _objects(aws_clients: Any, bucket: str) -> list[str]:
+    return [o["Key"] for o in aws_clients.s3.list_objects_v2(Bucket=bucket).get("Contents", [])]
+
+
+def test_an_upload_never_completed_is_purged_with_its_object_once_its_link_is_long_expired(stack: Any,
+                                                                                           aws_clients: Any) -> None:
+    from chalicelib.domain.models import STALE_UPLOAD_AFTER_S
+
+    clock = SteppedClock()
+    service = build_model_service(clock=clock)
+    bucket = stack.buckets["models"]
+    abandoned = service.request_upload(ALICE, UploadRequest(filename="abandoned.tar.gz"))
+    aws_clients.s3.put_object(Bucket=bucket, Key=abandoned.model.upload_key, Body=os.urandom(4096))  # never completed
+    clock.advance(seconds=STALE_UPLOAD_AFTER_S - 60)
+    recent = service.request_upload(ALICE, UploadRequest(filename="recent.tar.gz"))
+    assert service.store.get(ALICE.sub, abandoned.model.model_id).status is ModelStatus.UPLOADED  # not yet stale
+
+    clock.advance(seconds=120)
+    still_pending = service.purge_stale_uploads()
+
+    purged = service.store.get(ALICE.sub, abandoned.model.model_id)
+    assert purged.status is ModelStatus.DELETED and "never completed" in (purged.reason or "")
+    assert abandoned.model.upload_key not in _objects(aws_clients, bucket)
+    assert [r.model_id for r in still_pending] == [recent.model.model_id]
+    assert [m.model_id for m in service.list_models(ALICE, ListQuery()).models] == [recent.model.model_id]
+
+
+def test_a_racer_cannot_hold_more_than_a_few_open_upload_tickets(stack: Any, aws_clients: Any) -> None:
+    from chalicelib.domain.errors import RateLimited
+    from chalicelib.domain.models import MAX_PENDING_UPLOADS, STALE_UPLOAD_AFTER_S
+
+    clock = SteppedClock()
+    service = build_model_service(clock=clock)
+    tickets = [service.request_upload(ALICE, UploadRequest(filename=f"m{i}.tar.gz"))
+               for i in range(MAX_PENDING_UPLOADS)]
+
+    with pytest.raises(RateLimited) as refused:
+        service.request_upload(ALICE, UploadRequest(filename="one-more.tar.gz"))
+    assert f"You have {MAX_PENDING_UPLOADS} uploads that were never completed" in refused.value.message
+
+    # Completing one (the legitimate path) frees a place; so does the wait for the others to go stale.
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=tickets[0].model.upload_key, Body=onnx_archive())
+    assert service.complete(ALICE, tickets[0].model.model_id).status is ModelStatus.AVAILABLE
+    service.request_upload(ALICE, UploadRequest(filename="after-completing.tar.gz"))
+    clock.advance(seconds=STALE_UPLOAD_AFTER_S + 1)
+    service.request_upload(ALICE, UploadRequest(filename="after-the-wait.tar.gz"))
+
+
+def test_deleting_a_pending_upload_removes_what_was_uploaded(stack: Any, aws_clients: Any) -> None:
+    service = build_model_service()
+    ticket = service.request_upload(ALICE, UploadRequest(filename="changed-my-mind.tar.gz"))
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=onnx_archive())
+
+    service.delete(ALICE, ticket.model.model_id)
+
+    assert _objects(aws_clients, stack.buckets["models"]) == []

@@ -168,3 +168,51 @@ def test_a_board_write_failing_after_the_lap_is_stored_still_acknowledges_the_la
     assert lap["action"] == "lap" and _board_laps(desk, eid) == 0
     assert desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))["replayed"] is True
     assert _board_laps(desk, eid) == 1
+
+
+@pytest.mark.parametrize("timestamp_ms", [10**18, 10**30, 4_102_444_800_001])
+def test_a_device_clock_past_2100_is_a_400_and_the_race_keeps_counting(desk: Desk, clock: FakeClock, timed_track,
+                                                                     timestamp_ms: int) -> None:
+    eid, rid, timer = timed_track
+    desk.ok(desk.strip(timer, eid, T0, "start"))
+
+    absurd = desk.strip(timer, eid, timestamp_ms, "absurd")
+
+    assert absurd.status_code == 400, absurd.body
+    error = json.loads(absurd.body)["error"]
+    assert error["field"] == "timestamp_ms" and "4102444800000" in error["message"]
+    # Before the bound, 10**18 froze the race: every true crossing after it read as out of order.
+    lap = desk.ok(desk.strip(timer, eid, T0 + 11_000, "true lap"))
+    assert lap["action"] == "lap" and lap["lap"]["time_ms"] == 11_000
+    assert [l["time_ms"] for l in _race(desk, eid, rid)["laps"]] == [11_000]
+
+
+def test_a_second_timer_in_the_fleet_cannot_lap_a_race_another_timer_is_timing(desk: Desk, clock: FakeClock,
+                                                                             timed_track) -> None:
+    eid, rid, timer = timed_track
+    track_fleet = desk.ok(desk.call("GET", f"/api/events/{eid}"))["tracks"][0]["fleet_id"]
+    intruder = desk.device(track_fleet, "timer-2")
+    desk.ok(desk.strip(timer, eid, T0, "start"))
+
+    refused = desk.strip(intruder, eid, T0 + 3_500, "fake lap")
+
+    assert refused.status_code == 403
+    assert f"Race {rid} is timed by device" in json.loads(refused.body)["error"]["message"]
+    assert _race(desk, eid, rid)["laps"] == []
+    assert desk.ok(desk.strip(timer, eid, T0 + 12_000, "real lap"))["lap"]["time_ms"] == 12_000
+
+
+def test_a_car_times_only_the_race_it_is_the_car_of(desk: Desk, clock: FakeClock) -> None:
+    fleet = desk.fleet()
+    own_car = desk.device(fleet, "car-a", kind="car")
+    other_car = desk.device(fleet, "car-b", kind="car")
+    desk.users.create("cara", ("racer",))
+    eid = desk.event(tracks=[{"track_id": "1", "fleet_id": fleet}])["event_id"]
+    rid = desk.ok(desk.create_race(eid, "cara", car="car-a"), 201)["race_id"]
+
+    refused = desk.strip(other_car, eid, T0, "b-start")
+
+    assert refused.status_code == 403
+    assert f"is not the car of race {rid}" in json.loads(refused.body)["error"]["message"]
+    assert desk.ok(desk.strip(own_car, eid, T0, "a-start"))["action"] == "start"
+    assert desk.ok(desk.strip(own_car, eid, T0 + 9_000, "a-lap"))["lap"]["time_ms"] == 9_000

@@ -222,3 +222,29 @@ def test_self_delete_removes_the_racers_models(api, users, aws_clients, stack):
     assert record.status is ModelStatus.DELETED and record.owner_username.startswith("Deleted racer ")
     listed = aws_clients.s3.list_objects_v2(Bucket=stack.buckets["models"]).get("Contents", [])
     assert listed == []
+
+
+def test_self_delete_also_erases_models_the_racer_had_already_deleted(api, users, aws_clients, stack, client,
+                                                                      chalice_app):
+    from chalicelib.domain.models import ModelStatus
+    from chalicelib.storage.models import build_model_service
+    from tests.unit.models_helpers import ModelsApi, bearer as json_bearer, ensure_model_routes, onnx_archive
+
+    ensure_model_routes(chalice_app)
+    token = users.access_token("binned", ("racer",))
+    racer = ModelsApi(client, json_bearer(token))
+    kept = racer.upload_and_complete("kept.tar.gz", onnx_archive(0.1))
+    binned = racer.upload_and_complete("binned.tar.gz", onnx_archive(0.2))
+    assert racer.delete(binned["model_id"]).status_code == 200  # soft delete: the archive stays in the bucket
+    bucket = stack.buckets["models"]
+    assert len(aws_clients.s3.list_objects_v2(Bucket=bucket).get("Contents", [])) >= 2
+    sub = call(api, "GET", "/api/me", token=token)[1]["sub"]
+
+    status, body = call(api, "DELETE", "/api/me", {"confirm": "binned"}, token=token)
+
+    assert status == 200 and body["items_erased"] == 2, body
+    assert aws_clients.s3.list_objects_v2(Bucket=bucket).get("Contents", []) == []
+    store = build_model_service().store
+    for model in (kept, binned):
+        record = store.get(sub, model["model_id"])
+        assert record.status is ModelStatus.DELETED and record.owner_username.startswith("Deleted racer ")

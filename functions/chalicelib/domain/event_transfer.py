@@ -20,8 +20,14 @@ re-activate on the target, into the imported fleets), live races (refused: submi
 commands, strip idempotency records, raw uploads and quarantined uploads, soft-deleted models.
 
 Accounts are recreated on import with the same username (or matched by username where the target has one), and
-Cognito gives them new subs; every old sub in every item is rewritten to the new one (the mapping goes into the
-import report). `--event-id NEW` rewrites the event id the same way in the event-scoped items.
+Cognito gives them new subs. A created account gets the racer role only: staff roles in users.json are granted only
+with `grant_roles=True` (`drem import --grant-roles`), and the report lists, per account, the roles granted and
+skipped. Matched accounts keep their own roles. Every old sub in every item is rewritten to the new one (the
+mapping goes into the import report). `--event-id NEW` rewrites the event id the same way in the event-scoped items.
+
+A tampered export is hostile input: checksums only catch accidents, so `read_export` also re-validates every item
+and archive (`chalicelib.domain.import_checks`: the app's own models, keys only under their expected prefixes,
+every archive through the upload validator), and `run_import` has the target recompute the boards from the races.
 
 Everything is read and validated before the first write; writes then go accounts → archives → shared items
 (fleets, profiles, models; kept where the target already has them) → races → boards → the event item last, so an
@@ -42,6 +48,7 @@ from typing import Any, Protocol
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from chalicelib.domain.errors import Conflict, DremError, InvalidInput, NotFound
+from chalicelib.domain.import_checks import check_bundle
 
 FORMAT = "drem-event-export"
 FORMAT_VERSION = 1
@@ -58,6 +65,7 @@ _ALLOWED_PK = {"fleet": ("FLEET#",), "profiles": ("USER#", "USERNAME#"), "models
 _EVENT_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 _ATTRIBUTE_TYPES = frozenset({"S", "N", "B", "BOOL", "NULL", "M", "L", "SS", "NS", "BS"})
 _SYMBOLS = "!#%*+-=?@^_"
+RACER_ROLE = "racer"  # the role every created account gets; staff roles need grant_roles
 
 Item = dict[str, Any]  # one DynamoDB item in attribute-value JSON
 
@@ -119,6 +127,7 @@ class StackWriter(StackReader, Protocol):
     def create_account(self, account: Account, temporary_password: str) -> str: ...
     def put_new_item(self, table: str, item: Item) -> bool: ...
     def write_object(self, bucket: str, key: str, data: bytes) -> None: ...
+    def recompute_boards(self, event_item: Item) -> None: ...
 
 
 # --- export ---------------------------------------------------------------------------------------------------------
@@ -266,8 +275,10 @@ def read_export(folder: Path) -> EventBundle:
     usernames = [a.username.casefold() for a in accounts]
     if len(usernames) != len(set(usernames)):
         raise InvalidExport(f"{USERS_FILE}: a username appears twice.", field="username")
-    return EventBundle(event_id=event_id, items=items, accounts=accounts, archives=archives,
-                       archive_data=archive_data)
+    bundle = EventBundle(event_id=event_id, items=items, accounts=accounts, archives=archives,
+                         archive_data=archive_data)
+    check_bundle(bundle)
+    return bundle
 
 
 def _verified_files(folder: Path, listed: dict[str, Any]) -> dict[str, bytes]:
@@ -340,6 +351,8 @@ class AccountAction:
     action: str  # "create" or "match"
     target_sub: str | None = None  # known up front for "match", after creation for "create"
     temporary_password: str | None = None
+    roles_granted: list[str] = field(default_factory=list)  # for "create": what the new account gets
+    roles_skipped: list[str] = field(default_factory=list)  # exported roles not granted (no --grant-roles)
 
 
 @dataclass
@@ -353,9 +366,12 @@ class ImportPlan:
 
 
 def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_event_id: str | None = None,
-                passwords: dict[str, str] | None = None,
-                generate: Callable[[], str] | None = None) -> ImportPlan:
-    """Decide everything (and refuse clearly) before the first write."""
+                passwords: dict[str, str] | None = None, generate: Callable[[], str] | None = None,
+                grant_roles: bool = False) -> ImportPlan:
+    """Decide everything (and refuse clearly) before the first write.
+
+    Roles are power over the target event: an export (a file anyone may have edited) grants none silently. Without
+    `grant_roles`, a created account is a racer only, and its other exported roles are reported as skipped."""
     event_id = new_event_id or bundle.event_id
     if not _EVENT_ID.match(event_id):
         raise InvalidInput("Use 1-64 letters, digits, '-' or '_' for the event id.", field="event_id")
@@ -377,7 +393,10 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
         problem = password_problem(password)
         if problem:
             raise InvalidInput(f"The password file's password for {account.username} {problem}.", field="password")
-        actions.append(AccountAction(account, "create", temporary_password=password))
+        granted = sorted(account.groups) if grant_roles else [RACER_ROLE]
+        skipped = sorted(set(account.groups) - set(granted))
+        actions.append(AccountAction(account, "create", temporary_password=password, roles_granted=granted,
+                                     roles_skipped=skipped))
 
     plan = ImportPlan(bundle=bundle, event_id=event_id, accounts=actions)
     matched = {a.account.sub: a.target_sub for a in actions if a.action == "match"}
@@ -409,7 +428,7 @@ class ImportResult:
     event_id: str
     source_event_id: str
     sub_map: dict[str, str]
-    accounts: list[dict[str, str]]
+    accounts: list[dict[str, Any]]
     written: dict[str, int]
     archives_written: int
     kept: list[str]
@@ -429,7 +448,8 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
         sub_map: dict[str, str] = {}
         for action in plan.accounts:
             if action.action == "create":
-                action.target_sub = target.create_account(action.account, action.temporary_password or "")
+                account = action.account.model_copy(update={"groups": action.roles_granted})
+                action.target_sub = target.create_account(account, action.temporary_password or "")
                 written.append(f"account {action.account.username}")
             sub_map[action.account.sub] = action.target_sub or action.account.sub
         bundle = remap(plan.bundle, sub_map, plan.event_id)
@@ -443,6 +463,9 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
         counts: dict[str, int] = {}
         originals = {t: plan.bundle.items.get(t, []) for t in ITEM_FILES.values()}
         for table in ITEM_FILES.values():
+            if table == "events":  # before the event shows: imported board bodies are never what the public sees
+                step = "recomputing the boards from the races"
+                target.recompute_boards(bundle.items["events"][0])
             step = f"writing the {table} table"
             counts[table] = 0
             for original, item in zip(originals[table], bundle.items.get(table, []), strict=True):
@@ -461,7 +484,8 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
     except Exception as exc:  # an unexpected failure still must say what is already on the target
         raise PartialImport(_partial_message(step, repr(exc), written), written) from exc
     accounts = [{"username": a.account.username, "old_sub": a.account.sub, "new_sub": a.target_sub or "",
-                 "action": "created" if a.action == "create" else "matched existing"} for a in plan.accounts]
+                 "action": "created" if a.action == "create" else "matched existing",
+                 "roles_granted": a.roles_granted, "roles_skipped": a.roles_skipped} for a in plan.accounts]
     return ImportResult(event_id=plan.event_id, source_event_id=plan.bundle.event_id, sub_map=sub_map,
                         accounts=accounts, written=counts, archives_written=archives_written, kept=plan.kept,
                         temporary_passwords={a.account.username: a.temporary_password or ""
@@ -539,8 +563,11 @@ def parse_password_file(text: str) -> dict[str, str]:
     """`{"username": "password", ...}` JSON, or lines `username password` (blank lines and # comments skipped)."""
     stripped = text.strip()
     if stripped.startswith("{"):
-        data = json.loads(stripped)
-        if not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+        try:
+            data = json.loads(stripped)
+        except (ValueError, RecursionError):
+            raise InvalidInput("The password file is not valid JSON.", field="password_file") from None
+        if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
             raise InvalidInput("The password file must map usernames to password strings.", field="password_file")
         return data
     passwords: dict[str, str] = {}
@@ -585,3 +612,5 @@ def _load_json_text(where: str, text: str, field_name: str | None) -> Any:
         return json.loads(text)
     except ValueError as exc:
         raise InvalidExport(f"{where} is not valid JSON ({exc}).", field=field_name) from None
+    except RecursionError:  # json recurses per nesting level; a hand-made `[[[[...` would crash the CLI
+        raise InvalidExport(f"{where} is nested too deeply.", field=field_name) from None

@@ -320,6 +320,14 @@ class LeaderboardPublisher:
         raise Conflict("The leaderboard is being updated by someone else; try again.")
 
 
+def board_item_content(event_id: str, track_id: str, rows: Iterable[BoardRow], method: RankingMethod, version: int,
+                       updated_at_ms: int) -> tuple[str, str]:
+    """(body, etag) of the board item these rows give, exactly as the publisher writes it; `drem import` uses it to
+    refuse an exported board whose public body was edited apart from its rows."""
+    board = _ranked(rows, method, track_id, version)
+    return _board_body(event_id, board, updated_at_ms), board.etag
+
+
 def _rows(state: str) -> dict[str, BoardRow]:
     if not state:
         return {}

@@ -3,7 +3,9 @@
 An upload is hostile input. `inspect_archive` streams the archive once, entirely in memory, and never extracts:
 
 * QUARANTINED: anything that could write outside a sandbox if extracted (absolute paths, `..`, links, device files,
-  fifos, NUL/backslash/drive-letter tricks, control characters in names).
+  fifos, NUL/backslash/drive-letter tricks, control, bidi-override and other invisible format characters in names),
+  and any data hidden after the tar end marker (a later gzip member or tar members that `tar -i`, `bsdtar` or a
+  careless extractor would still unpack).
 * NOT_VALID: broken or unusable, with a reason a racer can act on (not gzip, truncated, not tar, too big, too many
   members, bad or missing `model_metadata.json`, no model file, duplicate names).
 * AVAILABLE: the facts drem keeps about the model (kind, md5 of the model file and of the metadata, sensors, ...).
@@ -26,7 +28,9 @@ import re
 import shutil
 import tarfile
 import tempfile
+import unicodedata
 import zlib
+from collections import deque
 from collections.abc import Callable
 from enum import StrEnum
 from pathlib import Path
@@ -56,6 +60,13 @@ _ZIP_MAGIC = b"PK\x03\x04"
 _META_HEADER_TYPES = (tarfile.GNUTYPE_LONGNAME, tarfile.GNUTYPE_LONGLINK, tarfile.XHDTYPE, tarfile.XGLTYPE,
                       tarfile.SOLARIS_XHDTYPE)
 _CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
+# Unicode categories a file name never needs and a reviewer cannot see: C1 controls (Cc), format characters such as
+# the bidi overrides U+202E/U+2066-2069 and zero-width joiners (Cf, the "Trojan Source" trick: `model\u202egnp.pb`
+# shows as `modelbp.png`), and line/paragraph separators (Zl, Zp).
+_INVISIBLE_CATEGORIES = frozenset({"Cc", "Cf", "Zl", "Zp"})
+# How much of the inflated stream is kept behind the reader: tarfile's stream mode reads ahead by at most one record
+# (20 blocks), so the bytes after the end marker it already consumed are always inside this window.
+_TAIL_WINDOW = 4 * tarfile.RECORDSIZE
 
 
 class ArchiveStatus(StrEnum):
@@ -357,12 +368,12 @@ class _Scanner:
             ),
         )
         try:
-            with tarfile.open(fileobj=inflated, mode="r|", tarinfo=_guarded_tarinfo(self._limits)) as archive:
+            tail = _TailWindow(inflated, _TAIL_WINDOW)
+            with tarfile.open(fileobj=tail, mode="r|", tarinfo=_guarded_tarinfo(self._limits)) as archive:
                 for member in archive:
                     self._take(archive, member)
-            # Read the compressed stream to its end so a truncated or corrupted gzip is noticed (the CRC sits last).
-            while inflated.read(_CHUNK):
-                pass
+                end_marker = archive.offset  # where tarfile met the first zero block
+            self._check_nothing_after_end(tail, end_marker)
         except _Problem:
             raise
         except EOFError:
@@ -373,6 +384,27 @@ class _Scanner:
             raise _not_valid(f"the archive does not contain a valid tar file ({error})") from None
         except (ValueError, UnicodeError, OverflowError) as error:  # malformed numbers/text inside tar headers
             raise _not_valid(f"the archive's tar headers are malformed ({type(error).__name__})") from None
+
+    @staticmethod
+    def _check_nothing_after_end(tail: _TailWindow, end_marker: int) -> None:
+        """Every byte after the tar end marker must be zero padding, up to the end of the last gzip member.
+
+        tarfile stops at the first zero block, but `tar --ignore-zeros`, bsdtar and naive extractors go on; a member
+        after the marker, or a second gzip member (gzip readers concatenate them), would never have been checked.
+        Reading to the end also makes a truncated or corrupt gzip noticed (the CRC sits last)."""
+        already_read = tail.since(end_marker)
+        if already_read is None:  # cannot happen with tarfile's read-ahead; refuse rather than guess
+            raise _not_valid("the archive's tar end marker could not be located")
+        chunk = already_read
+        while True:
+            if chunk.strip(b"\x00"):
+                raise _quarantine(
+                    "the archive hides data after the tar end marker (a second archive or gzip member that other "
+                    "tools would unpack); re-create it with a single `tar -czf`"
+                )
+            chunk = tail.read(_CHUNK)
+            if not chunk:
+                return
 
     def _take(self, archive: tarfile.TarFile, member: tarfile.TarInfo) -> None:
         facts = self._facts
@@ -497,6 +529,42 @@ class _Scanner:
         return ("onnx" if onnx else "tensorflow"), member
 
 
+class _TailWindow(io.RawIOBase):
+    """Passes reads through, counting the position and keeping the last `window` bytes read, so the bytes tarfile
+    read ahead past its end marker can be checked too."""
+
+    def __init__(self, inner: IO[bytes], window: int) -> None:
+        self._inner = inner
+        self._window = window
+        self._kept: deque[bytes] = deque()
+        self._kept_bytes = 0
+        self.position = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._inner.read(size)
+        self.position += len(data)
+        self._kept.append(data)
+        self._kept_bytes += len(data)
+        while self._kept and self._kept_bytes - len(self._kept[0]) >= self._window:
+            self._kept_bytes -= len(self._kept.popleft())
+        return data
+
+    def readinto(self, buffer) -> int:  # type: ignore[override]
+        data = self.read(len(buffer))
+        buffer[: len(data)] = data
+        return len(data)
+
+    def since(self, offset: int) -> bytes | None:
+        """The bytes read from `offset` up to the current position, or None if they are no longer kept."""
+        start = self.position - self._kept_bytes
+        if offset < start or offset > self.position:
+            return None
+        return b"".join(self._kept)[offset - start:]
+
+
 class _Prefixed(io.RawIOBase):
     """Puts back the magic bytes we peeked at, for sources that cannot seek."""
 
@@ -536,6 +604,12 @@ def _vetted_name(raw: str, limits: ArchiveLimits) -> str | None:
         raise _quarantine(f"member name {raw!r} contains a NUL byte (tools disagree on where such a name ends)")
     if _CONTROL_CHARACTERS.search(raw):
         raise _quarantine(f"member name {raw!r} contains control characters")
+    invisible = next((char for char in raw if unicodedata.category(char) in _INVISIBLE_CATEGORIES), None)
+    if invisible is not None:
+        raise _quarantine(
+            f"member name {raw!r} contains the invisible or bidi-override character U+{ord(invisible):04X} "
+            f"({unicodedata.name(invisible, 'unnamed')}), which makes a name display as something it is not"
+        )
     try:
         raw.encode("utf-8")
     except UnicodeEncodeError:

@@ -221,6 +221,8 @@ def lineage_from_archive(models: ModelService, limit: int) -> LineageReader:
             document = json.loads(files[LINEAGE_MEMBER])
         except ValueError:
             raise InvalidInput("it is not valid JSON", field=LINEAGE_MEMBER) from None
+        except RecursionError:  # json recurses once per nesting level: `[[[[...` thousands deep blows the stack
+            raise InvalidInput("it is nested too deeply", field=LINEAGE_MEMBER) from None
         return document if isinstance(document, dict) else None
     return read
 

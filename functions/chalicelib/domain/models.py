@@ -14,8 +14,8 @@ import hashlib
 import logging
 import re
 import secrets
-from collections.abc import Callable
-from datetime import UTC, datetime
+from collections.abc import Callable, Iterator
+from datetime import UTC, datetime, timedelta
 from enum import StrEnum
 from pathlib import Path
 from typing import IO, Any, Protocol
@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib import logs
 from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
+from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, RateLimited
 from chalicelib.domain.model_archive import (DEFAULT_LIMITS, ArchiveLimits, ArchiveStatus, inspect_archive,
                                              model_name_from_filename)
 from chalicelib.domain.model_conversion import ConversionOutcome
@@ -32,6 +32,12 @@ from chalicelib.domain.ownership import require_owner_or_role
 
 SAMPLE_OWNER = "default"
 UPLOAD_EXPIRES_S = 15 * 60
+# An upload still not completed this long after its ticket was issued can never arrive any more (the signed POST
+# expired an hour before): its record and any object it left are purged.
+STALE_UPLOAD_AFTER_S = UPLOAD_EXPIRES_S + 60 * 60
+# Upload tickets a racer may hold open at once: each lets up to max_upload_bytes land in the bucket before anything
+# judges it, so an open-ended number would let one racer fill the disk.
+MAX_PENDING_UPLOADS = 5
 DOWNLOAD_EXPIRES_S = 5 * 60
 MODEL_ID_PATTERN = r"^[A-Za-z0-9_-]{1,80}$"
 # Who may see and act on every racer's models.
@@ -162,7 +168,8 @@ class ModelStore(Protocol):
     def replace(self, record: ModelRecord, *, expected_status: ModelStatus) -> None: ...
     def get(self, owner_sub: str, model_id: str) -> ModelRecord | None: ...
     def get_by_id(self, model_id: str) -> ModelRecord | None: ...
-    def list_owner(self, owner_sub: str, *, limit: int, next_token: str | None) -> ModelPage: ...
+    def list_owner(self, owner_sub: str, *, limit: int, next_token: str | None,
+                   include_deleted: bool = False) -> ModelPage: ...
     def list_all(self, *, limit: int, next_token: str | None) -> ModelPage: ...
     def find_available_by_md5(self, owner_sub: str, model_md5: str) -> list[ModelRecord]: ...
 
@@ -182,6 +189,11 @@ class ModelFiles(Protocol):
     def put(self, key: str, data: bytes) -> None: ...
     def copy(self, source: str, destination: str) -> None: ...
     def delete(self, key: str) -> None: ...
+
+
+def _parse_time(stamp: str) -> datetime:
+    parsed = datetime.fromisoformat(stamp.replace("Z", "+00:00"))
+    return parsed if parsed.tzinfo else parsed.replace(tzinfo=UTC)
 
 
 def utc_now() -> str:
@@ -248,6 +260,11 @@ class ModelService:
 
     def request_upload(self, principal: Principal, request: UploadRequest) -> UploadTicket:
         owner_sub, username = _user_of(principal)
+        pending = self.purge_stale_uploads(owner_sub)
+        if len(pending) >= MAX_PENDING_UPLOADS:
+            raise RateLimited(f"You have {len(pending)} uploads that were never completed; finish or delete one "
+                              f"(or wait {STALE_UPLOAD_AFTER_S // 60} minutes for them to expire) before starting "
+                              "another.", field="filename")
         record = self._new_record(owner_sub, username, request.model_name, self._new_id())
         self.store.create(record)
         post = self.files.presign_upload(record.upload_key, max_bytes=self.max_upload_bytes,
@@ -388,7 +405,41 @@ class ModelService:
             self.store.replace(deleted, expected_status=record.status)
         except ModelChanged:
             return self.delete(principal, model_id)
+        if record.status is ModelStatus.UPLOADED:  # nothing will ever judge (and so remove) what was uploaded
+            self.files.delete(record.upload_key)
         return deleted
+
+    def purge_stale_uploads(self, owner_sub: str | None = None) -> list[ModelRecord]:
+        """Purge uploads never completed within STALE_UPLOAD_AFTER_S (their object deleted, the record DELETED with
+        the reason), for one owner or, with None, for everyone; returns the uploads still pending."""
+        cutoff = (_parse_time(self._clock()) - timedelta(seconds=STALE_UPLOAD_AFTER_S))
+        pending: list[ModelRecord] = []
+        for record in self._all_records(owner_sub):
+            if record.status is not ModelStatus.UPLOADED:
+                continue
+            if _parse_time(record.uploaded_at) > cutoff:
+                pending.append(record)
+                continue
+            purged = record.model_copy(update={
+                "status": ModelStatus.DELETED, "updated_at": self._clock(),
+                "reason": "the upload was never completed before its link expired; it was removed"})
+            try:
+                self.store.replace(purged, expected_status=ModelStatus.UPLOADED)
+            except ModelChanged:
+                continue  # completed (or deleted) meanwhile: not stale after all
+            self.files.delete(record.upload_key)
+            logs.log(logging.INFO, "stale upload purged", model_id=record.model_id, owner_sub=record.owner_sub)
+        return pending
+
+    def _all_records(self, owner_sub: str | None) -> Iterator[ModelRecord]:
+        token: str | None = None
+        while True:
+            page = self.store.list_owner(owner_sub, limit=100, next_token=token) if owner_sub is not None \
+                else self.store.list_all(limit=100, next_token=token)
+            yield from page.models
+            token = page.next_token
+            if not token:
+                return
 
     def available_model(self, model_id: str) -> ModelRecord:
         """A model a car may be given: it exists and is AVAILABLE (for assignments)."""

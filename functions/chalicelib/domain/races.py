@@ -64,6 +64,9 @@ class RaceRecord(BaseModel):
     race: Race
     created_by: str
     max_runs_override: MaxRunsOverride | None = None
+    # The device whose crossing first counted for this race; only it may post further crossings (a lap is the
+    # difference of two timestamps of ONE device clock, and another device must not be able to lap this race).
+    timed_by: str | None = None
 
 
 class PublishIntent(BaseModel):

@@ -1,9 +1,15 @@
 """Timing-strip posts from timer devices (and cars with a strip): which race they belong to, and exactly-once laps.
 
-A post names the event and track; the device must be in that track's fleet. The crossing is applied to the track's
-live race with `drem_leaderboard.timer_input.handle_strip_event`. Devices retry, so the answer is stored under
-`(device, idempotency_key)` in the same transaction as the race change, BEFORE it is returned; a repeated key gets
-the stored answer back (`replayed: true`) and never a second lap. A replay also finishes any board publish a crash
+A post names the event and track. Who may time a race (docs/racing.md, "Who may post crossings"):
+
+* the device must be in that track's fleet;
+* a car only times the race it is the car of (`race.car` is its device id or hostname);
+* the first device whose crossing counts is the race's clock (`RaceRecord.timed_by`); any other device is refused,
+  because a lap is the difference of two timestamps of one device clock.
+
+The crossing is applied to the track's live race with `drem_leaderboard.timer_input.handle_strip_event`. Devices
+retry, so the answer is stored under `(device, idempotency_key)` in the same transaction as the race change, BEFORE it
+is returned; a repeated key gets the stored answer back (`replayed: true`) and never a second lap. A replay also finishes any board publish a crash
 left pending (the race write and its publish intent are stored together, the board after), so a retry of a post whose
 answer was lost brings the board up to date.
 """
@@ -15,17 +21,19 @@ from typing import Protocol
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.auth.principals import Device
+from chalicelib.domain.devices import DeviceKind, DeviceRecord
 from chalicelib.domain.errors import DremError, Forbidden, MaybeStored
 from chalicelib.domain.races import RaceRecord, RaceService, with_retries
 from drem_leaderboard.models import Lap
-from drem_leaderboard.timer_input import StripEvent, handle_strip_event
+from drem_leaderboard.timer_input import MAX_DEVICE_TIMESTAMP_MS, StripEvent, handle_strip_event
 
 
 class StripPost(BaseModel):
     model_config = ConfigDict(extra="forbid")
     event_id: str = Field(min_length=1, max_length=64)
     track_id: str = Field(min_length=1, max_length=32)
-    timestamp_ms: int = Field(ge=0, description="device clock, ms since the epoch")
+    timestamp_ms: int = Field(ge=0, le=MAX_DEVICE_TIMESTAMP_MS,
+                              description="device clock, ms since the epoch (before 2100-01-01)")
     sensor: int = Field(ge=0, le=1000)
     idempotency_key: str = Field(min_length=1, max_length=200)
 
@@ -51,22 +59,23 @@ class OutcomeStore(Protocol):
                           outcome_json: str) -> bool: ...
 
 
-class DeviceFleets(Protocol):
-    def fleet_of(self, device_id: str) -> str | None: ...
+class DeviceDirectory(Protocol):
+    def get_device(self, device_id: str) -> DeviceRecord | None: ...
 
 
 class TimingService:
-    def __init__(self, races: RaceService, outcomes: OutcomeStore, fleets: DeviceFleets,
+    def __init__(self, races: RaceService, outcomes: OutcomeStore, devices: DeviceDirectory,
                  clock_ms: Callable[[], int]) -> None:
         self._races = races
         self._outcomes = outcomes
-        self._fleets = fleets
+        self._devices = devices
         self._clock_ms = clock_ms
 
     def strip_event(self, device: Device, post: StripPost) -> StripAnswer:
         event = self._races.event(post.event_id)
         fleet = event.track(post.track_id).fleet_id
-        if fleet is None or self._fleets.fleet_of(device.device_id) != fleet:
+        registered = self._devices.get_device(device.device_id)
+        if fleet is None or registered is None or registered.fleet_id != fleet:
             raise Forbidden(f"Device {device.device_id} is not in the fleet of track {post.track_id}.")
         stored = self._replay(device.device_id, post.idempotency_key)
         if stored is not None:
@@ -82,10 +91,12 @@ class TimingService:
                                      message=f"crossing ignored: no race is live on track {post.track_id}")
                 return self._keep(device, answer, None, None), None, now
             record = self._races.record(post.event_id, race_id)
+            _check_may_time(registered, record)
             after, outcome = handle_strip_event(record.race, crossing, now)
             answer = StripAnswer(**outcome.model_dump(), race_id=race_id)
             changed = after != record.race
-            updated = record.model_copy(update={"race": after}) if changed else None
+            updated = record.model_copy(update={"race": after, "timed_by": record.timed_by or device.device_id}) \
+                if changed else None
             kept = self._keep(device, answer, updated, record.race.version if changed else None)
             return kept, (updated if kept is answer else None), now
 
@@ -121,3 +132,14 @@ class TimingService:
         if stored is None:
             return None
         return StripAnswer.model_validate_json(stored).model_copy(update={"replayed": True})
+
+
+def _check_may_time(device: DeviceRecord, record: RaceRecord) -> None:
+    """Refuse (403) a crossing from a device that is not this race's clock; see the module docstring."""
+    race = record.race
+    if record.timed_by is not None and record.timed_by != device.device_id:
+        raise Forbidden(f"Race {race.race_id} is timed by device {record.timed_by}; crossings from "
+                        f"{device.device_id} are not counted (record laps by hand at the timekeeper desk instead).")
+    if device.kind is DeviceKind.CAR and race.car not in (device.device_id, device.hostname):
+        raise Forbidden(f"Car {device.device_id} is not the car of race {race.race_id}; a car only times its own "
+                        "race.")

@@ -215,7 +215,8 @@ class OwnedDataEraser(Protocol):
 
 class ModelsEraser:
     """Satisfies OwnedDataEraser over `chalicelib.domain.models.ModelService`: every model the user owns is deleted
-    (its archive removed, the record kept as DELETED under an anonymised owner name, so race history stays whole).
+    (its archive removed, the record kept as DELETED under an anonymised owner name, so race history stays whole),
+    including models the racer had already soft-deleted (those keep their archive and name until now).
     Best moved into the models service as `erase_owned_by` — it reaches into the service's store and files."""
 
     def __init__(self, service: object) -> None:
@@ -228,7 +229,7 @@ class ModelsEraser:
         store, files = self._service.store, self._service.files  # type: ignore[attr-defined]
         erased, token = 0, None
         while True:
-            page = store.list_owner(sub, limit=100, next_token=token)  # lists models not yet DELETED
+            page = store.list_owner(sub, limit=100, next_token=token, include_deleted=True)
             for record in page.models:
                 for key in {record.s3_key, record.upload_key} - {None}:
                     files.delete(key)

@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.races import LapEdit
 from chalicelib.domain.timekeeper_desk import clock_text
 from chalicelib.routes.console_common import checkbox, form, redirect, render_or_errors
@@ -83,9 +84,11 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
 
 
 def _lap_number(lap_id: str) -> int:
-    if not lap_id.isdigit():
-        raise InvalidInput("The lap id is a whole number (0 is the first lap).", field="lap_id")
-    return int(lap_id)
+    return lap_number(lap_id)
+
+
+MAX_LAP_SECONDS = 3600  # LapEdit's own bound (time_ms <= 3,600,000)
+MAX_RESETS = 1000
 
 
 def _lap_edit(fields: dict[str, str]) -> LapEdit:
@@ -93,12 +96,12 @@ def _lap_edit(fields: dict[str, str]) -> LapEdit:
         seconds = Decimal(fields.get("time_s", "").strip())
     except InvalidOperation:
         raise InvalidInput("Write the lap time in seconds, e.g. 12.345.", field="time_s") from None
-    if not seconds.is_finite() or seconds < 0:
-        raise InvalidInput("Write the lap time in seconds, e.g. 12.345.", field="time_s")
-    resets = fields.get("resets", "").strip()
-    if not resets.isdigit():
-        raise InvalidInput("Resets is a whole number (0 or more).", field="resets")
-    return LapEdit(time_ms=int(seconds * 1000), resets=int(resets), is_valid=checkbox(fields, "is_valid"))
+    # Bounded before int(): Decimal("1e999999999") is finite, and turning it into an int would take gigabytes.
+    if not seconds.is_finite() or not 0 <= seconds <= MAX_LAP_SECONDS:
+        raise InvalidInput(f"Write the lap time in seconds, e.g. 12.345 (at most {MAX_LAP_SECONDS}).", field="time_s")
+    resets = whole_number(fields.get("resets", ""), field="resets", message="Resets is a whole number (0 or more).",
+                          maximum=MAX_RESETS)
+    return LapEdit(time_ms=int(seconds * 1000), resets=resets, is_valid=checkbox(fields, "is_valid"))
 
 
 def _race_row(race: dict[str, Any]) -> dict[str, Any]:

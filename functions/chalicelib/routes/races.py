@@ -9,8 +9,8 @@ from pydantic import RootModel
 
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.leaderboards import LeaderboardPublisher
+from chalicelib.domain.numbers import lap_number
 from chalicelib.domain.profiles import ProfileService
 from chalicelib.domain.races import CreateRaceInput, LapEdit, RaceService
 from chalicelib.routes.users import user_directory
@@ -96,9 +96,7 @@ def race_command(principal: User, event_id: str, race_id: str, body: RaceCommand
 
 @route(bp, "/api/events/{event_id}/races/{race_id}/laps/{lap_id}", methods=["PUT"], allow=RACE_STAFF, body=LapEdit)
 def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str, body: LapEdit) -> dict:
-    if not lap_id.isdigit():
-        raise InvalidInput("The lap id is a whole number (0 is the first lap).", field="lap_id")
-    return race_service().edit_lap(event_id, race_id, int(lap_id), body)
+    return race_service().edit_lap(event_id, race_id, lap_number(lap_id), body)
 
 
 @route(bp, "/api/events/{event_id}/races/{race_id}", methods=["DELETE"], allow=RACE_STAFF)

@@ -14,20 +14,9 @@ from chalicelib.storage.devices import DynamoDeviceStore
 bp = Blueprint(__name__)
 
 
-class DeviceFleetLookup:
-    """Which fleet a device is in, from the device registry."""
-
-    def __init__(self, devices: DynamoDeviceStore) -> None:
-        self._devices = devices
-
-    def fleet_of(self, device_id: str) -> str | None:
-        record = self._devices.get_device(device_id)
-        return record.fleet_id if record else None
-
-
 def timing_service() -> TimingService:
     devices = DynamoDeviceStore(clients.dynamodb(), get_settings().table("fleet"))
-    return TimingService(race_service(), race_store(), DeviceFleetLookup(devices), now_ms)
+    return TimingService(race_service(), race_store(), devices, now_ms)
 
 
 @route(bp, "/api/timing/strip-events", methods=["POST"], allow={CAR, TIMER}, body=StripPost, response=StripAnswer)

@@ -7,10 +7,11 @@ from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.auth.revocation import REVOKED
-from chalicelib.domain.errors import InvalidInput, ServiceUnavailable
-from chalicelib.domain.users import (ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser, OwnedDataEraser,
-                                     RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm, UserPage,
-                                     UserService)
+from chalicelib.domain.errors import ServiceUnavailable
+from chalicelib.domain.numbers import whole_number
+from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser,
+                                     OwnedDataEraser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
+                                     UserPage, UserService)
 from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.sessions import session_store
@@ -100,7 +101,6 @@ def delete_self(principal: User, body: DeleteSelfForm) -> dict:
 
 def _limit(raw: str | None) -> int:
     if raw is None:
-        return 60
-    if not raw.isdigit():
-        raise InvalidInput("limit is a whole number.", field="limit")
-    return int(raw)
+        return MAX_PAGE
+    return whole_number(raw, field="limit", message=f"limit is a whole number between 1 and {MAX_PAGE}.",
+                        minimum=1, maximum=MAX_PAGE)

@@ -147,6 +147,35 @@ class StackStorage:
         except (ClientError, BotoCoreError) as exc:
             raise translate_common(exc, f"The {bucket} bucket") from exc
 
+    # --- boards -----------------------------------------------------------------------------------------------------
+
+    def recompute_boards(self, event_item: Item) -> None:
+        """Rebuild the event's boards from its races on this stack, as the race admin's "recompute" does, with the
+        event taken from `event_item` (the import writes the event item only after this). A board already equal to
+        the recomputed one is left untouched, so an honest export round-trips byte for byte."""
+        import time
+
+        from chalicelib.domain.events import Event
+        from chalicelib.domain.leaderboards import LeaderboardPublisher
+        from chalicelib.domain.profiles import ProfileService
+        from chalicelib.domain.races import RaceService
+        from chalicelib.routes.races import ProfilesForBoards  # the app's own board names; one definition
+        from chalicelib.storage.leaderboards import DynamoBoardStore
+        from chalicelib.storage.profiles import DynamoProfileStore
+        from chalicelib.storage.races import DynamoRaceStore
+
+        event = Event.model_validate_json(event_item["doc"]["S"])
+        tables = self._location.tables
+        profiles = ProfilesForBoards(ProfileService(DynamoProfileStore(self._dynamodb, tables["profiles"])))
+        def clock_ms() -> int:
+            return time.time_ns() // 1_000_000
+
+        publisher = LeaderboardPublisher(DynamoBoardStore(self._dynamodb, tables["leaderboards"]), clock_ms,
+                                         cache=None)
+        service = RaceService(DynamoRaceStore(self._dynamodb, tables["races"]), _OneEvent(event), _NoRacers(),
+                              profiles, publisher, clock_ms)
+        service.recompute(event.event_id)
+
     # --- accounts ---------------------------------------------------------------------------------------------------
 
     def accounts_by_sub(self) -> dict[str, Account]:
@@ -217,6 +246,23 @@ class StackStorage:
             return getattr(self._cognito, operation)(**kwargs)
         except (ClientError, BotoCoreError) as exc:
             raise translate_account_error(exc, username) from exc
+
+
+class _OneEvent:
+    """The event being imported, served before its item is written."""
+
+    def __init__(self, event: Any) -> None:
+        self._event = event
+
+    def get(self, event_id: str) -> Any:
+        return self._event if event_id == self._event.event_id else None
+
+
+class _NoRacers:
+    """Recomputing boards never looks racers up (that is for creating races)."""
+
+    def __getattr__(self, name: str) -> Any:
+        raise AttributeError(f"recompute does not use the racer directory ({name})")
 
 
 def _attributes(raw: dict[str, Any]) -> dict[str, str]:

@@ -84,15 +84,18 @@ class DynamoModelStore:
         owner = self.owner_of(model_id)
         return self.get(owner, model_id) if owner is not None else None
 
-    def list_owner(self, owner_sub: str, *, limit: int, next_token: str | None) -> ModelPage:
-        """The owner's models (not DELETED), newest first: model ids sort by creation time."""
+    def list_owner(self, owner_sub: str, *, limit: int, next_token: str | None,
+                   include_deleted: bool = False) -> ModelPage:
+        """The owner's models (not DELETED unless `include_deleted`), newest first: model ids sort by creation
+        time. Account deletion needs the soft-deleted ones too: they still hold the archive and the racer's name."""
         pk = _owner_pk(owner_sub)
         query: dict[str, Any] = dict(
             TableName=self._table, KeyConditionExpression="pk = :pk AND begins_with(sk, :model)",
-            FilterExpression="#status <> :deleted", ExpressionAttributeNames={"#status": "status"},
-            ExpressionAttributeValues={":pk": {"S": pk}, ":model": {"S": "MODEL#"},
-                                       ":deleted": {"S": ModelStatus.DELETED.value}},
+            ExpressionAttributeValues={":pk": {"S": pk}, ":model": {"S": "MODEL#"}},
             ScanIndexForward=False, Limit=limit)
+        if not include_deleted:
+            query.update(FilterExpression="#status <> :deleted", ExpressionAttributeNames={"#status": "status"})
+            query["ExpressionAttributeValues"][":deleted"] = {"S": ModelStatus.DELETED.value}
         return self._page(query, next_token, required={"pk": pk}, key_names=("pk", "sk"))
 
     def list_all(self, *, limit: int, next_token: str | None) -> ModelPage:

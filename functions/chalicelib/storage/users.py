@@ -85,7 +85,16 @@ class CognitoUserDirectory:
             request["Filter"] = f'username ^= "{prefix}"'
         if next_token:
             request["PaginationToken"] = next_token
-        reply = self._call("", "list_users", **request)
+        try:
+            reply = self._client.list_users(**request)
+        except ClientError as exc:
+            # A token Cognito did not issue (or one that expired): the caller's mistake, not Cognito failing.
+            if next_token and error_code(exc) in {"InvalidParameterException", "InvalidToken"}:
+                raise InvalidInput("This page token is not valid here; start again from the first page.",
+                                   field="next") from exc
+            raise translate_account_error(exc) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE) from exc
         return UserPage(users=[_user(u) for u in reply.get("Users", [])], next_token=reply.get("PaginationToken"))
 
     def groups_of(self, username: str) -> list[str]:

@@ -2,8 +2,10 @@
 
 The whole folder is checked first (checksums, format, every item); the target must not have the event yet. Then
 accounts are created (temporary passwords printed once, or taken from --password-file) or matched by username,
-every old sub is rewritten to the new one, and the items and model archives are written. The report (sub
-mapping, what was written and kept) goes next to the folder; it never holds passwords.
+every old sub is rewritten to the new one, and the items and model archives are written. Every item and archive is
+re-validated first (a tampered export is refused, naming the file), the boards are recomputed from the races, and
+created accounts are racers unless --grant-roles applies the roles the export lists (reported either way). The
+report (sub mapping, roles, what was written and kept) goes next to the folder; it never holds passwords.
 """
 from __future__ import annotations
 
@@ -24,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--password-file", type=Path, default=None,
                         help="temporary passwords for the accounts to create: JSON {\"user\": \"pw\"} or lines "
                              "'user pw' (accounts not listed get a generated one, printed once)")
+    parser.add_argument("--grant-roles", action="store_true",
+                        help="give created accounts the staff roles (admin, operator, ...) the export lists; without "
+                             "it they are racers and the skipped roles are reported")
     parser.add_argument("--report", type=Path, default=None,
                         help="where to write the import report (default: next to DIR)")
     add_location_arguments(parser)
@@ -38,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
         passwords = parse_password_file(args.password_file.read_text()) if args.password_file else {}
         bundle = read_export(args.folder)
         target = open_stack(args)
-        plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords)
+        plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,
+                           grant_roles=args.grant_roles)
         result = run_import(plan, target)
     except PartialImport as exc:
         print(f"drem import: {exc.message}", file=sys.stderr)
@@ -57,6 +63,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"  kept existing: {line}")
     for username, password in sorted(result.temporary_passwords.items()):
         print(f"  account {username}: temporary password {password}  (must be changed at first sign-in)")
+    for account in result.accounts:
+        if account["action"] != "created":
+            continue
+        granted = ", ".join(account["roles_granted"]) or "none"
+        skipped = f"; NOT granted: {', '.join(account['roles_skipped'])} (use --grant-roles)" \
+            if account["roles_skipped"] else ""
+        print(f"  account {account['username']}: roles granted: {granted}{skipped}")
     matched = [a["username"] for a in result.accounts if a["action"] == "matched existing"]
     if matched:
         print(f"  matched existing accounts (their passwords and roles unchanged): {', '.join(matched)}")

@@ -19,6 +19,7 @@ STABLE_ID_ENV = {
     "MOTO_DISABLE_GLOBAL_CORS": "true",
 }
 EXIT_VERSION_MISMATCH = 3
+DEFAULT_MAX_POST_BYTES = 256 * 1024 * 1024  # above the app's 128 MiB model limit plus the form's own fields
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -29,6 +30,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--snapshot-interval", type=float, default=5.0,
                         help="seconds between snapshots while something changed (default 5)")
     parser.add_argument("--no-fsync", action="store_true", help="skip fsync of the journal (faster, not crash-safe)")
+    parser.add_argument("--max-post-bytes", type=int, default=DEFAULT_MAX_POST_BYTES,
+                        help="largest browser-form upload body read at all (the signed policy's own size range is "
+                             "enforced on top; default 256 MiB)")
     return parser.parse_args(argv)
 
 
@@ -42,6 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     from werkzeug.serving import make_server
 
     from drem_local.durable.guard import StorageGuard
+    from drem_local.durable.post_policy import PostPolicyGuard
     from drem_local.durable.server import DurableApp
     from drem_local.durable.state import DurableState, MotoVersionMismatch
     from drem_local.storage_keys import load_or_create
@@ -62,7 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     token_signing.install(ensure_signing_key(args.state_dir))
 
     os.environ.setdefault("MOTO_PORT", str(args.port))
-    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys))
+    upload_guard = PostPolicyGuard({keys.access_key_id: keys.secret_access_key}.get,
+                                   max_body_bytes=args.max_post_bytes)
+    app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys), upload_guard)
     report = app.recover()
     log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
              "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,

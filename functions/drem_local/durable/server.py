@@ -1,4 +1,8 @@
-"""moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`."""
+"""moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`.
+
+Browser-form uploads (presigned POST) are also checked against their signed policy's conditions (`post_policy`:
+key, size range, extra fields), which moto ignores: a refused upload is answered as S3 would and never reaches the
+journal or moto."""
 from __future__ import annotations
 
 import io
@@ -10,9 +14,11 @@ from typing import Any, Callable
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import (MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot,
+                                         service_of)
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
+from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
 from drem_local.durable.state import DurableState, replay_environ
 
 log = logging.getLogger("drem.durable")
@@ -34,10 +40,11 @@ class DurableApp:
     """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
 
     def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState,
-                 guard: StorageGuard | None = None) -> None:
+                 guard: StorageGuard | None = None, upload_guard: PostPolicyGuard | None = None) -> None:
         self.moto_app = moto_app
         self.state = state
         self.guard = guard  # None only in tests that drive the middleware in-process
+        self.upload_guard = upload_guard
         self.lock = threading.Lock()
 
     def recover(self):
@@ -59,6 +66,9 @@ class DurableApp:
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
         if environ.get("PATH_INFO") == HEALTH_PATH:
             return self._health(start_response)
+        form_upload = self.upload_guard is not None and is_form_upload(environ)
+        if form_upload and (too_big := self.upload_guard.refusal_before_reading(environ)):
+            return refusal_response(too_big, start_response)
         body = read_body(environ)
         environ["wsgi.input"] = io.BytesIO(body)  # moto's dispatcher and Flask may each read it
         environ["CONTENT_LENGTH"] = str(len(body))
@@ -66,6 +76,9 @@ class DurableApp:
         if refusal is not None:  # before the journal: a refused request leaves no trace in the state
             return refuse(refusal, environ, start_response)
         service = service_of(environ)
+        # After the signature check (which also strips the app's /_storage gateway prefix): the policy's conditions.
+        if form_upload and service == S3 and (broken := self.upload_guard.refusal(environ, body)):
+            return refusal_response(broken, start_response)
         changing = is_state_changing(environ)
         captured: dict[str, Any] = {}
 
