@@ -273,13 +273,13 @@ class UserService:
                 raise
             username, sub, resumed = existing.username, existing.sub, True
         self._finish(username, sub, form.country_code)
+        started = "This sign-up was already started. " if resumed else ""
         if self._confirm_sign_ups:
             self._directory.confirm_without_code(username)
             return SignUpResult(username=username, sub=sub, confirmed=True,
-                                message="Your account is ready; you can sign in now.")
-        message = f"Check {form.email} for a confirmation code, then confirm your account."
+                                message=f"{started}Your account is ready; you can sign in now.")
         return SignUpResult(username=username, sub=sub, confirmed=False,
-                            message=f"This sign-up was already started. {message}" if resumed else message)
+                            message=f"{started}Check {form.email} for a confirmation code, then confirm your account.")
 
     def confirm_sign_up(self, form: ConfirmSignUpForm) -> dict[str, str]:
         self._directory.confirm_sign_up(form.username.strip(), form.code.strip())
