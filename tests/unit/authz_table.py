@@ -107,6 +107,11 @@ def racer_a_race(world: World, caller: str) -> Call:
                 {"time_ms": 12345, "resets": 0, "is_valid": True})
 
 
+def event_summary_pdf(world: World, caller: str) -> Call:
+    """The printed race summary of an event (a PDF for the race staff)."""
+    return Call({"event_id": matrix_event(world, caller)["event_id"], "file_name": "summary.pdf"})
+
+
 PUBLIC = Case(allow(*EVERYONE))
 SIGNED_IN = Case(allow(*USERS))
 ADMIN_ONLY = Case(allow("admin"))
@@ -198,6 +203,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("DELETE", "/api/events/{event_id}/races/{race_id}"): ADMIN_OPERATOR,
     ("POST", "/api/events/{event_id}/recompute"): ADMIN_OPERATOR,
     ("GET", "/api/events/{event_id}/export/{file_name}"): ADMIN_OPERATOR,
+    ("GET", "/api/events/{event_id}/results/{file_name}"): Case(allow("admin", "operator"), event_summary_pdf),
     ("POST", "/api/timing/strip-events"): DEVICES,
     # public polls
     ("GET", "/api/leaderboard/{event_id}"): PUBLIC,

@@ -12,7 +12,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-HELP = "copy drem_infra, drem_leaderboard and drem_web into functions/vendor/ for the Lambda bundle"
+HELP = ("copy drem_infra, drem_leaderboard, drem_web and the PDF fonts into functions/vendor/ for the Lambda bundle")
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 FUNCTIONS_DIR = REPO_ROOT / "functions"
@@ -57,15 +57,33 @@ def vendor_packages(functions_dir: Path = FUNCTIONS_DIR, repo_root: Path = REPO_
     return copied
 
 
+def vendor_fonts(functions_dir: Path = FUNCTIONS_DIR) -> Path:
+    """Copy the fonts the PDFs embed (installed from Debian packages, never committed) to vendor/drem_fonts/, which
+    lands at the bundle root where `chalicelib.domain.pdf_fonts` looks first."""
+    from chalicelib.domain.pdf_fonts import FONT_FILES, font_path
+
+    fonts = {name: font_path(name).read_bytes() for name in sorted(set(FONT_FILES.values()))}  # before the rmtree
+    target = functions_dir / "vendor" / "drem_fonts"
+    if target.exists():
+        shutil.rmtree(target)
+    target.mkdir(parents=True)
+    for name, data in fonts.items():
+        (target / name).write_bytes(data)
+    return target
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--functions-dir", type=Path, default=FUNCTIONS_DIR,
                         help="the Chalice project to vendor into (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from chalicelib.domain.errors import ServiceUnavailable
+
     try:
         copied = vendor_packages(args.functions_dir)
-    except FileNotFoundError as exc:
+        copied.append(vendor_fonts(args.functions_dir))
+    except (FileNotFoundError, ServiceUnavailable) as exc:
         print(f"drem build: {exc}", file=sys.stderr)
         return 1
     for target in copied:
