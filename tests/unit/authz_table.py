@@ -112,6 +112,11 @@ def event_summary_pdf(world: World, caller: str) -> Call:
     return Call({"event_id": matrix_event(world, caller)["event_id"], "file_name": "summary.pdf"})
 
 
+def racer_card_form(world: World, caller: str) -> Call:
+    """The registration desk prints the card of the racer it has just created."""
+    return Call(body={"username": "new_racer", "temporary_password": "Tmp-Pass-123"})
+
+
 PUBLIC = Case(allow(*EVERYONE))
 SIGNED_IN = Case(allow(*USERS))
 ADMIN_ONLY = Case(allow("admin"))
@@ -268,6 +273,8 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/timekeeper/{event_id}/{track_id}/races"): Case(allow("admin", "operator"), event_only),
     ("POST", "/console/timekeeper/{event_id}/{track_id}/commands"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/races"): ADMIN_OPERATOR,
+    ("GET", "/console/cars/labels.pdf"): Case(allow("admin", "operator")),
+    ("POST", "/console/registration/card.pdf"): Case(allow("admin", "registration"), racer_card_form),
     ("GET", "/console/races/{event_id}/{race_id}"): Case(allow("admin", "operator"), racer_a_race),
     ("GET", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
     ("POST", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
