@@ -29,12 +29,16 @@ class ResultsQuery(BaseModel):
     track: str = Field(default="", max_length=32, pattern=r"^[A-Za-z0-9_-]*$")
 
 
+def profile_service() -> ProfileService:
+    return ProfileService(DynamoProfileStore(clients.dynamodb(), get_settings().table("profiles")))
+
+
 def load_results(event_id: str) -> EventResults:
     settings, dynamodb = get_settings(), clients.dynamodb()
     event = DynamoEventStore(dynamodb, settings.table("events")).get(event_id)
     if event is None:
         raise NotFound(f"There is no event {event_id}.", field="event_id")
-    profiles = ProfileService(DynamoProfileStore(dynamodb, settings.table("profiles")))
+    profiles = profile_service()
     races = [record.race for record in race_store().list_event(event_id)]
     return event_results(event, races, profiles.public_by_sub)
 
