@@ -274,6 +274,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/timekeeper/{event_id}/{track_id}/commands"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/races"): ADMIN_OPERATOR,
     ("GET", "/stats"): PUBLIC,
+    ("GET", "/event/{event_id}"): Case(allow(*EVERYONE), event_only),
     ("GET", "/console/cars/labels.pdf"): Case(allow("admin", "operator")),
     ("POST", "/console/registration/card.pdf"): Case(allow("admin", "registration"), racer_card_form),
     ("GET", "/console/races/{event_id}/{race_id}"): Case(allow("admin", "operator"), racer_a_race),
