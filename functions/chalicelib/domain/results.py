@@ -7,7 +7,7 @@ submitted races count (a live race is not a result yet). Times are formatted lik
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from datetime import date
 
 from pydantic import BaseModel, ConfigDict
@@ -20,7 +20,7 @@ from drem_leaderboard.models import Race, RaceConfig, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, RacerProfile, rank
 from drem_leaderboard.summary import RaceSummary, summarise_racer
 
-ProfileLookup = Callable[[str], PublicProfile | None]
+ProfileLookup = Callable[[list[str]], Mapping[str, PublicProfile]]  # subs → their public profiles (found ones)
 
 
 class ResultEntry(BaseModel):
@@ -70,13 +70,14 @@ def ranking_label(config: RaceConfig) -> str:
     return "Fastest lap"
 
 
-def event_results(event: Event, races: Iterable[Race], profile_of: ProfileLookup) -> EventResults:
+def event_results(event: Event, races: Iterable[Race], profiles_of: ProfileLookup) -> EventResults:
     """Standings of every board of the event (each track, then the combined board when there are several)."""
     by_racer: dict[tuple[str, str], list[Race]] = {}
     for race in races:
         by_racer.setdefault((race.track_id, race.racer.sub), []).append(race)
     summaries = [s for _, group in sorted(by_racer.items()) if (s := summarise_racer(group)) is not None]
-    public = {s.racer_sub: profile_of(s.racer_sub) for s in summaries}
+    found = profiles_of(sorted({s.racer_sub for s in summaries}))
+    public = {s.racer_sub: found.get(s.racer_sub) for s in summaries}
     method = event.race_config.ranking_method
     boards = []
     for board_id in event.boards:

@@ -40,7 +40,7 @@ def load_results(event_id: str) -> EventResults:
         raise NotFound(f"There is no event {event_id}.", field="event_id")
     profiles = profile_service()
     races = [record.race for record in race_store().list_event(event_id)]
-    return event_results(event, races, profiles.public_by_sub)
+    return event_results(event, races, profiles.public_by_subs)
 
 
 @route(bp, "/api/events/{event_id}/results/{file_name}", allow=RESULTS_STAFF, query=ResultsQuery,
