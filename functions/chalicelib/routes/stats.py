@@ -10,11 +10,11 @@ from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.stats import StatsFilter, compute, visible_events
 from chalicelib.domain.stats_view import stats_page
-from chalicelib.routes.races import race_store
 from chalicelib.routes.results import profile_service
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
 from chalicelib.storage.events import DynamoEventStore
+from chalicelib.storage.race_scan import submitted_races_by_event
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -25,9 +25,10 @@ STATS_STAFF = {ADMIN, OPERATOR, COMMENTATOR}
 @route(bp, "/stats", allow=PUBLIC, query=StatsFilter)
 def stats(principal: Principal, query: StatsFilter) -> Response:
     staff = bool(principal.roles & STATS_STAFF)
-    events = visible_events(DynamoEventStore(clients.dynamodb(), get_settings().table("events")).list(), staff=staff)
-    races = race_store()
-    data = [(event, [r.race for r in races.list_event(event.event_id)]) for event in events]
+    settings, dynamodb = get_settings(), clients.dynamodb()
+    events = visible_events(DynamoEventStore(dynamodb, settings.table("events")).list(), staff=staff)
+    races = submitted_races_by_event(dynamodb, settings.table("races"))
+    data = [(event, races.get(event.event_id, [])) for event in events]
     profiles = profile_service()
 
     def display_name(sub: str, username: str) -> str:
