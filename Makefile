@@ -17,11 +17,14 @@ RUNTIME_LOCK := requirements/runtime.txt
 DEV_LOCK := requirements/dev.txt
 HTMX := web/drem_web/static/vendor/htmx.min.js
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# Fonts the result PDFs and labels embed (names in any script): Noto Sans + Noto Sans Arabic (OFL-1.1) and
+# Droid Sans Fallback for CJK (Apache-2.0). `drem build` copies the few files it needs into the Lambda bundle.
+FONT_DEBS := fonts-noto-core fonts-droid-fallback
 # Debian packages the tests and benches drive (apt pins them to the release's current, signed versions).
-TEST_DEBS := chromium poppler-utils
+TEST_DEBS := chromium poppler-utils $(FONT_DEBS)
 BENCH_DEBS := wrk nginx-light
 
-.PHONY: up demo test install install-test test-debs lock build bench clean-state deploy destroy
+.PHONY: up demo test install install-test test-debs font-debs lock build bench clean-state deploy destroy
 
 ## make up: install everything, then start the local event stack on http://127.0.0.1:8000
 up: install
@@ -35,7 +38,7 @@ demo: install
 test: install-test
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
-install: $(VENV)/.installed-runtime $(HTMX)
+install: $(VENV)/.installed-runtime $(HTMX) font-debs
 
 install-test: $(VENV)/.installed-test $(HTMX) test-debs
 
@@ -65,7 +68,9 @@ lock: | $(UV)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras -o $(DEV_LOCK)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --extra convert --constraint $(DEV_LOCK) \
 		-o $(RUNTIME_LOCK)
-	$(UV_COMPILE) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
+	@# Lambda's python3.11 runs on Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels only.
+	$(UV) pip compile --quiet --generate-hashes --python-version 3.11 --python-platform x86_64-manylinux_2_17 \
+		$(if $(UPGRADE),--upgrade,) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
 
 node_modules/.package-lock.json: package.json package-lock.json
 	npm ci --no-audit --no-fund
@@ -78,6 +83,9 @@ $(HTMX): node_modules/.package-lock.json
 # Installs only the Debian packages that are missing (dpkg knows), so a warm machine pays nothing.
 test-debs:
 	@$(call apt_install,$(TEST_DEBS))
+
+font-debs:
+	@$(call apt_install,$(FONT_DEBS))
 
 define apt_install
 missing=; for p in $(1); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

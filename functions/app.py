@@ -8,19 +8,22 @@ from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
 from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
                                 console_racer, console_races, console_registration, console_timekeeper, console_users,
-                                devices, events, fleets, health, leaderboards, league, login, models, pages, ping,
-                                profiles, public_pages, races, registry, timing, users)
+                                devices, event_landing, events, fleets, health, labels, leaderboards, league, login,
+                                models, pages, ping, profiles, public_pages, races, registry, results, stats, timing,
+                                users)
 from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
 app.register_middleware(security_headers_middleware, "http")
+# Printed results and labels are PDFs; Chalice base64-encodes only the types listed here (and API Gateway with them).
+app.api.binary_types.append("application/pdf")
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,
                          console_timekeeper, console_races, console_racer, console_registration, console_users,
-                         console_models, league, registry, ping):
+                         console_models, league, registry, results, labels, stats, event_landing, ping):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

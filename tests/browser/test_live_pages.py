@@ -152,7 +152,7 @@ def test_leaderboard_and_overlay_show_a_timer_lap_live_in_their_own_tabs(live_st
     board.screenshot(path=str(ARTIFACTS / "leaderboard.png"), full_page=True)
     overlay.screenshot(path=str(ARTIFACTS / "overlay.png"))
 
-    # The QR code on the big screen really decodes to the page (read back from the rendered pixels).
+    # The QR code on the big screen really decodes to the event's landing page (read back from the rendered pixels).
     png = board.locator('[data-testid="qr"] svg').screenshot()
     image = cv2.imdecode(np.frombuffer(png, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
     _, black_and_white = cv2.threshold(image, 128, 255, cv2.THRESH_BINARY)
@@ -160,7 +160,7 @@ def test_leaderboard_and_overlay_show_a_timer_lap_live_in_their_own_tabs(live_st
     # The ArUco-based detector: the classic one misreads some codes drawn at ~4 px per module (fractional module
     # widths after the browser's scaling), so the test failed for some event ids and ports.
     decoded, _points, _ = cv2.QRCodeDetectorAruco().detectAndDecode(quiet_zone)
-    assert decoded == f"{pages_url}/leaderboard/{eid}?track=1&lang=en"
+    assert decoded == f"{pages_url}/event/{eid}"
 
     polls = live_polls(board)
     changed = [p for p in polls if p["status"] == 200]

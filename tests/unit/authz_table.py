@@ -119,6 +119,16 @@ def racer_a_race(world: World, caller: str) -> Call:
                 {"time_ms": 12345, "resets": 0, "is_valid": True})
 
 
+def event_summary_pdf(world: World, caller: str) -> Call:
+    """The printed race summary of an event (a PDF for the race staff)."""
+    return Call({"event_id": matrix_event(world, caller)["event_id"], "file_name": "summary.pdf"})
+
+
+def racer_card_form(world: World, caller: str) -> Call:
+    """The registration desk prints the card of the racer it has just created."""
+    return Call(body={"username": "new_racer", "temporary_password": "Tmp-Pass-123"})
+
+
 PUBLIC = Case(allow(*EVERYONE))
 SIGNED_IN = Case(allow(*USERS))
 ADMIN_ONLY = Case(allow("admin"))
@@ -212,6 +222,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("DELETE", "/api/events/{event_id}/races/{race_id}"): ADMIN_OPERATOR,
     ("POST", "/api/events/{event_id}/recompute"): ADMIN_OPERATOR,
     ("GET", "/api/events/{event_id}/export/{file_name}"): ADMIN_OPERATOR,
+    ("GET", "/api/events/{event_id}/results/{file_name}"): Case(allow("admin", "operator"), event_summary_pdf),
     ("POST", "/api/timing/strip-events"): DEVICES,
     # public polls
     ("GET", "/api/leaderboard/{event_id}"): PUBLIC,
@@ -277,6 +288,10 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/timekeeper/{event_id}/{track_id}/races"): Case(allow("admin", "operator"), event_only),
     ("POST", "/console/timekeeper/{event_id}/{track_id}/commands"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/races"): ADMIN_OPERATOR,
+    ("GET", "/stats"): PUBLIC,
+    ("GET", "/event/{event_id}"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/console/cars/labels.pdf"): Case(allow("admin", "operator")),
+    ("POST", "/console/registration/card.pdf"): Case(allow("admin", "registration"), racer_card_form),
     ("GET", "/console/races/{event_id}/{race_id}"): Case(allow("admin", "operator"), racer_a_race),
     ("GET", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),
     ("POST", "/console/races/{event_id}/{race_id}/delete"): Case(allow("admin", "operator"), racer_a_race),

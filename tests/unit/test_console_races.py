@@ -75,3 +75,22 @@ def test_a_live_race_cannot_be_deleted_and_says_why(console, clock, event):
     console.sign_in("op-web", "operator")
     reply = console.post(f"/console/races/{event['event_id']}/{race['race_id']}/delete", {})
     assert reply.status_code == 409 and "end and discard it instead" in text_of(reply.body.decode())
+
+
+def test_printed_results_are_linked_from_race_admin_and_download_as_pdf(console, clock, event, tmp_path):
+    import re
+
+    from tests.unit.pdf_helpers import pdf_text
+
+    _submitted_race(console, clock, event["event_id"], "ann", "1")
+    console.sign_in("admin-web", "admin")
+    page = console.web.get(f"/console/races?event_id={event['event_id']}&track=1").body.decode()
+    links = dict(re.findall(r'href="([^"]+)" data-testid="(pdf-\w+)"', page))
+    summary = next(href for href, testid in links.items() if testid == "pdf-summary")
+    assert summary == f"/api/events/{event['event_id']}/results/summary.pdf?track=1"
+    # What a browser sends when following a link: */* among the accepted types.
+    browser_accept = "text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8"
+    reply = console.web.get(summary.replace("&amp;", "&"), headers={"Accept": browser_accept})
+    assert reply.status_code == 200 and reply.headers["Content-Type"] == "application/pdf"
+    text = pdf_text(reply.body, tmp_path)
+    assert "ann" in text and "0:12.345" in text and "Track 1" in text

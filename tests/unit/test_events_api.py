@@ -30,8 +30,10 @@ def test_operator_creates_event_and_staff_read_it(api: Api) -> None:
     assert event["race_config"]["race_time_min"] == 3
     assert event["race_config"]["resets_per_lap"] is None  # DREM's 9999 = unlimited
     assert event["tracks"] == [{"track_id": "1", "fleet_id": None, "leaderboard_title": "Main track",
-                                "leaderboard_footer": "Follow the race #AWSDeepRacer"}]
+                                "leaderboard_footer": "Follow the race #AWSDeepRacer",
+                                "direction": "counter_clockwise"}]
     assert event["combined_board"] is False
+    assert event["stats_visibility"] == "public"  # the default: the event counts on the public /stats page
     assert event["landing_page_links"][0]["href"] == "/upload"
 
     for reader in ("commentator", "registration", "admin"):

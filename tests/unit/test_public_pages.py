@@ -143,7 +143,7 @@ def test_qr_code_is_inline_svg_that_decodes_to_the_page_url(desk: Desk, clock: F
     image = np.pad(np.kron(~grid, np.ones((8, 8), dtype=bool)).astype(np.uint8) * 255, 32,
                    constant_values=255)  # 8 px per module, dark = 0, on a white margin
     decoded, _points, _ = cv2.QRCodeDetector().detectAndDecode(image)
-    assert decoded == f"http://127.0.0.1:8000/leaderboard/{eid}?track=1&lang=de"
+    assert decoded == f"http://127.0.0.1:8000/event/{eid}?lang=de"  # the event's landing page
     inside = svg[svg.index("<svg"):].split(">", 1)[1]
     assert "<script" not in inside and "http" not in inside  # module squares only: no script, no URL text
     assert 'data-testid="qr"' not in html_get(desk, f"/leaderboard/{eid}?qr=none").body.decode()

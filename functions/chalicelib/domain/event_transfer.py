@@ -4,7 +4,8 @@ The folder (format `drem-event-export`, version 1):
 
     manifest.json       format, version, event id, `exported_at`, sha256 + md5 + size of every other file
     event.json          the event item                          (table `events`)
-    races.json          its finished races with their laps      (table `races`)
+    races.json          its finished races with their laps,     (table `races`)
+                        and the audit trail of results changes
     leaderboards.json   its materialised boards and overlays    (table `leaderboards`)
     profiles.json       the racers' public profiles + name alias (table `profiles`)
     fleets.json         the fleets its tracks use               (table `fleet`, fleet items only)
@@ -144,6 +145,7 @@ def collect_event(source: StackReader, event_id: str) -> EventBundle:
         raise Conflict(f"Event {event_id} has a live race on track(s) {', '.join(live)}; submit or discard it "
                        "before exporting (a race in progress does not move between stacks).")
     races = [i for i in race_items if i["sk"]["S"].startswith("RACE#")]
+    audit_trail = [i for i in race_items if i["sk"]["S"].startswith("AUDIT#")]  # who changed results, carried along
     boards = source.partition("leaderboards", pk)
     event_doc = json.loads(event_item["doc"]["S"])
 
@@ -187,7 +189,7 @@ def collect_event(source: StackReader, event_id: str) -> EventBundle:
                 archives.append(ArchiveEntry(model_id=model_id, key=key, file=file,
                                              md5=hashlib.md5(data).hexdigest(), bytes=len(data)))
 
-    items = {"events": [event_item], "races": races, "leaderboards": boards, "profiles": profiles,
+    items = {"events": [event_item], "races": races + audit_trail, "leaderboards": boards, "profiles": profiles,
              "fleet": fleets, "models": models}
     return EventBundle(event_id=event_id, items={t: _sorted_items(v) for t, v in items.items()},
                        accounts=accounts, archives=sorted(archives, key=lambda a: a.model_id),
@@ -206,10 +208,12 @@ def render_files(bundle: EventBundle) -> dict[str, bytes]:
 
 
 def manifest_for(bundle: EventBundle, files: dict[str, bytes], exported_at: str) -> dict[str, Any]:
+    audit = sum(1 for i in bundle.items.get("races", []) if i["sk"]["S"].startswith("AUDIT#"))
+    counts = {table: len(items) for table, items in sorted(bundle.items.items())}
+    counts["races"] = counts.get("races", 0) - audit  # races.json also holds the audit trail, counted apart
     return {
         "format": FORMAT, "format_version": FORMAT_VERSION, "event_id": bundle.event_id, "exported_at": exported_at,
-        "counts": {table: len(items) for table, items in sorted(bundle.items.items())}
-        | {"accounts": len(bundle.accounts), "archives": len(bundle.archives)},
+        "counts": counts | {"audit_entries": audit, "accounts": len(bundle.accounts), "archives": len(bundle.archives)},
         "files": {path: _checksums(data) for path, data in sorted(files.items())},
         "not_carried": ["devices and their credentials (cars and timers re-activate on the target)",
                         "live races", "device commands and strip idempotency records",

@@ -12,7 +12,7 @@ import uuid
 from collections.abc import Callable
 from datetime import date
 from enum import StrEnum
-from typing import Protocol
+from typing import Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
@@ -48,6 +48,10 @@ class EventType(StrEnum):
     OTHER = "OTHER"
 
 
+TrackDirection = Literal["counter_clockwise", "clockwise"]
+StatsVisibility = Literal["public", "staff"]
+
+
 class Track(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -55,6 +59,8 @@ class Track(BaseModel):
     fleet_id: str | None = Field(default=None, max_length=64)
     leaderboard_title: str = Field(default="", max_length=120)
     leaderboard_footer: str = Field(default=DEFAULT_FOOTER, max_length=200)
+    direction: TrackDirection = Field(default="counter_clockwise",
+                                      description="the way cars go round (statistics filter fastest laps by it)")
 
     @field_validator("track_id")
     @classmethod
@@ -95,6 +101,8 @@ class EventInput(BaseModel):
     race_config: RaceConfig = Field(default_factory=RaceConfig)
     tracks: list[Track] = Field(default_factory=lambda: [Track()], min_length=1, max_length=MAX_TRACKS)
     landing_page_links: list[LandingPageLink] = Field(default_factory=lambda: list(DEFAULT_LINKS), max_length=20)
+    stats_visibility: StatsVisibility = Field(
+        default="public", description="whether the event counts on the public /stats page or only on the staff's")
 
     @field_validator("name", "sponsor")
     @classmethod
@@ -129,6 +137,7 @@ class Event(BaseModel):
     race_config: RaceConfig
     tracks: tuple[Track, ...]
     landing_page_links: tuple[LandingPageLink, ...]
+    stats_visibility: StatsVisibility = "public"
     created_at_ms: int
     created_by: str
     updated_at_ms: int
@@ -225,7 +234,8 @@ class EventService:
                 raise InvalidInput(f"There is no fleet {track.fleet_id}.", field=f"tracks.{index}.fleet_id")
         return {"name": data.name, "event_type": data.event_type, "date": data.date,
                 "country_code": data.country_code, "sponsor": data.sponsor, "race_config": data.race_config,
-                "tracks": _numbered(data.tracks, keep), "landing_page_links": tuple(data.landing_page_links)}
+                "tracks": _numbered(data.tracks, keep), "landing_page_links": tuple(data.landing_page_links),
+                "stats_visibility": data.stats_visibility}
 
 
 def _numbered(tracks: list[Track], existing: tuple[Track, ...]) -> tuple[Track, ...]:

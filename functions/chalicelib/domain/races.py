@@ -17,6 +17,7 @@ leaderboard and overlay are rebuilt right after.
 """
 from __future__ import annotations
 
+import json
 import logging
 import uuid
 from collections.abc import Callable, Iterable
@@ -25,17 +26,18 @@ from typing import Any, Protocol, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from chalicelib.auth.principals import Principal, Role, User
+from chalicelib.domain.audit import AuditLog, AuditTrail, lap_state, standings
 from chalicelib.domain.errors import Conflict, DremError, Forbidden, InvalidInput, NotFound
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, LeaderboardPublisher
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.domain.race_export import CsvFile, ExportKind, export_csv
 from drem_leaderboard import race_machine
-from drem_leaderboard.commands import RaceCommand
+from drem_leaderboard.commands import RaceCommand, SetLapValidity
 from drem_leaderboard.errors import LapNotFoundError, RaceRuleError
 from drem_leaderboard.models import TERMINAL_STATUSES, LapSource, Race, RaceStatus, Racer, new_race
 from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
-from drem_leaderboard.ranking import Leaderboard, RacerProfile
+from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer
 
 WRITE_ATTEMPTS = 3
@@ -178,8 +180,9 @@ def rule_error(exc: RaceRuleError) -> Exception:
 
 class RaceService:
     def __init__(self, races: RaceRepository, events: EventSource, racers: RacerDirectory, profiles: ProfileSource,
-                 boards: LeaderboardPublisher, clock_ms: Callable[[], int]) -> None:
+                 boards: LeaderboardPublisher, clock_ms: Callable[[], int], audit: AuditLog | None = None) -> None:
         self._races = races
+        self._audit = AuditTrail(audit, clock_ms)
         self._events = events
         self._racers = racers
         self._profiles = profiles
@@ -246,11 +249,13 @@ class RaceService:
         self.publish(event, race, now)
         return race_view(record, now, runs_used=used + 1, max_runs=config.max_runs_per_racer)
 
-    def apply_command(self, event_id: str, race_id: str, command: RaceCommand) -> dict[str, Any]:
+    def apply_command(self, event_id: str, race_id: str, command: RaceCommand, *, by: str = "") -> dict[str, Any]:
         event = self.event(event_id)
+        replaced: list[Race] = []
 
         def attempt() -> tuple[RaceRecord, race_machine.TransitionOutcome, int]:
             record = self.record(event_id, race_id)
+            replaced[:] = [record.race]
             now = self.clock_ms()
             try:
                 after, outcome = race_machine.apply(record.race, command, now)
@@ -264,6 +269,8 @@ class RaceService:
         record, outcome, now = with_retries(attempt)
         if outcome.changed:
             self.publish(event, record.race, now)
+        if isinstance(command, SetLapValidity) and outcome.changed:
+            self._audit_lap(event_id, by, "lap_validity", replaced[0], record.race, command.lap_id)
         return race_view(record, now, outcome=outcome.model_dump(mode="json"))
 
     def store(self, record: RaceRecord, expected_version: int) -> None:
@@ -274,12 +281,14 @@ class RaceService:
 
     # --- race admin --------------------------------------------------------------------------------------------
 
-    def edit_lap(self, event_id: str, race_id: str, lap_id: int, edit: LapEdit) -> dict[str, Any]:
+    def edit_lap(self, event_id: str, race_id: str, lap_id: int, edit: LapEdit, *, by: str = "") -> dict[str, Any]:
         event = self.event(event_id)
+        replaced: list[Race] = []  # the race as the winning attempt found it: the audit's "before"
 
         def attempt() -> RaceRecord:
             record = self.record(event_id, race_id)
             race = record.race
+            replaced[:] = [race]
             index = next((i for i, lap in enumerate(race.laps) if lap.lap_id == lap_id), None)
             if index is None:
                 raise NotFound(f"Race {race_id} has no lap {lap_id}.", field="lap_id")
@@ -295,22 +304,34 @@ class RaceService:
 
         record = with_retries(attempt)
         self.publish(event, record.race, self.clock_ms())
+        self._audit_lap(event_id, by, "lap_edit", replaced[0], record.race, lap_id)
         return race_view(record, self.clock_ms())
 
-    def delete_race(self, event_id: str, race_id: str) -> None:
+    def _audit_lap(self, event_id: str, by: str, action: Any, before: Race, after: Race, lap_id: int) -> None:
+        old = next((lap_state(lap) for lap in before.laps if lap.lap_id == lap_id), None)
+        new = next((lap_state(lap) for lap in after.laps if lap.lap_id == lap_id), None)
+        if old != new:
+            self._audit.record(event_id, by, action, race_id=after.race_id, racer=after.racer.username,
+                               lap_id=lap_id, before=old, after=new)
+
+    def delete_race(self, event_id: str, race_id: str, *, by: str = "") -> None:
         event = self.event(event_id)
         record = self.record(event_id, race_id)
         if record.race.status not in TERMINAL_STATUSES:
             raise Conflict(f"Race {race_id} is live on track {record.race.track_id}; end and discard it instead.")
         self._races.delete(record)
+        listing = _listing(record)
+        self._audit.record(event_id, by, "race_delete", race_id=race_id, racer=record.race.racer.username,
+                           before={k: listing[k] for k in ("track_id", "status", "laps", "valid_laps", "fastest_lap_ms")})
         try:
             self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
             self._finish(PublishIntent.of(record.race, deleted=True))
         except DremError as exc:
             _board_behind(record.race, exc)
 
-    def recompute(self, event_id: str) -> dict[str, Any]:
+    def recompute(self, event_id: str, *, by: str = "") -> dict[str, Any]:
         event = self.event(event_id)
+        before = self._standings(event)
         grouped: dict[tuple[str, str], list[Race]] = {}
         for record in self._races.list_event(event_id):
             grouped.setdefault((record.race.track_id, record.race.racer.sub), []).append(record.race)
@@ -321,8 +342,14 @@ class RaceService:
                 rows_by_track.setdefault(track_id, []).append(row)
         boards = self._boards.rebuild(event_id, rows_by_track, event.race_config.ranking_method,
                                      [t.track_id or "" for t in event.tracks])
+        self._audit.record(event_id, by, "recompute", before={"boards": before}, after={"boards": {
+            track: standings(board.model_dump(mode="json")) for track, board in boards.items()}})
         return {"event_id": event_id, "boards": {track: {"version": b.version, "entries": len(b.entries)}
                                                  for track, b in boards.items()}}
+
+    def _standings(self, event: Event) -> dict[str, list[str]]:
+        tracks = dict.fromkeys([*event.boards, COMBINED_TRACK_ID])  # the combined board exists for one track too
+        return {track: standings(json.loads(self._boards.board(event.event_id, track).body)) for track in tracks}
 
     def export(self, event_id: str, file_name: str) -> CsvFile:
         kinds = {f"{kind.value}.csv": kind for kind in ExportKind}

@@ -149,7 +149,7 @@ class TimekeeperDesk:
         record = self._races.record(event_id, press.race_id)
         if press.kind in {"capture_lap", "dnf"} and record.race.car:
             payload["car"] = record.race.car
-        view = self._races.apply_command(event_id, press.race_id, parse_command(payload))
+        view = self._races.apply_command(event_id, press.race_id, parse_command(payload), by=principal.username)
         self._tail_light(principal, view)
         return self.screen(event_id, track_id)
 

@@ -29,6 +29,7 @@ class TrackRow(BaseModel):
     title: str
     footer: str
     existing: bool
+    direction: str = "counter_clockwise"
 
 
 class EventFormView(BaseModel):
@@ -42,7 +43,8 @@ class EventFormView(BaseModel):
 def blank_form() -> EventFormView:
     config = RaceConfig()
     values = {"name": "", "event_type": EventType.OFFICIAL_TRACK_RACE.value, "date": "", "country_code": "",
-              "sponsor": "", **_config_values(config), "landing_page_links": _links_text(DEFAULT_LINKS)}
+              "sponsor": "", **_config_values(config), "landing_page_links": _links_text(DEFAULT_LINKS),
+              "stats_visibility": "public"}
     rows = [TrackRow(number=1, use=True, track_id="", fleet_id="", title="", footer="", existing=False)]
     return EventFormView(values=values, tracks=rows + _spare_rows(2, SPARE_TRACK_ROWS))
 
@@ -50,9 +52,9 @@ def blank_form() -> EventFormView:
 def form_of(event: Event) -> EventFormView:
     values = {"name": event.name, "event_type": event.event_type.value, "date": event.date.isoformat(),
               "country_code": event.country_code, "sponsor": event.sponsor, **_config_values(event.race_config),
-              "landing_page_links": _links_text(event.landing_page_links)}
+              "landing_page_links": _links_text(event.landing_page_links), "stats_visibility": event.stats_visibility}
     rows = [TrackRow(number=i, use=True, track_id=t.track_id or "", fleet_id=t.fleet_id or "",
-                     title=t.leaderboard_title, footer=t.leaderboard_footer, existing=True)
+                     title=t.leaderboard_title, footer=t.leaderboard_footer, existing=True, direction=t.direction)
             for i, t in enumerate(event.tracks, start=1)]
     return EventFormView(values=values, tracks=rows + _spare_rows(len(rows) + 1, SPARE_TRACK_ROWS))
 
@@ -63,9 +65,10 @@ def posted_form(fields: dict[str, str]) -> EventFormView:
     rows = [TrackRow(number=n, use=fields.get(f"track-{n}-use") == "on",
                      track_id=fields.get(f"track-{n}-track_id", ""), fleet_id=fields.get(f"track-{n}-fleet_id", ""),
                      title=fields.get(f"track-{n}-title", ""), footer=fields.get(f"track-{n}-footer", ""),
-                     existing=fields.get(f"track-{n}-existing") == "1") for n in numbers]
+                     existing=fields.get(f"track-{n}-existing") == "1",
+                     direction=fields.get(f"track-{n}-direction", "counter_clockwise")) for n in numbers]
     values = {name: fields.get(name, "") for name in ("name", "event_type", "date", "country_code", "sponsor",
-                                                     *CONFIG_FIELDS, "landing_page_links")}
+                                                     *CONFIG_FIELDS, "landing_page_links", "stats_visibility")}
     return EventFormView(values=values, tracks=rows)
 
 
@@ -79,7 +82,8 @@ def event_input(fields: dict[str, str]) -> EventInput:
     tracks = [{"track_id": fields.get(f"track-{n}-track_id", "").strip() or None,
                "fleet_id": fields.get(f"track-{n}-fleet_id", "").strip() or None,
                "leaderboard_title": fields.get(f"track-{n}-title", "").strip(),
-               "leaderboard_footer": fields.get(f"track-{n}-footer", "").strip()}
+               "leaderboard_footer": fields.get(f"track-{n}-footer", "").strip(),
+               "direction": fields.get(f"track-{n}-direction", "").strip() or "counter_clockwise"}
               for n in _used_rows(fields)]
     for track in tracks:
         if not track["leaderboard_footer"]:
@@ -87,7 +91,8 @@ def event_input(fields: dict[str, str]) -> EventInput:
     return EventInput.model_validate({
         "name": fields.get("name", ""), "event_type": fields.get("event_type", ""), "date": fields.get("date", ""),
         "country_code": fields.get("country_code", ""), "sponsor": fields.get("sponsor", ""), "race_config": config,
-        "tracks": tracks, "landing_page_links": _parse_links(fields.get("landing_page_links", ""))})
+        "tracks": tracks, "landing_page_links": _parse_links(fields.get("landing_page_links", "")),
+        "stats_visibility": fields.get("stats_visibility", "").strip() or "public"})
 
 
 def rename_for(fields: dict[str, str]):  # noqa: ANN201 - a small closure

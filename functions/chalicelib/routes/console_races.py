@@ -11,13 +11,14 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
+from chalicelib.domain import audit
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.races import LapEdit
 from chalicelib.domain.timekeeper_desk import clock_text
 from chalicelib.routes.console_common import checkbox, form, redirect, render_or_errors
 from chalicelib.routes.events import event_service
-from chalicelib.routes.races import race_service
+from chalicelib.routes.races import audit_log, race_service
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -37,7 +38,8 @@ def races_page(principal: User, query: RaceFilter) -> Response:
     event = next((e for e in events if e.event_id == query.event_id), events[0] if events else None)
     races = race_service().list_races(event.event_id, query.track or None) if event else []
     return render.page("console/races", events=events, event=event, track=query.track,
-                       races=[_race_row(r) for r in reversed(races)])
+                       races=[_race_row(r) for r in reversed(races)],
+                       audit=_audit_rows(event.event_id) if event else [])
 
 
 @route(bp, "/console/races/{event_id}/{race_id}", allow=RACE_ADMINS)
@@ -50,7 +52,7 @@ def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> Respo
     fields = form(bp.current_request)
 
     def save() -> Response:
-        race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields))
+        race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields), by=principal.username)
         return redirect(f"/console/races/{event_id}/{race_id}")
 
     return render_or_errors(save, lambda errors, status: _edit_page(
@@ -67,7 +69,7 @@ def confirm_delete_page(principal: User, event_id: str, race_id: str) -> Respons
 @route(bp, "/console/races/{event_id}/{race_id}/delete", methods=["POST"], allow=RACE_ADMINS)
 def delete_race(principal: User, event_id: str, race_id: str) -> Response:
     def delete() -> Response:
-        race_service().delete_race(event_id, race_id)
+        race_service().delete_race(event_id, race_id, by=principal.username)
         return redirect(f"/console/races?event_id={event_id}")
 
     return render_or_errors(delete, lambda errors, status: render.page(
@@ -80,7 +82,14 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
     laps = [{**lap, "seconds": f"{Decimal(lap['time_ms']) / 1000:.3f}", "time": clock_text(lap["time_ms"])}
             for lap in race["laps"]]
     return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors,
-                       created=_when(race["created_at_ms"]))
+                       created=_when(race["created_at_ms"]), audit=_audit_rows(event_id, race_id))
+
+
+def _audit_rows(event_id: str, race_id: str | None = None) -> list[dict[str, str]]:
+    entries = audit.newest_first(audit_log().for_event(event_id), race_id)
+    return [{"action": e.action, "when": _when(e.at_ms), "by": e.by, "what": audit.ACTION_LABELS[e.action],
+             "racer": e.racer or "", "lap": "" if e.lap_id is None else str(e.lap_id + 1),
+             "before": audit.describe(e.before), "after": audit.describe(e.after)} for e in entries]
 
 
 def _lap_number(lap_id: str) -> int:

@@ -41,6 +41,8 @@ NAV_LINKS: tuple[NavLink, ...] = (
     NavLink("Users", "/console/users", as_allow({ADMIN}), "search users, change roles, disable"),
     NavLink("League", "/league/reinvent_base", Allow(public=True), "the virtual league (any track: /league/TRACK)",
             topbar=False),
+    NavLink("Statistics", "/stats", Allow(public=True), "events, racers and fastest laps, per country and track",
+            topbar=False),
     NavLink("API", "/api/docs", Allow(public=True), "every JSON route, who may call it, and its input", topbar=False),
     NavLink("My account", "/api/me", SIGNED_IN, "who drem thinks you are (JSON)", topbar=False),
     NavLink("Service health", "/healthz", as_allow(STAFF), "storage and local state", topbar=False),

@@ -30,6 +30,7 @@ from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain import public_views as views
 from chalicelib.domain.errors import NotFound
+from chalicelib.domain.event_landing import landing_url
 from chalicelib.domain.events import Event
 from chalicelib.domain.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 from chalicelib.routes import races as race_routes
@@ -199,8 +200,7 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
     track = board_track(event, query.track)
     footer_tracks = [track] if track != COMBINED_TRACK_ID else [t.track_id or "" for t in event.tracks]
     _token, live = leaderboard_live(event_id, track, query, footer_tracks[:MAX_FOOTER_TRACKS], race_routes.now_ms())
-    page_url = live_url(f"{get_settings().public_url}/leaderboard/{quote(event_id, safe='')}",
-                        {"track": track, "format": query.format, "lang": query.lang})
+    page_url = landing_url(get_settings().public_url, event_id, query.lang)  # the QR opens the event's landing page
     return render.page("leaderboard", title=event.name, track=track, tracks=event.boards, lang=i18n.resolve_language(
         query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url, **live())
 

@@ -16,6 +16,7 @@ from chalicelib.domain.races import CreateRaceInput, LapEdit, RaceService
 from chalicelib.routes.users import user_directory
 from chalicelib.settings import get_settings
 from chalicelib.storage import clients
+from chalicelib.storage.audit import DynamoAuditLog
 from chalicelib.storage.events import DynamoEventStore
 from chalicelib.storage.leaderboards import DynamoBoardStore
 from chalicelib.storage.profiles import DynamoProfileStore
@@ -59,7 +60,12 @@ def race_service() -> RaceService:
     settings, dynamodb = get_settings(), clients.dynamodb()
     profiles = ProfileService(DynamoProfileStore(dynamodb, settings.table("profiles")))
     return RaceService(race_store(), DynamoEventStore(dynamodb, settings.table("events")),
-                       user_directory(settings), ProfilesForBoards(profiles), publisher(), now_ms)
+                       user_directory(settings), ProfilesForBoards(profiles), publisher(), now_ms,
+                       audit=audit_log())
+
+
+def audit_log() -> DynamoAuditLog:
+    return DynamoAuditLog(clients.dynamodb(), get_settings().table("races"))
 
 
 class RaceCommandBody(RootModel[RaceCommand]):
@@ -91,23 +97,23 @@ def my_races(principal: User) -> dict:
 @route(bp, "/api/events/{event_id}/races/{race_id}/commands", methods=["POST"], allow=RACE_STAFF,
        body=RaceCommandBody)
 def race_command(principal: User, event_id: str, race_id: str, body: RaceCommandBody) -> dict:
-    return race_service().apply_command(event_id, race_id, body.root)
+    return race_service().apply_command(event_id, race_id, body.root, by=principal.username)
 
 
 @route(bp, "/api/events/{event_id}/races/{race_id}/laps/{lap_id}", methods=["PUT"], allow=RACE_STAFF, body=LapEdit)
 def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str, body: LapEdit) -> dict:
-    return race_service().edit_lap(event_id, race_id, lap_number(lap_id), body)
+    return race_service().edit_lap(event_id, race_id, lap_number(lap_id), body, by=principal.username)
 
 
 @route(bp, "/api/events/{event_id}/races/{race_id}", methods=["DELETE"], allow=RACE_STAFF)
 def delete_race(principal: User, event_id: str, race_id: str) -> Response:
-    race_service().delete_race(event_id, race_id)
+    race_service().delete_race(event_id, race_id, by=principal.username)
     return Response(body="", status_code=204)
 
 
 @route(bp, "/api/events/{event_id}/recompute", methods=["POST"], allow=RACE_STAFF)
 def recompute(principal: User, event_id: str) -> dict:
-    return race_service().recompute(event_id)
+    return race_service().recompute(event_id, by=principal.username)
 
 
 @route(bp, "/api/events/{event_id}/export/{file_name}", methods=["GET"], allow=RACE_STAFF)

@@ -20,7 +20,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-HELP = "copy drem_infra, drem_leaderboard and drem_web into functions/vendor/ for the Lambda bundle"
+HELP = ("copy drem_infra, drem_leaderboard, drem_web and the PDF fonts into functions/vendor/ for the Lambda bundle")
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 FUNCTIONS_DIR = REPO_ROOT / "functions"
@@ -28,9 +28,10 @@ HTMX_RELATIVE = Path("static/vendor/htmx.min.js")
 LAMBDA_LOCK = REPO_ROOT / "requirements" / "lambda.txt"
 # Which lock filled vendor/ with wheels (its sha256), and which top-level names those wheels installed.
 DEPENDENCY_STAMP = ".drem-dependencies.json"
-# Lambda runs x86_64 Amazon Linux; these tags cover every wheel in the lock. Chalice picks the function's runtime
-# from the Python that packages it, so the wheels are for this interpreter's version.
-LAMBDA_PLATFORMS = ("manylinux2014_x86_64", "manylinux_2_28_x86_64")
+# Lambda's python3.11 runs on x86_64 Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels, which the lock
+# was resolved for. Chalice picks the function's runtime from the Python that packages it, so the wheels are for this
+# interpreter's version.
+LAMBDA_PLATFORMS = ("manylinux2014_x86_64",)
 
 
 class BuildError(RuntimeError):
@@ -134,12 +135,29 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
+def vendor_fonts(functions_dir: Path = FUNCTIONS_DIR) -> Path:
+    """Copy the fonts the PDFs embed (installed from Debian packages, never committed) to vendor/drem_fonts/, which
+    lands at the bundle root where `chalicelib.domain.pdf_fonts` looks first."""
+    from chalicelib.domain.pdf_fonts import FONT_FILES, font_path
+
+    fonts = {name: font_path(name).read_bytes() for name in sorted(set(FONT_FILES.values()))}  # before the rmtree
+    target = functions_dir / "vendor" / "drem_fonts"
+    if target.exists():
+        shutil.rmtree(target)
+    target.mkdir(parents=True)
+    for name, data in fonts.items():
+        (target / name).write_bytes(data)
+    return target
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--functions-dir", type=Path, default=FUNCTIONS_DIR,
                         help="the Chalice project to vendor into (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from chalicelib.domain.errors import ServiceUnavailable
+
     try:
         copied = vendor_packages(args.functions_dir)
         if dependencies_current(args.functions_dir):
@@ -147,7 +165,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             installed = vendor_dependencies(args.functions_dir)
             print(f"vendored {len(installed)} dependency folders from {LAMBDA_LOCK.name} (Lambda wheels)")
-    except (FileNotFoundError, BuildError) as exc:
+        copied.append(vendor_fonts(args.functions_dir))
+    except (FileNotFoundError, BuildError, ServiceUnavailable) as exc:
         print(f"drem build: {exc}", file=sys.stderr)
         return 1
     for target in copied:

@@ -10,10 +10,13 @@ report (sub mapping, roles, what was written and kept) goes next to the folder; 
 from __future__ import annotations
 
 import argparse
+import getpass
 import json
 import sys
+import time
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from drem_local.commands.export import add_location_arguments, open_stack
 
@@ -34,6 +37,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_location_arguments(parser)
 
 
+def record_import(target: Any, result: Any) -> None:
+    """The import itself goes into the event's audit trail (who ran it, from which event, what it wrote)."""
+    from chalicelib.domain.audit import AuditEntry
+    from chalicelib.storage.audit import audit_item
+
+    entry = AuditEntry(event_id=result.event_id, at_ms=time.time_ns() // 1_000_000,
+                       by=f"drem import ({getpass.getuser()})", action="import",
+                       after={"source_event_id": result.source_event_id, "written": result.written})
+    target.put_new_item("races", audit_item(entry))
+
+
 def run(args: argparse.Namespace) -> int:
     from chalicelib.domain.errors import DremError
     from chalicelib.domain.event_transfer import (PartialImport, parse_password_file, plan_import, read_export,
@@ -46,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,
                            grant_roles=args.grant_roles)
         result = run_import(plan, target)
+        record_import(target, result)
     except PartialImport as exc:
         print(f"drem import: {exc.message}", file=sys.stderr)
         return 1

@@ -1,0 +1,155 @@
+"""The statistics page (`/stats`): events, racers and laps over time, per country on a world map, and the fastest laps
+per track type, over every event the viewer may see, with filters (track direction, country, dates).
+
+Pure: it takes the events and their races and returns what the page prints. Rules follow DREM's statistics engine:
+test events are left out, only submitted races count, and a lap under 5 s counts as invalid (a timing artefact).
+Events the organiser keeps staff-only (`stats_visibility = "staff"`) count only for signed-in staff.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
+from datetime import date
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib.domain.events import Event, EventType, TrackDirection
+from chalicelib.domain.public_views import lap_time
+from drem_leaderboard.models import Race, RaceStatus
+
+MIN_LAP_MS = 5_000
+TOP_LAPS = 10
+DIRECTION_LABELS = {"counter_clockwise": "Counter-clockwise", "clockwise": "Clockwise"}
+
+
+class StatsFilter(BaseModel):
+    """The page's filter form (GET query): empty means "all"."""
+    model_config = ConfigDict(extra="ignore")
+    direction: TrackDirection | None = None
+    country: str | None = Field(default=None, pattern=r"^[A-Za-z]{2}$")
+    date_from: date | None = Field(default=None, alias="from")
+    date_to: date | None = Field(default=None, alias="to")
+
+
+class FastLap(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    position: int
+    username: str
+    time: str
+    time_ms: int
+    event_name: str
+    event_date: date
+    country_code: str
+    direction: str
+
+
+class TrackTypeStats(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    track_type: str
+    races: int
+    best: str
+    fastest: tuple[FastLap, ...]
+
+
+class Totals(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    events: int
+    racers: int
+    races: int
+    laps: int
+    valid_laps: int
+    countries: int
+
+
+class Stats(BaseModel):
+    model_config = ConfigDict(frozen=True)
+    totals: Totals
+    by_month: tuple[tuple[str, int, int], ...]  # (YYYY-MM, events, races)
+    events_by_country: dict[str, int]
+    racers_by_country: dict[str, int]
+    track_types: tuple[TrackTypeStats, ...]
+    fastest: tuple[FastLap, ...]
+    countries: tuple[str, ...]  # every country with a visible event (the filter's choices)
+
+
+def visible_events(events: Iterable[Event], *, staff: bool) -> list[Event]:
+    return [e for e in events if e.event_type is not EventType.TEST_EVENT and (staff or e.stats_visibility == "public")]
+
+
+def _event_matches(event: Event, wanted: StatsFilter) -> bool:
+    if wanted.country and event.country_code != wanted.country.upper():
+        return False
+    if wanted.date_from and event.date < wanted.date_from:
+        return False
+    if wanted.date_to and event.date > wanted.date_to:
+        return False
+    return not wanted.direction or any(t.direction == wanted.direction for t in event.tracks)
+
+
+def compute(events_and_races: Sequence[tuple[Event, Sequence[Race]]], wanted: StatsFilter,
+            display_name: Callable[[str, str], str]) -> Stats:
+    """`events_and_races` holds the visible events only; `display_name(sub, username)` is what a lap is shown
+    under (a deleted racer's tombstone name)."""
+    countries = tuple(sorted({e.country_code for e, _ in events_and_races}))
+    chosen = [(e, races) for e, races in events_and_races if _event_matches(e, wanted)]
+    months: dict[str, list[int]] = {}
+    event_countries: Counter[str] = Counter()
+    racers_by_country: dict[str, set[str]] = {}
+    racers: set[str] = set()
+    laps = valid = race_count = 0
+    candidates: list[tuple[int, str, str, Event, str, str]] = []  # (ms, sub, username, event, track type, direction)
+    by_type: dict[str, int] = Counter()
+    for event, races in chosen:
+        directions = {t.track_id: t.direction for t in event.tracks}
+        month = months.setdefault(event.date.strftime("%Y-%m"), [0, 0])
+        month[0] += 1
+        event_countries[event.country_code] += 1
+        for race in races:
+            direction = directions.get(race.track_id, "counter_clockwise")
+            if race.status is not RaceStatus.SUBMITTED or (wanted.direction and direction != wanted.direction):
+                continue
+            race_count += 1
+            month[1] += 1
+            racers.add(race.racer.sub)
+            racers_by_country.setdefault(event.country_code, set()).add(race.racer.sub)
+            track_type = race.config.track_type.value
+            by_type[track_type] += 1
+            for lap in race.laps:
+                laps += 1
+                if lap.is_valid and lap.time_ms >= MIN_LAP_MS:
+                    valid += 1
+                    candidates.append((lap.time_ms, race.racer.sub, race.racer.username, event, track_type,
+                                       direction))
+    candidates.sort(key=lambda c: (c[0], c[2]))
+    per_type = [TrackTypeStats(track_type=track_type, races=count,
+                               best=lap_time(next((c[0] for c in candidates if c[4] == track_type), None), "—"),
+                               fastest=_top(c for c in candidates if c[4] == track_type)(display_name))
+                for track_type, count in sorted(by_type.items())]
+    return Stats(
+        totals=Totals(events=len(chosen), racers=len(racers), races=race_count, laps=laps, valid_laps=valid,
+                      countries=len(event_countries)),
+        by_month=tuple((m, v[0], v[1]) for m, v in sorted(months.items())),
+        events_by_country=dict(event_countries), racers_by_country={c: len(s) for c, s in racers_by_country.items()},
+        track_types=tuple(per_type), fastest=_top(candidates)(display_name), countries=countries)
+
+
+def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callable[[Callable[[str, str], str]],
+                                                                                   tuple[FastLap, ...]]:
+    """The TOP_LAPS fastest laps, one per racer (their best), named only once chosen (a profile read each)."""
+    best: list[tuple[int, str, str, Event, str, str]] = []
+    seen: set[str] = set()
+    for candidate in candidates:
+        if candidate[1] in seen:
+            continue
+        seen.add(candidate[1])
+        best.append(candidate)
+        if len(best) == TOP_LAPS:
+            break
+
+    def named(display_name: Callable[[str, str], str]) -> tuple[FastLap, ...]:
+        return tuple(FastLap(position=i, username=display_name(sub, username), time=lap_time(ms), time_ms=ms,
+                             event_name=event.name, event_date=event.date, country_code=event.country_code,
+                             direction=DIRECTION_LABELS[direction])
+                     for i, (ms, sub, username, event, _type, direction) in enumerate(best, start=1))
+
+    return named

@@ -1,0 +1,54 @@
+"""Printed results: the race summary, podium sheet and certificates of an event as PDFs, for race staff.
+
+The console's race admin page links here (a session cookie works like a bearer token on GET).
+"""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.errors import NotFound
+from chalicelib.domain.profiles import ProfileService
+from chalicelib.domain.results import EventResults, event_results
+from chalicelib.domain.results_pdf import render_document
+from chalicelib.routes.races import race_store
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.events import DynamoEventStore
+from chalicelib.storage.profiles import DynamoProfileStore
+
+bp = Blueprint(__name__)
+
+RESULTS_STAFF = {ADMIN, OPERATOR}
+
+
+class ResultsQuery(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    track: str = Field(default="", max_length=32, pattern=r"^[A-Za-z0-9_-]*$")
+
+
+def profile_service() -> ProfileService:
+    return ProfileService(DynamoProfileStore(clients.dynamodb(), get_settings().table("profiles")))
+
+
+def load_results(event_id: str) -> EventResults:
+    settings, dynamodb = get_settings(), clients.dynamodb()
+    event = DynamoEventStore(dynamodb, settings.table("events")).get(event_id)
+    if event is None:
+        raise NotFound(f"There is no event {event_id}.", field="event_id")
+    profiles = profile_service()
+    races = [record.race for record in race_store().list_event(event_id)]
+    return event_results(event, races, profiles.public_by_subs)
+
+
+@route(bp, "/api/events/{event_id}/results/{file_name}", allow=RESULTS_STAFF, query=ResultsQuery,
+       summary="The event's race summary, podium sheet or certificates as a PDF (summary.pdf, podium.pdf, "
+               "certificates.pdf); ?track= for one board")
+def results_pdf(principal: User, event_id: str, file_name: str, query: ResultsQuery) -> Response:
+    body = render_document(load_results(event_id), file_name, query.track or None)
+    suffix = f"-track-{query.track}" if query.track else ""
+    return Response(body=body, status_code=200, headers={
+        "Content-Type": "application/pdf", "Cache-Control": "no-store",
+        "Content-Disposition": f'attachment; filename="{event_id}{suffix}-{file_name}"'})

@@ -1,0 +1,38 @@
+"""The statistics page `/stats`: public, and more for signed-in staff (events the organiser keeps staff-only).
+
+Server-rendered (SVG charts and world map), filtered with a plain GET form: works without JavaScript.
+"""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
+from chalicelib.auth.principals import Principal
+from chalicelib.domain.stats import StatsFilter, compute, visible_events
+from chalicelib.domain.stats_view import stats_page
+from chalicelib.routes.results import profile_service
+from chalicelib.settings import get_settings
+from chalicelib.storage import clients
+from chalicelib.storage.events import DynamoEventStore
+from chalicelib.storage.race_scan import submitted_races_by_event
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+STATS_STAFF = {ADMIN, OPERATOR, COMMENTATOR}
+
+
+@route(bp, "/stats", allow=PUBLIC, query=StatsFilter)
+def stats(principal: Principal, query: StatsFilter) -> Response:
+    staff = bool(principal.roles & STATS_STAFF)
+    settings, dynamodb = get_settings(), clients.dynamodb()
+    events = visible_events(DynamoEventStore(dynamodb, settings.table("events")).list(), staff=staff)
+    races = submitted_races_by_event(dynamodb, settings.table("races"))
+    data = [(event, races.get(event.event_id, [])) for event in events]
+    profiles = profile_service()
+
+    def display_name(sub: str, username: str) -> str:
+        public = profiles.public_by_sub(sub)
+        return public.username if public else username
+
+    return render.page("stats", view=stats_page(compute(data, query, display_name), query, staff=staff))
