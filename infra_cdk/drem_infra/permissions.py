@@ -37,6 +37,7 @@ BUCKET_ACTIONS: dict[str, tuple[str, ...]] = {
 # tokens or are public, and IAM does not evaluate them.
 USER_POOL_ACTIONS: tuple[str, ...] = (
     "cognito-idp:AdminAddUserToGroup",
+    "cognito-idp:AdminConfirmSignUp",  # (only a local stack confirms sign-ups itself; kept so the code path works)
     "cognito-idp:AdminCreateUser",
     "cognito-idp:AdminDeleteUser",
     "cognito-idp:AdminDisableUser",
@@ -44,6 +45,7 @@ USER_POOL_ACTIONS: tuple[str, ...] = (
     "cognito-idp:AdminGetUser",
     "cognito-idp:AdminListGroupsForUser",
     "cognito-idp:AdminRemoveUserFromGroup",
+    "cognito-idp:AdminSetUserPassword",  # a resumed staff registration hands out a new temporary password
     "cognito-idp:AdminUserGlobalSignOut",
     "cognito-idp:ListUsers",
 )

@@ -15,8 +15,9 @@ from drem_infra import permissions, resources
 pytestmark = pytest.mark.infra
 
 STORAGE_DIR = Path(__file__).resolve().parents[2] / "functions" / "chalicelib" / "storage"
-# The CLI's adapter for `drem export/import --aws`: it runs with the operator's own credentials, never in Lambda.
-CLI_ONLY = {"event_archive.py"}
+# Not callers: the CLI's adapter for `drem export/import --aws` (it runs with the operator's own credentials, never in
+# Lambda) and the error translator, which lists operation-name prefixes to tell reads from writes.
+CLI_ONLY = {"event_archive.py", "aws_errors.py"}
 SERVICES = ("dynamodb", "s3", "cognito-idp")
 # Client methods that are not API operations but sign a request the role must be allowed to make.
 PRESIGNED = {"generate_presigned_post": ("s3", "PutObject"), "generate_presigned_url": ("s3", "GetObject")}
