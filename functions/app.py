@@ -11,9 +11,11 @@ from chalicelib.routes import (accounts, api_docs, assignments, commentator, con
                                 devices, events, fleets, health, leaderboards, league, login, models, pages, ping,
                                 profiles, public_pages, races, registry, timing, users)
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
+from drem_web import favicon
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
+app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,

@@ -88,7 +88,7 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
 
     page.goto(f"{app_url}/console/races?event_id={event_id}")
     row = page.locator("[data-testid=races-table] tr", has_text="keys-racer")
-    assert "SUBMITTED" in row.inner_text() and "3 (1)" in row.inner_text()
+    assert "Submitted" in row.inner_text() and "3 (1)" in row.inner_text()
 
     download = page.request.get(app_url + page.get_by_test_id("csv-laps").get_attribute("href"))
     assert download.ok and download.headers["content-type"].startswith("text/csv")

@@ -102,13 +102,13 @@ def test_my_models_lists_status_and_reason_and_polls_only_while_uploaded(app: An
 
     page = racer.get("/console/my-models")
     shown = text(page)
-    assert "fast-lap AVAILABLE" in shown
-    assert "no-meta the archive has no model_metadata.json at its top level NOT_VALID" in shown
+    assert "fast-lap Ready to race" in shown
+    assert "no-meta the archive has no model_metadata.json at its top level Not valid" in shown
     assert 'src="/static/upload.js"' in body(page)
     polling = racer.get(f"/console/my-models/{waiting['model_id']}/row")
-    assert 'hx-trigger="every 2s"' in body(polling) and "UPLOADED" in text(polling)
+    assert 'hx-trigger="every 2s"' in body(polling) and "Checking…" in text(polling)
     settled = racer.get(f"/console/my-models/{good['model_id']}/row")
-    assert "every 2s" not in body(settled) and "AVAILABLE" in text(settled)
+    assert "every 2s" not in body(settled) and "Ready to race" in text(settled)
     assert bad["status"] == "NOT_VALID"
 
 

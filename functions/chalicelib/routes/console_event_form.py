@@ -13,6 +13,7 @@ from pydantic import BaseModel
 from chalicelib.domain.events import DEFAULT_LINKS, Event, EventInput, EventType
 from chalicelib.domain.errors import InvalidInput
 from drem_leaderboard.models import RaceConfig, RankingMethod, TrackType
+from drem_web import labels
 
 SPARE_TRACK_ROWS = 2
 CONFIG_FIELDS = ("race_time_min", "resets_per_lap", "track_type", "ranking_method", "lap_count_target",
@@ -34,9 +35,9 @@ class TrackRow(BaseModel):
 class EventFormView(BaseModel):
     values: dict[str, str]
     tracks: list[TrackRow]
-    event_types: list[str] = [t.value for t in EventType]
-    track_types: list[str] = [t.value for t in TrackType]
-    ranking_methods: list[str] = [m.value for m in RankingMethod]
+    event_types: list[tuple[str, str]] = labels.options(EventType)
+    track_types: list[tuple[str, str]] = labels.options(TrackType)
+    ranking_methods: list[tuple[str, str]] = labels.options(RankingMethod)
 
 
 def blank_form() -> EventFormView:

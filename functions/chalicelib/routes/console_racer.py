@@ -18,6 +18,7 @@ from chalicelib.domain.passwords import PasswordChangeForm, PasswordService
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE, ProfileUpdate
 from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
 from chalicelib.domain.identity import password_policy_text
+from chalicelib.routes.events import event_service
 from chalicelib.routes.console_forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
 from chalicelib.routes.profiles import profile_service
 from chalicelib.routes.races import race_service
@@ -136,7 +137,9 @@ def delete_my_model(principal: User, model_id: str) -> Response:
 
 @route(bp, "/console/my-races", allow=SIGNED_IN)
 def my_races(principal: User) -> Response:
-    return render.page("console/my_races", races=list(reversed(race_service().my_races(principal))))
+    event_names = {event.event_id: event.name for event in event_service().list_events()}
+    return render.page("console/my_races", races=list(reversed(race_service().my_races(principal))),
+                       event_names=event_names)
 
 
 @route(bp, "/console/my-races/{event_id}/{race_id}", allow=SIGNED_IN)
