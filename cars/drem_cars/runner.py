@@ -58,6 +58,7 @@ def run_agent(args: argparse.Namespace) -> int:
         print(f"drem car run --sim: {exc}", file=sys.stderr)
         return 2
     agent = CarAgent(client, car.driver, outbox, models)
+    agent.times_laps = car.strips is not None
     stats = _drive(agent, car.vehicle, args.rate_hz, deadline)
     print(f"drive loop: {stats.summary()}; sim laps crossed: {car.strips.queued if car.strips else 0}; "
           f"outbox pending {outbox.count()}")

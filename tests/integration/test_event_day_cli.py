@@ -71,6 +71,9 @@ def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_
                           timeout=10).json()
     code = requests.post(live_stack.url + "/api/devices/activation-codes", headers=headers, timeout=10, json={
         "fleet_id": fleet["fleet_id"], "hostname": "fresh-sim", "device_kind": "car"}).json()["code"]
+    event = requests.post(live_stack.url + "/api/events", headers=headers, timeout=10, json={
+        "name": "Fresh clone cup", "event_type": "OTHER", "date": "2026-07-01", "country_code": "SE",
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]}).json()
     config = tmp_path / "car"
     activated = drem("car", "activate", "--code", code, "--hostname", "fresh-sim", "--api", live_stack.url,
                      "--config-dir", str(config), cwd=tmp_path)
@@ -79,8 +82,13 @@ def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_
     script = ("import sys; from pathlib import Path; import drem_sim.tracks as t; "
               "t.DEFAULT_NPY_DIR = Path(sys.argv[1]); from drem_local.cli import main; sys.exit(main(sys.argv[2:]))")
     ran = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c", script, str(tmp_path / "no-shared"),
-                          "car", "--config-dir", str(config), "run", "--sim", "--seconds", "3"],
+                          "car", "--config-dir", str(config), "run", "--sim", "--seconds", "3",
+                          "--event", event["event_id"], "--race-track", "1"],
                          cwd=tmp_path, capture_output=True, text=True, timeout=120,
                          env={k: v for k, v in os.environ.items() if not k.startswith("DREM_")})
     assert ran.returncode == 0, ran.stderr
     assert "Traceback" not in ran.stderr and "drive loop:" in ran.stdout
+    # The sim car times its track with its own timing line: the timekeeper must not say there is no timer.
+    desk = requests.get(f"{live_stack.url}/console/timekeeper/{event['event_id']}/1", headers=headers, timeout=10)
+    assert desk.status_code == 200, desk.text[:300]
+    assert "Timed by sim car fresh-sim" in desk.text and "No timer in this track" not in desk.text
