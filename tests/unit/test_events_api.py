@@ -32,7 +32,7 @@ def test_operator_creates_event_and_staff_read_it(api: Api) -> None:
     assert event["tracks"] == [{"track_id": "1", "fleet_id": None, "leaderboard_title": "Main track",
                                 "leaderboard_footer": "Follow the race #AWSDeepRacer"}]
     assert event["combined_board"] is False
-    assert event["landing_page_links"][0]["href"] == "/upload"
+    assert event["landing_page_links"][0]["href"] == "/console/my-models"  # a page racers may open
 
     for reader in ("commentator", "registration", "admin"):
         listed = api.get("/api/events", as_=reader)

@@ -1,0 +1,131 @@
+"""Issue 13 (event day) on real screens, in Chromium at 1920×1080 and 390×844: the big screen with 18 racers, the
+chroma-key overlay, the track's title/footer/sponsor/links, and the console pages racers and staff meet."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.browser.console_api import PASSWORD, access_token, call, create_user, sign_in
+
+pytestmark = pytest.mark.browser
+
+SCREENSHOTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "event-day"
+BIG_SCREEN = {"width": 1920, "height": 1080}
+PHONE = {"width": 390, "height": 844}
+RACERS = 18
+
+
+@pytest.fixture(scope="module")
+def event_day(live_stack: Any) -> dict[str, Any]:
+    """An event whose track 1 board holds 18 racers, and a race running on it (the "Now racing" bar)."""
+    url = live_stack.url
+    create_user(live_stack, "day-op", "operator")
+    token = access_token(live_stack, "day-op")
+    fleet = call(url, "POST", "/api/fleets", token=token, body={"name": "Day fleet"}, expect=201)
+    event = call(url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Event Day Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-01", "country_code": "SE",
+        "sponsor": "Acme Robotics", "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"],
+                                                "leaderboard_title": "Main stage",
+                                                "leaderboard_footer": "Race again at the Acme booth"}]})
+    event_id = event["event_id"]
+    racers = [f"day-racer-{n:02d}" for n in range(1, RACERS + 1)]
+    for n, racer in enumerate(racers):
+        call(url, "POST", "/api/users", token=admin_token(live_stack), expect=201,
+             body={"username": racer, "email": f"{racer}@example.test", "country_code": "DE"})
+        race = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                    body={"track_id": "1", "racer_username": racer})
+        path = f"/api/events/{event_id}/races/{race['race_id']}"
+        for kind in ("start", "capture_lap", "end", "submit"):
+            call(url, "POST", path + "/commands", token=token, body={"kind": kind})
+        call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 8_000 + 137 * n, "is_valid": True})
+    create_user(live_stack, "day-live", "racer")
+    live = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                body={"track_id": "1", "racer_username": "day-live"})
+    call(url, "POST", f"/api/events/{event_id}/races/{live['race_id']}/commands", token=token, body={"kind": "start"})
+    return {"event_id": event_id, "racers": racers, "token": token}
+
+
+_admin: dict[str, str] = {}
+
+
+def admin_token(live_stack: Any) -> str:
+    if "token" not in _admin:
+        import requests
+
+        _admin["token"] = requests.post(live_stack.url + "/api/auth/token", timeout=10, json={
+            "username": live_stack.admin_username, "password": live_stack.admin_password}).json()["access_token"]
+    return _admin["token"]
+
+
+def shot(page: Any, name: str) -> None:
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / f"{name}.png"))
+
+
+def visible_racers(page: Any) -> list[str]:
+    """Racers whose whole row is on screen and not under the race bar."""
+    return page.evaluate("""() => {
+        const bar = document.querySelector('[data-testid=race-footer]');
+        const limit = bar ? bar.getBoundingClientRect().top : window.innerHeight;
+        return [...document.querySelectorAll('.board-row')].filter(row => {
+            const box = row.getBoundingClientRect();
+            return !row.hidden && box.height > 0 && box.top >= 0 && box.bottom <= Math.min(limit, window.innerHeight);
+        }).map(row => row.dataset.racer);
+    }""")
+
+
+def test_every_one_of_18_racers_appears_on_the_big_screen_and_the_race_bar_covers_none(chromium, event_day,
+                                                                                       app_url):
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    page.goto(f"{app_url}/leaderboard/{event_day['event_id']}?page_seconds=2")
+    page.get_by_test_id("race-footer").wait_for()
+    seen: set[str] = set()
+    pages_seen: set[str] = set()
+    for _ in range(40):  # bounded: 2 s pages, polled every 250 ms
+        seen.update(visible_racers(page))
+        pages_seen.add(page.inner_text("[data-board-page]"))
+        if seen >= set(event_day["racers"]) and len(pages_seen) > 1:
+            break
+        page.wait_for_timeout(250)
+    assert seen == set(event_day["racers"]), f"never on screen: {sorted(set(event_day['racers']) - seen)} {pages_seen}"
+    assert any("/" in label for label in pages_seen)  # "1 / 2": the audience sees there is more
+    # The track's own title, its footer, the sponsor and the landing links (saved in the console) are shown.
+    assert page.get_by_test_id("board-subtitle").inner_text().startswith("Main stage")
+    assert page.get_by_test_id("board-footer").inner_text() == "Race again at the Acme booth"
+    assert "Acme Robotics" in page.get_by_test_id("board-sponsor").inner_text()
+    link = page.get_by_test_id("board-links").get_by_role("link").first
+    assert link.get_attribute("href") == "/console/my-models"
+    page.evaluate("() => { document.querySelectorAll('.board-row').forEach(r => r.hidden = false); }")
+    shot(page, "leaderboard-18-racers-1920")
+    context.close()
+
+
+def test_the_default_landing_link_opens_for_a_racer(chromium, event_day, app_url, live_stack):
+    create_user(live_stack, "day-landing", "racer")
+    context = chromium.new_context(viewport=PHONE)
+    page = context.new_page()
+    sign_in(page, app_url, "day-landing")
+    page.goto(f"{app_url}/leaderboard/{event_day['event_id']}")
+    page.get_by_test_id("board-links").get_by_role("link").first.click()
+    page.wait_for_url(f"{app_url}/console/my-models")
+    assert page.locator("h1").first.inner_text().strip() != "Not allowed"
+    context.close()
+
+
+def test_chroma_overlay_panels_are_opaque_with_no_soft_shadow(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    page.goto(f"{app_url}/overlay/{event_day['event_id']}?trackId=1&chroma=1")
+    page.get_by_test_id("lower-third").wait_for()
+    styles = page.evaluate("""() => [...document.querySelectorAll('.lower-third, .standings, .overlay-title')]
+        .map(el => { const s = getComputedStyle(el);
+                     return {bg: s.backgroundColor, shadow: s.textShadow, box: s.boxShadow, radius: s.borderRadius}; })""")
+    assert styles
+    for style in styles:
+        assert style["bg"].startswith("rgb(") and not style["bg"].startswith("rgba("), style  # alpha 1
+        assert style["shadow"] == "none" and style["box"] == "none" and style["radius"] in ("0px", ""), style
+    shot(page, "overlay-chroma-1920")
+    context.close()
