@@ -98,7 +98,10 @@ def test_every_one_of_18_racers_appears_on_the_big_screen_and_the_race_bar_cover
     assert "Acme Robotics" in page.get_by_test_id("board-sponsor").inner_text()
     link = page.get_by_test_id("board-links").get_by_role("link").first
     assert link.get_attribute("href") == "/console/my-models"
-    page.evaluate("() => { document.querySelectorAll('.board-row').forEach(r => r.hidden = false); }")
+    # Flags are images (flag-icons), not emoji that Windows and this Chromium show as letters or boxes.
+    flag = page.locator(".board-row:not([hidden]) [data-testid=flag]").first
+    assert flag.get_attribute("src") == "/static/vendor/flags/de.svg"
+    assert flag.evaluate("img => img.complete && img.naturalWidth > 0")
     shot(page, "leaderboard-18-racers-1920")
     context.close()
 

@@ -120,6 +120,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/static/{name}"): Case(allow(*EVERYONE), lambda w, c: Call({"name": "drem.css"})),
     ("GET", "/static/vendor/{name}"): Case(allow(*EVERYONE), lambda w, c: Call({"name": "htmx.min.js"})),
     ("GET", "/favicon.ico"): Case(allow(*EVERYONE)),
+    ("GET", "/static/vendor/flags/{name}"): Case(allow(*EVERYONE), lambda w, c: Call({"name": "se.svg"})),
     ("GET", "/_drem/not-found"): Case(allow(*EVERYONE)),
     ("GET", "/api/_drem/not-found"): Case(allow(*EVERYONE)),
     ("GET", "/login"): PUBLIC,

@@ -34,6 +34,12 @@ def vendor_file(principal: Principal, name: str) -> Response:
     return _static(name, "vendor", max_age=86400)
 
 
+@route(bp, "/static/vendor/flags/{name}", allow=PUBLIC)
+def flag_file(principal: Principal, name: str) -> Response:
+    # flag-icons' 4×3 SVGs, copied at setup (Makefile); named by lower-case ISO 3166-1 alpha-2 code.
+    return _static(name, "vendor/flags", max_age=86400)
+
+
 @route(bp, "/favicon.ico", allow=PUBLIC)
 def favicon_ico(principal: Principal) -> Response:
     """drem's icon (browsers ask for it on every site; a 403 here put an error in every page's console)"""
