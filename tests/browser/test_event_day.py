@@ -132,3 +132,17 @@ def test_chroma_overlay_panels_are_opaque_with_no_soft_shadow(chromium, event_da
         assert style["shadow"] == "none" and style["box"] == "none" and style["radius"] in ("0px", ""), style
     shot(page, "overlay-chroma-1920")
     context.close()
+
+
+def test_the_events_table_fits_a_phone(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=PHONE)
+    page = context.new_page()
+    sign_in(page, app_url, "day-op")
+    page.goto(app_url + "/console/events")
+    table = page.get_by_test_id("events-table")
+    assert table.bounding_box()["width"] <= PHONE["width"]
+    assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]  # no sideways scrolling
+    row = page.locator("tr", has_text="Event Day Cup")
+    assert "Official track race" in row.inner_text() and "Fastest lap" in row.inner_text()  # labels, not enums
+    shot(page, "events-390")
+    context.close()
