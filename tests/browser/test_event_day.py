@@ -40,11 +40,20 @@ def event_day(live_stack: Any) -> dict[str, Any]:
         for kind in ("start", "capture_lap", "end", "submit"):
             call(url, "POST", path + "/commands", token=token, body={"kind": kind})
         call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 8_000 + 137 * n, "is_valid": True})
+    # A racer who can sign in, with one submitted race of 8.838 s.
+    create_user(live_stack, "day-mine", "racer")
+    mine = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                body={"track_id": "1", "racer_username": "day-mine"})
+    mine_path = f"/api/events/{event_id}/races/{mine['race_id']}"
+    for kind in ("start", "capture_lap", "capture_lap", "end", "submit"):
+        call(url, "POST", mine_path + "/commands", token=token, body={"kind": kind})
+    call(url, "PUT", mine_path + "/laps/0", token=token, body={"time_ms": 8_838, "is_valid": True})
+    call(url, "PUT", mine_path + "/laps/1", token=token, body={"time_ms": 9_101, "is_valid": True})
     create_user(live_stack, "day-live", "racer")
     live = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
                 body={"track_id": "1", "racer_username": "day-live"})
     call(url, "POST", f"/api/events/{event_id}/races/{live['race_id']}/commands", token=token, body={"kind": "start"})
-    return {"event_id": event_id, "racers": racers, "token": token}
+    return {"event_id": event_id, "racers": racers + ["day-mine"], "token": token, "mine": mine["race_id"]}
 
 
 _admin: dict[str, str] = {}
@@ -145,4 +154,60 @@ def test_the_events_table_fits_a_phone(chromium, event_day, app_url):
     row = page.locator("tr", has_text="Event Day Cup")
     assert "Official track race" in row.inner_text() and "Fastest lap" in row.inner_text()  # labels, not enums
     shot(page, "events-390")
+    context.close()
+
+
+def board_colour(page: Any, racer: str) -> str:
+    return page.evaluate("r => getComputedStyle(document.querySelector(`[data-racer='${r}']`))"
+                         ".getPropertyValue('--racer-colour').trim().toLowerCase()", racer)
+
+
+def test_a_racers_colour_change_reaches_the_board_and_the_default_is_preselected(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=PHONE)
+    page = context.new_page()
+    sign_in(page, app_url, "day-mine")
+    page.goto(app_url + "/console/profile")
+    assert page.get_by_label("#0000FF").is_checked()  # the colour the boards show before any save
+    page.get_by_label("#FF0000").check()
+    page.get_by_role("button", name="Save").click()
+    page.get_by_test_id("notice").wait_for()
+    board = context.new_page()
+    board.goto(f"{app_url}/leaderboard/{event_day['event_id']}")
+    assert board_colour(board, "day-mine") == "#ff0000"
+    context.close()
+
+
+def test_my_races_names_the_event_and_writes_lap_times_like_every_other_page(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=PHONE)
+    page = context.new_page()
+    sign_in(page, app_url, "day-mine")
+    page.goto(app_url + "/console/my-races")
+    row = page.get_by_test_id("race-row").first
+    text = row.inner_text()
+    assert "Event Day Cup" in text and event_day["event_id"] not in text
+    assert "0:08.838" in text and "Submitted" in text
+    row.get_by_role("button", name="Show laps").click()
+    assert "0:08.838" in page.get_by_test_id("race-laps").inner_text()
+    shot(page, "my-races-390")
+    context.close()
+
+
+def test_the_race_editor_lines_its_inputs_up_under_their_headings(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    sign_in(page, app_url, "day-op")
+    page.goto(f"{app_url}/console/races/{event_day['event_id']}/{event_day['mine']}")
+    editor = page.get_by_test_id("lap-editor")
+    headings = editor.locator("thead th")
+    first_row = editor.get_by_test_id("lap-row").first
+    for column, field in ((1, "input[name=time_s]"), (2, "input[name=resets]"), (3, "input[name=is_valid]")):
+        heading = headings.nth(column).bounding_box()
+        box = first_row.locator(field).bounding_box()
+        assert heading["x"] - 1 <= box["x"] < heading["x"] + heading["width"], (column, heading, box)
+    # Saving from the aligned row still edits the lap.
+    first_row.locator("input[name=time_s]").fill("8.9")
+    first_row.get_by_role("button", name="Save lap 1").click()
+    page.wait_for_load_state()
+    assert page.get_by_test_id("lap-row").first.locator("input[name=time_s]").input_value() == "8.900"
+    shot(page, "race-edit-1920")
     context.close()

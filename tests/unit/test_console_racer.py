@@ -86,7 +86,7 @@ def test_profile_colour_comes_from_the_palette_and_shows_in_the_public_profile(a
     assert "Pick a highlight colour from the palette" in field_error(bad, "highlight_colour")
 
     saved = post(racer, "/console/profile", {"highlight_colour": "#ff8200", "avatar": "identicon"})
-    assert "Your profile is saved." in text(saved)
+    assert "Your profile is saved; the leaderboards show it now." in text(saved)
     checked = re.findall(r'value="(#[0-9A-F]{6})" aria-label="[^"]*"\s+checked', body(saved))
     assert checked == ["#FF8200"]  # the saved swatch is the one selected
     public = app.http.get("/api/profiles/ola", headers={"Accept": "application/json"}).json_body
