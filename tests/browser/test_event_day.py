@@ -211,3 +211,41 @@ def test_the_race_editor_lines_its_inputs_up_under_their_headings(chromium, even
     assert page.get_by_test_id("lap-row").first.locator("input[name=time_s]").input_value() == "8.900"
     shot(page, "race-edit-1920")
     context.close()
+
+
+def test_the_cars_page_confirms_an_emergency_stop_and_refreshes_itself(chromium, event_day, app_url):
+    url, token = app_url, event_day["token"]
+    fleet = call(url, "POST", "/api/fleets", token=token, body={"name": "Cars page fleet"}, expect=201)
+    code = call(url, "POST", "/api/devices/activation-codes", token=token, expect=201, body={
+        "fleet_id": fleet["fleet_id"], "hostname": "estop-car", "device_kind": "car"})["code"]
+    credential = call(url, "POST", "/api/devices/activate", expect=201,
+                      body={"code": code, "hostname": "estop-car", "device_kind": "car"})["credential"]
+    call(url, "POST", "/api/devices/self/heartbeat", device=credential, body={"battery_pct": 77})
+
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    sign_in(page, url, "day-op")
+    page.goto(url + "/console/cars")
+    row = page.locator("tr[data-hostname='estop-car']")
+    assert row.get_by_test_id("loaded-model").inner_text() == "—"
+    row.get_by_role("button", name="Emergency stop").click()
+    page.wait_for_load_state()
+    assert "Emergency stop sent to estop-car" in page.get_by_test_id("notice").inner_text()
+    live = page.locator("tr[data-hostname='estop-car']").get_by_test_id("car-live")
+    assert "Emergency stop: sent, waiting for the car" in live.inner_text()
+
+    # The car does it and says so, and reports its loaded model: the open page shows both without a reload.
+    pending = call(url, "GET", "/api/devices/self/commands", device=credential)["commands"]
+    stop = next(c for c in pending if c["type"] == "EMERGENCY_STOP")
+    call(url, "POST", f"/api/devices/self/commands/{stop['command_id']}/ack", device=credential,
+         body={"result": "ok"})
+    call(url, "POST", "/api/devices/self/heartbeat", device=credential,
+         body={"battery_pct": 64, "model": {"name": "fast-model", "md5": "0" * 32}, "faults": ["stopped: emergency stop"]})
+    page.wait_for_function("""() => {
+        const cell = document.querySelector("tr[data-hostname='estop-car'] [data-testid=car-live]");
+        return cell && cell.innerText.includes('Emergency stop: done by the car') && cell.innerText.includes('64 %');
+    }""", timeout=15_000)
+    assert live.get_by_test_id("loaded-model").inner_text() == "fast-model"
+    assert "stopped: emergency stop" in live.get_by_test_id("car-fault").inner_text()
+    shot(page, "cars-1920")
+    context.close()

@@ -253,6 +253,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/fleets"): ADMIN_OPERATOR,
     ("POST", "/console/fleets"): ADMIN_OPERATOR,
     ("GET", "/console/cars"): ADMIN_OPERATOR,
+    ("GET", "/console/cars/live"): ADMIN_OPERATOR,
     ("GET", "/console/cars/activate"): ADMIN_OPERATOR,
     ("POST", "/console/cars/activate"): ADMIN_OPERATOR,
     ("POST", "/console/cars/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
