@@ -28,7 +28,8 @@ def event_day(live_stack: Any) -> dict[str, Any]:
         "name": "Event Day Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-01", "country_code": "SE",
         "sponsor": "Acme Robotics", "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"],
                                                 "leaderboard_title": "Main stage",
-                                                "leaderboard_footer": "Race again at the Acme booth"}]})
+                                                "leaderboard_footer": "Race again at the Acme booth"},
+                                               {"track_id": "2", "leaderboard_title": "Side stage"}]})
     event_id = event["event_id"]
     racers = [f"day-racer-{n:02d}" for n in range(1, RACERS + 1)]
     for n, racer in enumerate(racers):
@@ -248,4 +249,28 @@ def test_the_cars_page_confirms_an_emergency_stop_and_refreshes_itself(chromium,
     assert live.get_by_test_id("loaded-model").inner_text() == "fast-model"
     assert "stopped: emergency stop" in live.get_by_test_id("car-fault").inner_text()
     shot(page, "cars-1920")
+    context.close()
+
+
+def test_every_track_has_its_links_and_the_overlay_link_builder_explains_its_options(chromium, event_day, app_url):
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    sign_in(page, app_url, "day-op")
+    nav = page.get_by_test_id("nav-links").inner_text()
+    assert "League" in nav and "Model registry" not in nav  # one name per registry, the league in the bar
+    page.goto(app_url + "/console/events")
+    side = page.get_by_test_id("track-links-2")
+    assert side.get_by_role("link", name="Timekeeper").get_attribute("href").endswith(f"{event_day['event_id']}/2")
+    side.get_by_role("link", name="Overlay").click()
+    page.get_by_label("Chroma key background").check()
+    page.get_by_label("Gap to the leader").uncheck()
+    page.get_by_role("button", name="Update the link").click()
+    link = page.get_by_test_id("overlay-link").inner_text()
+    assert link == (f"{app_url}/overlay/{event_day['event_id']}?trackId=2&chroma=true&chromaColor=%2300FF00"
+                    "&gapToLeader=false")
+    assert "OBS" in page.locator("section").inner_text()  # the options are explained where they are chosen
+    preview = context.new_page()
+    preview.goto(link)
+    assert preview.evaluate("getComputedStyle(document.body).backgroundColor") == "rgb(0, 255, 0)"
+    shot(page, "overlay-link-1920")
     context.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from datetime import date
 import shlex
 import subprocess
 from pathlib import Path
@@ -47,17 +48,18 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
 
     # An event with two tracks; a mistake first, shown next to its field.
     page.goto(app_url + "/console/events/new")
-    page.fill("#name", "Journey Summit")
+    assert page.input_value("#date") == date.today().isoformat()  # a new event starts on today's date
     page.fill("#date", "2026-06-01")
-    page.fill("#country_code", "XX")
+    page.select_option("#country_code", label="Sweden (SE)")  # names, found as they are typed
     page.fill("#track-1-title", "Main track")
     page.select_option("#track-1-fleet_id", label="Track 1 cars")
     page.check("#track-2-use")
     page.fill("#track-2-title", "Side track")
     page.get_by_role("button", name="Create event").click()
-    assert "ISO 3166-1" in page.inner_text("#country_code-error")
+    assert page.locator("#name-error").is_visible()  # the name is missing
     assert page.input_value("#track-2-title") == "Side track"  # nothing typed is lost
-    page.fill("#country_code", "SE")
+    assert page.input_value("#country_code") == "SE"
+    page.fill("#name", "Journey Summit")
     page.get_by_role("button", name="Create event").click()
     page.wait_for_url(app_url + "/console/events")
     row = page.locator("tr", has_text="Journey Summit")

@@ -246,6 +246,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/events"): ADMIN_OPERATOR,
     ("POST", "/console/events"): ADMIN_OPERATOR,
     ("GET", "/console/events/new"): ADMIN_OPERATOR,
+    ("GET", "/console/events/{event_id}/overlay"): Case(allow("admin", "operator"), event_only),
     ("POST", "/console/events/{event_id}"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/events/{event_id}/edit"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/events/{event_id}/delete"): Case(allow("admin", "operator"), event_only),

@@ -6,6 +6,7 @@ Tracks are rows `track-{n}-…` with a "use" checkbox; links are one per line: `
 from __future__ import annotations
 
 import re
+from datetime import date
 from typing import Any
 
 from pydantic import BaseModel
@@ -42,7 +43,9 @@ class EventFormView(BaseModel):
 
 def blank_form() -> EventFormView:
     config = RaceConfig()
-    values = {"name": "", "event_type": EventType.OFFICIAL_TRACK_RACE.value, "date": "", "country_code": "",
+    # Most events are created for today or soon: today is a better start than an empty date field.
+    values = {"name": "", "event_type": EventType.OFFICIAL_TRACK_RACE.value, "date": date.today().isoformat(),
+              "country_code": "",
               "sponsor": "", **_config_values(config), "landing_page_links": _links_text(DEFAULT_LINKS)}
     rows = [TrackRow(number=1, use=True, track_id="", fleet_id="", title="", footer="", existing=False)]
     return EventFormView(values=values, tracks=rows + _spare_rows(2, SPARE_TRACK_ROWS))

@@ -12,7 +12,7 @@ from chalice import Blueprint, Response
 from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.countries import COUNTRY_CODES
+from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.models import ListQuery, ModelStatus
 from chalicelib.domain.passwords import PasswordChangeForm, PasswordService
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE, ProfileUpdate
@@ -32,7 +32,7 @@ from drem_web import render
 
 bp = Blueprint(__name__)
 
-COUNTRIES = sorted(COUNTRY_CODES)
+COUNTRIES = COUNTRY_CHOICES
 _SIGN_UP_FIELDS = ("username", "email", "country_code", "password")
 _MY_MODELS_LIMIT = 100
 
