@@ -69,9 +69,15 @@ def admin_token(live_stack: Any) -> str:
     return _admin["token"]
 
 
-def shot(page: Any, name: str) -> None:
+def shot(page: Any, name: str, *, sizes: tuple[dict[str, int], ...] = (BIG_SCREEN, PHONE)) -> None:
+    """What a person sees, at the big screen's and a phone's size (test-artifacts/event-day/NAME-WIDTH.png)."""
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SCREENSHOTS / f"{name}.png"))
+    before = page.viewport_size
+    for size in sizes:
+        page.set_viewport_size(size)
+        page.wait_for_timeout(300)  # a screenshot only: let the resized layout (and the board's paging) settle
+        page.screenshot(path=str(SCREENSHOTS / f"{name}-{size['width']}.png"))
+    page.set_viewport_size(before)
 
 
 def visible_racers(page: Any) -> list[str]:
@@ -112,7 +118,7 @@ def test_every_one_of_18_racers_appears_on_the_big_screen_and_the_race_bar_cover
     flag = page.locator(".board-row:not([hidden]) [data-testid=flag]").first
     assert flag.get_attribute("src") == "/static/vendor/flags/de.svg"
     assert flag.evaluate("img => img.complete && img.naturalWidth > 0")
-    shot(page, "leaderboard-18-racers-1920")
+    shot(page, "leaderboard-18-racers")
     context.close()
 
 
@@ -140,7 +146,7 @@ def test_chroma_overlay_panels_are_opaque_with_no_soft_shadow(chromium, event_da
     for style in styles:
         assert style["bg"].startswith("rgb(") and not style["bg"].startswith("rgba("), style  # alpha 1
         assert style["shadow"] == "none" and style["box"] == "none" and style["radius"] in ("0px", ""), style
-    shot(page, "overlay-chroma-1920")
+    shot(page, "overlay-chroma", sizes=(BIG_SCREEN,))
     context.close()
 
 
@@ -154,7 +160,7 @@ def test_the_events_table_fits_a_phone(chromium, event_day, app_url):
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]  # no sideways scrolling
     row = page.locator("tr", has_text="Event Day Cup")
     assert "Official track race" in row.inner_text() and "Fastest lap" in row.inner_text()  # labels, not enums
-    shot(page, "events-390")
+    shot(page, "events")
     context.close()
 
 
@@ -189,7 +195,7 @@ def test_my_races_names_the_event_and_writes_lap_times_like_every_other_page(chr
     assert "0:08.838" in text and "Submitted" in text
     row.get_by_role("button", name="Show laps").click()
     assert "0:08.838" in page.get_by_test_id("race-laps").inner_text()
-    shot(page, "my-races-390")
+    shot(page, "my-races")
     context.close()
 
 
@@ -210,7 +216,7 @@ def test_the_race_editor_lines_its_inputs_up_under_their_headings(chromium, even
     first_row.get_by_role("button", name="Save lap 1").click()
     page.wait_for_load_state()
     assert page.get_by_test_id("lap-row").first.locator("input[name=time_s]").input_value() == "8.900"
-    shot(page, "race-edit-1920")
+    shot(page, "race-edit")
     context.close()
 
 
@@ -248,7 +254,7 @@ def test_the_cars_page_confirms_an_emergency_stop_and_refreshes_itself(chromium,
     }""", timeout=15_000)
     assert live.get_by_test_id("loaded-model").inner_text() == "fast-model"
     assert "stopped: emergency stop" in live.get_by_test_id("car-fault").inner_text()
-    shot(page, "cars-1920")
+    shot(page, "cars")
     context.close()
 
 
@@ -272,5 +278,5 @@ def test_every_track_has_its_links_and_the_overlay_link_builder_explains_its_opt
     preview = context.new_page()
     preview.goto(link)
     assert preview.evaluate("getComputedStyle(document.body).backgroundColor") == "rgb(0, 255, 0)"
-    shot(page, "overlay-link-1920")
+    shot(page, "overlay-link")
     context.close()
