@@ -281,3 +281,27 @@ def test_every_track_has_its_links_and_the_overlay_link_builder_explains_its_opt
     assert preview.evaluate("getComputedStyle(document.body).backgroundColor") == "rgb(0, 255, 0)"
     shot(page, "overlay-link")
     context.close()
+
+
+def test_a_name_with_a_dash_is_accepted_at_the_desk_and_at_self_sign_up(chromium, app_url, live_stack):
+    """One username rule: the desk took "kim-b" while self sign-up refused "kim-c" (issue 13, item 5)."""
+    create_user(live_stack, "day-desk", "registration")
+    context = chromium.new_context(viewport=PHONE)
+    desk = context.new_page()
+    sign_in(desk, app_url, "day-desk")
+    desk.goto(app_url + "/console/registration")
+    desk.fill("#username", "kim-b")
+    desk.fill("#email", "kim-b@example.test")
+    desk.select_option("#country_code", label="Sweden (SE)")
+    desk.get_by_role("button", name="Create racer").click()
+    assert desk.get_by_test_id("registered-username").inner_text() == "kim-b"
+    racer = context.browser.new_context(viewport=PHONE).new_page()
+    racer.goto(app_url + "/signup")
+    racer.fill("#username", "kim-c")
+    racer.fill("#email", "kim-c@example.test")
+    racer.select_option("#country_code", label="Sweden (SE)")
+    racer.fill("#password", PASSWORD)
+    racer.get_by_role("button", name="Sign up").click()
+    racer.wait_for_url(f"{app_url}/signup/confirm?username=kim-c")
+    racer.context.close()
+    context.close()
