@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import aws_cdk as cdk
+from aws_cdk import aws_apigateway as apigateway
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
 from aws_cdk import aws_events as events
@@ -161,6 +162,7 @@ class DremStack(cdk.Stack):
             bucket.grant_read_write(role)
         self.user_pool.grant(role, *_APP_COGNITO_ACTIONS)
 
+        self._unknown_paths_are_not_found(app)
         sam = json.loads(Path(app._sam_package_dir, "sam.json").read_text())  # the template Chalice just wrote
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
         if upload_fn in sam["Resources"]:
@@ -168,6 +170,18 @@ class DremStack(cdk.Stack):
                 if spec.eventbridge:
                     self._route_uploads(self.buckets[spec.logical], app.get_function(upload_fn))
         return app
+
+    def _unknown_paths_are_not_found(self, app) -> None:  # noqa: ANN001 - chalice.cdk.Chalice
+        """API Gateway answers a path no route matches with 403 "Missing Authentication Token"; make it the 404 it
+        is (the local app server does the same through the app's own not-found routes)."""
+        apigateway.CfnGatewayResponse(
+            self, "UnknownPathIsNotFound", rest_api_id=app.get_resource("RestAPI").ref,
+            response_type="MISSING_AUTHENTICATION_TOKEN", status_code="404",
+            response_templates={
+                "application/json": '{"error": {"code": "NotFound", "message": "There is no route at this path; '
+                                    'GET /api/docs lists every route."}}',
+                "text/html": "<!doctype html><title>Not found · drem</title><h1>Not found</h1>"
+                             "<p>There is no page at this address. <a href=\"/\">Start page</a></p>"})
 
     def _route_uploads(self, bucket: s3.Bucket, function) -> None:
         rule = events.Rule(
