@@ -16,6 +16,8 @@ UV_COMPILE := $(UV) pip compile --quiet --generate-hashes --python-version 3.11 
 RUNTIME_LOCK := requirements/runtime.txt
 DEV_LOCK := requirements/dev.txt
 HTMX := web/drem_web/static/vendor/htmx.min.js
+# Country flags as images (emoji flags show as letters on Windows and in the test Chromium).
+FLAGS := web/drem_web/static/vendor/flags/.installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Fonts the result PDFs and labels embed (names in any script): Noto Sans + Noto Sans Arabic (OFL-1.1) and
 # Droid Sans Fallback for CJK (Apache-2.0). `drem build` copies the few files it needs into the Lambda bundle.
@@ -38,9 +40,9 @@ demo: install
 test: install-test
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
-install: $(VENV)/.installed-runtime $(HTMX) font-debs
+install: $(VENV)/.installed-runtime $(HTMX) $(FLAGS) font-debs
 
-install-test: $(VENV)/.installed-test $(HTMX) test-debs
+install-test: $(VENV)/.installed-test $(HTMX) $(FLAGS) test-debs
 
 $(UV):
 	$(PYTHON) -m venv $(TOOLS)
@@ -79,6 +81,11 @@ node_modules/.package-lock.json: package.json package-lock.json
 $(HTMX): node_modules/.package-lock.json
 	mkdir -p $(dir $@)
 	cp node_modules/htmx.org/dist/htmx.min.js $@
+
+$(FLAGS): node_modules/.package-lock.json
+	mkdir -p $(dir $@)
+	cp node_modules/flag-icons/flags/4x3/*.svg $(dir $@)
+	touch $@
 
 # Installs only the Debian packages that are missing (dpkg knows), so a warm machine pays nothing.
 test-debs:

@@ -13,12 +13,14 @@ from chalicelib.routes import (accounts, api_docs, assignments, commentator, con
                                 users)
 from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
+from drem_web import favicon
 
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
 app.register_middleware(security_headers_middleware, "http")
 # Printed results and labels are PDFs; Chalice base64-encodes only the types listed here (and API Gateway with them).
 app.api.binary_types.append("application/pdf")
+app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,

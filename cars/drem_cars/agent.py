@@ -46,6 +46,8 @@ class CarAgent:
         self._threads: list[threading.Thread] = []
         self._done_commands: set[str] = set()
         self._reported: dict[str, tuple[str, str | None]] = {}  # model_id → (status, md5) last queued
+        # A sim car carries its own timing line (its strip events time the track): staff see it as the timer.
+        self.times_laps = False
         self._failed: set[tuple[str, str]] = set()  # (model_id, archive md5) that cannot install: not retried
         self.loaded: InstalledModel | None = None
         self.revoked: str | None = None
@@ -122,6 +124,8 @@ class CarAgent:
                     ("inference_latency_ms", self.driver.inference_ms()))
         # faults after the readings: reading the battery is how a device-console car learns of its faults
         body: dict[str, Any] = {"agent_version": __version__, "faults": self.driver.faults()[:10]}
+        if self.times_laps:
+            body["times_laps"] = True
         if self.loaded is not None:
             body["model"] = {"name": self.loaded.name[:200], "md5": self.loaded.archive_md5}
         for key, value in readings:

@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     activate.add_argument("--kind", choices=("car", "timer"), default="car")
     run = sub.add_parser("run", help="run the agent and the drive loop")
     run.add_argument("--sim", action="store_true", help="drive the simulator instead of hardware")
-    run.add_argument("--track", default="reinvent_base", help="simulator track (default reinvent_base)")
+    run.add_argument("--track", default=None, help="simulator track (default reinvent_base when its DeepRacer route "
+                                                   "file is found, else drem_oval, which ships with drem)")
     run.add_argument("--event", help="event id: the sim's timing line posts strip events to it")
     run.add_argument("--race-track", default="1", help="the event's track id for strip events (default 1)")
     run.add_argument("--rate-hz", type=float, default=15.0, help="drive loop rate (sim: >15 runs faster than life)")

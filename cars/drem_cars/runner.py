@@ -50,16 +50,27 @@ def run_agent(args: argparse.Namespace) -> int:
         print("drem car run: say what to drive: --sim, --pwm (camera + PWM) or --deepracer URL "
               "(see docs/cars.md)", file=sys.stderr)
         return 2
-    from drem_cars.parts.safety import Safety
-    from drem_cars.sim_car import build_sim_car
+    from drem_sim.tracks import TrackError, default_track_name
 
-    car = build_sim_car(args.track, safety=Safety(heartbeat_limit_s=args.heartbeat_limit), outbox=outbox,
-                        event_id=args.event, track_id=args.race_track, device_id=client.device_id)
+    try:
+        car = _sim_car(args, client, outbox, args.track or default_track_name())
+    except TrackError as exc:
+        print(f"drem car run --sim: {exc}", file=sys.stderr)
+        return 2
     agent = CarAgent(client, car.driver, outbox, models)
+    agent.times_laps = car.strips is not None
     stats = _drive(agent, car.vehicle, args.rate_hz, deadline)
     print(f"drive loop: {stats.summary()}; sim laps crossed: {car.strips.queued if car.strips else 0}; "
           f"outbox pending {outbox.count()}")
     return _finish(agent)
+
+
+def _sim_car(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, track: str):  # type: ignore[no-untyped-def]
+    from drem_cars.parts.safety import Safety
+    from drem_cars.sim_car import build_sim_car
+
+    return build_sim_car(track, safety=Safety(heartbeat_limit_s=args.heartbeat_limit), outbox=outbox,
+                         event_id=args.event, track_id=args.race_track, device_id=client.device_id)
 
 
 def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,

@@ -16,6 +16,23 @@ from typing import Any
 import requests
 
 DEFAULT_API = "http://127.0.0.1:8000"
+STATE_DIR_ENV = "DREM_STATE_DIR"
+
+
+def running_stack_api(state_dir: str | os.PathLike[str] | None = None) -> str | None:
+    """The app URL of the stack `drem up` runs on `state_dir` ($DREM_STATE_DIR, else ./.drem), if it runs."""
+    from pathlib import Path
+
+    from drem_local.stack import pid_is_drem, read_stack_file
+
+    info = read_stack_file(Path(state_dir or os.environ.get(STATE_DIR_ENV) or ".drem")) or {}
+    url = info.get("urls", {}).get("app")
+    return url if url and pid_is_drem(info.get("pids", {}).get("app")) else None
+
+
+def default_api() -> str:
+    """$DREM_API, else the running local stack's own URL (whatever port `drem up --port` chose), else port 8000."""
+    return os.environ.get("DREM_API") or running_stack_api() or DEFAULT_API
 
 
 class ApiError(Exception):
@@ -30,8 +47,9 @@ class ApiError(Exception):
 
 def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("connection")
-    group.add_argument("--api", default=os.environ.get("DREM_API", DEFAULT_API),
-                       help=f"base URL of the drem API (default {DEFAULT_API}, or $DREM_API)")
+    group.add_argument("--api", default=default_api(),
+                       help=f"base URL of the drem API (default: $DREM_API, else the stack `drem up` runs with its "
+                            f"data in $DREM_STATE_DIR or ./.drem, else {DEFAULT_API})")
     group.add_argument("--token", default=os.environ.get("DREM_TOKEN"), help="an access token (or $DREM_TOKEN)")
     group.add_argument("--username", default=os.environ.get("DREM_USERNAME"), help="sign in as (or $DREM_USERNAME)")
     group.add_argument("--password", default=os.environ.get("DREM_PASSWORD"), help="password (or $DREM_PASSWORD)")

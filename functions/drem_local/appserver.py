@@ -1,7 +1,9 @@
 """Serve the Chalice app over HTTP for local use and integration tests (instead of `chalice local`).
 
-Two fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
-for Nagle + delayed ACK) and a deep listen backlog (a burst of browser and poller connections is queued, not reset).
+Fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
+for Nagle + delayed ACK), a deep listen backlog (a burst of browser and poller connections is queued, not reset),
+a URL no route matches answered by the app's own 404 (page or JSON) instead of API Gateway's 403 "Missing
+Authentication Token", and a browser tab closed mid-poll logged as one quiet line, not a BrokenPipe traceback.
 No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
 A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
 finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
@@ -21,6 +23,7 @@ import functools
 import logging
 import os
 import signal
+import socketserver
 import sys
 import threading
 from typing import Any
@@ -43,6 +46,8 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local",
     local.ChaliceRequestHandler.disable_nagle_algorithm = True
     local.ThreadedHTTPServer.request_queue_size = REQUEST_QUEUE_SIZE
     local.ThreadedHTTPServer.daemon_threads = True
+    local.ThreadedHTTPServer.handle_error = _handle_error  # type: ignore[method-assign]
+    _answer_unknown_urls_with_404(local.LocalGateway)
     # The request middleware already writes one JSON line per request; drop http.server's plain-text access log.
     local.ChaliceRequestHandler.log_message = _quiet  # type: ignore[method-assign]
     factory = CLIFactory(str(PROJECT_DIR))
@@ -120,6 +125,53 @@ def _purge_stale_uploads(stopping: threading.Event) -> None:
 
 def _quiet(*_args: Any) -> None:
     return None
+
+
+# A client that goes away before its answer is written (a tab closed or reloaded mid-poll) is normal on event day.
+_CLIENT_GONE = (BrokenPipeError, ConnectionResetError, ConnectionAbortedError, TimeoutError)
+
+
+def _handle_error(self: Any, request: Any, client_address: Any) -> None:
+    """socketserver prints a traceback for any error while serving a request; a vanished client is not an error."""
+    error = sys.exc_info()[1]
+    if isinstance(error, _CLIENT_GONE):
+        from chalicelib import logs
+
+        logs.log(logging.INFO, "client went away", client=str(client_address[0]), error=type(error).__name__)
+        return
+    socketserver.BaseServer.handle_error(self, request, client_address)
+
+
+def _answer_unknown_urls_with_404(gateway_class: Any) -> None:
+    """Chalice's local gateway raises ForbiddenError ("Missing Authentication Token") for a path no route matches;
+    hand such a request to the app's not-found route (HTML for browsers, JSON under /api/), once per class."""
+    if getattr(gateway_class, "_drem_not_found", False):
+        return
+    from chalice.local import ForbiddenError
+
+    original = gateway_class.handle_request
+
+    def handle_request(self: Any, method: str, path: str, headers: Any, body: Any) -> Any:
+        try:
+            return original(self, method, path, headers, body)
+        except ForbiddenError:
+            if _route_exists(self, path):
+                raise
+            from chalicelib.routes.pages import API_NOT_FOUND_PATH, NOT_FOUND_PATH
+
+            target = API_NOT_FOUND_PATH if path.startswith("/api/") else NOT_FOUND_PATH
+            return original(self, "GET", target, headers, None)
+
+    gateway_class.handle_request = handle_request
+    gateway_class._drem_not_found = True
+
+
+def _route_exists(gateway: Any, path: str) -> bool:
+    try:
+        gateway.event_converter._route_matcher.match_route(path)
+    except ValueError:
+        return False
+    return True
 
 
 def _put_project_on_path() -> None:

@@ -7,6 +7,7 @@ so `drem status` never pays for torch, pymunk or aws-cdk. A subcommand module ex
 from __future__ import annotations
 
 import argparse
+import copy
 import importlib
 import sys
 
@@ -50,8 +51,25 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
+        accept_options_after_action(p)
         p.set_defaults(_run=module.run)
     return parser
+
+
+def accept_options_after_action(parser: argparse.ArgumentParser) -> None:
+    """`drem events list --api URL` as well as `drem events --api URL list`: each option of a command is also
+    accepted after its action. The copies default to SUPPRESS, so an option given before the action is kept."""
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    options = [a for a in parser._actions if a.option_strings and not isinstance(a, argparse._HelpAction)]
+    for subparsers in actions:
+        for child in set(subparsers.choices.values()):
+            taken = {s for a in child._actions for s in a.option_strings}
+            for option in options:
+                if taken.isdisjoint(option.option_strings):
+                    twin = copy.copy(option)
+                    twin.default, twin.required = argparse.SUPPRESS, False
+                    child._add_action(twin)
+            accept_options_after_action(child)
 
 
 def main(argv: list[str] | None = None) -> int:

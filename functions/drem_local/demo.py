@@ -251,7 +251,7 @@ class Demo:
     def urls(self) -> dict[str, str]:
         base, event = self.stack.config.app_url, self.event_id
         return {"Leaderboard": f"{base}/leaderboard/{event}", "Overlay (track 1)": f"{base}/overlay/{event}?trackId=1",
-                "Commentator": f"{base}/commentator/{event}", "Console": f"{base}/console/races"}
+                "Commentator (staff sign-in)": f"{base}/commentator/{event}", "Console": f"{base}/console/races"}
 
     def cars_alive(self) -> bool:
         return all(car.process is not None and car.process.alive() for car in self.cars)

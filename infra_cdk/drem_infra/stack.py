@@ -17,6 +17,7 @@ from aws_cdk import aws_certificatemanager as acm
 from aws_cdk import aws_cloudfront as cloudfront
 from aws_cdk import aws_cloudfront_origins as origins
 from aws_cdk import aws_cloudwatch as cloudwatch
+from aws_cdk import aws_apigateway as apigateway
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
 from aws_cdk import aws_events as events
@@ -200,6 +201,7 @@ class DremStack(cdk.Stack):
         with _packaging_leaves_no_trace():
             app = Chalice(self, "App", source_dir=str(functions_dir),
                           stage_config={"environment_variables": self.app_environment()})
+        self._unknown_paths_are_not_found(app)
         sam = json.loads(Path(app._sam_package_dir, "sam.json").read_text())  # the template Chalice just wrote
         functions = [name for name, r in sam["Resources"].items() if r["Type"] == "AWS::Serverless::Function"]
         log_groups = self._log_groups(app, functions)
@@ -257,6 +259,18 @@ class DremStack(cdk.Stack):
                 metric.create_alarm(self, f"{name}{metric_name}Alarm", threshold=1, evaluation_periods=1,
                                     alarm_description=f"drem {self.stage}: {name} {metric_name.lower()} in 5 minutes",
                                     treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
+
+    def _unknown_paths_are_not_found(self, app) -> None:  # noqa: ANN001 - chalice.cdk.Chalice
+        """API Gateway answers a path no route matches with 403 "Missing Authentication Token"; make it the 404 it
+        is (the local app server does the same through the app's own not-found routes)."""
+        apigateway.CfnGatewayResponse(
+            self, "UnknownPathIsNotFound", rest_api_id=app.get_resource("RestAPI").ref,
+            response_type="MISSING_AUTHENTICATION_TOKEN", status_code="404",
+            response_templates={
+                "application/json": '{"error": {"code": "NotFound", "message": "There is no route at this path; '
+                                    'GET /api/docs lists every route."}}',
+                "text/html": "<!doctype html><title>Not found · drem</title><h1>Not found</h1>"
+                             "<p>There is no page at this address. <a href=\"/\">Start page</a></p>"})
 
     def _route_uploads(self, bucket: s3.Bucket, function) -> None:
         rule = events.Rule(

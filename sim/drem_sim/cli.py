@@ -50,7 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _track_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--track", default="reinvent_base", help="track name or file (see `drem sim tracks`)")
+    parser.add_argument("--track", default=None, help="track name or file (see `drem sim tracks`; default "
+                                                      "reinvent_base when its route file is found, else drem_oval)")
     parser.add_argument("--reverse", action="store_true", help="race the track the other way round")
     parser.add_argument("--seed", type=int, default=0)
 
@@ -83,9 +84,9 @@ def _tracks(_args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from drem_sim.demonstrator import Demonstrator
     from drem_sim.env import EnvConfig, RaceEnv
-    from drem_sim.tracks import load_track
+    from drem_sim.tracks import default_track_name, load_track
 
-    track = load_track(args.track, reverse=args.reverse)
+    track = load_track(args.track or default_track_name(), reverse=args.reverse)
     env = RaceEnv(track, EnvConfig(observe=args.mp4 is not None, max_laps=args.laps,
                                    max_steps=int(args.laps * 120 * 15)))
     driver = Demonstrator(track)
@@ -134,13 +135,13 @@ def _record(args: argparse.Namespace) -> int:
     from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
     from drem_sim.env import RaceEnv
     from drem_sim.runs import record_run, runs_bucket_name, upload_run
-    from drem_sim.tracks import load_track
+    from drem_sim.tracks import default_track_name, load_track
 
     if args.upload and not os.environ.get("AWS_ENDPOINT_URL"):
         print("drem sim record: --upload needs AWS_ENDPOINT_URL (start the local stack with `drem up`)",
               file=sys.stderr)
         return 2
-    track = load_track(args.track, reverse=args.reverse)
+    track = load_track(args.track or default_track_name(), reverse=args.reverse)
     env = RaceEnv(track)
     driver = Demonstrator(track, DemonstratorConfig(steering_noise_deg=args.noise),
                           rng=np.random.default_rng(args.seed))
@@ -158,12 +159,12 @@ def _record(args: argparse.Namespace) -> int:
 def _drive(args: argparse.Namespace) -> int:
     from drem_sim import drive_server
     from drem_sim.runs import default_s3_client, runs_bucket_name, upload_run
-    from drem_sim.tracks import load_track
+    from drem_sim.tracks import default_track_name, load_track
 
     if args.upload and not os.environ.get("AWS_ENDPOINT_URL"):
         print("drem sim drive: --upload needs AWS_ENDPOINT_URL (start the local stack with `drem up`)", file=sys.stderr)
         return 2
-    track = load_track(args.track, reverse=args.reverse)
+    track = load_track(args.track or default_track_name(), reverse=args.reverse)
     uploader = None
     if args.upload:
         bucket = runs_bucket_name()

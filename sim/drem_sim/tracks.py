@@ -392,6 +392,16 @@ def available_tracks() -> dict[str, Path]:
     return found
 
 
+# The track a command drives when none is named: re:Invent 2018 when its DeepRacer route file is found (the shared
+# folder or $DREM_TRACKS_DIR), else drem_oval, which ships with drem_sim (a fresh clone has no route files).
+DEFAULT_TRACK_CHOICES = ("reinvent_base", "drem_oval")
+
+
+def default_track_name() -> str:
+    found = available_tracks()
+    return next((name for name in DEFAULT_TRACK_CHOICES if name in found), DEFAULT_TRACK_CHOICES[-1])
+
+
 def load_track(name_or_path: str | Path, *, reverse: bool = False) -> Track:
     """Load a track by file path, shipped YAML id, or `.npy` route name; `reverse` races it the other way."""
     path = Path(name_or_path)

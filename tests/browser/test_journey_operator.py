@@ -3,6 +3,11 @@ with a code from the screen (the car exchanges it through the JSON API, as the c
 uploaded model given to that car on the cars screen."""
 from __future__ import annotations
 
+import json
+import os
+from datetime import date
+import shlex
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -14,6 +19,7 @@ from tests.unit.models_helpers import onnx_archive
 pytestmark = pytest.mark.browser
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+DREM = Path(__file__).resolve().parents[2] / ".venv" / "bin" / "drem"
 
 
 def _upload_model(url: str, token: str, filename: str) -> dict:
@@ -27,7 +33,7 @@ def _upload_model(url: str, token: str, filename: str) -> dict:
     return done["model"]
 
 
-def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model(live_stack, app_url, page):
+def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model(live_stack, app_url, page, tmp_path):
     create_user(live_stack, "journey-op", "operator")
     create_user(live_stack, "journey-racer", "racer")
     model = _upload_model(app_url, access_token(live_stack, "journey-racer"), "journey-model.tar.gz")
@@ -42,17 +48,18 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
 
     # An event with two tracks; a mistake first, shown next to its field.
     page.goto(app_url + "/console/events/new")
-    page.fill("#name", "Journey Summit")
+    assert page.input_value("#date") == date.today().isoformat()  # a new event starts on today's date
     page.fill("#date", "2026-06-01")
-    page.fill("#country_code", "XX")
+    page.select_option("#country_code", label="Sweden (SE)")  # names, found as they are typed
     page.fill("#track-1-title", "Main track")
     page.select_option("#track-1-fleet_id", label="Track 1 cars")
     page.check("#track-2-use")
     page.fill("#track-2-title", "Side track")
     page.get_by_role("button", name="Create event").click()
-    assert "ISO 3166-1" in page.inner_text("#country_code-error")
+    assert page.locator("#name-error").is_visible()  # the name is missing
     assert page.input_value("#track-2-title") == "Side track"  # nothing typed is lost
-    page.fill("#country_code", "SE")
+    assert page.input_value("#country_code") == "SE"
+    page.fill("#name", "Journey Summit")
     page.get_by_role("button", name="Create event").click()
     page.wait_for_url(app_url + "/console/events")
     row = page.locator("tr", has_text="Journey Summit")
@@ -69,10 +76,14 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     page.get_by_role("button", name="Create activation code").click()
     code = page.inner_text("[data-testid=activation-code]").strip()
     command = page.inner_text("[data-testid=activation-command]")
-    assert command == f"drem car activate --code {code} --api {app_url}"
-    issued = call(app_url, "POST", "/api/devices/activate",
-                  body={"code": code, "hostname": "deepracer-07", "device_kind": "car"}, expect=201)
-    call(app_url, "POST", "/api/devices/self/heartbeat", device=issued["credential"],
+    assert command == f"drem car activate --code {code} --hostname deepracer-07 --api {app_url}"
+    # The operator pastes it on the car, as printed (issue 13, item 2: without --hostname it was refused).
+    config = tmp_path / "car-config"
+    ran = subprocess.run([str(DREM), *shlex.split(command)[1:]], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=60, env={**os.environ, "DREM_CAR_CONFIG": str(config)})
+    assert ran.returncode == 0, ran.stderr
+    credential = json.loads((config / "credential.json").read_text())["credential"]
+    call(app_url, "POST", "/api/devices/self/heartbeat", device=credential,
          body={"battery_pct": 81, "agent_version": "journey"}, expect=200)
 
     # The car is listed online with its battery; give it the racer's model.
@@ -87,5 +98,5 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     assert "journey-racer · journey-model (assigned)" in page.get_by_test_id("models-deepracer-07").inner_text()
 
     # The car sees the assignment through its own API.
-    mine = call(app_url, "GET", "/api/devices/self/assignment", device=issued["credential"], expect=200)
+    mine = call(app_url, "GET", "/api/devices/self/assignment", device=credential, expect=200)
     assert [m["model_id"] for m in mine["models"]] == [model["model_id"]]

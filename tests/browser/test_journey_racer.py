@@ -95,8 +95,8 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
 
     good = page.locator('[data-testid="model-row"][data-model-name="fast-lap"]')
     bad = page.locator('[data-testid="model-row"][data-model-name="no-metadata"]')
-    good.locator('[data-testid="model-status"]', has_text="AVAILABLE").wait_for()
-    bad.locator('[data-testid="model-status"]', has_text="NOT_VALID").wait_for()
+    good.locator('[data-testid="model-status"]', has_text="Ready to race").wait_for()
+    bad.locator('[data-testid="model-status"]', has_text="Not valid").wait_for()
     assert bad.get_by_test_id("model-reason").inner_text() == "the archive has no model_metadata.json at its top level"
     assert good.get_by_test_id("model-reason").count() == 0
     # Each upload's progress bar went all the way, and both reached S3 and were judged.

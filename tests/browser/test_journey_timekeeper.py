@@ -82,13 +82,20 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     assert other.locator("[data-testid=laps] tr[data-lap]").count() == 3
     other.close()
 
+    # "e" ends the race only after a confirmation (a stray key must not): dismissed first, then accepted.
+    asked: list[str] = []
+    page.once("dialog", lambda dialog: (asked.append(dialog.message), dialog.dismiss()))
+    page.keyboard.press("e")
+    assert asked == ["End this race now? The clock stops for good."]
+    assert page.get_by_role("button", name="End race").is_visible()  # not ended: still the live race's buttons
+    page.once("dialog", lambda dialog: dialog.accept())
     page.keyboard.press("e")  # end
     page.get_by_role("button", name="Submit race").click()
     page.get_by_role("button", name="Ready race").wait_for()  # back to the next racer
 
     page.goto(f"{app_url}/console/races?event_id={event_id}")
     row = page.locator("[data-testid=races-table] tr", has_text="keys-racer")
-    assert "SUBMITTED" in row.inner_text() and "3 (1)" in row.inner_text()
+    assert "Submitted" in row.inner_text() and "3 (1)" in row.inner_text()
 
     download = page.request.get(app_url + page.get_by_test_id("csv-laps").get_attribute("href"))
     assert download.ok and download.headers["content-type"].startswith("text/csv")

@@ -2,6 +2,7 @@
 to one without the other fails here. Synth is slow (seconds), so it happens once per session (tests/infra/conftest.py)."""
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
@@ -139,6 +140,15 @@ def test_model_uploads_trigger_the_upload_complete_function(app_template):
     permissions = [p["Properties"] for p in _of_type(app_template, "AWS::Lambda::Permission").values()
                    if p["Properties"]["Principal"] == "events.amazonaws.com"]
     assert [p["FunctionName"] for p in permissions] == [{"Fn::GetAtt": [target_function, "Arn"]}]
+
+
+def test_an_unknown_path_is_a_404_not_api_gateways_403(app_template):
+    responses = [r["Properties"] for r in _of_type(app_template, "AWS::ApiGateway::GatewayResponse").values()]
+    [missing] = [r for r in responses if r["ResponseType"] == "MISSING_AUTHENTICATION_TOKEN"]
+    assert missing["StatusCode"] == "404"
+    assert missing["RestApiId"] == {"Ref": "RestAPI"}
+    assert json.loads(missing["ResponseTemplates"]["application/json"])["error"]["code"] == "NotFound"
+    assert "Not found" in missing["ResponseTemplates"]["text/html"]
 
 
 def test_synth_reads_no_local_name_overrides(monkeypatch):

@@ -32,7 +32,7 @@ def test_a_fleet_made_on_screen_then_an_activation_code_with_the_command_to_run(
                                                    "fleet_id": fleet_id, "ttl_minutes": "30"}).body.decode()
 
     code = re.search(r'data-testid="activation-code">([A-Z0-9-]+)<', page).group(1)
-    assert f"drem timer activate --code {code} --api http://127.0.0.1:8000" in page
+    assert f"drem car activate --code {code} --hostname timer-a --kind timer --api http://127.0.0.1:8000" in page
     exchange = {"code": code, "hostname": "timer-a", "device_kind": "timer"}
     activated = console.desk.client.http.post("/api/devices/activate", body=json.dumps(exchange).encode(),
                                               headers={"Content-Type": "application/json"})

@@ -37,7 +37,10 @@ def test_an_operator_creates_an_event_with_two_tracks_and_sees_it_listed(console
     listing = console.web.get("/console/events").body.decode()
     assert "Summit Stockholm" in listing and "Second track" in listing
     assert f'href="/leaderboard/{event["event_id"]}"' in listing
-    assert f'href="/overlay/{event["event_id"]}"' in listing and f'href="/commentator/{event["event_id"]}"' in listing
+    assert f'href="/commentator/{event["event_id"]}"' in listing
+    for track in ("1", "2"):  # every track its overlay link builder and timekeeper, not only track 1
+        assert f'href="/console/events/{event["event_id"]}/overlay?track={track}"' in listing
+        assert f'href="/console/timekeeper/{event["event_id"]}/{track}"' in listing
 
 
 def test_bad_input_is_shown_next_to_each_field_and_nothing_typed_is_lost(console):

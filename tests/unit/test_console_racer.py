@@ -87,7 +87,7 @@ def test_profile_colour_comes_from_the_palette_and_shows_in_the_public_profile(a
     assert "Pick a highlight colour from the palette" in field_error(bad, "highlight_colour")
 
     saved = post(racer, "/console/profile", {"highlight_colour": "#ff8200", "avatar": "identicon"})
-    assert "Your profile is saved." in text(saved)
+    assert "Your profile is saved; the leaderboards show it now." in text(saved)
     checked = re.findall(r'value="(#[0-9A-F]{6})" aria-label="[^"]*"\s+checked', body(saved))
     assert checked == ["#FF8200"]  # the saved swatch is the one selected
     public = app.http.get("/api/profiles/ola", headers={"Accept": "application/json"}).json_body
@@ -103,13 +103,13 @@ def test_my_models_lists_status_and_reason_and_polls_only_while_uploaded(app: An
 
     page = racer.get("/console/my-models")
     shown = text(page)
-    assert "fast-lap AVAILABLE" in shown
-    assert "no-meta the archive has no model_metadata.json at its top level NOT_VALID" in shown
+    assert "fast-lap Ready to race" in shown
+    assert "no-meta the archive has no model_metadata.json at its top level Not valid" in shown
     assert 'src="/static/upload.js"' in body(page)
     polling = racer.get(f"/console/my-models/{waiting['model_id']}/row")
-    assert 'hx-trigger="every 2s"' in body(polling) and "UPLOADED" in text(polling)
+    assert 'hx-trigger="every 2s"' in body(polling) and "Checking…" in text(polling)
     settled = racer.get(f"/console/my-models/{good['model_id']}/row")
-    assert "every 2s" not in body(settled) and "AVAILABLE" in text(settled)
+    assert "every 2s" not in body(settled) and "Ready to race" in text(settled)
     assert bad["status"] == "NOT_VALID"
 
 

@@ -70,9 +70,9 @@ def test_desk_refusals_sit_next_to_their_field(app: Any, users: Any) -> None:
     assert 'value="k2@example.test"' in body(taken)
     bad = post(desk, "/console/registration", {"username": "lee", "email": "not-an-email", "country_code": "SE"})
     assert bad.status_code == 400 and field_error(bad, "email").startswith("Enter a valid email address")
-    dotted = post(desk, "/console/registration", {"username": "a.b", "email": "ab@example.test", "country_code": "SE"})
-    assert field_error(dotted, "username") == ("A username may contain only letters, digits, &#39;-&#39; and "
-                                               "&#39;_&#39;.")
+    spaced = post(desk, "/console/registration", {"username": "a b", "email": "ab@example.test", "country_code": "SE"})
+    assert field_error(spaced, "username") == ("A username may contain only letters, digits, &#39;.&#39;, "
+                                               "&#39;_&#39; and &#39;-&#39;.")
 
 
 def test_admin_searches_changes_a_role_and_disables_a_user(app: Any, users: Any, aws_clients: Any,

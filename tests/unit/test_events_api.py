@@ -34,7 +34,7 @@ def test_operator_creates_event_and_staff_read_it(api: Api) -> None:
                                 "direction": "counter_clockwise"}]
     assert event["combined_board"] is False
     assert event["stats_visibility"] == "public"  # the default: the event counts on the public /stats page
-    assert event["landing_page_links"][0]["href"] == "/upload"
+    assert event["landing_page_links"][0]["href"] == "/console/my-models"  # a page racers may open
 
     for reader in ("commentator", "registration", "admin"):
         listed = api.get("/api/events", as_=reader)

@@ -98,9 +98,9 @@ def test_start_up_repair_finishes_interrupted_registrations(api, users, aws_clie
 
 def test_staff_username_rule_and_country_are_checked(api, users):
     admin = users.access_token("boss", ("admin",))
-    status, body = _register(api, admin, "dot.name")
+    status, body = _register(api, admin, "space name")
     assert status == 400 and body["error"]["field"] == "username"
-    assert "letters, digits, '-' and '_'" in error_message(body)
+    assert "letters, digits, '.', '_' and '-'" in error_message(body)
     status, body = _register(api, admin, "ok-name", country_code="XX")
     assert status == 400 and body["error"]["field"] == "country_code"
 

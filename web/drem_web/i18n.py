@@ -49,6 +49,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "combined": "Combined",
         "fastest_lap_of_event": "fastest of the event",
         "fastest_lap_of_race": "fastest of this race",
+        "sponsored_by": "Sponsored by",
     },
     "de": {
         "leaderboard": "Bestenliste",
@@ -89,6 +90,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "combined": "Gesamt",
         "fastest_lap_of_event": "schnellste der Veranstaltung",
         "fastest_lap_of_race": "schnellste dieses Rennens",
+        "sponsored_by": "Gesponsert von",
     },
 }
 

@@ -24,8 +24,12 @@ _local = threading.local()
 
 @lru_cache(maxsize=1)
 def environment() -> Environment:
-    return Environment(loader=FileSystemLoader(TEMPLATES_DIR), autoescape=select_autoescape(default=True),
-                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    from drem_web import labels
+
+    env = Environment(loader=FileSystemLoader(TEMPLATES_DIR), autoescape=select_autoescape(default=True),
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    env.filters.update(label=labels.label, laptime=labels.laptime)
+    return env
 
 
 def bind_request(*, htmx: bool = False, **request_globals: Any) -> None:

@@ -1,39 +1,28 @@
-"""ISO 3166-1 alpha-2 country codes (all 249 officially assigned codes), for `custom:countryCode`.
+"""ISO 3166-1 alpha-2 country codes and their English names, for `custom:countryCode` and the country pickers.
 
-Kept as data here because Python has no built-in list and one frozenset is not worth a dependency. Source: the
-ISO 3166 Maintenance Agency's officially assigned codes (2024); compare with tzdata's `iso3166.tab` when updating.
+The list comes from pycountry (a maintained copy of the ISO 3166 data, Debian's iso-codes), not from a hand list.
 """
 from __future__ import annotations
 
+import pycountry
+
 from chalicelib.domain.errors import InvalidInput
 
-COUNTRY_CODES: frozenset[str] = frozenset("""
-AD AE AF AG AI AL AM AO AQ AR AS AT AU AW AX AZ
-BA BB BD BE BF BG BH BI BJ BL BM BN BO BQ BR BS BT BV BW BY BZ
-CA CC CD CF CG CH CI CK CL CM CN CO CR CU CV CW CX CY CZ
-DE DJ DK DM DO DZ
-EC EE EG EH ER ES ET
-FI FJ FK FM FO FR
-GA GB GD GE GF GG GH GI GL GM GN GP GQ GR GS GT GU GW GY
-HK HM HN HR HT HU
-ID IE IL IM IN IO IQ IR IS IT
-JE JM JO JP
-KE KG KH KI KM KN KP KR KW KY KZ
-LA LB LC LI LK LR LS LT LU LV LY
-MA MC MD ME MF MG MH MK ML MM MN MO MP MQ MR MS MT MU MV MW MX MY MZ
-NA NC NE NF NG NI NL NO NP NR NU NZ
-OM
-PA PE PF PG PH PK PL PM PN PR PS PT PW PY
-QA
-RE RO RS RU RW
-SA SB SC SD SE SG SH SI SJ SK SL SM SN SO SR SS ST SV SX SY SZ
-TC TD TF TG TH TJ TK TL TM TN TO TR TT TV TW TZ
-UA UG UM US UY UZ
-VA VC VE VG VI VN VU
-WF WS
-YE YT
-ZA ZM ZW
-""".split())
+
+def _short_name(country: object) -> str:
+    # pycountry's `common_name` where ISO's is long or formal ("Bolivia" for "Bolivia, Plurinational State of").
+    return str(getattr(country, "common_name", None) or getattr(country, "name"))
+
+
+COUNTRY_NAMES: dict[str, str] = {c.alpha_2: _short_name(c) for c in pycountry.countries}
+COUNTRY_CODES: frozenset[str] = frozenset(COUNTRY_NAMES)
+# (code, "Sweden (SE)") sorted by name: a <select> finds a country as its name is typed.
+COUNTRY_CHOICES: tuple[tuple[str, str], ...] = tuple(
+    (code, f"{name} ({code})") for code, name in sorted(COUNTRY_NAMES.items(), key=lambda item: item[1].casefold()))
+
+
+def country_name(code: str | None) -> str:
+    return COUNTRY_NAMES.get((code or "").upper(), code or "")
 
 
 def normalise_country_code(value: str, *, field: str = "country_code") -> str:

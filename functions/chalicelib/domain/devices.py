@@ -66,6 +66,8 @@ class Telemetry(BaseModel):
     faults: list[str] = Field(default_factory=list, max_length=10)
     inference_latency_ms: float | None = Field(default=None, ge=0, le=60_000)
     fps: float | None = Field(default=None, ge=0, le=1000)
+    times_laps: bool = Field(default=False, description="the device posts strip events itself (a sim car's "
+                                                        "timing line): the timekeeper counts it as the track's timer")
 
     @field_validator("faults")
     @classmethod

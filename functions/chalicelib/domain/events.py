@@ -86,7 +86,8 @@ class LandingPageLink(BaseModel):
 
 
 DEFAULT_LINKS = (LandingPageLink(name="Upload your own model and race",
-                                 description="Upload a model, then race it on the track.", href="/upload"),)
+                                 description="Upload a model, then race it on the track.",
+                                 href="/console/my-models"),)
 
 
 class EventInput(BaseModel):

@@ -410,6 +410,23 @@ class RaceService:
                                           event.race_config.ranking_method,
                                           all_tracks=[t.track_id or "" for t in event.tracks])
 
+    def refresh_racer_everywhere(self, racer_sub: str) -> int:
+        """After a profile change (colour, country, name): rebuild the racer's row on every board they are on, so
+        the boards and overlays show the new colour; returns how many boards were refreshed."""
+        now = self.clock_ms()
+        seen: dict[tuple[str, str], Racer] = {}
+        for record in self._races.list_racer(racer_sub):
+            seen.setdefault((record.race.event_id, record.race.track_id), record.race.racer)
+        refreshed = 0
+        for (event_id, track_id), racer in sorted(seen.items(), key=lambda item: item[0]):
+            try:
+                event = self.event(event_id)
+            except NotFound:  # an event deleted since: nothing to show
+                continue
+            self.refresh_racer_board(event, track_id, racer, now)
+            refreshed += 1
+        return refreshed
+
     def _row(self, races: Iterable[Race]) -> BoardRow | None:
         summary = summarise_racer(c for r in races if (c := counts_on_board(r)) is not None)
         if summary is None:

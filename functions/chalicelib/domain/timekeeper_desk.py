@@ -127,7 +127,7 @@ class TimekeeperDesk:
         devices = self._fleet_devices(track)
         race_id = self._live.live_race_id(event_id, track_id)
         race = self._race_screen(event, race_id, devices) if race_id else None
-        timers = [d for d in devices if d.kind is DeviceKind.TIMER]
+        timers = [d for d in devices if d.kind is DeviceKind.TIMER or (d.telemetry and d.telemetry.times_laps)]
         connected = any(d.online for d in timers)
         return TimekeeperScreen(
             event_id=event_id, event_name=event.name, track_id=track_id,
@@ -212,5 +212,7 @@ def _timer_text(track: Track, timers: list[DeviceView], connected: bool) -> str:
     if not timers:
         return "No timer in this track's fleet: capture laps by hand"
     if connected:
-        return "Timer connected"
+        timing_cars = [d.hostname for d in timers if d.kind is DeviceKind.CAR and d.online]
+        return f"Timed by sim car {', '.join(timing_cars)}" if timing_cars and len(timing_cars) == sum(
+            1 for d in timers if d.online) else "Timer connected"
     return "Timer offline: capture laps by hand"

@@ -18,8 +18,10 @@ from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput
 from chalicelib.domain.identity import password_policy_text
 from drem_infra import resources
 
-_SELF_SIGN_UP_CHARS = re.compile(r"^[a-zA-Z0-9._]+$")
-_STAFF_USERNAME = re.compile(r"^[a-zA-Z0-9_-]+$")
+# One character set for the registration desk and self sign-up: a racer the desk registered as "anna-b" could
+# otherwise never have signed up under that name herself (and the other way round for "anna.b").
+_USERNAME_CHARS = re.compile(r"^[a-zA-Z0-9._-]+$")
+_CHARS_MESSAGE = "A username may contain only letters, digits, '.', '_' and '-'."
 # Deliberately simple: the directory sends a code to it, which is the real check.
 _EMAIL = re.compile(r"^[^@\s<>\"']+@[^@\s<>\"']+\.[^@\s<>\"']+$")
 _PASSWORD_SYMBOLS = "!#%*+-=?@^_"
@@ -30,19 +32,19 @@ def check_sign_up_username(username: str) -> str:
     """DREM's self sign-up rule, one message per broken rule."""
     if not 2 <= len(username) <= 20:
         raise InvalidInput("A username has 2 to 20 characters.", field="username")
-    if not _SELF_SIGN_UP_CHARS.match(username):
-        raise InvalidInput("A username may contain only letters, digits, '.' and '_'.", field="username")
-    if username[0] in "._" or username[-1] in "._":
-        raise InvalidInput("A username cannot start or end with '.' or '_'.", field="username")
-    if re.search(r"[._]{2}", username):
-        raise InvalidInput("A username cannot have two '.' or '_' in a row.", field="username")
+    if not _USERNAME_CHARS.match(username):
+        raise InvalidInput(_CHARS_MESSAGE, field="username")
+    if username[0] in "._-" or username[-1] in "._-":
+        raise InvalidInput("A username cannot start or end with '.', '_' or '-'.", field="username")
+    if re.search(r"[._-]{2}", username):
+        raise InvalidInput("A username cannot have two of '.', '_' or '-' in a row.", field="username")
     return username
 
 
 def check_staff_username(username: str) -> str:
-    """DREM's staff registration rule (differs from self sign-up: '-' allowed, '.' not)."""
-    if not 1 <= len(username) <= 128 or not _STAFF_USERNAME.match(username):
-        raise InvalidInput("A username may contain only letters, digits, '-' and '_'.", field="username")
+    """The registration desk's rule: the characters self sign-up accepts, any length Cognito takes."""
+    if not 1 <= len(username) <= 128 or not _USERNAME_CHARS.match(username):
+        raise InvalidInput(_CHARS_MESSAGE, field="username")
     return username
 
 

@@ -6,6 +6,7 @@ Tracks are rows `track-{n}-…` with a "use" checkbox; links are one per line: `
 from __future__ import annotations
 
 import re
+from datetime import date
 from typing import Any
 
 from pydantic import BaseModel
@@ -13,6 +14,7 @@ from pydantic import BaseModel
 from chalicelib.domain.events import DEFAULT_LINKS, Event, EventInput, EventType
 from chalicelib.domain.errors import InvalidInput
 from drem_leaderboard.models import RaceConfig, RankingMethod, TrackType
+from drem_web import labels
 
 SPARE_TRACK_ROWS = 2
 CONFIG_FIELDS = ("race_time_min", "resets_per_lap", "track_type", "ranking_method", "lap_count_target",
@@ -35,14 +37,16 @@ class TrackRow(BaseModel):
 class EventFormView(BaseModel):
     values: dict[str, str]
     tracks: list[TrackRow]
-    event_types: list[str] = [t.value for t in EventType]
-    track_types: list[str] = [t.value for t in TrackType]
-    ranking_methods: list[str] = [m.value for m in RankingMethod]
+    event_types: list[tuple[str, str]] = labels.options(EventType)
+    track_types: list[tuple[str, str]] = labels.options(TrackType)
+    ranking_methods: list[tuple[str, str]] = labels.options(RankingMethod)
 
 
 def blank_form() -> EventFormView:
     config = RaceConfig()
-    values = {"name": "", "event_type": EventType.OFFICIAL_TRACK_RACE.value, "date": "", "country_code": "",
+    # Most events are created for today or soon: today is a better start than an empty date field.
+    values = {"name": "", "event_type": EventType.OFFICIAL_TRACK_RACE.value, "date": date.today().isoformat(),
+              "country_code": "",
               "sponsor": "", **_config_values(config), "landing_page_links": _links_text(DEFAULT_LINKS),
               "stats_visibility": "public"}
     rows = [TrackRow(number=1, use=True, track_id="", fleet_id="", title="", footer="", existing=False)]

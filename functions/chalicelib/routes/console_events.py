@@ -6,10 +6,13 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
+from chalicelib.domain.countries import COUNTRY_CHOICES
+from chalicelib.domain.overlay_links import OverlayLinkOptions, overlay_link
 from chalicelib.routes import console_event_form as event_form
 from chalicelib.routes.console_common import form, redirect, render_or_errors
 from chalicelib.routes.events import event_service
 from chalicelib.routes.fleets import fleet_service
+from chalicelib.settings import get_settings
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -20,6 +23,15 @@ EVENT_EDITORS = {ADMIN, OPERATOR}
 @route(bp, "/console/events", allow=EVENT_EDITORS)
 def events_page(principal: User) -> Response:
     return render.page("console/events", events=event_service().list_events())
+
+
+@route(bp, "/console/events/{event_id}/overlay", allow=EVENT_EDITORS, query=OverlayLinkOptions)
+def overlay_link_page(principal: User, event_id: str, query: OverlayLinkOptions) -> Response:
+    """Build the OBS browser-source address of a track's overlay: each option explained, the link to paste"""
+    event = event_service().get_event(event_id)
+    event.track(query.track)  # NotFound for a track the event does not have
+    link = overlay_link(get_settings().public_url, event_id, query)
+    return render.page("console/overlay_link", event=event, options=query, link=link, path=link.split("/", 3)[-1])
 
 
 @route(bp, "/console/events/new", allow=EVENT_EDITORS)
@@ -74,4 +86,4 @@ def delete_event(principal: User, event_id: str) -> Response:
 def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],
                status: int = 200) -> Response:
     return render.page("console/event_form", status=status, event_id=event_id, form=view, errors=errors,
-                       fleets=fleet_service().list_fleets())
+                       fleets=fleet_service().list_fleets(), countries=COUNTRY_CHOICES)

@@ -2,16 +2,19 @@
 device activation (a one-time code plus the command to run on the car or timer). Same services as the JSON API."""
 from __future__ import annotations
 
+from urllib.parse import quote
+
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.activation import ActivationCodeRequest
-from chalicelib.domain.car_console import cars_overview
+from chalicelib.domain.car_console import COMMAND_LABELS, car_lines, cars_overview
 from chalicelib.domain.devices import CommandRequest
+from chalicelib.domain.errors import NotFound
 from chalicelib.domain.fleets import FleetInput
 from chalicelib.routes.console_common import checkbox, form, optional, redirect, render_or_errors
-from chalicelib.routes.devices import activation_service, device_service
+from chalicelib.routes.devices import activation_service, device_service, now_ms
 from chalicelib.routes.fleets import fleet_service
 from chalicelib.settings import get_settings
 from chalicelib.storage.assignments import build_assignment_service
@@ -37,7 +40,15 @@ def create_fleet(principal: User) -> Response:
 
 @route(bp, "/console/cars", allow=DEVICE_STAFF)
 def cars_page(principal: User) -> Response:
-    return _cars_page(principal, {})
+    return _cars_page(principal, {}, notice=_sent_notice(bp.current_request.query_params or {}))
+
+
+@route(bp, "/console/cars/live", allow=DEVICE_STAFF)
+def cars_live(principal: User) -> Response:
+    """Every car's status cell (status, battery, faults, loaded model, last command) as out-of-band swaps: the page
+    polls this, so the operator sees an emergency stop confirmed without reloading"""
+    lines = car_lines(device_service(), fleet_service(), build_assignment_service(), now_ms())
+    return render.fragment("console/cars_live", cars=lines, headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/console/cars/activate", allow=DEVICE_STAFF)
@@ -91,7 +102,9 @@ def deregister_car(principal: User, device_id: str) -> Response:
 def _car_action(principal: User, device_id: str, action) -> Response:  # noqa: ANN001 - a thunk
     def run() -> Response:
         action()
-        return redirect(f"/console/cars#car-{device_id}")
+        sent = form(bp.current_request).get("type", "") if bp.current_request.method == "POST" else ""
+        query = f"?sent={quote(sent)}&device={quote(device_id)}" if sent else ""
+        return redirect(f"/console/cars{query}#car-{device_id}")
 
     return render_or_errors(run, lambda errors, status: _cars_page(
         principal, {f"{device_id}-{name}": message for name, message in errors.items()}, status))
@@ -106,11 +119,24 @@ def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 2
                        values=values)
 
 
-def _cars_page(principal: User, errors: dict[str, str], status: int = 200) -> Response:
+def _sent_notice(query: dict[str, str]) -> str:
+    """"Emergency stop sent to car-1 …" after a command, built from known values only (never echoes the query)."""
+    label = COMMAND_LABELS.get(query.get("sent", ""))
+    device_id = query.get("device", "")
+    if not label or not device_id:
+        return ""
+    try:
+        hostname = device_service().get_device(device_id).hostname
+    except NotFound:
+        return ""
+    return f"{label} sent to {hostname}. Its status below shows when the car has done it."
+
+
+def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notice: str = "") -> Response:
     overview = cars_overview(principal, device_service(), fleet_service(), build_assignment_service(),
-                             build_model_service())
+                             build_model_service(), now_ms())
     return render.page("console/cars", status=status, overview=overview, errors=errors,
-                       is_admin=ADMIN in principal.roles)
+                       is_admin=ADMIN in principal.roles, notice=notice)
 
 
 def _activation_page(errors: dict[str, str], values: dict[str, str], issued: object, status: int = 200) -> Response:

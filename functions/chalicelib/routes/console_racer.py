@@ -13,26 +13,28 @@ from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
-from chalicelib.domain.countries import COUNTRY_CODES
+from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.models import ListQuery, ModelStatus
 from chalicelib.domain.passwords import PasswordChangeForm, PasswordService
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE, ProfileUpdate
 from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.http_errors import retry_after_headers
+from chalicelib.routes.events import event_service
 from chalicelib.routes.console_forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
-from chalicelib.routes.profiles import profile_service
+from chalicelib.routes.profiles import profile_service, shown_on_boards
 from chalicelib.routes.races import race_service
 from chalicelib.routes.responses import redirect
 from chalicelib.routes.users import user_service
 from chalicelib.storage import clients
 from chalicelib.storage.models import build_model_service
 from chalicelib.storage.passwords import CognitoPasswordChanger
+from drem_leaderboard.ranking import DEFAULT_HIGHLIGHT_COLOUR
 from drem_web import render
 
 bp = Blueprint(__name__)
 
-COUNTRIES = sorted(COUNTRY_CODES)
+COUNTRIES = COUNTRY_CHOICES
 _SIGN_UP_FIELDS = ("username", "email", "country_code", "password")
 _MY_MODELS_LIMIT = 100
 
@@ -107,7 +109,7 @@ def update_profile(principal: User) -> Response:
             submitted(bp.current_request, "highlight_colour", "avatar")))
     except SHOWN_ON_FORM as exc:
         return _profile_form(service.own(principal), exc)
-    return _profile_form(saved, notice="Your profile is saved.")
+    return _profile_form(shown_on_boards(saved), notice="Your profile is saved; the leaderboards show it now.")
 
 
 # --- my models ----------------------------------------------------------------------------------------------------
@@ -141,7 +143,9 @@ def delete_my_model(principal: User, model_id: str) -> Response:
 
 @route(bp, "/console/my-races", allow=SIGNED_IN)
 def my_races(principal: User) -> Response:
-    return render.page("console/my_races", races=list(reversed(race_service().my_races(principal))))
+    event_names = {event.event_id: event.name for event in event_service().list_events()}
+    return render.page("console/my_races", races=list(reversed(race_service().my_races(principal))),
+                       event_names=event_names)
 
 
 @route(bp, "/console/my-races/{event_id}/{race_id}", allow=SIGNED_IN)
@@ -178,4 +182,6 @@ def _password_form(exc: Exception | None = None, notice: str = "") -> Response:
 def _profile_form(profile, exc: Exception | None = None, notice: str = "") -> Response:
     return render.page("console/profile", status=error_status(exc) if exc else 200, profile=profile,
                        palette=HIGHLIGHT_PALETTE, notice=notice,
+                       # Before the first save the boards show the default colour: the form says so by selecting it.
+                       shown_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR,
                        errors=field_errors(exc, "highlight_colour") if exc else {})

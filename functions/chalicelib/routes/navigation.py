@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, SIGNED_IN, STAFF, Allow, as_allow
 from chalicelib.auth.principals import Principal
+from chalicelib.domain.countries import country_name
 from drem_web import render
 
 OPERATIONS = as_allow({ADMIN, OPERATOR})
@@ -27,7 +28,7 @@ class NavLink:
 NAV_LINKS: tuple[NavLink, ...] = (
     NavLink("My models", "/console/my-models", SIGNED_IN, "upload models and see whether they are valid"),
     NavLink("My races", "/console/my-races", SIGNED_IN, "your races and laps"),
-    NavLink("Model registry", "/models/registry", SIGNED_IN, "your model versions, evaluations and plots"),
+    NavLink("My model versions", "/models/registry", SIGNED_IN, "your model versions, evaluations and plots"),
     NavLink("Profile", "/console/profile", SIGNED_IN, "highlight colour, avatar, password"),
     NavLink("Registration", "/console/registration", as_allow({ADMIN, REGISTRATION}), "create racer accounts"),
     NavLink("Events", "/console/events", OPERATIONS, "events, tracks and race settings"),
@@ -36,11 +37,10 @@ NAV_LINKS: tuple[NavLink, ...] = (
     NavLink("Models", "/console/models", OPERATIONS, "all racers' models, give models to cars"),
     NavLink("Timekeeper", "/console/timekeeper", OPERATIONS, "run races"),
     NavLink("Races", "/console/races", OPERATIONS, "race admin: edit laps, export"),
-    NavLink("Registry", "/console/models/registry", OPERATIONS, "every model version with lineage and evaluations",
-            topbar=False),
+    NavLink("All model versions", "/console/models/registry", OPERATIONS,
+            "every racer's model versions with lineage and evaluations", topbar=False),
     NavLink("Users", "/console/users", as_allow({ADMIN}), "search users, change roles, disable"),
-    NavLink("League", "/league/reinvent_base", Allow(public=True), "the virtual league (any track: /league/TRACK)",
-            topbar=False),
+    NavLink("League", "/league/reinvent_base", Allow(public=True), "the virtual league (any track: /league/TRACK)"),
     NavLink("Statistics", "/stats", Allow(public=True), "events, racers and fastest laps, per country and track",
             topbar=False),
     NavLink("API", "/api/docs", Allow(public=True), "every JSON route, who may call it, and its input", topbar=False),
@@ -61,3 +61,4 @@ def topbar_links(principal: Principal | None) -> list[NavLink]:
 
 # One environment per process (cached): every page rendered after this import gets the role-aware nav.
 render.environment().globals["nav_links_for"] = topbar_links
+render.environment().filters["country_name"] = country_name

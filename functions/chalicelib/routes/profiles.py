@@ -20,6 +20,15 @@ def profile_service() -> ProfileService:
     return ProfileService(store, user_directory(settings))
 
 
+def shown_on_boards(profile: Profile) -> Profile:
+    """Board rows carry the racer's colour and country as they were when a race was published: refresh them so a
+    change reaches every leaderboard and overlay the racer is on."""
+    from chalicelib.routes.races import race_service  # races → profiles already; import here, not at the top
+
+    race_service().refresh_racer_everywhere(profile.sub)
+    return profile
+
+
 @route(bp, "/api/me/profile", allow=SIGNED_IN, response=Profile)
 def own_profile(principal: User) -> dict:
     return profile_service().own(principal).model_dump()
@@ -27,13 +36,13 @@ def own_profile(principal: User) -> dict:
 
 @route(bp, "/api/me/profile", methods=["PUT"], allow=SIGNED_IN, body=ProfileUpdate, response=Profile)
 def update_own_profile(principal: User, body: ProfileUpdate) -> dict:
-    return profile_service().update_own(principal, body).model_dump()
+    return shown_on_boards(profile_service().update_own(principal, body)).model_dump()
 
 
 @route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN}, body=ProfileUpdate,
        response=PublicProfile)
 def update_user_profile(principal: User, username: str, body: ProfileUpdate) -> dict:
-    return public_view(profile_service().update_for(principal, username, body)).model_dump()
+    return public_view(shown_on_boards(profile_service().update_for(principal, username, body))).model_dump()
 
 
 @route(bp, "/api/profiles/{username}", allow=PUBLIC, response=PublicProfile)

@@ -61,6 +61,7 @@ class PageOptions(BaseModel):
 class LeaderboardQuery(PageOptions):
     scroll: bool = True
     qr: Literal["header", "footer", "none"] = "footer"
+    page_seconds: int = Field(default=8, ge=2, le=60, description="big screen: seconds each page of rows is shown")
     tracks: str = Field(default="", max_length=300, description="live fragment: tracks whose race footer to show")
 
     @field_validator("tracks")
@@ -186,9 +187,10 @@ def leaderboard_live(event_id: str, track: str, query: LeaderboardQuery, footer_
             o, now_ms, t, views.entry_for(items.board, o.username), show_flags=query.flag)) is not None]
         poll = live_url(f"/leaderboard/{quote(event_id, safe='')}/live", {
             "track": track, "format": query.format, "flag": query.flag, "scroll": query.scroll, "lang": query.lang,
-            "tracks": ",".join(footer_tracks), "v": token})
+            "tracks": ",".join(footer_tracks), "page_seconds": query.page_seconds, "v": token})
         return {"rows": views.board_rows(items.board, query.format, t, show_flags=query.flag), "footers": footers,
-                "poll_url": poll, "token": token, "scroll": query.scroll, "t": t, "clock_at": now_ms}
+                "poll_url": poll, "token": token, "scroll": query.scroll, "t": t, "clock_at": now_ms,
+                "page_ms": query.page_seconds * 1000}
 
     return token, context
 
@@ -201,8 +203,11 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
     footer_tracks = [track] if track != COMBINED_TRACK_ID else [t.track_id or "" for t in event.tracks]
     _token, live = leaderboard_live(event_id, track, query, footer_tracks[:MAX_FOOTER_TRACKS], race_routes.now_ms())
     page_url = landing_url(get_settings().public_url, event_id, query.lang)  # the QR opens the event's landing page
+    shown = next((t for t in event.tracks if t.track_id == track), None)  # None on the combined board
     return render.page("leaderboard", title=event.name, track=track, tracks=event.boards, lang=i18n.resolve_language(
-        query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url, **live())
+        query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url,
+        track_title=shown.leaderboard_title if shown else "", board_footer=(shown or event.tracks[0]).leaderboard_footer,
+        sponsor=event.sponsor, links=event.landing_page_links, **live())
 
 
 @route(bp, "/leaderboard/{event_id}/live", allow=PUBLIC, query=LeaderboardQuery)

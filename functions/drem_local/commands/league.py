@@ -62,7 +62,7 @@ def _push(args: argparse.Namespace) -> int:
     from chalicelib.domain.league_export import read_export
     from drem_local.api_client import ApiClient
 
-    export = read_export(args.path)
+    export = with_sim_evaluation(read_export(args.path), args.path, args.track)
     if args.dry_run:
         racer = args.racer or args.username or "racer"
         print(assemble(export, racer=racer, track=args.track, model_name=args.model_name).model_dump_json(indent=2))
@@ -76,6 +76,27 @@ def _push(args: argparse.Namespace) -> int:
     print(f"pushed {entry['model_name']} for {entry['racer']} on {args.track} ({submission.layout} export): "
           f"{entry['laps_completed']}/{entry['trials']} laps, best {best}")
     return 0
+
+
+def with_sim_evaluation(export: Any, path: Any, track: str) -> Any:
+    """A drem model (its training/lineage.json) without an evaluation on `track`: run `drem sim eval` on it here,
+    so drem's own models (the samples included) can be pushed as they are, like a console export with its metrics."""
+    names = set(export.names)
+    if not names & {"lineage.json", "training/lineage.json"} or "metrics.json" in names:
+        return export
+    try:
+        from drem_sim.learn.evaluate import evaluate_model
+    except ImportError as exc:
+        raise OSError(f"this export has no metrics.json, and the simulator that would make one is not installed "
+                      f"({exc}); run `drem sim eval --model {path} --track {track} --out DIR` where it is") from None
+    print(f"no evaluation in {path}: evaluating it on {track} in the simulator (3 laps) ...", file=sys.stderr)
+    try:
+        metrics = evaluate_model(path, track, laps=3)
+    except ValueError as exc:  # an unknown track or a model the simulator cannot run
+        raise OSError(f"could not evaluate {path} on {track}: {exc}") from None
+    export.files["metrics.json"] = metrics.model_dump_json().encode()
+    export.names.append("metrics.json")
+    return export
 
 
 def _pull(args: argparse.Namespace) -> int:

@@ -17,7 +17,7 @@ from typing import Any, Iterable, Sequence
 import cv2
 import numpy as np
 
-from drem_sim.learn.model import IMAGE_HEIGHT, IMAGE_WIDTH
+from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH
 
 MAX_STEERING_DEG = 30.0
 MIN_SPEED_SPREAD = 0.2  # m/s; a constant-speed demonstrator still gets a usable speed range

@@ -6,11 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-import onnxruntime
 import torch
 from torch import nn
 
-from drem_sim.learn.model import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, OUTPUT_NAME
+from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, OUTPUT_NAME, onnx_session  # noqa: F401
 
 OPSET = 17
 # Pinned, not left to the exporter: the onnxruntime on cars and here reads IR <= 13 only, while newer onnx/torch
@@ -37,14 +36,6 @@ def export_onnx(model: nn.Module, path: Path) -> Path:
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))
     return path
-
-
-def onnx_session(model_bytes_or_path: bytes | Path) -> onnxruntime.InferenceSession:
-    options = onnxruntime.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    source = model_bytes_or_path if isinstance(model_bytes_or_path, bytes) else str(model_bytes_or_path)
-    return onnxruntime.InferenceSession(source, options, providers=["CPUExecutionProvider"])
 
 
 def verify_onnx(model: nn.Module, path: Path, samples: np.ndarray, tolerance: float = TOLERANCE) -> float:

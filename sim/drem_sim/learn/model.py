@@ -9,11 +9,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-IMAGE_HEIGHT = 120
-IMAGE_WIDTH = 160
-INPUT_NAME = "observation"
-OUTPUT_NAME = "policy"
-NETWORK_NAME = "DREM_BC_CNN_SMALL"
+from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, NETWORK_NAME, OUTPUT_NAME  # noqa: F401
 
 
 class BehaviourCloningCNN(nn.Module):

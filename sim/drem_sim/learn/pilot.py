@@ -17,7 +17,7 @@ class OnnxPilot:
     """Continuous action spaces rescale the [-1, 1] means to low..high; discrete ones take the argmax action."""
 
     def __init__(self, metadata: dict[str, Any], onnx_model: bytes) -> None:
-        from drem_sim.learn.export import onnx_session  # onnxruntime loads only when a pilot is built
+        from drem_sim.learn.contract import onnx_session  # onnxruntime loads only when a pilot is built
 
         self.metadata = metadata
         self.kind = str(metadata.get("action_space_type", "discrete"))

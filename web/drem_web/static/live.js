@@ -9,6 +9,10 @@
   var clocks = [];
   var previousTimes = null;
   var highlightUntil = {};
+  // Big-screen paging: when the rows do not fit the screen, show them a page at a time (every racer appears).
+  var DEFAULT_PAGE_MS = 8000;
+  var pageIndex = 0;
+  var pageShownAt = 0;
 
   function pad(value, width) { return String(value).padStart(width, "0"); }
   function countdown(ms) {
@@ -70,7 +74,52 @@
       if ((highlightUntil[racer] || 0) > now) { row.classList.add("is-new"); }
     });
     previousTimes = times;
-    if (first && board.dataset.scroll === "true") { first.scrollIntoView({ block: "center", behavior: "smooth" }); }
+    if (first && board.dataset.scroll === "true") {
+      var rowsPerPage = layoutPages(board);
+      if (rowsPerPage) {  // dwell on the page with the new result
+        pageIndex = Math.floor(rowIndex(board, first) / rowsPerPage);
+        pageShownAt = Date.now() + pageMs(board);
+        showPage(board, rowsPerPage);
+      } else {
+        first.scrollIntoView({ block: "center", behavior: "smooth" });
+      }
+    }
+  }
+
+  function pageMs(board) {
+    var ms = Number(board.dataset.pageMs);
+    return isFinite(ms) && ms >= 1000 ? ms : DEFAULT_PAGE_MS;
+  }
+  function boardRows(board) { return Array.prototype.slice.call(board.querySelectorAll(".board-row")); }
+  function rowIndex(board, row) { return boardRows(board).indexOf(row); }
+  // Rows per page when the list overflows its box (the big-screen layout gives it a fixed height), else 0.
+  function layoutPages(board) {
+    var list = board.querySelector(".board-rows");
+    var rows = boardRows(board);
+    rows.forEach(function (row) { row.hidden = false; });
+    if (!list || rows.length < 2 || list.scrollHeight <= list.clientHeight + 1) { return 0; }
+    var first = rows[0].getBoundingClientRect();
+    var last = rows[rows.length - 1].getBoundingClientRect();
+    var pitch = (last.bottom - first.top) / rows.length;
+    // A spare row of margin: podium rows are taller, and a half-shown row is no use to anyone 5 m away.
+    return Math.max(1, Math.floor(list.clientHeight / pitch) - 1);
+  }
+  function showPage(board, rowsPerPage) {
+    var rows = boardRows(board);
+    var pages = Math.ceil(rows.length / rowsPerPage);
+    pageIndex = pageIndex % pages;
+    rows.forEach(function (row, index) { row.hidden = Math.floor(index / rowsPerPage) !== pageIndex; });
+    var label = document.querySelector("[data-board-page]");
+    if (label) { label.hidden = false; label.textContent = (pageIndex + 1) + " / " + pages; }
+  }
+  function paginate(advance) {
+    var board = document.querySelector("[data-board]");
+    if (!board) { return; }
+    var rowsPerPage = layoutPages(board);
+    var label = document.querySelector("[data-board-page]");
+    if (!rowsPerPage) { pageIndex = 0; if (label) { label.hidden = true; } return; }
+    if (advance && Date.now() - pageShownAt >= pageMs(board)) { pageIndex += 1; pageShownAt = Date.now(); }
+    showPage(board, rowsPerPage);
   }
   function expireHighlights() {
     var now = Date.now();
@@ -89,7 +138,13 @@
     arrived(null);
     markChangedRows();
     document.body.addEventListener("htmx:afterSwap", arrived);
-    document.body.addEventListener("htmx:afterSettle", function () { anchorClocks(null); markChangedRows(); });
+    pageShownAt = Date.now();
+    paginate(false);
+    document.body.addEventListener("htmx:afterSettle", function () {
+      anchorClocks(null); paginate(false); markChangedRows();
+    });
+    window.addEventListener("resize", function () { paginate(false); });
+    setInterval(function () { paginate(true); }, 250);
     setInterval(tick, 50);
     setInterval(expireHighlights, 1000);
   }

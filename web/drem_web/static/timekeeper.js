@@ -59,6 +59,7 @@
   // Straight through htmx.ajax rather than .click(): a key pressed right after a swap must not be lost while htmx
   // is still wiring up the new buttons.
   function press(button) {
+    // A destructive key asks first, as its button does: htmx.ajax honours the source button's hx-confirm.
     htmx.ajax("POST", button.getAttribute("hx-post"), {
       source: button, target: "#tk-state", swap: "outerHTML",
       values: JSON.parse(button.getAttribute("hx-vals") || "{}"),

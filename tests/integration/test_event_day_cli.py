@@ -1,0 +1,94 @@
+"""Issue 13 (event day), the CLI as a user runs it: the installed `drem` as a subprocess from a folder outside the
+repository, against a running stack."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import requests
+
+pytestmark = pytest.mark.integration
+
+REPO = Path(__file__).resolve().parents[2]
+DREM = REPO / ".venv" / "bin" / "drem"
+SAMPLE = REPO / "sim" / "drem_sim" / "samples" / "drem-bc-oval.tar.gz"
+
+
+def drem(*argv: str, cwd: Path, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("DREM_")}
+    return subprocess.run([str(DREM), *argv], cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                          env={**clean, **(env or {})})
+
+
+def test_the_cli_finds_the_running_stacks_port_and_takes_options_after_the_action(live_stack, tmp_path):
+    # The stack runs on a free port, not 8000: the CLI reads it from the state dir (./.drem or $DREM_STATE_DIR).
+    assert not live_stack.url.endswith(":8000")
+    login = ["--username", live_stack.admin_username, "--password", live_stack.admin_password]
+    by_env = drem("fleets", "create", "CLI port fleet", *login, cwd=tmp_path,
+                  env={"DREM_STATE_DIR": str(live_stack.state_dir)})
+    assert by_env.returncode == 0, by_env.stderr
+    (tmp_path / ".drem").symlink_to(live_stack.state_dir)
+    listed = drem("fleets", "list", *login, cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
+    assert "CLI port fleet" in listed.stdout
+    # The classic order still works.
+    before = drem("fleets", *login, "--api", live_stack.url, "list", cwd=tmp_path.parent)
+    assert before.returncode == 0 and "CLI port fleet" in before.stdout
+
+
+def test_sim_eval_runs_without_torch(tmp_path):
+    """`make up` installs the sim extra, not torch: the registry page's `drem sim eval` must still work."""
+    no_torch = tmp_path / "no-torch" / "torch"
+    no_torch.mkdir(parents=True)
+    (no_torch / "__init__.py").write_text('raise ModuleNotFoundError("No module named \'torch\'", name="torch")\n')
+    ran = drem("sim", "eval", "--model", str(SAMPLE), "--track", "drem_oval", "--laps", "1", "--out", "eval",
+               cwd=tmp_path, env={"PYTHONPATH": str(no_torch.parent)})
+    assert ran.returncode == 0, ran.stderr
+    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    assert metrics["track"] == "drem_oval" and metrics["laps_completed"] == 1
+
+
+def test_league_push_takes_drems_own_sample_model(live_stack, tmp_path):
+    ran = drem("league", "push", str(SAMPLE), "--track", "drem_oval", "--username", live_stack.admin_username,
+               "--password", live_stack.admin_password, cwd=tmp_path, env={"DREM_STATE_DIR": str(live_stack.state_dir)},
+               timeout=240)
+    assert ran.returncode == 0, ran.stderr
+    assert "pushed drem-bc-oval" in ran.stdout
+    board = requests.get(live_stack.url + "/api/league/drem_oval", timeout=10).json()
+    assert any(ranked["entry"]["model_name"].startswith("drem-bc-oval") for ranked in board["entries"]), board
+
+
+def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_stack, tmp_path):
+    """No ../shared beside the clone: the default track falls back to drem_oval (shipped) instead of a traceback."""
+    token = requests.post(live_stack.url + "/api/auth/token", timeout=10, json={
+        "username": live_stack.admin_username, "password": live_stack.admin_password}).json()["access_token"]
+    headers = {"Authorization": f"Bearer {token}"}
+    fleet = requests.post(live_stack.url + "/api/fleets", json={"name": "fresh clone"}, headers=headers,
+                          timeout=10).json()
+    code = requests.post(live_stack.url + "/api/devices/activation-codes", headers=headers, timeout=10, json={
+        "fleet_id": fleet["fleet_id"], "hostname": "fresh-sim", "device_kind": "car"}).json()["code"]
+    event = requests.post(live_stack.url + "/api/events", headers=headers, timeout=10, json={
+        "name": "Fresh clone cup", "event_type": "OTHER", "date": "2026-07-01", "country_code": "SE",
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]}).json()
+    config = tmp_path / "car"
+    activated = drem("car", "activate", "--code", code, "--hostname", "fresh-sim", "--api", live_stack.url,
+                     "--config-dir", str(config), cwd=tmp_path)
+    assert activated.returncode == 0, activated.stderr
+    # The venv's own entry point, with the shared folder beside the repo made to look absent (as in a fresh clone).
+    script = ("import sys; from pathlib import Path; import drem_sim.tracks as t; "
+              "t.DEFAULT_NPY_DIR = Path(sys.argv[1]); from drem_local.cli import main; sys.exit(main(sys.argv[2:]))")
+    ran = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c", script, str(tmp_path / "no-shared"),
+                          "car", "--config-dir", str(config), "run", "--sim", "--seconds", "3",
+                          "--event", event["event_id"], "--race-track", "1"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                         env={k: v for k, v in os.environ.items() if not k.startswith("DREM_")})
+    assert ran.returncode == 0, ran.stderr
+    assert "Traceback" not in ran.stderr and "drive loop:" in ran.stdout
+    # The sim car times its track with its own timing line: the timekeeper must not say there is no timer.
+    desk = requests.get(f"{live_stack.url}/console/timekeeper/{event['event_id']}/1", headers=headers, timeout=10)
+    assert desk.status_code == 200, desk.text[:300]
+    assert "Timed by sim car fresh-sim" in desk.text and "No timer in this track" not in desk.text
