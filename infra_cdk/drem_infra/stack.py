@@ -309,12 +309,19 @@ def _packaging_leaves_no_trace() -> Iterator[None]:
     environment variables (CDK tokens here) into os.environ. Undo both, so a synth inside a longer-lived process (a
     test session, a notebook) does not leave it pointing at unresolved tokens or at the packaged copy of the app."""
     saved_env, saved_path = dict(os.environ), list(sys.path)
-    saved_modules = {name for name in sys.modules if name == "app" or name.split(".")[0] == "chalicelib"}
+    # Modules already imported are set aside, so packaging imports its own copies: registering the app's blueprints
+    # in another Chalice app consumes their route options (Chalice pops `methods` from each deferred registration),
+    # and a later `import app` in this process would then register every route as GET.
+    ours = lambda name: name == "app" or name.split(".")[0] == "chalicelib"  # noqa: E731
+    saved_modules = {name: module for name, module in sys.modules.items() if ours(name)}
+    for name in saved_modules:
+        del sys.modules[name]
     try:
         yield
     finally:
         os.environ.clear()
         os.environ.update(saved_env)
         sys.path[:] = saved_path
-        for name in [n for n in sys.modules if (n == "app" or n.split(".")[0] == "chalicelib") and n not in saved_modules]:
+        for name in [n for n in sys.modules if ours(n)]:
             del sys.modules[name]
+        sys.modules.update(saved_modules)

@@ -14,6 +14,8 @@ os.environ.setdefault("JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION", "20")
 REPO_ROOT = Path(__file__).resolve().parents[2]
 FUNCTIONS_DIR = REPO_ROOT / "functions"
 STAGE = "test"
+# The app module the session had imported before the synth (tests/infra/test_cdk_synth.py checks it is untouched).
+BEFORE_SYNTH: dict = {}
 # What `make deploy` passes on its second deploy (CloudFront's domain, or the custom domain).
 PUBLIC_URL = "https://drem.example.org"
 
@@ -40,6 +42,8 @@ def templates(tmp_path_factory, lambda_build):
     from drem_infra.stack import DremStack
 
     assert not (lambda_build / "requirements.txt").exists(), "Chalice would download requirements at synth"
+    import app as app_before_synth  # as any earlier test of the session would have (the synth must not disturb it)
+    BEFORE_SYNTH["app"] = app_before_synth
     work = tmp_path_factory.mktemp("cdk")
     cwd, saved_env = os.getcwd(), dict(os.environ)
     os.chdir(work)  # the Chalice construct writes chalice.out/ into the working directory
