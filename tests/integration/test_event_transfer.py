@@ -386,9 +386,24 @@ def _other_valid_model_under_the_records_name(folder: Path) -> str:
     return "does not match its record in models.json (model_md5)"
 
 
+def _audit_entry_of_another_event(folder: Path) -> str:
+    def move(document: dict) -> None:
+        entry = next(item for item in document["items"] if item["sk"]["S"].startswith("AUDIT#"))
+        doc = json.loads(entry["doc"]["S"])
+        doc["event_id"] = "someone-elses-event"
+        entry["doc"]["S"] = json.dumps(doc)
+    _tamper_json(folder, "races.json", move)
+    return "does not match its key"
+
+
+def _first_race(document: dict) -> dict:
+    """The first race item (races.json also carries the event's audit trail, `AUDIT#` items, which sort first)."""
+    return next(item for item in document["items"] if item["sk"]["S"].startswith("RACE#"))
+
+
 def _live_pointer_in_races(folder: Path) -> str:
     def add_live(document: dict) -> None:
-        race = document["items"][0]
+        race = _first_race(document)
         document["items"].append({"pk": race["pk"], "sk": {"S": "LIVE#1"}, "race_id": {"S": race["sk"]["S"][5:]}})
     _tamper_json(folder, "races.json", add_live)
     return "finished races only"
@@ -396,9 +411,10 @@ def _live_pointer_in_races(folder: Path) -> str:
 
 def _race_made_live_again(folder: Path) -> str:
     def revive(document: dict) -> None:
-        doc = json.loads(document["items"][0]["doc"]["S"])
+        race = _first_race(document)
+        doc = json.loads(race["doc"]["S"])
         doc["race"]["status"] = "RUNNING"
-        document["items"][0]["doc"]["S"] = json.dumps(doc)
+        race["doc"]["S"] = json.dumps(doc)
     _tamper_json(folder, "races.json", revive)
     return "only submitted or discarded races"
 
@@ -449,6 +465,7 @@ TAMPERINGS = {
     "another valid model under the record's name": (_other_valid_model_under_the_records_name, None),
     "live pointer smuggled into races.json": (_live_pointer_in_races, None),
     "race made live again": (_race_made_live_again, None),
+    "audit entry moved to another event": (_audit_entry_of_another_event, None),
     "deeply nested JSON": (_deeply_nested_profiles, None),
     "board of a track the event lacks": (_board_of_a_track_the_event_lacks, None),
     "model record pointing at another key": (_model_record_moved_to_another_owner_key, None),

@@ -91,6 +91,9 @@ def _check_races(bundle: EventBundle) -> dict[str, Race]:
     for index, item in enumerate(bundle.items["races"]):
         where = f"races.json: item {index}"
         sk = item["sk"]["S"]
+        if sk.startswith("AUDIT#"):  # the event's audit trail travels with its races (domain/audit.py)
+            _check_audit_entry(bundle, item, sk, where)
+            continue
         if not sk.startswith("RACE#"):
             raise _invalid(f"{where} field 'sk' is {sk!r}; an export holds finished races only (no live pointers).",
                            field="sk")
@@ -106,6 +109,17 @@ def _check_races(bundle: EventBundle) -> dict[str, Race]:
             raise _invalid(f"{where}: field 'racer_sub' is not the racer of the race document.", field="racer_sub")
         races[race.race_id] = race
     return races
+
+
+def _check_audit_entry(bundle: EventBundle, item: Item, sk: str, where: str) -> None:
+    """An audit entry must be what the app writes: an AuditEntry of this event, under its own time and id."""
+    from chalicelib.domain.audit import AuditEntry
+
+    entry: AuditEntry = _parse(AuditEntry, _text(item, "doc"), f"{where} field 'doc'")
+    if entry.event_id != bundle.event_id or sk != f"AUDIT#{entry.at_ms:013d}#{entry.entry_id}":
+        raise _invalid(f"{where}: the audit entry ({entry.event_id}, {sk}) does not match its key.", field="doc")
+    if _text(item, "action") not in (None, entry.action):
+        raise _invalid(f"{where}: field 'action' is not the action of the audit entry.", field="action")
 
 
 def _check_boards(bundle: EventBundle, event: Event, races: dict[str, Race]) -> None:
