@@ -171,7 +171,7 @@ def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin,
         outage_s = wait_until(lambda: car.strips.queued >= outage_started_with + 2 and outbox.count() >= 2, 90,
                               "laps kept coming while the API was down, and waited in the outbox")
         print(f"\nAPI down for {outage_s:.1f} s")
-        running.app = local_stack.start_app(running.config, running.env)
+        running.restart_app()  # also records its pid in stack.json, where `drem` finds the stack
         restarted_with = car.strips.queued
         wait_until(lambda: car.strips.queued > restarted_with and outbox.count() == 0, 60,
                    "after the restart the backlog is delivered and the next crossing too")
@@ -183,7 +183,7 @@ def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin,
         car.vehicle.stop()
         agent.stop()
         if not running.app.alive():
-            running.app = local_stack.start_app(running.config, running.env)
+            running.restart_app()  # also records its pid in stack.json, where `drem` finds the stack
     crossings = [item["timestamp_ms"] for item in _delivered_bodies(outbox)]
     laps = laps_of(admin, event_id, race_id)
     expected = [b - a for a, b in zip(crossings, crossings[1:])]

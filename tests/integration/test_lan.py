@@ -106,7 +106,7 @@ def test_drem_up_on_the_venue_network(venue, tmp_path):
         seen = json.loads(device.stdout.strip().splitlines()[-1])
         assert seen["health"] == 200
         assert seen["activation_command"].endswith(f"--api {lan_url}"), seen["activation_command"]
-        assert seen["qr_url"].startswith(f"{lan_url}/leaderboard/"), seen["qr_url"]
+        assert seen["qr_url"].startswith(f"{lan_url}/event/"), seen["qr_url"]  # the event landing page
         assert seen["upload_url"].startswith(f"{lan_url}/_storage/")
         assert seen["upload_status"] in (200, 204) and seen["model_status"] == "AVAILABLE", seen
         assert seen["storage_on_lan"] == "unreachable" and seen["storage_on_own_loopback"] == "unreachable"
