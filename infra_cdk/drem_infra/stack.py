@@ -37,6 +37,10 @@ LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 # (10,000 rps), so a runaway client cannot take the account's whole API quota.
 API_RATE_LIMIT_RPS = 200
 API_BURST_LIMIT = 400
+# The app's security headers (chalicelib.security_headers) on the one answer API Gateway gives by itself.
+NOT_FOUND_HEADERS = {"Content-Security-Policy": "default-src 'none'; frame-ancestors 'none'",
+                     "X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
+                     "Referrer-Policy": "same-origin", "Strict-Transport-Security": "max-age=31536000"}
 
 
 class DremStack(cdk.Stack):
@@ -266,6 +270,9 @@ class DremStack(cdk.Stack):
         apigateway.CfnGatewayResponse(
             self, "UnknownPathIsNotFound", rest_api_id=app.get_resource("RestAPI").ref,
             response_type="MISSING_AUTHENTICATION_TOKEN", status_code="404",
+            # API Gateway answers these before the app (and its security headers) runs: give them the same headers.
+            response_parameters={f"gatewayresponse.header.{name}": f"'{value}'"
+                                 for name, value in NOT_FOUND_HEADERS.items()},
             response_templates={
                 "application/json": '{"error": {"code": "NotFound", "message": "There is no route at this path; '
                                     'GET /api/docs lists every route."}}',

@@ -149,6 +149,10 @@ def test_an_unknown_path_is_a_404_not_api_gateways_403(app_template):
     assert missing["RestApiId"] == {"Ref": "RestAPI"}
     assert json.loads(missing["ResponseTemplates"]["application/json"])["error"]["code"] == "NotFound"
     assert "Not found" in missing["ResponseTemplates"]["text/html"]
+    # Answered before the app runs, so it carries the app's security headers itself.
+    headers = {k.removeprefix("gatewayresponse.header."): v for k, v in missing["ResponseParameters"].items()}
+    assert headers["X-Content-Type-Options"] == "'nosniff'" and headers["X-Frame-Options"] == "'DENY'"
+    assert "default-src 'none'" in headers["Content-Security-Policy"]
 
 
 def test_synth_reads_no_local_name_overrides(monkeypatch):
