@@ -141,3 +141,21 @@ def live_stack(tmp_path_factory: pytest.TempPathFactory):
     _app_code, storage_code = running.stop()
     if storage_code not in (0, None):
         print(f"storage server exited with {storage_code}:\n{running.storage.log_tail()}")
+
+
+def read_until(process: Any, marker: str, timeout: float = 60.0) -> str:
+    """The lines `process` prints up to the first one holding `marker` (e.g. drem up's "Press Ctrl-C" banner line).
+    If the output ends or `timeout` passes first, the process is killed and the test fails with what it printed."""
+    import time
+
+    lines: list[str] = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if marker in line:
+            return "".join(lines)
+    process.kill()
+    pytest.fail(f"never printed {marker!r}:\n" + "".join(lines) + (process.stdout.read() or ""))

@@ -21,7 +21,6 @@ from drem_cars.model_store import ModelStore
 from drem_cars.outbox import Outbox
 from drem_cars.parts.safety import Safety
 from drem_cars.sim_car import build_sim_car
-from drem_local import stack as local_stack
 from drem_local.api_client import ApiClient
 from tests.cars.onnx_models import CONTINUOUS_SPACE, mean_brightness_policy
 from tests.unit.models_helpers import UNREADABLE_IR_VERSION, onnx_archive, tar_gz

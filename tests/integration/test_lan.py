@@ -10,13 +10,13 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from drem_local.stack import free_port, read_stack_file
 from tests.integration.venue_network import can_create, venue_network
+from tests.stack_fixtures import read_until
 
 pytestmark = pytest.mark.integration
 
@@ -91,7 +91,7 @@ def test_drem_up_on_the_venue_network(venue, tmp_path):
                            "--storage-port", str(storage_port), "--state-dir", str(state_dir)],
                           cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        banner = _wait_ready(up)
+        banner = read_until(up, "Press Ctrl-C", timeout=90)
         lan_url = f"http://{venue.laptop_address}:{app_port}"
         assert f"Open the app:        {lan_url}" in banner
         password = re.search(r"Admin login:\s+admin / (\S+)", banner).group(1)
@@ -122,17 +122,3 @@ def test_drem_up_refuses_an_address_this_machine_does_not_have(tmp_path):
                             cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
     assert "203.0.113.77 is not an IPv4 address of this machine" in result.stderr
-
-
-def _wait_ready(process: subprocess.Popen, timeout: float = 90) -> str:
-    lines = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if line.startswith("Press Ctrl-C"):
-            return "".join(lines)
-    process.kill()
-    pytest.fail("drem up did not get ready:\n" + "".join(lines) + process.stdout.read())

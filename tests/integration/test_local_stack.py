@@ -14,6 +14,7 @@ import pytest
 
 from drem_local.commands.status import describe, gather
 from drem_local.stack import free_port, http_get, read_stack_file
+from tests.stack_fixtures import read_until
 
 pytestmark = pytest.mark.integration
 
@@ -55,26 +56,12 @@ def _start_up(state_dir, app_port, storage_port, env=None) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
 
 
-def _wait_ready(process: subprocess.Popen, timeout: float = 60) -> str:
-    lines = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if line.startswith("Press Ctrl-C"):
-            return "".join(lines)
-    process.kill()
-    pytest.fail("drem up did not get ready:\n" + "".join(lines) + process.stdout.read())
-
-
 def test_drem_up_stops_cleanly_on_ctrl_c_and_keeps_the_admin_on_restart(tmp_path):
     state_dir = tmp_path / "state"
     app_port, storage_port = free_port(), free_port()
 
     first = _start_up(state_dir, app_port, storage_port)
-    banner = _wait_ready(first)
+    banner = read_until(first, "Press Ctrl-C")
     assert f"http://127.0.0.1:{app_port}" in banner
     assert "Admin login:         admin / " in banner  # the generated password, shown once
     pids = read_stack_file(state_dir)["pids"]
@@ -83,7 +70,7 @@ def test_drem_up_stops_cleanly_on_ctrl_c_and_keeps_the_admin_on_restart(tmp_path
     assert first.returncode == 0 and "stopped cleanly" in rest, rest
 
     second = _start_up(state_dir, app_port, storage_port)
-    banner = _wait_ready(second)
+    banner = read_until(second, "Press Ctrl-C")
     assert "admin (password unchanged)" in banner
     assert read_stack_file(state_dir)["pids"]["storage"] != pids["storage"]
     second.send_signal(signal.SIGTERM)
@@ -118,27 +105,13 @@ def _drem_up(cwd, state_dir, app_port, storage_port, env) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
 
 
-def _read_until(process: subprocess.Popen, marker: str, timeout: float = 60) -> str:
-    lines = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if marker in line:
-            return "".join(lines)
-    process.kill()
-    pytest.fail(f"drem up never printed {marker!r}:\n" + "".join(lines))
-
-
 def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on(tmp_path):
     state_dir = tmp_path / "state"
     app_port, storage_port = free_port(), free_port()
     env = {**os.environ, "DREM_ADMIN_PASSWORD": "Admin-Pass-123!"}
     up = _drem_up(tmp_path, state_dir, app_port, storage_port, env)
     try:
-        banner = _read_until(up, "Press Ctrl-C")
+        banner = read_until(up, "Press Ctrl-C")
         # A fresh state dir: the admin was just created with the password from the environment.
         assert "admin (created now, with the password in DREM_ADMIN_PASSWORD)" in banner
         assert "password unchanged" not in banner
@@ -146,7 +119,7 @@ def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on
         for role in ("storage", "app"):
             before = read_stack_file(state_dir)["pids"][role]
             os.kill(before, signal.SIGKILL)
-            said = _read_until(up, "is running again")
+            said = read_until(up, "is running again")
             assert "was killed by SIGKILL; restarting it in" in said, said
             assert read_stack_file(state_dir)["pids"][role] != before
             assert up.poll() is None

@@ -110,7 +110,6 @@ def test_a_model_that_leaves_the_track_fails_with_its_completion(tmp_path: Path)
 
 
 def test_a_model_with_the_wrong_number_of_outputs_is_invalid_not_a_crash(tmp_path: Path) -> None:
-    import onnx
     from onnx import TensorProto, helper
 
     image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 120, 160, 1])
