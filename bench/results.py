@@ -91,7 +91,7 @@ def stats_without_storage(ids: list[str]) -> None:
     """The /stats work after the reads: aggregate 5,000 races, draw the charts and the map, render the page. The
     events and races are read once and kept (module global), so this times drem's own code only."""
     from chalicelib.domain.stats import StatsFilter, compute
-    from chalicelib.domain.stats_view import stats_page
+    from chalicelib.views.stats_view import stats_page
     from drem_web import render
 
     global _READ
@@ -122,9 +122,10 @@ def main() -> int:
         outputs = ensure_stack(clients_for(None, REGION), STAGE)
         os.environ.update(outputs.to_env())
         from app import app
-        from chalicelib.domain import pdf_fonts, world_map
-        from chalicelib.domain.render_cache import LIVE_FRAGMENTS, LIVE_RACES
-        from chalicelib.routes import races as race_routes
+        from chalicelib.formats import pdf_fonts
+        from chalicelib.views import world_map
+        from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
+        from chalicelib import services
         from chalicelib.settings import get_settings
         from chalicelib.storage import clients
 
@@ -133,8 +134,8 @@ def main() -> int:
         with Client(app, project_dir=str(ROOT / "bench")) as client:
             # --- 200-racer event ------------------------------------------------------------------------------
             [big] = seed(dynamodb, 1, RACERS, ["SE"])
-            race_routes.race_service().recompute(big, by="bench")
-            from chalicelib.domain.results_pdf import render_document
+            services.race_service().recompute(big, by="bench")
+            from chalicelib.formats.results_pdf import render_document
             from chalicelib.routes.results import load_results
 
             def pdf(file_name: str) -> bytes:
@@ -163,7 +164,7 @@ def main() -> int:
 
             # --- 50 events / 5,000 races ------------------------------------------------------------------------
             many = seed(dynamodb, EVENTS - 1, RACES_PER_EVENT, ["SE", "US", "JP", "DE", "BR", "AU", "GB", "IN"])
-            race_routes.race_service().recompute(many[0], by="bench")
+            services.race_service().recompute(many[0], by="bench")
 
             def stats_page() -> None:
                 reply = client.http.get("/stats", headers={"Accept": "text/html"})

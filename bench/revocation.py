@@ -60,12 +60,13 @@ def main() -> None:
 
 def measure(outputs, username: str, password: str) -> None:
     from chalicelib.auth.revocation import REVOKED
-    from chalicelib.auth.sessions import current_token, identity_provider
+    from chalicelib.auth.sessions import current_token
+    from chalicelib import services
     from chalicelib.auth.tokens import verify_token
     from chalicelib.settings import get_settings
 
     settings = get_settings()
-    token = identity_provider().sign_in(username, password).access_token
+    token = services.identity_provider().sign_in(username, password).access_token
     for _ in range(30):  # warm-up: clients, key, connection pool
         current_token(token, settings)
     verify = summary(timed(lambda: verify_token(token, settings)))

@@ -6,11 +6,13 @@ from chalice import Chalice
 
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
-from chalicelib.routes import (accounts, api_docs, assignments, commentator, console_events, console_fleets, console_models,
-                                console_racer, console_races, console_registration, console_timekeeper, console_users,
-                                devices, event_landing, events, fleets, health, labels, leaderboards, league, login,
-                                models, pages, ping, profiles, public_pages, races, registry, results, stats, timing,
-                                users)
+from chalicelib.routes import (accounts, api_docs, assignments, commentator, devices, event_landing, events, fleets, health,
+                               labels, leaderboards, league, login, pages, ping, profiles, public_pages, races,
+                               racer_models, registry, results, stats, timing, users)
+from chalicelib.routes.console import events as console_events, fleets as console_fleets, models as console_models
+from chalicelib.routes.console import racer as console_racer, races as console_races
+from chalicelib.routes.console import registration as console_registration, timekeeper as console_timekeeper
+from chalicelib.routes.console import users as console_users
 from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION
 from drem_web import favicon
@@ -22,7 +24,7 @@ app.register_middleware(security_headers_middleware, "http")
 app.api.binary_types.append("application/pdf")
 app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
 
-for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, models, assignments,
+for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models, assignments,
                          races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,
                          console_timekeeper, console_races, console_racer, console_registration, console_users,
                          console_models, league, registry, results, labels, stats, event_landing, ping):
@@ -34,4 +36,4 @@ set_device_credential_verifier(devices.verify_device_credential)
 @app.lambda_function(name=UPLOAD_COMPLETE_FUNCTION)
 def upload_complete(event, context):
     """On AWS: the models bucket's EventBridge "Object Created" rule for uploads/ lands here."""
-    return models.handle_upload_complete_event(event)
+    return racer_models.handle_upload_complete_event(event)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from chalicelib.domain.model_archive import ArchiveStatus, inspect_archive
+from chalicelib.formats.model_archive import ArchiveStatus, inspect_archive
 from drem_local.cli import main
 
 pytestmark = pytest.mark.sim

@@ -13,7 +13,7 @@ import onnxruntime
 import pytest
 import torch
 
-from chalicelib.domain.model_archive import ArchiveStatus, inspect_archive
+from chalicelib.formats.model_archive import ArchiveStatus, inspect_archive
 from drem_sim.demonstrator import Demonstrator
 from drem_sim.env import RaceEnv
 from drem_sim.learn.dataset import load_snapshot
@@ -114,7 +114,7 @@ def test_the_car_agent_reads_the_archive_like_the_simulator(trained, run_dir: Pa
 def test_the_archive_also_carries_a_pb_a_stock_car_accepts(trained, run_dir: Path, tmp_path: Path) -> None:
     import openvino as ov
 
-    from chalicelib.domain.model_metadata import check_for_stock_car, parse_model_metadata_json
+    from chalicelib.formats.model_metadata import check_for_stock_car, parse_model_metadata_json
     from drem_sim.console.convert import convert
     from drem_sim.console.tf_export import INPUT_NODE, OUTPUT_NODE
 

@@ -41,8 +41,8 @@ def route_modules() -> list[Any]:
     """Every module of chalicelib.routes that defines a Blueprint `bp`."""
     import chalicelib.routes as package
 
-    modules = [importlib.import_module(f"{package.__name__}.{info.name}")
-               for info in pkgutil.iter_modules(package.__path__)]
+    modules = [importlib.import_module(info.name)
+               for info in pkgutil.walk_packages(package.__path__, prefix=f"{package.__name__}.")]
     return [module for module in modules if isinstance(getattr(module, "bp", None), Blueprint)]
 
 

@@ -77,7 +77,7 @@ def traversal_archive() -> bytes:
 
 def ensure_model_routes(app: Any) -> Any:
     """Register this area's blueprints on the app if app.py does not (yet): the lead wires them in app.py."""
-    from chalicelib.routes import assignments, models
+    from chalicelib.routes import assignments, racer_models as models
 
     if "/api/models" not in app.routes:
         app.register_blueprint(models.bp)
@@ -147,10 +147,10 @@ def activate_device(hostname: str, fleet_id: str, kind: str = "car") -> Any:
     """A car or timer brought in through the devices area's own activation service; returns its IssuedCredential."""
     from chalicelib.auth.principals import User
     from chalicelib.domain.activation import ActivationCodeRequest, ActivationExchange
-    from chalicelib.routes.devices import activation_service
+    from chalicelib import services
 
     operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))
-    service = activation_service()
+    service = services.activation_service()
     issued = service.issue_code(operator, ActivationCodeRequest(fleet_id=fleet_id, hostname=hostname,
                                                                 device_kind=kind))
     return service.activate(ActivationExchange(code=issued.code, hostname=hostname, device_kind=kind))

@@ -16,8 +16,9 @@ from tests.unit.race_helpers import Desk, _app_with_race_routes
 
 
 def app_with_console() -> Any:
-    from chalicelib.routes import (assignments, console_events, console_fleets, console_races, console_timekeeper,
-                                   models, profiles, users)
+    from chalicelib.routes import assignments, profiles, racer_models as models, users
+    from chalicelib.routes.console import events as console_events, fleets as console_fleets
+    from chalicelib.routes.console import races as console_races, timekeeper as console_timekeeper
 
     app = _app_with_race_routes()
     needed = ((users, "/api/signup"), (profiles, "/api/me/profile"), (models, "/api/models"),

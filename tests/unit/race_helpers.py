@@ -67,11 +67,10 @@ class FakeClock:
 
 @pytest.fixture
 def clock(monkeypatch: pytest.MonkeyPatch) -> FakeClock:
-    from chalicelib.routes import races, timing
+    from chalicelib import services
 
     fake = FakeClock()
-    monkeypatch.setattr(races, "now_ms", fake)
-    monkeypatch.setattr(timing, "now_ms", fake)
+    monkeypatch.setattr(services, "now_ms", fake)
     return fake
 
 

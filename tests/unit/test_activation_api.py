@@ -59,11 +59,11 @@ def test_code_bound_to_kind_and_hostname_and_not_spent_by_a_mismatch(api: Api) -
 
 
 def test_expired_code_is_refused(api: Api, monkeypatch: pytest.MonkeyPatch) -> None:
-    from chalicelib.routes import devices
+    from chalicelib import services
 
     code = api.activation_code(api.fleet(), "car-01", ttl_minutes=5)
-    issued_at = devices.now_ms()
-    monkeypatch.setattr(devices, "now_ms", lambda: issued_at + 5 * 60_000 + 1_000)
+    issued_at = services.now_ms()
+    monkeypatch.setattr(services, "now_ms", lambda: issued_at + 5 * 60_000 + 1_000)
     expired = activate_with(api, code)
     assert expired.status_code == 400
     assert "expired" in expired.data["error"]["message"]
@@ -91,20 +91,20 @@ def test_redeeming_is_conditional_so_a_race_for_one_code_registers_one_device(ap
     """Two devices that both read the code before either redeemed it: only the first transaction goes through."""
     from chalicelib.domain.activation import ActivationExchange, normalise_code, sha256_hex
     from chalicelib.domain.devices import DeviceRecord
-    from chalicelib.routes import devices
+    from chalicelib import services
 
     code = api.activation_code(api.fleet(), "car-01")
-    store, _ = devices._stores()
+    store, _ = (services.device_store(), services.fleet_store())
     code_hash = sha256_hex(normalise_code(code))
     assert store.get_activation(code_hash) is not None
     exchange = ActivationExchange(code=code, hostname="car-01", device_kind="car")
 
     def record(device_id: str) -> DeviceRecord:
         return DeviceRecord(device_id=device_id, kind="car", hostname="car-01", secret_hash="0" * 64,
-                            registered_at_ms=devices.now_ms())
+                            registered_at_ms=services.now_ms())
 
-    assert store.redeem(code_hash, exchange, devices.now_ms(), record("car-first")) is True
-    assert store.redeem(code_hash, exchange, devices.now_ms(), record("car-second")) is False
+    assert store.redeem(code_hash, exchange, services.now_ms(), record("car-first")) is True
+    assert store.redeem(code_hash, exchange, services.now_ms(), record("car-second")) is False
     assert store.get_device("car-first") is not None
     assert store.get_device("car-second") is None
 

@@ -187,10 +187,10 @@ def test_clearing_a_car_and_deleting_a_model_withdraw_it(racer: ModelsApi, opera
 def create_event(fleet_id: str) -> str:
     from chalicelib.auth.principals import User
     from chalicelib.domain.events import EventInput
-    from chalicelib.routes.events import event_service
+    from chalicelib import services
 
     operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))
-    event = event_service().create_event(operator, EventInput.model_validate_json(json.dumps({
+    event = services.event_service().create_event(operator, EventInput.model_validate_json(json.dumps({
         "name": "Summit", "event_type": "AWS_SUMMIT", "date": datetime.date.today().isoformat(),
         "country_code": "GB", "tracks": [{"fleet_id": fleet_id}]})))
     return event.event_id

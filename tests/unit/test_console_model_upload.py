@@ -10,8 +10,8 @@ import pytest
 
 from chalicelib.auth.principals import User
 from chalicelib.domain.model_conversion import ConsoleConverter, ConversionLimits
-from chalicelib.domain.models import ModelStatus, UploadRequest
-from chalicelib.storage.models import build_model_service
+from chalicelib.domain.racer_models import ModelStatus, UploadRequest
+from chalicelib import services
 from tests import console_fixture
 
 pytestmark = pytest.mark.unit
@@ -20,7 +20,7 @@ ALICE = User(sub="sub-alice", username="alice", groups=frozenset({"racer"}))
 
 
 def _upload(aws_clients: Any, stack: Any, data: bytes, name: str, **options: Any):
-    service = build_model_service(**options)
+    service = services.model_service(**options)
     ticket = service.request_upload(ALICE, UploadRequest(filename=f"{name}.tar.gz"))
     aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=data)
     return service, service.complete(ALICE, ticket.model.model_id)

@@ -35,12 +35,12 @@ def test_heartbeat_puts_the_car_on_the_online_board_with_its_report(api: Api) ->
 
 
 def test_a_device_unseen_for_more_than_15_seconds_is_offline(api: Api, monkeypatch: pytest.MonkeyPatch) -> None:
-    from chalicelib.routes import devices
+    from chalicelib import services
 
     car = api.activate(api.fleet(), "car-01")
     api.post("/api/devices/self/heartbeat", {"agent_version": "1.4.0"}, device=car["credential"])
-    seen_at = devices.now_ms()
-    monkeypatch.setattr(devices, "now_ms", lambda: seen_at + 16_000)
+    seen_at = services.now_ms()
+    monkeypatch.setattr(services, "now_ms", lambda: seen_at + 16_000)
     line = api.get(f"/api/devices/{car['device_id']}").data
     assert line["online"] is False
     assert line["telemetry"]["agent_version"] == "1.4.0"

@@ -20,7 +20,7 @@ import onnx
 import pytest
 from onnx import TensorProto, helper
 
-from chalicelib.domain.model_archive import (
+from chalicelib.formats.model_archive import (
     ArchiveLimits,
     ArchiveRejected,
     ArchiveStatus,

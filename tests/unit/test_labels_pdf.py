@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from chalicelib.domain.labels_pdf import CarLabel, RacerCard, car_labels_pdf, racer_card_pdf
+from chalicelib.formats.labels_pdf import CarLabel, RacerCard, car_labels_pdf, racer_card_pdf
 from tests.unit.operator_console_helpers import console  # noqa: F401 - fixture
 from tests.unit.pdf_helpers import pdf_pages, pdf_text
 from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture

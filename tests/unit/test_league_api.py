@@ -12,8 +12,8 @@ import pytest
 from chalice import Chalice
 
 from chalicelib.domain.league import BOARD_COLUMNS
-from chalicelib.domain.league_assembler import assemble
-from chalicelib.domain.league_export import read_export
+from chalicelib.formats.league_assembler import assemble
+from chalicelib.formats.league_export import read_export
 from drem_local.commands.league import rows_of, table, to_csv
 from tests.unit.conftest import bearer
 from tests.unit.league_helpers import console_old_export, drem_sim_export, drfc_export

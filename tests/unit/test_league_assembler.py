@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
-from chalicelib.domain.league_assembler import ExportProblem, assemble
-from chalicelib.domain.league_export import ExportLimits, read_export
+from chalicelib.formats.league_assembler import ExportProblem, assemble
+from chalicelib.formats.league_export import ExportLimits, read_export
 from tests.unit.league_helpers import (HYPERPARAMETERS, console_log, console_new_export, console_old_export,
                                        droa_export, drem_sim_export, drfc_export, raw_tar_gz, tar_gz_of,
                                        training_metrics)

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.domain.model_metadata import (
+from chalicelib.formats.model_metadata import (
     ActionSpaceType,
     ModelMetadataError,
     TrainingAlgorithm,

@@ -8,10 +8,10 @@ from typing import Any
 import pytest
 
 from chalicelib.auth.principals import User
-from chalicelib.domain.model_archive import ArchiveLimits
-from chalicelib.domain.models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
-from chalicelib.routes.models import handle_upload_complete_event
-from chalicelib.storage.models import build_model_service
+from chalicelib.formats.model_archive import ArchiveLimits
+from chalicelib.domain.racer_models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
+from chalicelib.routes.racer_models import handle_upload_complete_event
+from chalicelib import services
 from tests.unit.models_helpers import onnx_archive, traversal_archive
 
 pytestmark = pytest.mark.unit
@@ -25,7 +25,7 @@ def s3_event(bucket: str, key: str) -> dict[str, Any]:
 
 
 def test_eventbridge_object_created_validates_the_upload(stack: Any, aws_clients: Any) -> None:
-    service = build_model_service()
+    service = services.model_service()
     ticket = service.request_upload(ALICE, UploadRequest(filename="evented.tar.gz"))
     key, bucket = ticket.model.upload_key, stack.buckets["models"]
     aws_clients.s3.put_object(Bucket=bucket, Key=key, Body=onnx_archive())
@@ -47,7 +47,7 @@ def test_events_for_other_buckets_or_unknown_keys_are_ignored(stack: Any, aws_cl
 
 def test_the_size_limit_is_enforced_by_us_not_by_the_presigned_policy(stack: Any, aws_clients: Any) -> None:
     limits = ArchiveLimits(max_compressed_bytes=4096)
-    service = build_model_service(limits=limits)
+    service = services.model_service(limits=limits)
     ticket = service.request_upload(ALICE, UploadRequest(filename="huge.tar.gz"))
     assert ticket.max_bytes == 4096
     # moto ignores the policy's content-length-range, exactly like a misconfigured bucket would
@@ -78,7 +78,7 @@ def test_seed_sample_models_is_idempotent_and_validates_like_any_upload(stack: A
     good, evil = tmp_path / "Centerline-AtoZ.tar.gz", tmp_path / "evil.tar.gz"
     good.write_bytes(onnx_archive(0.5))
     evil.write_bytes(traversal_archive())
-    service = build_model_service()
+    service = services.model_service()
 
     first = seed_sample_models(service, [good, evil])
     again = seed_sample_models(service, [good, evil])
@@ -114,10 +114,10 @@ def _objects(aws_clients: Any, bucket: str) -> list[str]:
 
 def test_an_upload_never_completed_is_purged_with_its_object_once_its_link_is_long_expired(stack: Any,
                                                                                            aws_clients: Any) -> None:
-    from chalicelib.domain.models import STALE_UPLOAD_AFTER_S
+    from chalicelib.domain.racer_models import STALE_UPLOAD_AFTER_S
 
     clock = SteppedClock()
-    service = build_model_service(clock=clock)
+    service = services.model_service(clock=clock)
     bucket = stack.buckets["models"]
     abandoned = service.request_upload(ALICE, UploadRequest(filename="abandoned.tar.gz"))
     aws_clients.s3.put_object(Bucket=bucket, Key=abandoned.model.upload_key, Body=os.urandom(4096))  # never completed
@@ -137,10 +137,10 @@ def test_an_upload_never_completed_is_purged_with_its_object_once_its_link_is_lo
 
 def test_a_racer_cannot_hold_more_than_a_few_open_upload_tickets(stack: Any, aws_clients: Any) -> None:
     from chalicelib.domain.errors import RateLimited
-    from chalicelib.domain.models import MAX_PENDING_UPLOADS, STALE_UPLOAD_AFTER_S
+    from chalicelib.domain.racer_models import MAX_PENDING_UPLOADS, STALE_UPLOAD_AFTER_S
 
     clock = SteppedClock()
-    service = build_model_service(clock=clock)
+    service = services.model_service(clock=clock)
     tickets = [service.request_upload(ALICE, UploadRequest(filename=f"m{i}.tar.gz"))
                for i in range(MAX_PENDING_UPLOADS)]
 
@@ -157,7 +157,7 @@ def test_a_racer_cannot_hold_more_than_a_few_open_upload_tickets(stack: Any, aws
 
 
 def test_deleting_a_pending_upload_removes_what_was_uploaded(stack: Any, aws_clients: Any) -> None:
-    service = build_model_service()
+    service = services.model_service()
     ticket = service.request_upload(ALICE, UploadRequest(filename="changed-my-mind.tar.gz"))
     aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=onnx_archive())
 

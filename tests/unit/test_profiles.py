@@ -5,7 +5,7 @@ from xml.etree import ElementTree
 
 import pytest
 
-from chalicelib.domain.avatars import identicon_cells, identicon_svg
+from chalicelib.views.avatars import identicon_cells, identicon_svg
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE
 from tests.unit.users_helpers import api, call, error_message  # noqa: F401
 

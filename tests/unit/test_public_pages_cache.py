@@ -20,7 +20,7 @@ pytestmark = pytest.mark.unit
 
 
 def test_concurrent_askers_of_one_key_share_one_build() -> None:
-    from chalicelib.domain.render_cache import VersionedCache
+    from chalicelib.views.render_cache import VersionedCache
 
     cache: VersionedCache[str] = VersionedCache(8)
     builds: list[int] = []
@@ -46,7 +46,7 @@ def test_concurrent_askers_of_one_key_share_one_build() -> None:
 
 
 def test_cache_is_bounded_and_evicts_the_least_recently_used() -> None:
-    from chalicelib.domain.render_cache import VersionedCache
+    from chalicelib.views.render_cache import VersionedCache
 
     cache: VersionedCache[str] = VersionedCache(2)
     built: list[str] = []
@@ -60,7 +60,7 @@ def test_cache_is_bounded_and_evicts_the_least_recently_used() -> None:
 
 
 def test_a_failed_build_is_not_cached() -> None:
-    from chalicelib.domain.render_cache import VersionedCache
+    from chalicelib.views.render_cache import VersionedCache
 
     cache: VersionedCache[str] = VersionedCache(4)
 
@@ -109,11 +109,11 @@ def test_spectators_polling_after_a_lap_share_one_render_until_the_token_changes
 
 def test_overlay_reads_its_race_once_per_overlay_version(desk: Desk, clock: FakeClock,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    from chalicelib.routes import races as race_routes
+    from chalicelib import services
 
     eid, rid = racing(desk, clock, "vera", laps=(10_000,))
-    reads = Counting(race_routes.race_store)
-    monkeypatch.setattr(race_routes, "race_store", reads)  # counts stores built, one per race read
+    reads = Counting(services.race_store)
+    monkeypatch.setattr(services, "race_store", reads)  # counts stores built, one per race read
 
     pages = [html_get(desk, f"/overlay/{eid}").body.decode() for _ in range(3)]
     assert all('data-testid="previous-lap">0:10.000<' in page for page in pages) and reads.calls == 1
@@ -133,7 +133,7 @@ def _clock(body: str, kind: str) -> tuple[int, int]:
 
 def test_a_fragment_served_later_than_it_was_built_still_gives_the_right_race_clock(
         desk: Desk, clock: FakeClock) -> None:
-    from chalicelib.domain.render_cache import LIVE_FRAGMENTS
+    from chalicelib.views.render_cache import LIVE_FRAGMENTS
 
     eid, rid = racing(desk, clock, "vera", laps=(10_000,))
     poll = live_region_url(html_get(desk, f"/overlay/{eid}").body.decode(), "overlay-live")

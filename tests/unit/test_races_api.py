@@ -266,12 +266,12 @@ def test_csv_exports_have_drem_columns_and_file_names(desk: Desk, clock: FakeClo
 def test_race_writes_are_conditional_on_the_version(desk: Desk, clock: FakeClock) -> None:
     """Two writers that read the same version: the second one is refused instead of overwriting the first."""
     from chalicelib.domain.races import StaleRace
-    from chalicelib.routes.races import race_store
+    from chalicelib import services
 
     desk.users.create("tom", ("racer",))
     eid = desk.event()["event_id"]
     rid = desk.ok(desk.create_race(eid, "tom"), 201)["race_id"]
-    store = race_store()
+    store = services.race_store()
     record = store.get(eid, rid)
     assert record is not None
     first = record.model_copy(update={"race": record.race.model_copy(update={"car": "car-1", "version": 1})})

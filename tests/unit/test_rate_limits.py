@@ -32,7 +32,7 @@ def source_ip(monkeypatch):
 
     monkeypatch.setattr(rate_limits, "client_address", address)
     for module in ("chalicelib.routes.login", "chalicelib.routes.users", "chalicelib.routes.devices",
-                   "chalicelib.routes.console_racer"):
+                   "chalicelib.routes.console.racer"):
         monkeypatch.setattr(f"{module}.client_address", address)
 
 

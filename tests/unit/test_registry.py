@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from chalicelib.domain import svg_plots
+from chalicelib.views import svg_plots
 from tests.unit.models_helpers import DREM_METADATA, ModelsApi, bearer, ensure_model_routes, onnx_policy, tar_gz
 
 pytestmark = pytest.mark.unit

@@ -84,12 +84,12 @@ def test_a_deleted_users_token_is_refused(api, client, users):
 def test_another_process_sees_the_revocation_within_the_cache_ttl(client, users, monkeypatch):
     # Another app process (another Lambda container) only learns of the mark when its cached copy expires.
     from chalicelib.auth.revocation import REVOKED, RevocationList
-    from chalicelib.storage.sessions import session_store
+    from chalicelib import services
 
     monkeypatch.setattr(REVOKED, "_ttl_s", 0.3)
     token = users.access_token("sam", ("racer",))
     sub = client.http.get("/api/me", headers=bearer(token)).json_body["sub"]  # caches "no mark" for sam
-    RevocationList().ended(session_store(), sub)  # written by the other process
+    RevocationList().ended(services.session_store(), sub)  # written by the other process
 
     deadline, status = time.monotonic() + 5, 200
     while status == 200 and time.monotonic() < deadline:

@@ -72,7 +72,7 @@ def test_local_sign_up_is_ready_at_once_as_racer_and_no_code_confirms_anything(a
 
 
 def test_on_aws_sign_up_waits_for_the_emailed_code_and_a_guess_does_not_confirm(aws_mode, api, users):
-    from chalicelib.auth.sessions import identity_provider
+    from chalicelib import services
 
     status, body = call(api, "POST", "/api/signup", sign_up_body("new.racer"))
     assert status == 201 and body["confirmed"] is False and "confirmation code" in body["message"]
@@ -80,7 +80,7 @@ def test_on_aws_sign_up_waits_for_the_emailed_code_and_a_guess_does_not_confirm(
     status, body = call(api, "POST", "/api/signup/confirm", {"username": "new.racer", "code": "123456"})
     assert status == 400 and "code is wrong" in error_message(body)
     with pytest.raises(AccountNotReady, match="not confirmed"):
-        identity_provider().sign_in("new.racer", PASSWORD)
+        services.identity_provider().sign_in("new.racer", PASSWORD)
 
 
 def test_taken_name_is_a_conflict(api):

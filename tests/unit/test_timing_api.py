@@ -130,7 +130,7 @@ def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
 def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
         desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
     from chalicelib.domain.races import RaceService
-    from chalicelib.routes.races import race_service
+    from chalicelib import services
 
     eid, rid, timer = timed_track
     desk.ok(desk.strip(timer, eid, T0, "s"))
@@ -138,9 +138,9 @@ def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
         crash.setattr(RaceService, "publish", lambda *args: None)
         desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
     assert _board_laps(desk, eid) == 0
-    assert race_service().complete_pending_publishes() == 1  # what the app server's sweeper runs
+    assert services.race_service().complete_pending_publishes() == 1  # what the app server's sweeper runs
     assert _board_laps(desk, eid) == 1
-    assert race_service().complete_pending_publishes() == 0  # finished intents are gone
+    assert services.race_service().complete_pending_publishes() == 0  # finished intents are gone
     # A left-over row is also brought up to date by the racer's next lap (its rebuild reads every race).
     with monkeypatch.context() as crash:
         crash.setattr(RaceService, "publish", lambda *args: None)

@@ -84,16 +84,16 @@ def test_a_racer_who_has_signed_in_is_never_re_registered(api, users):
 
 
 def test_start_up_repair_finishes_interrupted_registrations(api, users, aws_clients, stack):
-    from chalicelib.routes.users import user_service
+    from chalicelib import services
 
     users.create("complete", ("racer",))
     _crash_after_the_account_step(aws_clients, stack, "cutoff")
 
-    assert user_service().finish_interrupted_registrations() == ["cutoff"]
+    assert services.user_service().finish_interrupted_registrations() == ["cutoff"]
     groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="cutoff")
     assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
     assert call(api, "GET", "/api/profiles/cutoff")[0] == 200
-    assert user_service().finish_interrupted_registrations() == []
+    assert services.user_service().finish_interrupted_registrations() == []
 
 
 def test_staff_username_rule_and_country_are_checked(api, users):
@@ -157,16 +157,16 @@ def test_role_change_rules(api, users):
 
 
 def test_disabled_users_cannot_sign_in_until_enabled(api, users):
-    from chalicelib.auth.sessions import identity_provider
+    from chalicelib import services
 
     admin = users.access_token("boss", ("admin",))
     users.create("troublemaker", ("racer",))
     status, body = call(api, "POST", "/api/users/troublemaker/disable", token=admin)
     assert status == 200 and body["enabled"] is False
     with pytest.raises(InvalidCredentials):
-        identity_provider().sign_in("troublemaker", PASSWORD)
+        services.identity_provider().sign_in("troublemaker", PASSWORD)
     assert call(api, "POST", "/api/users/troublemaker/enable", token=admin)[0] == 200
-    assert identity_provider().sign_in("troublemaker", PASSWORD).access_token
+    assert services.identity_provider().sign_in("troublemaker", PASSWORD).access_token
     assert call(api, "POST", "/api/users/boss/disable", token=admin)[0] == 403
 
 
@@ -180,7 +180,7 @@ def test_self_delete_needs_the_username_or_password(api, users):
 
 
 def test_self_delete_removes_the_account_and_anonymises_the_profile(api, users, aws_clients, stack):
-    from chalicelib.routes.profiles import profile_service
+    from chalicelib import services
 
     assert call(api, "POST", "/api/signup", sign_up_body("leaving"))[1]["confirmed"] is True  # local: at once
     token = users.sign_in("leaving")["AccessToken"]
@@ -197,18 +197,18 @@ def test_self_delete_removes_the_account_and_anonymises_the_profile(api, users, 
     # The access token is revoked with the account (chalicelib.auth.revocation): it cannot resurrect the profile.
     assert call(api, "GET", "/api/me/profile", token=token)[0] == 401
 
-    shown = profile_service().public_by_sub(sub)
+    shown = services.profile_service().public_by_sub(sub)
     assert shown.deleted and shown.username == f"Deleted racer {sub.replace('-', '')[:4]}"
     assert (shown.country_code, shown.highlight_colour, shown.avatar_url) == (None, None, None)
 
 
 def test_self_delete_removes_the_racers_models(api, users, aws_clients, stack):
-    from chalicelib.domain.models import ModelRecord, ModelStatus, model_key
-    from chalicelib.storage.models import build_model_service
+    from chalicelib.domain.racer_models import ModelRecord, ModelStatus, model_key
+    from chalicelib import services
 
     token = users.access_token("modeller", ("racer",))
     sub = call(api, "GET", "/api/me", token=token)[1]["sub"]
-    service = build_model_service()
+    service = services.model_service()
     key = model_key(sub, "m1")
     aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=key, Body=b"archive")
     service.store.create(ModelRecord(model_id="m1", owner_sub=sub, owner_username="modeller", name="fast",
@@ -226,8 +226,8 @@ def test_self_delete_removes_the_racers_models(api, users, aws_clients, stack):
 
 def test_self_delete_also_erases_models_the_racer_had_already_deleted(api, users, aws_clients, stack, client,
                                                                       chalice_app):
-    from chalicelib.domain.models import ModelStatus
-    from chalicelib.storage.models import build_model_service
+    from chalicelib.domain.racer_models import ModelStatus
+    from chalicelib import services
     from tests.unit.models_helpers import ModelsApi, bearer as json_bearer, ensure_model_routes, onnx_archive
 
     ensure_model_routes(chalice_app)
@@ -244,7 +244,7 @@ def test_self_delete_also_erases_models_the_racer_had_already_deleted(api, users
 
     assert status == 200 and body["items_erased"] == 2, body
     assert aws_clients.s3.list_objects_v2(Bucket=bucket).get("Contents", []) == []
-    store = build_model_service().store
+    store = services.model_service().store
     for model in (kept, binned):
         record = store.get(sub, model["model_id"])
         assert record.status is ModelStatus.DELETED and record.owner_username.startswith("Deleted racer ")

@@ -8,11 +8,9 @@ from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_sessio
 from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.tokens import VerifiedToken, verify_token
-from chalicelib.domain.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
+from chalicelib.domain.errors import NotAuthenticated, TokenExpired
 from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.cognito import CognitoIdentityProvider
-from chalicelib.storage.sessions import session_store
+from chalicelib import services
 
 
 @dataclass
@@ -21,13 +19,6 @@ class ResolvedCaller:
     # "header" (Bearer/Device: exempt from CSRF), "cookie" or "none"
     via: str
     set_cookies: list[str] = field(default_factory=list)
-
-
-def identity_provider(settings: Settings | None = None) -> CognitoIdentityProvider:
-    settings = settings or get_settings()
-    if not settings.user_pool_id or not settings.user_pool_client_id:
-        raise ServiceUnavailable("Sign-in is not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
-    return CognitoIdentityProvider(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
 
 
 def user_from(token: VerifiedToken) -> User:
@@ -42,7 +33,7 @@ def current_token(token: str, settings: Settings) -> VerifiedToken:
     """A verified access token that has not been revoked since it was issued (chalicelib.auth.revocation)."""
     verified = verify_token(token, settings)
     try:
-        REVOKED.require_current(session_store(), verified.sub, verified.claims)
+        REVOKED.require_current(services.session_store(), verified.sub, verified.claims)
     except NotAuthenticated as exc:
         raise TokenRevoked(exc.message) from None
     return verified
@@ -75,7 +66,7 @@ def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> Res
     if not refresh:
         return _signed_out(settings)
     try:
-        tokens = identity_provider(settings).refresh(refresh)
+        tokens = services.identity_provider(settings).refresh(refresh)
         user = user_from(current_token(tokens.access_token, settings))
     except NotAuthenticated:
         return _signed_out(settings)

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from chalicelib.auth.principals import Device, Principal
 from chalicelib.domain.errors import Conflict, Forbidden, NotFound
-from chalicelib.domain.models import DOWNLOAD_EXPIRES_S, ModelRecord, ModelService, ModelStatus, utc_now
+from chalicelib.domain.racer_models import DOWNLOAD_EXPIRES_S, ModelRecord, ModelService, ModelStatus, utc_now
 
 MAX_MODELS_PER_CAR = 10
 

@@ -44,7 +44,7 @@ class EvaluationTrial(BaseModel):
 
 
 class SubmissionInput(BaseModel):
-    """What `drem league push` sends (built by chalicelib.domain.league_assembler)."""
+    """What `drem league push` sends (built by chalicelib.formats.league_assembler)."""
     model_config = ConfigDict(extra="forbid")
 
     racer: str = Field(pattern=NAME_PATTERN)

@@ -11,9 +11,10 @@ from typing import Literal, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Role, User
-from chalicelib.domain.avatars import identicon_svg
+from chalicelib.views.avatars import identicon_svg
 from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.ownership import require_owner_or_role
+from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.
 HIGHLIGHT_PALETTE: tuple[str, ...] = ("#0000FF", "#FF0000", "#FF8200", "#800080",
@@ -165,3 +166,17 @@ class ProfileService:
 
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+class ProfilesForBoards:
+    """Board names, flags and colours from racer profiles; a deleted racer comes back anonymised."""
+
+    def __init__(self, profiles: ProfileService) -> None:
+        self._profiles = profiles
+
+    def racer_profile(self, sub: str, fallback_username: str) -> RacerProfile:
+        public = self._profiles.public_by_sub(sub)
+        if public is None:
+            return RacerProfile(username=fallback_username)
+        return RacerProfile(username=public.username, country_code=public.country_code,
+                            highlight_colour=public.highlight_colour)

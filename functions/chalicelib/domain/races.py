@@ -31,7 +31,7 @@ from chalicelib.domain.errors import Conflict, DremError, Forbidden, InvalidInpu
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, LeaderboardPublisher
 from chalicelib.domain.ownership import require_owner_or_role
-from chalicelib.domain.race_export import CsvFile, ExportKind, export_csv
+from chalicelib.formats.race_export import CsvFile, ExportKind, export_csv
 from drem_leaderboard import race_machine
 from drem_leaderboard.commands import RaceCommand, SetLapValidity
 from drem_leaderboard.errors import LapNotFoundError, RaceRuleError

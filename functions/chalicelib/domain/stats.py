@@ -14,7 +14,7 @@ from datetime import date
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.domain.events import Event, EventType, TrackDirection
-from chalicelib.domain.public_views import lap_time
+from chalicelib.views.public_views import lap_time
 from drem_leaderboard.models import Race, RaceStatus
 
 MIN_LAP_MS = 5_000

@@ -193,7 +193,7 @@ class ProfileKeeper(Protocol):
 
 
 class SessionEnder(Protocol):
-    """Makes already issued tokens stop working (satisfied by chalicelib.routes.users.RevokingSessions)."""
+    """Makes already issued tokens stop working (satisfied by chalicelib.services.RevokingSessions)."""
     def ended(self, sub: str) -> None: ...
     def reopened(self, sub: str) -> None: ...
     def roles_changed(self, sub: str, groups: frozenset[str]) -> None: ...
@@ -216,7 +216,7 @@ class OwnedDataEraser(Protocol):
 
 
 class ModelsEraser:
-    """Satisfies OwnedDataEraser over `chalicelib.domain.models.ModelService`: every model the user owns is deleted
+    """Satisfies OwnedDataEraser over `chalicelib.domain.racer_models.ModelService`: every model the user owns is deleted
     (its archive removed, the record kept as DELETED under an anonymised owner name, so race history stays whole),
     including models the racer had already soft-deleted (those keep their archive and name until now).
     Best moved into the models service as `erase_owned_by` — it reaches into the service's store and files."""
@@ -225,7 +225,7 @@ class ModelsEraser:
         self._service = service
 
     def erase_owned_by(self, sub: str) -> int:
-        from chalicelib.domain.models import ModelChanged, ModelStatus
+        from chalicelib.domain.racer_models import ModelChanged, ModelStatus
         from chalicelib.domain.profiles import anonymised_name
 
         store, files = self._service.store, self._service.files  # type: ignore[attr-defined]

@@ -5,7 +5,7 @@ from chalice import Blueprint
 
 from chalicelib.auth.access import ADMIN, SIGNED_IN, route
 from chalicelib.auth.principals import User
-from chalicelib.auth.sessions import identity_provider
+from chalicelib import services
 
 bp = Blueprint(__name__)
 
@@ -18,4 +18,4 @@ def whoami(principal: User) -> dict:
 
 @route(bp, "/api/users/{username}/groups", allow={ADMIN})
 def user_groups(principal: User, username: str) -> dict:
-    return {"username": username, "groups": identity_provider().groups_of(username)}
+    return {"username": username, "groups": services.identity_provider().groups_of(username)}

@@ -10,33 +10,33 @@ from chalice import Blueprint
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, STAFF, route
 from chalicelib.auth.principals import Device, User
 from chalicelib.domain.assignments import AssignInput, StatusReport
-from chalicelib.storage.assignments import build_assignment_service
+from chalicelib import services
 
 bp = Blueprint(__name__)
 
 
 @route(bp, "/api/cars/{device_id}/models", methods=["PUT"], allow={ADMIN, OPERATOR}, body=AssignInput)
 def assign_models(principal: User, device_id: str, body: AssignInput) -> dict:
-    return {"assignment": build_assignment_service().assign(principal, device_id, body.model_ids).public()}
+    return {"assignment": services.assignment_service().assign(principal, device_id, body.model_ids).public()}
 
 
 @route(bp, "/api/cars/{device_id}/models", allow=STAFF)
 def car_models(principal: User, device_id: str) -> dict:
-    return {"assignment": build_assignment_service().for_staff(device_id).public()}
+    return {"assignment": services.assignment_service().for_staff(device_id).public()}
 
 
 @route(bp, "/api/devices/self/assignment", allow={CAR})
 def own_assignment(principal: Device) -> dict:
-    return build_assignment_service().for_car(principal)
+    return services.assignment_service().for_car(principal)
 
 
 @route(bp, "/api/devices/self/assignment/status", methods=["POST"], allow={CAR}, body=StatusReport)
 def report_model_status(principal: Device, body: StatusReport) -> dict:
-    progress = build_assignment_service().report(principal, body)
+    progress = services.assignment_service().report(principal, body)
     return {"progress": progress.model_dump(mode="json")}
 
 
 @route(bp, "/api/events/{event_id}/model-status", allow=STAFF)
 def event_model_status(principal: User, event_id: str) -> dict:
-    rows = build_assignment_service().event_status(event_id)
+    rows = services.assignment_service().event_status(event_id)
     return {"event_id": event_id, "rows": [row.model_dump(mode="json") for row in rows]}

@@ -9,10 +9,10 @@ from urllib.parse import quote
 from chalice import Blueprint, Response
 from pydantic import Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
 from chalicelib.auth.principals import User
-from chalicelib.domain import public_views as views
-from chalicelib.routes import races as race_routes
+from chalicelib.views import public_views as views
 from chalicelib.routes.public_pages import (PageOptions, event_or_404, fragment_headers, live_race, live_url,
                                             read_live, unchanged)
 from drem_web import i18n, render
@@ -27,7 +27,7 @@ class CommentatorQuery(PageOptions):
 
 
 def commentator_live(event_id: str, query: CommentatorQuery) -> tuple[str, Any]:
-    now_ms = race_routes.now_ms()
+    now_ms = services.now_ms()
     items = read_live(event_id, query.track, [query.track])
     token = views.version_token(items.board.version, items.overlay.version)
 

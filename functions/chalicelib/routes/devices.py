@@ -9,20 +9,15 @@ route acts on the caller's own device id, taken from its verified credential.
 """
 from __future__ import annotations
 
-import time
 from chalice import Blueprint, Response
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_activation
-from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, ActivationService,
-                                         IssuedActivationCode, IssuedCredential)
-from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceService, DeviceView, MoveToFleet,
+from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode, IssuedCredential)
+from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceView, MoveToFleet,
                                       Telemetry)
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.devices import DynamoDeviceStore
-from chalicelib.storage.fleets import DynamoFleetStore
 
 bp = Blueprint(__name__)
 
@@ -30,69 +25,52 @@ DEVICE_STAFF = {ADMIN, OPERATOR}
 DEVICES = {CAR, TIMER}
 
 
-def now_ms() -> int:
-    return time.time_ns() // 1_000_000
-
-
-def _stores() -> tuple[DynamoDeviceStore, DynamoFleetStore]:
-    table, dynamodb = get_settings().table("fleet"), clients.dynamodb()
-    return DynamoDeviceStore(dynamodb, table), DynamoFleetStore(dynamodb, table)
-
-
-def device_service() -> DeviceService:
-    return DeviceService(*_stores(), clock_ms=now_ms)
-
-
-def activation_service() -> ActivationService:
-    return ActivationService(*_stores(), clock_ms=now_ms)
-
-
 def verify_device_credential(credential: str) -> Device:
-    return activation_service().verify(credential)
+    return services.activation_service().verify(credential)
 
 
 # --- staff ---
 @route(bp, "/api/devices/activation-codes", methods=["POST"], allow=DEVICE_STAFF, body=ActivationCodeRequest,
        response=IssuedActivationCode, status_code=201)
 def create_activation_code(principal: User, body: ActivationCodeRequest) -> Response:
-    issued = activation_service().issue_code(principal, body)
+    issued = services.activation_service().issue_code(principal, body)
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/api/devices", methods=["GET"], allow=DEVICE_STAFF)
 def list_devices(principal: User) -> dict:
     query = bp.current_request.query_params or {}
-    devices = device_service().list_devices(online=_flag(query.get("online")), fleet_id=query.get("fleet_id"))
+    devices = services.device_service().list_devices(online=_flag(query.get("online")), fleet_id=query.get("fleet_id"))
     return {"devices": [d.model_dump(mode="json") for d in devices]}
 
 
 @route(bp, "/api/devices/{device_id}", methods=["GET"], allow=DEVICE_STAFF, response=DeviceView)
 def get_device(principal: User, device_id: str) -> dict:
-    return device_service().get_device(device_id).model_dump(mode="json")
+    return services.device_service().get_device(device_id).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/{device_id}/fleet", methods=["PUT"], allow=DEVICE_STAFF, body=MoveToFleet,
        response=DeviceView)
 def move_device(principal: User, device_id: str, body: MoveToFleet) -> dict:
-    return device_service().move_to_fleet(device_id, body.fleet_id).model_dump(mode="json")
+    return services.device_service().move_to_fleet(device_id, body.fleet_id).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/{device_id}", methods=["DELETE"], allow={ADMIN})
 def deregister_device(principal: User, device_id: str) -> Response:
-    device_service().deregister(device_id)
+    services.device_service().deregister(device_id)
     return Response(body="", status_code=204)
 
 
 @route(bp, "/api/devices/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF, body=CommandRequest,
        response=Command, status_code=201)
 def queue_command(principal: User, device_id: str, body: CommandRequest) -> Response:
-    command = device_service().queue_command(principal, device_id, body)
+    command = services.device_service().queue_command(principal, device_id, body)
     return Response(command.model_dump(mode="json"), status_code=201)
 
 
 @route(bp, "/api/devices/{device_id}/commands", methods=["GET"], allow=DEVICE_STAFF)
 def device_commands(principal: User, device_id: str) -> dict:
-    return {"commands": [c.model_dump(mode="json") for c in device_service().device_commands(device_id)]}
+    return {"commands": [c.model_dump(mode="json") for c in services.device_service().device_commands(device_id)]}
 
 
 # --- the device itself ---
@@ -100,35 +78,35 @@ def device_commands(principal: User, device_id: str) -> dict:
 @route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC, csrf=False, body=ActivationExchange,
        response=IssuedCredential, status_code=201)
 def activate_device(principal: Principal, body: ActivationExchange) -> Response:
-    issued = guarded_activation(lambda: activation_service().activate(body), client_address(bp.current_request))
+    issued = guarded_activation(lambda: services.activation_service().activate(body), client_address(bp.current_request))
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/api/devices/self", methods=["GET"], allow=DEVICES, response=DeviceView)
 def own_device(principal: Device) -> dict:
-    return device_service().get_device(principal.device_id).model_dump(mode="json")
+    return services.device_service().get_device(principal.device_id).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/self/rotate", methods=["POST"], allow=DEVICES, response=IssuedCredential)
 def rotate_credential(principal: Device) -> Response:
-    issued = activation_service().rotate(principal)
+    issued = services.activation_service().rotate(principal)
     return Response(issued.model_dump(mode="json"), headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/api/devices/self/heartbeat", methods=["POST"], allow=DEVICES, body=Telemetry, response=DeviceView)
 def heartbeat(principal: Device, body: Telemetry) -> dict:
-    return device_service().heartbeat(principal, body).model_dump(mode="json")
+    return services.device_service().heartbeat(principal, body).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/self/commands", methods=["GET"], allow=DEVICES)
 def pending_commands(principal: Device) -> dict:
-    return {"commands": [c.model_dump(mode="json") for c in device_service().pending_commands(principal)]}
+    return {"commands": [c.model_dump(mode="json") for c in services.device_service().pending_commands(principal)]}
 
 
 @route(bp, "/api/devices/self/commands/{command_id}/ack", methods=["POST"], allow=DEVICES, body=CommandAck,
        response=Command)
 def acknowledge_command(principal: Device, command_id: str, body: CommandAck) -> dict:
-    return device_service().acknowledge(principal, command_id, body).model_dump(mode="json")
+    return services.device_service().acknowledge(principal, command_id, body).model_dump(mode="json")
 
 
 def _flag(value: str | None) -> bool | None:

@@ -5,7 +5,7 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
-from chalicelib.domain.event_landing import landing_view
+from chalicelib.views.event_landing import landing_view
 from chalicelib.routes.public_pages import event_or_404
 from drem_web import render
 

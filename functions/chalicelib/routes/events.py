@@ -1,17 +1,13 @@
 """JSON API for events: staff read them, admins and operators create, replace and delete them."""
 from __future__ import annotations
 
-import time
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
-from chalicelib.domain.events import Event, EventInput, EventService
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.events import DynamoEventStore, DynamoLiveRaceProbe
-from chalicelib.storage.fleets import DynamoFleetStore
+from chalicelib.domain.events import Event, EventInput
 
 bp = Blueprint(__name__)
 
@@ -19,38 +15,27 @@ EVENT_READERS = {ADMIN, OPERATOR, COMMENTATOR, REGISTRATION}
 EVENT_EDITORS = {ADMIN, OPERATOR}
 
 
-def now_ms() -> int:
-    return time.time_ns() // 1_000_000
-
-
-def event_service() -> EventService:
-    settings, dynamodb = get_settings(), clients.dynamodb()
-    return EventService(DynamoEventStore(dynamodb, settings.table("events")),
-                        DynamoLiveRaceProbe(dynamodb, settings.table("races")),
-                        DynamoFleetStore(dynamodb, settings.table("fleet")), now_ms)
-
-
 @route(bp, "/api/events", methods=["GET"], allow=EVENT_READERS)
 def list_events(principal: User) -> dict:
-    return {"events": [e.model_dump(mode="json") for e in event_service().list_events()]}
+    return {"events": [e.model_dump(mode="json") for e in services.event_service().list_events()]}
 
 
 @route(bp, "/api/events", methods=["POST"], allow=EVENT_EDITORS, body=EventInput, response=Event, status_code=201)
 def create_event(principal: User, body: EventInput) -> Response:
-    return Response(event_service().create_event(principal, body).model_dump(mode="json"), status_code=201)
+    return Response(services.event_service().create_event(principal, body).model_dump(mode="json"), status_code=201)
 
 
 @route(bp, "/api/events/{event_id}", methods=["GET"], allow=EVENT_READERS, response=Event)
 def get_event(principal: User, event_id: str) -> dict:
-    return event_service().get_event(event_id).model_dump(mode="json")
+    return services.event_service().get_event(event_id).model_dump(mode="json")
 
 
 @route(bp, "/api/events/{event_id}", methods=["PUT"], allow=EVENT_EDITORS, body=EventInput, response=Event)
 def replace_event(principal: User, event_id: str, body: EventInput) -> dict:
-    return event_service().update_event(principal, event_id, body).model_dump(mode="json")
+    return services.event_service().update_event(principal, event_id, body).model_dump(mode="json")
 
 
 @route(bp, "/api/events/{event_id}", methods=["DELETE"], allow=EVENT_EDITORS)
 def delete_event(principal: User, event_id: str) -> Response:
-    event_service().delete_event(principal, event_id)
+    services.event_service().delete_event(principal, event_id)
     return Response(body="", status_code=204)

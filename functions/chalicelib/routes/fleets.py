@@ -1,50 +1,40 @@
 """JSON API for fleets (admins and operators)."""
 from __future__ import annotations
 
-import time
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
-from chalicelib.domain.fleets import Fleet, FleetInput, FleetService
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.devices import DynamoDeviceStore
-from chalicelib.storage.fleets import DynamoFleetStore
+from chalicelib.domain.fleets import Fleet, FleetInput
 
 bp = Blueprint(__name__)
 
 FLEET_STAFF = {ADMIN, OPERATOR}
 
 
-def fleet_service() -> FleetService:
-    table, dynamodb = get_settings().table("fleet"), clients.dynamodb()
-    return FleetService(DynamoFleetStore(dynamodb, table), DynamoDeviceStore(dynamodb, table),
-                        lambda: time.time_ns() // 1_000_000)
-
-
 @route(bp, "/api/fleets", methods=["GET"], allow=FLEET_STAFF)
 def list_fleets(principal: User) -> dict:
-    return {"fleets": [f.model_dump(mode="json") for f in fleet_service().list_fleets()]}
+    return {"fleets": [f.model_dump(mode="json") for f in services.fleet_service().list_fleets()]}
 
 
 @route(bp, "/api/fleets", methods=["POST"], allow=FLEET_STAFF, body=FleetInput, response=Fleet, status_code=201)
 def create_fleet(principal: User, body: FleetInput) -> Response:
-    return Response(fleet_service().create_fleet(principal, body).model_dump(mode="json"), status_code=201)
+    return Response(services.fleet_service().create_fleet(principal, body).model_dump(mode="json"), status_code=201)
 
 
 @route(bp, "/api/fleets/{fleet_id}", methods=["GET"], allow=FLEET_STAFF, response=Fleet)
 def get_fleet(principal: User, fleet_id: str) -> dict:
-    return fleet_service().get_fleet(fleet_id).model_dump(mode="json")
+    return services.fleet_service().get_fleet(fleet_id).model_dump(mode="json")
 
 
 @route(bp, "/api/fleets/{fleet_id}", methods=["PUT"], allow=FLEET_STAFF, body=FleetInput, response=Fleet)
 def update_fleet(principal: User, fleet_id: str, body: FleetInput) -> dict:
-    return fleet_service().update_fleet(principal, fleet_id, body).model_dump(mode="json")
+    return services.fleet_service().update_fleet(principal, fleet_id, body).model_dump(mode="json")
 
 
 @route(bp, "/api/fleets/{fleet_id}", methods=["DELETE"], allow=FLEET_STAFF)
 def delete_fleet(principal: User, fleet_id: str) -> Response:
-    fleet_service().delete_fleet(principal, fleet_id)
+    services.fleet_service().delete_fleet(principal, fleet_id)
     return Response(body="", status_code=204)

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import PUBLIC, STAFF, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.health import check_health
 from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.health import fetch_durable_health, probe_table
+from chalicelib.storage.health import fetch_durable_health
 
 bp = Blueprint(__name__)
 
@@ -22,7 +22,7 @@ def healthz(principal: Principal) -> Response:
     endpoint = settings.endpoint_url
     report = check_health(
         storage_label=settings.storage_label, region=settings.region, stage=settings.stage,
-        probe_table=lambda: probe_table(clients.dynamodb(), settings.table("events")),
+        probe_table=services.probe_storage,
         durable_health=(lambda: fetch_durable_health(endpoint)) if endpoint else None,
     )
     body = report.model_dump() if principal.roles & STAFF else {"status": report.status}

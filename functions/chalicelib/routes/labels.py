@@ -11,10 +11,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.devices import DeviceKind
-from chalicelib.domain.labels_pdf import CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers, racer_card_pdf
-from chalicelib.routes.console_common import form
-from chalicelib.routes.devices import device_service
-from chalicelib.routes.fleets import fleet_service
+from chalicelib.formats.labels_pdf import CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers, racer_card_pdf
+from chalicelib.routes.console.common import form
+from chalicelib import services
 from chalicelib.settings import get_settings
 
 bp = Blueprint(__name__)
@@ -35,9 +34,9 @@ class RacerCardForm(BaseModel):
 
 @route(bp, "/console/cars/labels.pdf", allow={ADMIN, OPERATOR}, query=CarLabelsQuery)
 def car_labels(principal: User, query: CarLabelsQuery) -> Response:
-    names = {f.fleet_id: f.name for f in fleet_service().list_fleets()}
+    names = {f.fleet_id: f.name for f in services.fleet_service().list_fleets()}
     cars = [CarLabel(device_id=d.device_id, hostname=d.hostname, fleet_name=names.get(d.fleet_id or "", "no fleet"))
-            for d in device_service().list_devices(fleet_id=query.fleet_id or None) if d.kind is DeviceKind.CAR]
+            for d in services.device_service().list_devices(fleet_id=query.fleet_id or None) if d.kind is DeviceKind.CAR]
     body = car_labels_pdf(cars, query.format, get_settings().public_url)
     return Response(body=body, headers=label_headers(f"car-labels-{query.format}.pdf"))
 

@@ -8,7 +8,7 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.leaderboards import PublicView
-from chalicelib.routes.races import publisher
+from chalicelib import services
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 
 bp = Blueprint(__name__)
@@ -28,10 +28,10 @@ def conditional(view: PublicView) -> Response:
 @route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC, conditional=True)
 def leaderboard(principal: Principal, event_id: str) -> Response:
     track = (bp.current_request.query_params or {}).get("track") or COMBINED_TRACK_ID
-    return conditional(publisher().board(event_id, track))
+    return conditional(services.publisher().board(event_id, track))
 
 
 @route(bp, "/api/overlay/{event_id}", allow=PUBLIC, conditional=True)
 def overlay(principal: Principal, event_id: str) -> Response:
     track = (bp.current_request.query_params or {}).get("track") or "1"
-    return conditional(publisher().overlay(event_id, track))
+    return conditional(services.publisher().overlay(event_id, track))

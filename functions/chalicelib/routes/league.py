@@ -11,8 +11,8 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.league import Board, BoardQuery, Submission, SubmissionInput
-from chalicelib.domain.league_views import board_view, submission_view
-from chalicelib.storage.league import build_league_service
+from chalicelib.views.league_views import board_view, submission_view
+from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -22,7 +22,7 @@ bp = Blueprint(__name__)
        response=Submission, status_code=201, tags=("league",))
 def push_submission(principal: User, track: str, body: SubmissionInput) -> Response:
     """Push a submission (your own; admins may push for any racer)"""
-    submission = build_league_service().push(principal, track, body)
+    submission = services.league_service().push(principal, track, body)
     return Response(body={"submission": submission.model_dump(mode="json"),
                           "entry": submission.entry().model_dump(mode="json")}, status_code=201)
 
@@ -30,28 +30,28 @@ def push_submission(principal: User, track: str, body: SubmissionInput) -> Respo
 @route(bp, "/api/league/{track}", allow=PUBLIC, query=BoardQuery, response=Board, tags=("league",))
 def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
     """A track's board: each racer's latest submission, ranked"""
-    return build_league_service().board(track, query).model_dump(mode="json")
+    return services.league_service().board(track, query).model_dump(mode="json")
 
 
 @route(bp, "/api/league/{track}/racers/{racer}", allow=PUBLIC, response=Submission, tags=("league",))
 def latest_submission(principal: Principal, track: str, racer: str) -> dict:
     """A racer's latest submission on a track, with every hyperparameter"""
-    return {"submission": build_league_service().latest(track, racer).model_dump(mode="json")}
+    return {"submission": services.league_service().latest(track, racer).model_dump(mode="json")}
 
 
 @route(bp, "/api/league/{track}/racers/{racer}", methods=["DELETE"], allow={ADMIN}, tags=("league",))
 def delete_racer(principal: User, track: str, racer: str) -> dict:
     """Remove a racer's submissions from a track (admins)"""
-    return {"deleted": build_league_service().delete(principal, track, racer)}
+    return {"deleted": services.league_service().delete(principal, track, racer)}
 
 
 @route(bp, "/league/{track}", allow=PUBLIC, query=BoardQuery)
 def league_page(principal: Principal, track: str, query: BoardQuery) -> Response:
     """The public board page"""
-    return render.page("league", view=board_view(build_league_service().board(track, query), query))
+    return render.page("league", view=board_view(services.league_service().board(track, query), query))
 
 
 @route(bp, "/league/{track}/racers/{racer}", allow=PUBLIC)
 def league_racer_fragment(principal: Principal, track: str, racer: str) -> Response:
     """The hyperparameters and trials behind a board row (htmx fragment)"""
-    return render.fragment("league_submission", view=submission_view(build_league_service().latest(track, racer)))
+    return render.fragment("league_submission", view=submission_view(services.league_service().latest(track, racer)))

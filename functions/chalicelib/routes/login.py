@@ -13,14 +13,14 @@ from chalicelib.auth.access import PUBLIC, form_fields, route
 from chalicelib.auth.principals import Principal
 from chalicelib.auth.rate_limits import client_address, guarded_sign_in
 from chalicelib.auth.revocation import REVOKED
-from chalicelib.auth.sessions import identity_provider
+from chalicelib import services
 from chalicelib.auth.tokens import unverified_claim
 from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
 from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
 from chalicelib.http_errors import retry_after_headers, status_for
 from chalicelib.routes.responses import redirect, safe_next
 from chalicelib.settings import get_settings
-from chalicelib.storage.sessions import CHALLENGE_TTL_S, session_store
+from chalicelib.storage.sessions import CHALLENGE_TTL_S
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -51,7 +51,7 @@ def login(principal: Principal) -> Response:
 
 @route(bp, _CHALLENGE_PATH, allow=PUBLIC)
 def new_password_page(principal: Principal) -> Response:
-    challenge = session_store().challenge(_challenge_id(bp.current_request.headers))
+    challenge = services.session_store().challenge(_challenge_id(bp.current_request.headers))
     if challenge is None:
         return redirect("/login")
     return _new_password_form(challenge)
@@ -59,13 +59,13 @@ def new_password_page(principal: Principal) -> Response:
 
 @route(bp, _CHALLENGE_PATH, methods=["POST"], allow=PUBLIC)
 def new_password(principal: Principal) -> Response:
-    request, store = bp.current_request, session_store()
+    request, store = bp.current_request, services.session_store()
     challenge_id, secure = _challenge_id(request.headers), get_settings().cookie_secure
     challenge = store.challenge(challenge_id)
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
-        tokens = identity_provider().complete_new_password(challenge, _matching_new_password(form_fields(request)))
+        tokens = services.identity_provider().complete_new_password(challenge, _matching_new_password(form_fields(request)))
     except TokenExpired:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     except _SHOWN_ON_FORM as exc:
@@ -79,9 +79,9 @@ def new_password(principal: Principal) -> Response:
 def logout(principal: Principal) -> Response:
     access_token = cookies.request_cookies(bp.current_request.headers).get(cookies.SESSION_COOKIE)
     if principal.is_user and access_token:
-        identity_provider().sign_out_everywhere(access_token)
+        services.identity_provider().sign_out_everywhere(access_token)
         # Cognito revokes the refresh tokens; the access tokens already issued are revoked here.
-        REVOKED.signed_out(session_store(), principal.sub, unverified_claim(access_token, "origin_jti"))
+        REVOKED.signed_out(services.session_store(), principal.sub, unverified_claim(access_token, "origin_jti"))
     return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
 
 
@@ -119,11 +119,11 @@ def issue_token(principal: Principal, body: SignInForm) -> Response:
        response=TokenGrant, tags=("auth",))
 def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
     """Exchange a refresh token for a new access token."""
-    return _no_store(TokenGrant(**identity_provider().refresh(body.refresh_token).model_dump()))
+    return _no_store(TokenGrant(**services.identity_provider().refresh(body.refresh_token).model_dump()))
 
 
 def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
-    return guarded_sign_in(lambda: identity_provider().sign_in(credentials.username, credentials.password),
+    return guarded_sign_in(lambda: services.identity_provider().sign_in(credentials.username, credentials.password),
                            credentials.username, client_address(bp.current_request))
 
 
@@ -169,7 +169,7 @@ def _new_session(tokens: Tokens, secure: bool) -> list[str]:
 
 def _challenge_cookie(challenge: NewPasswordChallenge, secure: bool) -> str:
     # The username and Cognito session stay on the server; the browser holds only a random id for them.
-    challenge_id = session_store().hold_challenge(challenge)
+    challenge_id = services.session_store().hold_challenge(challenge)
     return cookies.set_cookie(cookies.CHALLENGE_COOKIE, challenge_id, secure=secure, path=_CHALLENGE_PATH,
                               same_site="Strict", max_age=CHALLENGE_TTL_S)
 

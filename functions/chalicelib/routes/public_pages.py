@@ -26,17 +26,15 @@ import qrcode.image.svg
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
-from chalicelib.domain import public_views as views
+from chalicelib.views import public_views as views
 from chalicelib.domain.errors import NotFound
-from chalicelib.domain.event_landing import landing_url
+from chalicelib.views.event_landing import landing_url
 from chalicelib.domain.events import Event
-from chalicelib.domain.render_cache import LIVE_FRAGMENTS, LIVE_RACES
-from chalicelib.routes import races as race_routes
+from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.events import DynamoEventStore
 from drem_leaderboard.models import Race
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 from drem_web import i18n, render
@@ -99,7 +97,7 @@ class LiveItems:
 
 
 def read_live(event_id: str, board_track: str, overlay_tracks: list[str]) -> LiveItems:
-    publisher = race_routes.publisher()
+    publisher = services.publisher()
     return LiveItems(board=views.BoardSnapshot.parse(publisher.board(event_id, board_track).body),
                      overlays=[views.OverlaySnapshot.parse(publisher.overlay(event_id, t).body)
                                for t in overlay_tracks])
@@ -112,14 +110,14 @@ def live_race(event_id: str, overlay: views.OverlaySnapshot) -> Race | None:
         return None
 
     def read() -> Race | None:
-        record = race_routes.race_store().get(event_id, race_id)
+        record = services.race_store().get(event_id, race_id)
         return record.race if record else None
 
     return LIVE_RACES.get((event_id, overlay.track_id, race_id, overlay.version), read)
 
 
 def event_or_404(event_id: str) -> Event:
-    event = DynamoEventStore(clients.dynamodb(), get_settings().table("events")).get(event_id)
+    event = services.event_store().get(event_id)
     if event is None:
         raise NotFound(f"There is no event {event_id}.", field="event_id")
     return event
@@ -156,7 +154,7 @@ def live_fragment(name: str, options: tuple[Any, ...], token: str, client_token:
         return reply
     body = LIVE_FRAGMENTS.get((name, *options, token), lambda: render.fragment(name, **context()).body)
     return Response(body=body, status_code=200, headers={
-        "Content-Type": render.HTML, **fragment_headers(token), SERVER_TIME_HEADER: str(race_routes.now_ms())})
+        "Content-Type": render.HTML, **fragment_headers(token), SERVER_TIME_HEADER: str(services.now_ms())})
 
 
 def live_url(path: str, params: dict[str, Any]) -> str:
@@ -201,7 +199,7 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
     event = event_or_404(event_id)
     track = board_track(event, query.track)
     footer_tracks = [track] if track != COMBINED_TRACK_ID else [t.track_id or "" for t in event.tracks]
-    _token, live = leaderboard_live(event_id, track, query, footer_tracks[:MAX_FOOTER_TRACKS], race_routes.now_ms())
+    _token, live = leaderboard_live(event_id, track, query, footer_tracks[:MAX_FOOTER_TRACKS], services.now_ms())
     page_url = landing_url(get_settings().public_url, event_id, query.lang)  # the QR opens the event's landing page
     shown = next((t for t in event.tracks if t.track_id == track), None)  # None on the combined board
     return render.page("leaderboard", title=event.name, track=track, tracks=event.boards, lang=i18n.resolve_language(
@@ -215,7 +213,7 @@ def leaderboard_fragment(principal: Principal, event_id: str, query: Leaderboard
     """The leaderboard's live region; 204 while `v` is current"""
     track = query.track or COMBINED_TRACK_ID
     footer_tracks = [t for t in query.tracks.split(",") if t] or ([track] if track != COMBINED_TRACK_ID else [])
-    token, live = leaderboard_live(event_id, track, query, footer_tracks, race_routes.now_ms())
+    token, live = leaderboard_live(event_id, track, query, footer_tracks, services.now_ms())
     options = (event_id, track, tuple(footer_tracks), query.model_dump_json(exclude={"v"}))
     return live_fragment("leaderboard_live", options, token, query.v, live)
 
@@ -249,7 +247,7 @@ def overlay_page(principal: Principal, event_id: str, query: OverlayQuery) -> Re
     """The OBS browser-source overlay (1920×1080, transparent or chroma-key background)"""
     event = event_or_404(event_id)
     event.track(query.overlay_track)  # NotFound for a track the event does not have
-    _token, context = overlay_live(event_id, query, race_routes.now_ms())
+    _token, context = overlay_live(event_id, query, services.now_ms())
     chroma = views.safe_colour(query.chroma_color, views.DEFAULT_CHROMA) if query.chroma else ""
     return render.page("overlay", title=event.name, chroma=chroma, lang=i18n.resolve_language(query.lang),
                        **context())
@@ -258,6 +256,6 @@ def overlay_page(principal: Principal, event_id: str, query: OverlayQuery) -> Re
 @route(bp, "/overlay/{event_id}/live", allow=PUBLIC, query=OverlayQuery)
 def overlay_fragment(principal: Principal, event_id: str, query: OverlayQuery) -> Response:
     """The overlay's live region; 204 while `v` is current"""
-    token, context = overlay_live(event_id, query, race_routes.now_ms())
+    token, context = overlay_live(event_id, query, services.now_ms())
     options = (event_id, query.overlay_track, query.model_dump_json(exclude={"v"}))
     return live_fragment("overlay_live", options, token, query.v, context)

@@ -11,7 +11,7 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.model_registry import Evaluation, EvaluationInput
-from chalicelib.storage.evaluations import build_registry_service
+from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -20,31 +20,31 @@ bp = Blueprint(__name__)
 @route(bp, "/console/models/registry", allow={ADMIN, OPERATOR})
 def staff_registry(principal: User) -> Response:
     """Every racer's model versions"""
-    return render.page("registry", view=build_registry_service().registry(principal, everyone=True))
+    return render.page("registry", view=services.registry_service().registry(principal, everyone=True))
 
 
 @route(bp, "/models/registry", allow=SIGNED_IN)
 def my_registry(principal: User) -> Response:
     """Your model versions"""
-    return render.page("registry", view=build_registry_service().registry(principal, everyone=False))
+    return render.page("registry", view=services.registry_service().registry(principal, everyone=False))
 
 
 @route(bp, "/models/registry/{model_id}", allow=SIGNED_IN)
 def model_detail(principal: User, model_id: str) -> Response:
     """One model: lineage, loss curve, evaluations (htmx fragment; owner or model staff)"""
-    return render.fragment("registry_model", detail=build_registry_service().detail(principal, model_id))
+    return render.fragment("registry_model", detail=services.registry_service().detail(principal, model_id))
 
 
 @route(bp, "/api/models/{model_id}/evaluations", methods=["POST"], allow=SIGNED_IN, body=EvaluationInput,
        response=Evaluation, status_code=201, tags=("models",))
 def record_evaluation(principal: User, model_id: str, body: EvaluationInput) -> Response:
     """Store an evaluation (a `drem sim eval` metrics.json) of your model; admins and operators: of any model"""
-    evaluation = build_registry_service().record(principal, model_id, body)
+    evaluation = services.registry_service().record(principal, model_id, body)
     return Response(body={"evaluation": evaluation.model_dump(mode="json")}, status_code=201)
 
 
 @route(bp, "/api/models/{model_id}/evaluations", allow=SIGNED_IN, response=list[Evaluation], tags=("models",))
 def list_evaluations(principal: User, model_id: str) -> dict:
     """A model's evaluations (owner, admins, operators)"""
-    found = build_registry_service().for_model(principal, model_id)
+    found = services.registry_service().for_model(principal, model_id)
     return {"evaluations": [e.model_dump(mode="json") for e in found]}

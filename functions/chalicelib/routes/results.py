@@ -10,14 +10,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.errors import NotFound
-from chalicelib.domain.profiles import ProfileService
 from chalicelib.domain.results import EventResults, event_results
-from chalicelib.domain.results_pdf import render_document
-from chalicelib.routes.races import race_store
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.events import DynamoEventStore
-from chalicelib.storage.profiles import DynamoProfileStore
+from chalicelib.formats.results_pdf import render_document
+from chalicelib import services
 
 bp = Blueprint(__name__)
 
@@ -29,17 +24,12 @@ class ResultsQuery(BaseModel):
     track: str = Field(default="", max_length=32, pattern=r"^[A-Za-z0-9_-]*$")
 
 
-def profile_service() -> ProfileService:
-    return ProfileService(DynamoProfileStore(clients.dynamodb(), get_settings().table("profiles")))
-
-
 def load_results(event_id: str) -> EventResults:
-    settings, dynamodb = get_settings(), clients.dynamodb()
-    event = DynamoEventStore(dynamodb, settings.table("events")).get(event_id)
+    event = services.event_store().get(event_id)
     if event is None:
         raise NotFound(f"There is no event {event_id}.", field="event_id")
-    profiles = profile_service()
-    races = [record.race for record in race_store().list_event(event_id)]
+    profiles = services.public_profiles()
+    races = [record.race for record in services.race_store().list_event(event_id)]
     return event_results(event, races, profiles.public_by_subs)
 
 

@@ -9,12 +9,8 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.stats import StatsFilter, compute, visible_events
-from chalicelib.domain.stats_view import stats_page
-from chalicelib.routes.results import profile_service
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.events import DynamoEventStore
-from chalicelib.storage.race_scan import submitted_races_by_event
+from chalicelib.views.stats_view import stats_page
+from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -25,11 +21,10 @@ STATS_STAFF = {ADMIN, OPERATOR, COMMENTATOR}
 @route(bp, "/stats", allow=PUBLIC, query=StatsFilter)
 def stats(principal: Principal, query: StatsFilter) -> Response:
     staff = bool(principal.roles & STATS_STAFF)
-    settings, dynamodb = get_settings(), clients.dynamodb()
-    events = visible_events(DynamoEventStore(dynamodb, settings.table("events")).list(), staff=staff)
-    races = submitted_races_by_event(dynamodb, settings.table("races"))
+    events = visible_events(services.event_store().list(), staff=staff)
+    races = services.submitted_races_by_event()
     data = [(event, races.get(event.event_id, [])) for event in events]
-    profiles = profile_service()
+    profiles = services.public_profiles()
 
     def display_name(sub: str, username: str) -> str:
         public = profiles.public_by_sub(sub)

@@ -6,97 +6,57 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
-from chalicelib.auth.revocation import REVOKED
-from chalicelib.domain.errors import ServiceUnavailable
 from chalicelib.domain.numbers import whole_number
-from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, ModelsEraser,
-                                     OwnedDataEraser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
-                                     UserPage, UserService)
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients
-from chalicelib.storage.sessions import session_store
-from chalicelib.storage.users import CognitoUserDirectory
+from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
+                                     UserPage)
+from chalicelib import services
 
 bp = Blueprint(__name__)
 
 
-def user_directory(settings: Settings | None = None) -> CognitoUserDirectory:
-    settings = settings or get_settings()
-    if not settings.user_pool_id or not settings.user_pool_client_id:
-        raise ServiceUnavailable("Accounts are not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
-    return CognitoUserDirectory(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
-
-
-def owned_data_erasers() -> tuple[OwnedDataEraser, ...]:
-    """What self-delete must clear besides the profile: the user's models."""
-    from chalicelib.storage.models import build_model_service
-
-    return (ModelsEraser(build_model_service()),)
-
-
-class RevokingSessions:
-    """UserService's SessionEnder: marks the user's tokens revoked (chalicelib.auth.revocation)."""
-
-    def ended(self, sub: str) -> None:
-        REVOKED.ended(session_store(), sub)
-
-    def reopened(self, sub: str) -> None:
-        REVOKED.reopened(session_store(), sub)
-
-    def roles_changed(self, sub: str, groups: frozenset[str]) -> None:
-        REVOKED.roles_changed(session_store(), sub, groups)
-
-
-def user_service() -> UserService:
-    from chalicelib.routes.profiles import profile_service
-
-    return UserService(user_directory(), profile_service(), owned_data_erasers(),
-                       confirm_sign_ups=get_settings().local_identity, sessions=RevokingSessions())
-
-
 @route(bp, "/api/signup", methods=["POST"], allow=PUBLIC, body=SignUpForm, status_code=201)
 def sign_up(principal: Principal, body: SignUpForm) -> Response:
-    result = guarded_sign_up(lambda: user_service().sign_up(body), client_address(bp.current_request))
+    result = guarded_sign_up(lambda: services.user_service().sign_up(body), client_address(bp.current_request))
     return Response(body=result.model_dump(exclude={"sub"}), status_code=201)
 
 
 @route(bp, "/api/signup/confirm", methods=["POST"], allow=PUBLIC, body=ConfirmSignUpForm)
 def confirm_sign_up(principal: Principal, body: ConfirmSignUpForm) -> dict:
-    return user_service().confirm_sign_up(body)
+    return services.user_service().confirm_sign_up(body)
 
 
 @route(bp, "/api/users", methods=["POST"], allow={ADMIN, REGISTRATION}, body=StaffRegistrationForm,
        response=RegisteredUser, status_code=201)
 def register_racer(principal: User, body: StaffRegistrationForm) -> Response:
-    registered = user_service().register_racer(body)
+    registered = services.user_service().register_racer(body)
     return Response(body=registered.model_dump(), status_code=201, headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/api/users", allow={ADMIN, REGISTRATION, OPERATOR}, response=UserPage)
 def list_users(principal: User) -> dict:
     query = bp.current_request.query_params or {}
-    page = user_service().list_users(query.get("prefix"), _limit(query.get("limit")), query.get("next"))
+    page = services.user_service().list_users(query.get("prefix"), _limit(query.get("limit")), query.get("next"))
     return page.model_dump()
 
 
 @route(bp, "/api/users/{username}/role", methods=["PUT"], allow={ADMIN}, body=RoleChange)
 def change_role(principal: User, username: str, body: RoleChange) -> dict:
-    return user_service().change_role(principal, username, body)
+    return services.user_service().change_role(principal, username, body)
 
 
 @route(bp, "/api/users/{username}/disable", methods=["POST"], allow={ADMIN}, response=DirectoryUser)
 def disable_user(principal: User, username: str) -> dict:
-    return user_service().set_enabled(principal, username, False).model_dump()
+    return services.user_service().set_enabled(principal, username, False).model_dump()
 
 
 @route(bp, "/api/users/{username}/enable", methods=["POST"], allow={ADMIN}, response=DirectoryUser)
 def enable_user(principal: User, username: str) -> dict:
-    return user_service().set_enabled(principal, username, True).model_dump()
+    return services.user_service().set_enabled(principal, username, True).model_dump()
 
 
 @route(bp, "/api/me", methods=["DELETE"], allow=SIGNED_IN, body=DeleteSelfForm)
 def delete_self(principal: User, body: DeleteSelfForm) -> dict:
-    return user_service().delete_self(principal, body)
+    return services.user_service().delete_self(principal, body)
 
 
 def _limit(raw: str | None) -> int:

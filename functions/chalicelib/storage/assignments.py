@@ -12,16 +12,12 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.assignments import (AssignedModel, Assignment, AssignmentChanged, AssignmentService,
-                                           ModelProgress)
+from chalicelib.domain.assignments import (AssignedModel, Assignment, AssignmentChanged, ModelProgress)
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import NotFound
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients
 from chalicelib.storage.aws_errors import call, error_code, translate_common
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.events import DynamoEventStore
-from chalicelib.storage.models import build_model_service
 
 _SERVICE = "The fleet table"
 _SK = "ASSIGNMENT"
@@ -141,11 +137,3 @@ class FleetCarDirectory:
                        if entry.kind is DeviceKind.CAR and entry.fleet_id in fleets),
                       key=lambda device_id: (board[device_id].hostname, device_id))
 
-
-def build_assignment_service(settings: Settings | None = None) -> AssignmentService:
-    settings = settings or get_settings()
-    fleet_table = settings.table("fleet")
-    directory = FleetCarDirectory(DynamoDeviceStore(clients.dynamodb(), fleet_table),
-                                  DynamoEventStore(clients.dynamodb(), settings.table("events")))
-    return AssignmentService(DynamoAssignmentStore(clients.dynamodb(), fleet_table),
-                             build_model_service(settings), directory)

@@ -9,11 +9,8 @@ from __future__ import annotations
 from typing import Any
 
 
-from chalicelib.domain.model_registry import Evaluation, RegistryService, lineage_from_archive
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients
+from chalicelib.domain.model_registry import Evaluation
 from chalicelib.storage.aws_errors import call
-from chalicelib.storage.models import build_model_service
 
 _SERVICE = "The evaluation store"
 
@@ -42,9 +39,3 @@ class DynamoEvaluationStore:
     def _call(self, operation: str, **kwargs: Any) -> Any:
         return call(self._client, operation, _SERVICE, **kwargs)
 
-
-def build_registry_service(settings: Settings | None = None) -> RegistryService:
-    settings = settings or get_settings()
-    models = build_model_service(settings)
-    return RegistryService(models, DynamoEvaluationStore(clients.dynamodb(), settings.table("models")),
-                           lineage_from_archive(models, models.max_upload_bytes))

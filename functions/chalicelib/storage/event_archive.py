@@ -3,7 +3,7 @@
 Works against whatever endpoint it is given: the local durable moto server (endpoint + names from the state dir's
 stack.json) or real AWS (default credential chain, names from the environment contract). Items travel as DynamoDB
 attribute-value JSON; binary values as base64 text. Implements `StackReader` / `StackWriter` of
-`chalicelib.domain.event_transfer`.
+`chalicelib.formats.event_transfer`.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.domain.event_transfer import Account, Item
+from chalicelib.formats.event_transfer import Account, Item
 from chalicelib.storage.aws_errors import error_code, translate_common
 from chalicelib.storage.users import COUNTRY_ATTRIBUTE, translate_account_error
 
@@ -159,7 +159,7 @@ class StackStorage:
         from chalicelib.domain.leaderboards import LeaderboardPublisher
         from chalicelib.domain.profiles import ProfileService
         from chalicelib.domain.races import RaceService
-        from chalicelib.routes.races import ProfilesForBoards  # the app's own board names; one definition
+        from chalicelib.domain.profiles import ProfilesForBoards
         from chalicelib.storage.leaderboards import DynamoBoardStore
         from chalicelib.storage.profiles import DynamoProfileStore
         from chalicelib.storage.races import DynamoRaceStore

@@ -17,9 +17,7 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import Conflict
-from chalicelib.domain.league import BoardEntry, LeagueService, Submission
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients
+from chalicelib.domain.league import BoardEntry, Submission
 from chalicelib.storage.aws_errors import call, error_code, translate_common
 
 _SERVICE = "The league store"
@@ -122,7 +120,3 @@ class DynamoLeagueStore:
     def _call(self, operation: str, **kwargs: Any) -> Any:
         return call(self._client, operation, _SERVICE, **kwargs)
 
-
-def build_league_service(settings: Settings | None = None) -> LeagueService:
-    settings = settings or get_settings()
-    return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))

@@ -15,8 +15,6 @@ from typing import Any
 
 from chalicelib.auth.revocation import RevocationMark
 from chalicelib.domain.identity import NewPasswordChallenge
-from chalicelib.settings import get_settings
-from chalicelib.storage import clients
 from chalicelib.storage.aws_errors import call
 
 _SERVICE = "The session store"
@@ -69,6 +67,3 @@ def _challenge_key(challenge_id: str) -> dict[str, dict[str, str]]:
 def _revocation_key(sub: str) -> dict[str, dict[str, str]]:
     return {"pk": {"S": f"USER#{sub}"}, "sk": {"S": "REVOKED"}}
 
-
-def session_store() -> DynamoSessionStore:
-    return DynamoSessionStore(clients.dynamodb(), get_settings().table("sessions"))

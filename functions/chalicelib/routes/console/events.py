@@ -1,0 +1,88 @@
+"""Operator console: events (list, create, edit, delete with confirmation). Calls the same `EventService` as the JSON
+API; the form lives in `console_event_form`."""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.countries import COUNTRY_CHOICES
+from chalicelib.views.overlay_links import OverlayLinkOptions, overlay_link
+from chalicelib.routes.console import event_form
+from chalicelib.routes.console.common import form, redirect, render_or_errors
+from chalicelib import services
+from chalicelib.settings import get_settings
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+EVENT_EDITORS = {ADMIN, OPERATOR}
+
+
+@route(bp, "/console/events", allow=EVENT_EDITORS)
+def events_page(principal: User) -> Response:
+    return render.page("console/events", events=services.event_service().list_events())
+
+
+@route(bp, "/console/events/{event_id}/overlay", allow=EVENT_EDITORS, query=OverlayLinkOptions)
+def overlay_link_page(principal: User, event_id: str, query: OverlayLinkOptions) -> Response:
+    """Build the OBS browser-source address of a track's overlay: each option explained, the link to paste"""
+    event = services.event_service().get_event(event_id)
+    event.track(query.track)  # NotFound for a track the event does not have
+    link = overlay_link(get_settings().public_url, event_id, query)
+    return render.page("console/overlay_link", event=event, options=query, link=link, path=link.split("/", 3)[-1])
+
+
+@route(bp, "/console/events/new", allow=EVENT_EDITORS)
+def new_event_page(principal: User) -> Response:
+    return _form_page(None, event_form.blank_form(), {})
+
+
+@route(bp, "/console/events", methods=["POST"], allow=EVENT_EDITORS)
+def create_event(principal: User) -> Response:
+    fields = form(bp.current_request)
+
+    def create() -> Response:
+        services.event_service().create_event(principal, event_form.event_input(fields))
+        return redirect("/console/events")
+
+    return render_or_errors(create, lambda errors, status: _form_page(None, event_form.posted_form(fields), errors,
+                                                                      status), event_form.rename_for(fields))
+
+
+@route(bp, "/console/events/{event_id}/edit", allow=EVENT_EDITORS)
+def edit_event_page(principal: User, event_id: str) -> Response:
+    return _form_page(event_id, event_form.form_of(services.event_service().get_event(event_id)), {})
+
+
+@route(bp, "/console/events/{event_id}", methods=["POST"], allow=EVENT_EDITORS)
+def update_event(principal: User, event_id: str) -> Response:
+    fields = form(bp.current_request)
+
+    def update() -> Response:
+        services.event_service().update_event(principal, event_id, event_form.event_input(fields))
+        return redirect("/console/events")
+
+    return render_or_errors(update, lambda errors, status: _form_page(
+        event_id, event_form.posted_form(fields), errors, status), event_form.rename_for(fields))
+
+
+@route(bp, "/console/events/{event_id}/delete", allow=EVENT_EDITORS)
+def confirm_delete_page(principal: User, event_id: str) -> Response:
+    return render.page("console/event_delete", event=services.event_service().get_event(event_id), errors={})
+
+
+@route(bp, "/console/events/{event_id}/delete", methods=["POST"], allow=EVENT_EDITORS)
+def delete_event(principal: User, event_id: str) -> Response:
+    def delete() -> Response:
+        services.event_service().delete_event(principal, event_id)
+        return redirect("/console/events")
+
+    return render_or_errors(delete, lambda errors, status: render.page(
+        "console/event_delete", status=status, event=services.event_service().get_event(event_id), errors=errors))
+
+
+def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],
+               status: int = 200) -> Response:
+    return render.page("console/event_form", status=status, event_id=event_id, form=view, errors=errors,
+                       fleets=services.fleet_service().list_fleets(), countries=COUNTRY_CHOICES)

@@ -1,0 +1,141 @@
+"""Operator console: fleets, the cars/timers page (status, per-car actions → device commands, model assignment) and
+device activation (a one-time code plus the command to run on the car or timer). Same services as the JSON API."""
+from __future__ import annotations
+
+from urllib.parse import quote
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.activation import ActivationCodeRequest
+from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
+from chalicelib.domain.devices import CommandRequest
+from chalicelib.domain.errors import NotFound
+from chalicelib.domain.fleets import FleetInput
+from chalicelib.routes.console.common import checkbox, form, optional, redirect, render_or_errors
+from chalicelib import services
+from chalicelib.settings import get_settings
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+DEVICE_STAFF = {ADMIN, OPERATOR}
+
+
+@route(bp, "/console/fleets", allow=DEVICE_STAFF)
+def fleets_page(principal: User) -> Response:
+    return _fleets_page({}, {})
+
+
+@route(bp, "/console/fleets", methods=["POST"], allow=DEVICE_STAFF)
+def create_fleet(principal: User) -> Response:
+    fields = form(bp.current_request)
+    return render_or_errors(lambda: _created(services.fleet_service().create_fleet(principal, FleetInput(name=fields.get(
+        "name", "")))), lambda errors, status: _fleets_page(errors, fields, status))
+
+
+@route(bp, "/console/cars", allow=DEVICE_STAFF)
+def cars_page(principal: User) -> Response:
+    return _cars_page(principal, {}, notice=_sent_notice(bp.current_request.query_params or {}))
+
+
+@route(bp, "/console/cars/live", allow=DEVICE_STAFF)
+def cars_live(principal: User) -> Response:
+    """Every car's status cell (status, battery, faults, loaded model, last command) as out-of-band swaps: the page
+    polls this, so the operator sees an emergency stop confirmed without reloading"""
+    lines = car_lines(services.device_service(), services.fleet_service(), services.assignment_service(), services.now_ms())
+    return render.fragment("console/cars_live", cars=lines, headers={"Cache-Control": "no-store"})
+
+
+@route(bp, "/console/cars/activate", allow=DEVICE_STAFF)
+def activation_page(principal: User) -> Response:
+    return _activation_page({}, {"device_kind": "car", "ttl_minutes": "60"}, None)
+
+
+@route(bp, "/console/cars/activate", methods=["POST"], allow=DEVICE_STAFF)
+def create_activation_code(principal: User) -> Response:
+    fields = form(bp.current_request)
+    return render_or_errors(
+        lambda: _activation_page({}, fields, services.activation_service().issue_code(
+            principal, ActivationCodeRequest.model_validate(fields))),
+        lambda errors, status: _activation_page(errors, fields, None, status))
+
+
+@route(bp, "/console/cars/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF)
+def car_command(principal: User, device_id: str) -> Response:
+    fields = form(bp.current_request)
+    request = {"type": fields.get("type", ""), "colour": optional(fields.get("colour")),
+               **({"with_system_logs": True} if checkbox(fields, "with_system_logs") else {})}
+    return _car_action(principal, device_id, lambda: services.device_service().queue_command(
+        principal, device_id, CommandRequest.model_validate(request)))
+
+
+@route(bp, "/console/cars/{device_id}/fleet", methods=["POST"], allow=DEVICE_STAFF)
+def move_car(principal: User, device_id: str) -> Response:
+    fleet_id = optional(form(bp.current_request).get("fleet_id"))
+    return _car_action(principal, device_id, lambda: services.device_service().move_to_fleet(device_id, fleet_id))
+
+
+@route(bp, "/console/cars/{device_id}/models", methods=["POST"], allow=DEVICE_STAFF)
+def assign_model(principal: User, device_id: str) -> Response:
+    fields = form(bp.current_request)
+    service = services.assignment_service()
+
+    def assign() -> object:
+        current = [m.model_id for m in service.for_staff(device_id).models]
+        wanted = [] if fields.get("clear") == "1" else current + [m for m in [optional(fields.get("model_id"))]
+                                                                  if m and m not in current]
+        return service.assign(principal, device_id, wanted)
+
+    return _car_action(principal, device_id, assign)
+
+
+@route(bp, "/console/cars/{device_id}/deregister", methods=["POST"], allow={ADMIN})
+def deregister_car(principal: User, device_id: str) -> Response:
+    return _car_action(principal, device_id, lambda: services.device_service().deregister(device_id))
+
+
+def _car_action(principal: User, device_id: str, action) -> Response:  # noqa: ANN001 - a thunk
+    def run() -> Response:
+        action()
+        sent = form(bp.current_request).get("type", "") if bp.current_request.method == "POST" else ""
+        query = f"?sent={quote(sent)}&device={quote(device_id)}" if sent else ""
+        return redirect(f"/console/cars{query}#car-{device_id}")
+
+    return render_or_errors(run, lambda errors, status: _cars_page(
+        principal, {f"{device_id}-{name}": message for name, message in errors.items()}, status))
+
+
+def _created(_fleet: object) -> Response:
+    return redirect("/console/fleets")
+
+
+def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 200) -> Response:
+    return render.page("console/fleets", status=status, fleets=services.fleet_service().list_fleets(), errors=errors,
+                       values=values)
+
+
+def _sent_notice(query: dict[str, str]) -> str:
+    """"Emergency stop sent to car-1 …" after a command, built from known values only (never echoes the query)."""
+    label = COMMAND_LABELS.get(query.get("sent", ""))
+    device_id = query.get("device", "")
+    if not label or not device_id:
+        return ""
+    try:
+        hostname = services.device_service().get_device(device_id).hostname
+    except NotFound:
+        return ""
+    return f"{label} sent to {hostname}. Its status below shows when the car has done it."
+
+
+def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notice: str = "") -> Response:
+    overview = cars_overview(principal, services.device_service(), services.fleet_service(), services.assignment_service(),
+                             services.model_service(), services.now_ms())
+    return render.page("console/cars", status=status, overview=overview, errors=errors,
+                       is_admin=ADMIN in principal.roles, notice=notice)
+
+
+def _activation_page(errors: dict[str, str], values: dict[str, str], issued: object, status: int = 200) -> Response:
+    return render.page("console/activation", status=status, errors=errors, values=values, issued=issued,
+                       fleets=services.fleet_service().list_fleets(), api_url=get_settings().public_url)

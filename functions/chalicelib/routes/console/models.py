@@ -1,0 +1,116 @@
+"""Every racer's models (HTML, operators and admins): filter by racer and status, give models to a car, and watch
+each car download, verify and load them (a polling fragment). Same services as /api/models and
+/api/cars/{device_id}/models; only AVAILABLE models can be given to a car (the assignment service says so)."""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.assignments import Assignment
+from chalicelib.domain.devices import DeviceKind
+from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
+from chalicelib.domain.racer_models import ListQuery, ModelRecord, ModelStatus
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted, submitted_list
+from chalicelib import services
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+MODEL_STAFF = {ADMIN, OPERATOR}
+STATUSES = [s.value for s in ModelStatus if s is not ModelStatus.DELETED]
+_LISTED = 100
+
+
+class ModelFilter(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    racer: str = Field(default="", max_length=128)
+    status: ModelStatus | None = None
+
+    def keeps(self, model: ModelRecord) -> bool:
+        racer = self.racer.strip().casefold()
+        return ((not racer or model.owner_username.casefold().startswith(racer))
+                and (self.status is None or model.status is self.status))
+
+
+@route(bp, "/console/models", allow=MODEL_STAFF)
+def models_page(principal: User) -> Response:
+    listed = _listed(principal)
+    query, errors, models = _filtered(listed)
+    return render.page("console/models", status=400 if errors else 200, query=query, errors=errors, models=models,
+                       statuses=STATUSES, cars=_cars(), track_types=TRACK_TYPES,
+                       assignable=[m for m in listed if m.status is ModelStatus.AVAILABLE])
+
+
+@route(bp, "/console/models/rows", allow=MODEL_STAFF)
+def model_rows(principal: User) -> Response:
+    query, errors, models = _filtered(_listed(principal))
+    return render.fragment("console/model_rows", status=400 if errors else 200, errors=errors, models=models,
+                           track_types=TRACK_TYPES)
+
+
+@route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
+def assign_models(principal: User) -> Response:
+    request = bp.current_request
+    device_id = submitted(request, "device_id").get("device_id", "")
+    service = services.assignment_service()
+    try:
+        assignment = service.assign(principal, _chosen_car(device_id), submitted_list(request, "model_ids"))
+    except SHOWN_ON_FORM as exc:
+        return _car_status(None, device_id, field_errors(exc, "model_ids"), error_status(exc))
+    return _car_status(assignment, device_id, {}, 200, notice="Models sent to the car.")
+
+
+@route(bp, "/console/models/car-status", allow=MODEL_STAFF)
+def car_status(principal: User) -> Response:
+    device_id = ((bp.current_request.query_params or {}).get("device_id") or "").strip()
+    assignment = services.assignment_service().for_staff(device_id) if device_id else None
+    return _car_status(assignment, device_id, {}, 200)
+
+
+def _car_status(assignment: Assignment | None, device_id: str, errors: dict[str, str], status: int,
+                notice: str = "") -> Response:
+    return render.fragment("console/car_status", status=status, assignment=assignment, device_id=device_id,
+                           errors=errors, notice=notice)
+
+
+def _chosen_car(device_id: str) -> str:
+    if not device_id:
+        raise InvalidInput("Choose a car.", field="device_id")
+    return device_id
+
+
+def _listed(principal: User) -> list[ModelRecord]:
+    return services.model_service().list_models(principal, ListQuery(limit=_LISTED)).models
+
+
+def _filtered(listed: list[ModelRecord]) -> tuple[dict[str, str], dict[str, str], list[ModelRecord]]:
+    raw = {k: v for k, v in (bp.current_request.query_params or {}).items() if k in ("racer", "status") and v}
+    query = {"racer": raw.get("racer", ""), "status": raw.get("status", "")}
+    try:
+        wanted = ModelFilter.model_validate(raw)
+    except SHOWN_ON_FORM as exc:
+        return query, field_errors(exc, "status"), []
+    return query, {}, [m for m in listed if wanted.keeps(m)]
+
+
+def _cars() -> list:
+    return [d for d in services.device_service().list_devices() if d.kind is DeviceKind.CAR]
+
+
+# --- scrutineering (owner or model staff: the service decides, another racer's model answers 403) ----------------
+
+@route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
+def scrutineer_model(principal: User, model_id: str) -> Response:
+    form = submitted(bp.current_request, "track_type", "event_id", "laps")
+    error, status = "", 200
+    try:
+        request = ScrutineerRequest.model_validate({key: value for key, value in form.items() if value})
+        model = services.scrutineer_service().scrutineer(principal, model_id, request)
+    except SHOWN_ON_FORM as exc:
+        model = services.model_service().get(principal, model_id)
+        error, status = " ".join(field_errors(exc, "model_id").values()), error_status(exc)
+    return render.fragment("console/model_scrutiny", status=status, model=model, error=error,
+                           track_types=TRACK_TYPES)

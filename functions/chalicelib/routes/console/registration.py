@@ -1,0 +1,46 @@
+"""The registration desk (HTML, admin and registration staff): create racer accounts one after another and show
+each temporary password once, in a box that prints on its own. Same service as `POST /api/users`."""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, REGISTRATION, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.users import RegisteredUser, StaffRegistrationForm
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
+from chalicelib.domain.countries import COUNTRY_CHOICES
+from chalicelib import services
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+DESK_STAFF = {ADMIN, REGISTRATION}
+_FIELDS = ("username", "email", "country_code")
+
+
+@route(bp, "/console/registration", allow=DESK_STAFF)
+def registration_page(principal: User) -> Response:
+    return _desk()
+
+
+@route(bp, "/console/registration", methods=["POST"], allow=DESK_STAFF)
+def register_racer(principal: User) -> Response:
+    form = submitted(bp.current_request, *_FIELDS)
+    try:
+        registered = services.user_service().register_racer(StaffRegistrationForm.model_validate(form))
+    except SHOWN_ON_FORM as exc:
+        return _desk(exc, form)
+    # The next racer at an event usually comes from the same country: keep it, clear the rest.
+    return _desk(values={"country_code": registered.country_code}, registered=registered)
+
+
+def _desk(exc: Exception | None = None, values: dict[str, str] | None = None,
+          registered: RegisteredUser | None = None) -> Response:
+    context = dict(values={name: (values or {}).get(name, "") for name in _FIELDS}, countries=COUNTRY_CHOICES,
+                   errors=field_errors(exc, "username") if exc else {}, registered=registered,
+                   status=error_status(exc) if exc else (201 if registered else 200),
+                   # The temporary password must not stay in any cache.
+                   headers={"Cache-Control": "no-store"})
+    if is_htmx(bp.current_request):
+        return render.fragment("console/registration_desk", **context)
+    return render.page("console/registration", **context)

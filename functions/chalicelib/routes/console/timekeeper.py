@@ -1,0 +1,87 @@
+"""Operator console: the timekeeper screen. The race is the track's live race on the server (`RaceService`), so a
+reload or a second tablet shows the same race; the screen polls its state fragment about once a second."""
+from __future__ import annotations
+
+import re
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.races import CreateRaceInput
+from chalicelib.views.timekeeper_desk import ScreenCommand, TimekeeperDesk, TimekeeperScreen
+from chalicelib.routes.console.common import checkbox, form, optional, render_or_errors
+from chalicelib import services
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+TIMEKEEPERS = {ADMIN, OPERATOR}
+_PREFIX = re.compile(r"^[A-Za-z0-9_.@+-]{0,64}$")
+
+
+class RacerSearch(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    prefix: str = Field(default="", pattern=_PREFIX.pattern)
+
+
+class ProfileColours:
+    def __init__(self) -> None:
+        self._profiles = services.profile_service()
+
+    def highlight_colour(self, sub: str) -> str | None:
+        public = self._profiles.public_by_sub(sub)
+        return public.highlight_colour if public else None
+
+
+def desk() -> TimekeeperDesk:
+    # The race service's clock, looked up per call, so the screen and the race agree on "now".
+    return TimekeeperDesk(services.race_service(), services.race_store(), services.device_service(), ProfileColours(),
+                          lambda: services.now_ms())
+
+
+@route(bp, "/console/timekeeper", allow=TIMEKEEPERS)
+def choose_track_page(principal: User) -> Response:
+    return render.page("console/timekeeper_pick", events=services.event_service().list_events())
+
+
+@route(bp, "/console/timekeeper/racers", allow=TIMEKEEPERS, query=RacerSearch)
+def racer_options(principal: User, query: RacerSearch) -> Response:
+    users = services.user_service().list_users(query.prefix or None, 20).users
+    return render.fragment("console/tk_racer_options", usernames=[u.username for u in users])
+
+
+@route(bp, "/console/timekeeper/{event_id}/{track_id}", allow=TIMEKEEPERS)
+def timekeeper_page(principal: User, event_id: str, track_id: str) -> Response:
+    return render.page("console/timekeeper", screen=desk().screen(event_id, track_id), errors={}, setup={})
+
+
+@route(bp, "/console/timekeeper/{event_id}/{track_id}/state", allow=TIMEKEEPERS)
+def race_state(principal: User, event_id: str, track_id: str) -> Response:
+    return _state(desk().screen(event_id, track_id))
+
+
+@route(bp, "/console/timekeeper/{event_id}/{track_id}/races", methods=["POST"], allow=TIMEKEEPERS)
+def start_race(principal: User, event_id: str, track_id: str) -> Response:
+    fields = form(bp.current_request)
+    data = {"track_id": track_id, "racer_username": fields.get("racer_username", "").strip(),
+            "car": optional(fields.get("car")), "raced_by_proxy": checkbox(fields, "raced_by_proxy"),
+            "override_max_runs": checkbox(fields, "override_max_runs")}
+    return render_or_errors(
+        lambda: _state(desk().start_race(principal, event_id, CreateRaceInput.model_validate(data))),
+        lambda errors, status: _state(desk().screen(event_id, track_id), errors, fields, status),
+        rename=lambda name: "racer_username" if name == "username" else name, missing_field="racer_username")
+
+
+@route(bp, "/console/timekeeper/{event_id}/{track_id}/commands", methods=["POST"], allow=TIMEKEEPERS)
+def press_button(principal: User, event_id: str, track_id: str) -> Response:
+    fields = form(bp.current_request)
+    return render_or_errors(
+        lambda: _state(desk().press(principal, event_id, track_id, ScreenCommand.model_validate(fields))),
+        lambda errors, status: _state(desk().screen(event_id, track_id), errors, {}, status))
+
+
+def _state(screen: TimekeeperScreen, errors: dict[str, str] | None = None, setup: dict[str, str] | None = None,
+           status: int = 200) -> Response:
+    return render.fragment("console/tk_state", status=status, screen=screen, errors=errors or {}, setup=setup or {})

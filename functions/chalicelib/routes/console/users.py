@@ -1,0 +1,88 @@
+"""User administration (HTML, admins only): search as you type, change a user's role, disable and enable.
+Same service as the JSON routes under /api/users; an admin cannot change or disable themselves (the service says
+so, next to the row)."""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+
+from chalicelib.auth.access import ADMIN, route
+from chalicelib.auth.principals import USER_ROLES, User
+from chalicelib.domain.users import DirectoryUser, RoleChange
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
+from chalicelib import services
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+ROLE_CHOICES = sorted(role.value for role in USER_ROLES)
+
+
+@route(bp, "/console/users", allow={ADMIN})
+def users_page(principal: User) -> Response:
+    query = _query()
+    try:
+        rows = _rows(query)
+    except SHOWN_ON_FORM as exc:
+        return render.page("console/users", status=error_status(exc), query=query, rows=[],
+                           errors=_search_error(exc), roles=ROLE_CHOICES)
+    return render.page("console/users", query=query, rows=rows, errors={}, roles=ROLE_CHOICES)
+
+
+@route(bp, "/console/users/rows", allow={ADMIN})
+def user_rows(principal: User) -> Response:
+    try:
+        return render.fragment("console/user_rows", rows=_rows(_query()), roles=ROLE_CHOICES, errors={})
+    except SHOWN_ON_FORM as exc:
+        return render.fragment("console/user_rows", status=error_status(exc), rows=[], roles=ROLE_CHOICES,
+                               errors=_search_error(exc))
+
+
+@route(bp, "/console/users/{username}/role", methods=["POST"], allow={ADMIN})
+def change_role(principal: User, username: str) -> Response:
+    return _act(username, lambda: services.user_service().change_role(
+        principal, username, RoleChange.model_validate(submitted(bp.current_request, "role"))))
+
+
+@route(bp, "/console/users/{username}/disable", methods=["POST"], allow={ADMIN})
+def disable_user(principal: User, username: str) -> Response:
+    return _act(username, lambda: services.user_service().set_enabled(principal, username, False))
+
+
+@route(bp, "/console/users/{username}/enable", methods=["POST"], allow={ADMIN})
+def enable_user(principal: User, username: str) -> Response:
+    return _act(username, lambda: services.user_service().set_enabled(principal, username, True))
+
+
+def _act(username: str, action) -> Response:
+    """Run the service call; answer with the user's refreshed row (and the refusal, if any, in the row)."""
+    try:
+        action()
+    except SHOWN_ON_FORM as exc:
+        return render.fragment("console/user_row", status=error_status(exc), row=_row(username),
+                               roles=ROLE_CHOICES, row_error=field_errors(exc, "role").popitem()[1])
+    return render.fragment("console/user_row", row=_row(username), roles=ROLE_CHOICES, row_error="")
+
+
+def _search_error(exc: Exception) -> dict[str, str]:
+    # The service names its `prefix` parameter; on this page that is the search box `q`.
+    return {"q": " ".join(field_errors(exc, "q").values())}
+
+
+def _query() -> str:
+    return ((bp.current_request.query_params or {}).get("q") or "").strip()[:128]
+
+
+def _rows(prefix: str) -> list[dict]:
+    page = services.user_service().list_users(prefix or None)
+    directory = services.user_directory()
+    return [_with_groups(user, directory.groups_of(user.username)) for user in page.users]
+
+
+def _row(username: str) -> dict:
+    directory = services.user_directory()
+    return _with_groups(directory.get_user(username), directory.groups_of(username))
+
+
+def _with_groups(user: DirectoryUser, groups: list[str]) -> dict:
+    role = next((g for g in groups if g in ROLE_CHOICES), "")
+    return {"user": user, "groups": groups, "role": role}

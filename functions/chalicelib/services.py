@@ -1,0 +1,228 @@
+"""The composition root: the one place that builds domain services from storage adapters, settings and the clock.
+
+Routes, auth and the CLI ask here for what they need (`services.race_service()`), so no route module imports another
+to borrow its wiring. Everything is built per call: settings are read lazily (Chalice sets them only while a handler
+runs) and boto3 clients are built once, on first use (`storage/clients.py`), so building a service costs a few object
+allocations and nothing at import.
+
+Tests replace the clock with `monkeypatch.setattr(services, "now_ms", ...)`: every builder reads `now_ms` at call time.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from chalicelib.auth.revocation import REVOKED
+from chalicelib.domain.activation import ActivationService
+from chalicelib.domain.assignments import AssignmentService
+from chalicelib.domain.devices import DeviceService
+from chalicelib.domain.errors import ServiceUnavailable
+from chalicelib.domain.events import EventService
+from chalicelib.domain.fleets import FleetService
+from chalicelib.domain.leaderboards import LeaderboardPublisher
+from chalicelib.domain.league import LeagueService
+from chalicelib.domain.model_conversion import ConsoleConverter
+from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
+from chalicelib.domain.model_scrutiny import ScrutineerService
+from chalicelib.domain.passwords import PasswordService
+from chalicelib.domain.profiles import Profile, ProfileService, ProfilesForBoards
+from chalicelib.domain.racer_models import ModelService
+from chalicelib.domain.races import RaceService
+from chalicelib.domain.timing import TimingService
+from chalicelib.domain.users import ModelsEraser, OwnedDataEraser, UserService
+from chalicelib.settings import Settings, get_settings
+from chalicelib.storage import clients, health, race_scan
+from chalicelib.storage.assignments import DynamoAssignmentStore, FleetCarDirectory
+from chalicelib.storage.audit import DynamoAuditLog
+from chalicelib.storage.cognito import CognitoIdentityProvider
+from chalicelib.storage.devices import DynamoDeviceStore
+from chalicelib.storage.evaluations import DynamoEvaluationStore
+from chalicelib.storage.events import DynamoEventStore, DynamoLiveRaceProbe
+from chalicelib.storage.fleets import DynamoFleetStore
+from chalicelib.storage.leaderboards import DynamoBoardStore
+from chalicelib.storage.league import DynamoLeagueStore
+from chalicelib.storage.passwords import CognitoPasswordChanger
+from chalicelib.storage.profiles import DynamoProfileStore
+from chalicelib.storage.model_files import S3ModelFiles
+from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
+from chalicelib.storage.races import DynamoRaceStore
+from chalicelib.storage.sessions import DynamoSessionStore
+from chalicelib.storage.users import CognitoUserDirectory
+from drem_leaderboard.models import Race
+
+
+def now_ms() -> int:
+    """The app's clock: milliseconds since the epoch."""
+    return time.time_ns() // 1_000_000
+
+
+def probe_storage() -> str:
+    """'ok', 'missing' or 'unreachable': can the app reach its storage (what /healthz checks)."""
+    return health.probe_table(clients.dynamodb(), get_settings().table("events"))
+
+
+# --- accounts and sessions ------------------------------------------------------------------------------------------
+
+def _require_user_pool(settings: Settings, what: str) -> None:
+    if not settings.user_pool_id or not settings.user_pool_client_id:
+        raise ServiceUnavailable(f"{what} not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
+
+
+def identity_provider(settings: Settings | None = None) -> CognitoIdentityProvider:
+    settings = settings or get_settings()
+    _require_user_pool(settings, "Sign-in is")
+    return CognitoIdentityProvider(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
+
+
+def user_directory(settings: Settings | None = None) -> CognitoUserDirectory:
+    settings = settings or get_settings()
+    _require_user_pool(settings, "Accounts are")
+    return CognitoUserDirectory(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
+
+
+def session_store() -> DynamoSessionStore:
+    return DynamoSessionStore(clients.dynamodb(), get_settings().table("sessions"))
+
+
+def password_service() -> PasswordService:
+    return PasswordService(CognitoPasswordChanger(clients.cognito()))
+
+
+class RevokingSessions:
+    """UserService's SessionEnder: marks the user's tokens revoked (chalicelib.auth.revocation)."""
+
+    def ended(self, sub: str) -> None:
+        REVOKED.ended(session_store(), sub)
+
+    def reopened(self, sub: str) -> None:
+        REVOKED.reopened(session_store(), sub)
+
+    def roles_changed(self, sub: str, groups: frozenset[str]) -> None:
+        REVOKED.roles_changed(session_store(), sub, groups)
+
+
+def owned_data_erasers() -> tuple[OwnedDataEraser, ...]:
+    """What self-delete must clear besides the profile: the user's models."""
+    return (ModelsEraser(model_service()),)
+
+
+def user_service() -> UserService:
+    return UserService(user_directory(), profile_service(), owned_data_erasers(),
+                       confirm_sign_ups=get_settings().local_identity, sessions=RevokingSessions())
+
+
+def profile_store() -> DynamoProfileStore:
+    return DynamoProfileStore(clients.dynamodb(), get_settings().table("profiles"))
+
+
+def profile_service() -> ProfileService:
+    """Profiles with the account directory behind them (for changes that touch the account)."""
+    return ProfileService(profile_store(), user_directory())
+
+
+def public_profiles() -> ProfileService:
+    """Profiles for reading public views only: no account directory needed (boards, results)."""
+    return ProfileService(profile_store())
+
+
+# --- events, fleets and devices -------------------------------------------------------------------------------------
+
+def event_store() -> DynamoEventStore:
+    return DynamoEventStore(clients.dynamodb(), get_settings().table("events"))
+
+
+def event_service() -> EventService:
+    settings, dynamodb = get_settings(), clients.dynamodb()
+    return EventService(event_store(), DynamoLiveRaceProbe(dynamodb, settings.table("races")),
+                        DynamoFleetStore(dynamodb, settings.table("fleet")), now_ms)
+
+
+def device_store() -> DynamoDeviceStore:
+    return DynamoDeviceStore(clients.dynamodb(), get_settings().table("fleet"))
+
+
+def fleet_store() -> DynamoFleetStore:
+    return DynamoFleetStore(clients.dynamodb(), get_settings().table("fleet"))
+
+
+def fleet_service() -> FleetService:
+    return FleetService(fleet_store(), device_store(), now_ms)
+
+
+def device_service() -> DeviceService:
+    return DeviceService(device_store(), fleet_store(), clock_ms=now_ms)
+
+
+def activation_service() -> ActivationService:
+    return ActivationService(device_store(), fleet_store(), clock_ms=now_ms)
+
+
+# --- races, boards and timing ---------------------------------------------------------------------------------------
+
+def race_store() -> DynamoRaceStore:
+    return DynamoRaceStore(clients.dynamodb(), get_settings().table("races"))
+
+
+def publisher() -> LeaderboardPublisher:
+    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms)
+
+
+def audit_log() -> DynamoAuditLog:
+    return DynamoAuditLog(clients.dynamodb(), get_settings().table("races"))
+
+
+def race_service() -> RaceService:
+    return RaceService(race_store(), event_store(), user_directory(), ProfilesForBoards(public_profiles()),
+                       publisher(), now_ms, audit=audit_log())
+
+
+def shown_on_boards(profile: Profile) -> Profile:
+    """Board rows carry the racer's colour and country as they were when a race was published: refresh them so a
+    profile change reaches every leaderboard and overlay the racer is on."""
+    race_service().refresh_racer_everywhere(profile.sub)
+    return profile
+
+
+def submitted_races_by_event() -> dict[str, list[Race]]:
+    """Every submitted race, grouped by event (the /stats page reads them all)."""
+    return race_scan.submitted_races_by_event(clients.dynamodb(), get_settings().table("races"))
+
+
+def timing_service() -> TimingService:
+    return TimingService(race_service(), race_store(), device_store(), now_ms)
+
+
+# --- models, cars and the league ------------------------------------------------------------------------------------
+
+def model_service(settings: Settings | None = None, **options: Any) -> ModelService:
+    """The model service over the configured table and bucket (clients built lazily, on first use)."""
+    settings = settings or get_settings()
+    options.setdefault("converter", ConsoleConverter())
+    return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
+                        S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)
+
+
+def registry_service(settings: Settings | None = None) -> RegistryService:
+    settings = settings or get_settings()
+    models = model_service(settings)
+    return RegistryService(models, DynamoEvaluationStore(clients.dynamodb(), settings.table("models")),
+                           lineage_from_archive(models, models.max_upload_bytes))
+
+
+def scrutineer_service(settings: Settings | None = None) -> ScrutineerService:
+    settings = settings or get_settings()
+    return ScrutineerService(model_service(settings),
+                             EventTrackTypes(DynamoEventStore(clients.dynamodb(), settings.table("events"))))
+
+
+def assignment_service(settings: Settings | None = None) -> AssignmentService:
+    settings = settings or get_settings()
+    fleet_table, dynamodb = settings.table("fleet"), clients.dynamodb()
+    directory = FleetCarDirectory(DynamoDeviceStore(dynamodb, fleet_table),
+                                  DynamoEventStore(dynamodb, settings.table("events")))
+    return AssignmentService(DynamoAssignmentStore(dynamodb, fleet_table), model_service(settings), directory)
+
+
+def league_service(settings: Settings | None = None) -> LeagueService:
+    settings = settings or get_settings()
+    return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))

@@ -1,0 +1,93 @@
+"""`drem import DIR [--event-id NEW]`: load a `drem export` folder into this stack.
+
+The whole folder is checked first (checksums, format, every item); the target must not have the event yet. Then
+accounts are created (temporary passwords printed once, or taken from --password-file) or matched by username,
+every old sub is rewritten to the new one, and the items and model archives are written. Every item and archive is
+re-validated first (a tampered export is refused, naming the file), the boards are recomputed from the races, and
+created accounts are racers unless --grant-roles applies the roles the export lists (reported either way). The
+report (sub mapping, roles, what was written and kept) goes next to the folder; it never holds passwords.
+"""
+from __future__ import annotations
+
+import argparse
+import getpass
+import json
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from drem_local.commands.export import add_location_arguments, open_stack
+
+HELP = "import a folder written by `drem export` (optionally under another event id)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="DIR", type=Path, help="the export folder")
+    parser.add_argument("--event-id", default=None, help="import under this event id instead of the exported one")
+    parser.add_argument("--password-file", type=Path, default=None,
+                        help="temporary passwords for the accounts to create: JSON {\"user\": \"pw\"} or lines "
+                             "'user pw' (accounts not listed get a generated one, printed once)")
+    parser.add_argument("--grant-roles", action="store_true",
+                        help="give created accounts the staff roles (admin, operator, ...) the export lists; without "
+                             "it they are racers and the skipped roles are reported")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="where to write the import report (default: next to DIR)")
+    add_location_arguments(parser)
+
+
+def record_import(target: Any, result: Any) -> None:
+    """The import itself goes into the event's audit trail (who ran it, from which event, what it wrote)."""
+    from chalicelib.domain.audit import AuditEntry
+    from chalicelib.storage.audit import audit_item
+
+    entry = AuditEntry(event_id=result.event_id, at_ms=time.time_ns() // 1_000_000,
+                       by=f"drem import ({getpass.getuser()})", action="import",
+                       after={"source_event_id": result.source_event_id, "written": result.written})
+    target.put_new_item("races", audit_item(entry))
+
+
+def run(args: argparse.Namespace) -> int:
+    from chalicelib.domain.errors import DremError
+    from chalicelib.formats.event_transfer import (PartialImport, parse_password_file, plan_import, read_export,
+                                                  run_import)
+
+    try:
+        passwords = parse_password_file(args.password_file.read_text()) if args.password_file else {}
+        bundle = read_export(args.folder)
+        target = open_stack(args)
+        plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,
+                           grant_roles=args.grant_roles)
+        result = run_import(plan, target)
+        record_import(target, result)
+    except PartialImport as exc:
+        print(f"drem import: {exc.message}", file=sys.stderr)
+        return 1
+    except (DremError, OSError, ValueError) as exc:
+        print(f"drem import: {getattr(exc, 'message', exc)}", file=sys.stderr)
+        return 1
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    report_path = args.report or args.folder.resolve().parent / f"{args.folder.resolve().name}.import-{stamp}.json"
+    report = {**result.report(), "imported_at": stamp, "folder": str(args.folder.resolve())}
+    report_path.write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
+    written = ", ".join(f"{n} {table}" for table, n in result.written.items())
+    print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
+          f"{result.archives_written} model archives.")
+    for line in result.kept:
+        print(f"  kept existing: {line}")
+    for username, password in sorted(result.temporary_passwords.items()):
+        print(f"  account {username}: temporary password {password}  (must be changed at first sign-in)")
+    for account in result.accounts:
+        if account["action"] != "created":
+            continue
+        granted = ", ".join(account["roles_granted"]) or "none"
+        skipped = f"; NOT granted: {', '.join(account['roles_skipped'])} (use --grant-roles)" \
+            if account["roles_skipped"] else ""
+        print(f"  account {account['username']}: roles granted: {granted}{skipped}")
+    matched = [a["username"] for a in result.accounts if a["action"] == "matched existing"]
+    if matched:
+        print(f"  matched existing accounts (their passwords and roles unchanged): {', '.join(matched)}")
+    print(f"Report (sub mapping, what was written; no passwords): {report_path}")
+    print("Cars and timers are not carried: activate them on this stack into the imported fleets.")
+    return 0
