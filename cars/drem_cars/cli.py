@@ -66,12 +66,13 @@ def _activate(args: argparse.Namespace) -> int:
     from drem_cars.client import DeviceApiError, activate
     from drem_cars.credentials import CredentialStore
 
+    store = CredentialStore(args.config_dir)
     try:
-        credential = activate(args.api, args.code, args.hostname, args.kind)
+        credential = activate(args.api, args.code, args.hostname, args.kind,
+                              attempt_id=store.attempt_id_for(args.code))
     except DeviceApiError as exc:
         print(f"activation failed: {exc}", file=sys.stderr)
         return 1
-    store = CredentialStore(args.config_dir)
     store.save(credential)
     print(f"activated {credential.device_kind} {credential.hostname} as {credential.device_id} "
           f"(fleet {credential.fleet_id}); credential saved to {store.path} (mode 0600)")

@@ -7,6 +7,7 @@ other 4xx: this request will never succeed as it is).
 from __future__ import annotations
 
 import secrets
+import time
 from dataclasses import replace
 from typing import Any
 
@@ -51,16 +52,34 @@ def _error_for(reply: requests.Response, what: str) -> DeviceApiError:
 
 
 def activate(api: str, code: str, hostname: str, device_kind: str = "car", *, timeout_s: float = 15.0,
+             attempt_id: str | None = None, retry_delays_s: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0),
              ) -> StoredCredential:
     """Exchange a one-time activation code for a device credential.
+
+    Every try of one activation sends the same `attempt_id`, so when an answer is lost (server restarted, WiFi
+    dropped) a retry resumes the activation the server already stored instead of finding the code used. Unreachable
+    and 5xx answers are retried after `retry_delays_s`; a refusal is not.
 
     A random double-submit CSRF token goes along (cookie + header): harmless where the route is CSRF-exempt, and
     enough where it is not — a device holds no session a forged request could ride on."""
     api = api.rstrip("/")
+    attempt_id = attempt_id or secrets.token_urlsafe(24)
+    for delay_s in (*retry_delays_s, None):
+        try:
+            return _activate_once(api, code, hostname, device_kind, attempt_id, timeout_s)
+        except Unreachable:
+            if delay_s is None:
+                raise
+            time.sleep(delay_s)  # backoff between network retries (not a wait in a test)
+    raise AssertionError("unreachable")
+
+
+def _activate_once(api: str, code: str, hostname: str, device_kind: str, attempt_id: str,
+                   timeout_s: float) -> StoredCredential:
     token = secrets.token_urlsafe(24)
+    body = {"code": code, "hostname": hostname, "device_kind": device_kind, "attempt_id": attempt_id}
     try:
-        reply = requests.post(f"{api}/api/devices/activate", timeout=timeout_s,
-                              json={"code": code, "hostname": hostname, "device_kind": device_kind},
+        reply = requests.post(f"{api}/api/devices/activate", timeout=timeout_s, json=body,
                               headers={CSRF_HEADER: token, "Accept": "application/json"},
                               cookies={CSRF_COOKIE: token})
     except requests.RequestException as exc:

@@ -5,13 +5,18 @@ and the `Authorization: Device <credential>` secret — nothing else is secret o
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import secrets
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 DEFAULT_CONFIG_DIR = Path("~/.config/drem-car")
 CREDENTIAL_FILE = "credential.json"
+# The attempt id of an activation in progress, kept until its credential is saved: a rerun of `drem car activate`
+# with the same code after a lost answer (or a crash of this process) resumes it (chalicelib/domain/activation.py).
+ATTEMPT_FILE = "activation-attempt.json"
 
 
 class NotActivated(RuntimeError):
@@ -38,15 +43,33 @@ class CredentialStore:
         self.path = self.directory / CREDENTIAL_FILE
 
     def save(self, credential: StoredCredential) -> None:
+        self._write(self.path, asdict(credential))
+        (self.directory / ATTEMPT_FILE).unlink(missing_ok=True)
+
+    def attempt_id_for(self, code: str) -> str:
+        """The attempt id for activating with `code`: the one already drawn for it (a retry), else a new one, stored
+        before it is ever sent."""
+        path, code_hash = self.directory / ATTEMPT_FILE, _code_hash(code)
+        try:
+            stored = json.loads(path.read_text())
+            if stored.get("code_sha256") == code_hash and isinstance(stored.get("attempt_id"), str):
+                return str(stored["attempt_id"])
+        except (FileNotFoundError, ValueError, AttributeError):
+            pass
+        attempt_id = secrets.token_urlsafe(24)
+        self._write(path, {"code_sha256": code_hash, "attempt_id": attempt_id})
+        return attempt_id
+
+    def _write(self, path: Path, data: dict[str, object]) -> None:
         self.directory.mkdir(parents=True, exist_ok=True, mode=0o700)
-        temporary = self.path.with_suffix(".tmp")
+        temporary = path.with_suffix(".tmp")
         # Created 0600 from the first byte: the secret is never readable by others, not even briefly.
         descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(descriptor, "w") as handle:
-            json.dump(asdict(credential), handle)
+            json.dump(data, handle)
             handle.flush()
             os.fsync(handle.fileno())
-        os.replace(temporary, self.path)
+        os.replace(temporary, path)
 
     def load(self) -> StoredCredential:
         try:
@@ -58,3 +81,8 @@ class CredentialStore:
 
     def forget(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def _code_hash(code: str) -> str:
+    # Codes are typed by people: the server ignores case, spaces and dashes, and so does the match here.
+    return hashlib.sha256("".join(ch for ch in code.upper() if ch.isalnum()).encode()).hexdigest()

@@ -24,8 +24,8 @@ def write(tmp_path: Path, data: bytes) -> Path:
     (tar_gz([("model.onnx", b"x")], symlinks={"model_metadata.json": "/etc/passwd"}), "not a regular file"),
     (tar_gz([("/abs/model.onnx", b"x")]), "outside the model folder"),
     (tar_gz([("a.onnx", b"1"), ("a.onnx", b"2")]), "names a file twice"),
-    (gzip.compress(b"not a tar at all" * 50), "not a readable"),
-])
+    (gzip.compress(b"not a tar at all" * 50, mtime=0), "not a readable"),
+], ids=["traversal", "symlink", "absolute", "duplicate", "not-a-tar"])
 def test_hostile_members_are_refused_and_nothing_lands_outside(tmp_path: Path, data: bytes, reason: str) -> None:
     destination = tmp_path / "out"
     destination.mkdir()

@@ -90,8 +90,8 @@ def test_code_request_is_validated(api: Api) -> None:
 def test_redeeming_is_conditional_so_a_race_for_one_code_registers_one_device(api: Api) -> None:
     """Two devices that both read the code before either redeemed it: only the first transaction goes through."""
     from chalicelib.domain.activation import ActivationExchange, normalise_code, sha256_hex
-    from chalicelib.domain.devices import DeviceRecord
     from chalicelib import services
+    from chalicelib.domain.devices import DeviceRecord, StatusEntry
 
     code = api.activation_code(api.fleet(), "car-01")
     store, _ = (services.device_store(), services.fleet_store())
@@ -103,10 +103,58 @@ def test_redeeming_is_conditional_so_a_race_for_one_code_registers_one_device(ap
         return DeviceRecord(device_id=device_id, kind="car", hostname="car-01", secret_hash="0" * 64,
                             registered_at_ms=services.now_ms())
 
-    assert store.redeem(code_hash, exchange, services.now_ms(), record("car-first")) is True
-    assert store.redeem(code_hash, exchange, services.now_ms(), record("car-second")) is False
+    def redeem(device: DeviceRecord) -> bool:
+        return store.redeem(code_hash, exchange, services.now_ms(), device, StatusEntry.for_device(device), None)
+
+    assert redeem(record("car-first")) is True
+    assert redeem(record("car-second")) is False
     assert store.get_device("car-first") is not None
     assert store.get_device("car-second") is None
+    # The device and its status-board line were written in the same transaction: both or neither.
+    assert set(store.status_board()) == {"car-first"}
+
+
+def activate_attempt(api: Api, code: str, attempt_id: str | None, hostname: str = "car-01") -> Any:
+    body = {"code": code, "hostname": hostname, "device_kind": "car"}
+    return api.post("/api/devices/activate", body if attempt_id is None else {**body, "attempt_id": attempt_id},
+                    as_=None)
+
+
+ATTEMPT = "attempt-0123456789abcdef"
+
+
+def test_an_activation_whose_answer_was_lost_is_resumed_by_the_same_attempt(api: Api) -> None:
+    """The app stored the activation, then the answer never reached the car (crash, WiFi): the car's retry with the
+    same attempt id gets a working credential for the same device, and the lost secret stops working."""
+    code = api.activation_code(api.fleet(), "car-01")
+    lost = activate_attempt(api, code, ATTEMPT)
+    assert lost.status_code == 201  # ... but imagine the car never read this answer
+
+    retry = activate_attempt(api, code, ATTEMPT)
+    assert retry.status_code == 201
+    assert retry.data["device_id"] == lost.data["device_id"]
+    assert api.get("/api/devices/self", device=retry.data["credential"]).status_code == 200
+    assert api.get("/api/devices/self", device=lost.data["credential"]).status_code == 401
+    assert [d["device_id"] for d in api.get("/api/devices").data["devices"]] == [lost.data["device_id"]]
+
+
+def test_only_the_same_attempt_resumes_and_only_until_the_device_is_heard_from(api: Api) -> None:
+    code = api.activation_code(api.fleet(), "car-01")
+    first = activate_attempt(api, code, ATTEMPT)
+    assert first.status_code == 201
+
+    for other in (None, "someone-else-0123456789"):
+        refused = activate_attempt(api, code, other)
+        assert (refused.status_code, refused.data["error"]["field"]) == (400, "code")
+        assert "already been used" in refused.data["error"]["message"]
+    # Still the first credential: the refused tries changed nothing.
+    credential = first.data["credential"]
+    assert api.get("/api/devices/self", device=credential).status_code == 200
+
+    assert api.post("/api/devices/self/heartbeat", {}, device=credential).status_code == 200
+    late = activate_attempt(api, code, ATTEMPT)
+    assert late.status_code == 400 and "already been used" in late.data["error"]["message"]
+    assert api.get("/api/devices/self", device=credential).status_code == 200
 
 
 def test_rotation_invalidates_the_old_secret_at_once(api: Api) -> None:

@@ -3,8 +3,14 @@
 1. An operator asks for a one-time activation code, bound to a fleet, a hostname and a device kind (car|timer). Only
    the code's SHA-256 is stored; the code itself is shown once. It expires (default 1 h).
 2. The device sends the code with its hostname and kind to `POST /api/devices/activate` (the only unauthenticated
-   device endpoint). Redeeming deletes the code and registers the device in one conditional transaction, so a code
-   works exactly once even when two devices race for it.
+   device endpoint). Redeeming marks the code used, registers the device and puts its line on the status board in one
+   conditional transaction, so a code works exactly once even when two devices race for it, and a crash leaves
+   either nothing or all three.
+   The answer can still be lost (the app dies after the commit, the WiFi drops): the device then retries with the
+   same `attempt_id`, a random value it drew for this activation. Until the code expires and while the device has
+   never been heard from, that retry resumes the activation: the same device id with a fresh secret (only hashes are
+   stored, so the first secret cannot be shown again; it was never delivered, so nothing holds it). Anyone else
+   with the code but not the attempt id gets "already used".
 3. The device gets `<device_id>.<secret>` and sends it as `Authorization: Device <device_id>.<secret>`. drem keeps
    only the secret's SHA-256 and compares in constant time. Rotation replaces the hash and deregistration deletes the
    device; both take effect on the next request because every request reads the registry item.
@@ -49,6 +55,9 @@ class ActivationRecord(BaseModel):
     expires_at_ms: int
     created_at_ms: int
     created_by: str
+    # Set when redeemed: the device it registered, and the SHA-256 of the attempt id that redeemed it (if sent).
+    redeemed_device_id: str | None = None
+    redeemed_attempt_hash: str | None = None
 
 
 class IssuedActivationCode(BaseModel):
@@ -68,6 +77,10 @@ class ActivationExchange(BaseModel):
     code: str = Field(min_length=1, max_length=100)
     hostname: str = Field(pattern=HOSTNAME_PATTERN)
     device_kind: DeviceKind
+    attempt_id: str | None = Field(
+        default=None, min_length=16, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
+        description="a random value the device draws once per activation; a retry with it resumes an activation "
+                    "whose answer was lost")
 
     @field_validator("code")
     @classmethod
@@ -88,8 +101,10 @@ class IssuedCredential(BaseModel):
 class ActivationRepository(Protocol):
     def put_activation(self, record: ActivationRecord) -> None: ...
     def get_activation(self, code_hash: str) -> ActivationRecord | None: ...
-    def redeem(self, code_hash: str, exchange: ActivationExchange, now_ms: int, device: DeviceRecord) -> bool: ...
+    def redeem(self, code_hash: str, exchange: ActivationExchange, now_ms: int, device: DeviceRecord,
+               line: StatusEntry, attempt_hash: str | None) -> bool: ...
     def get_device(self, device_id: str) -> DeviceRecord | None: ...
+    def status_board(self) -> dict[str, StatusEntry]: ...
     def replace_secret_hash(self, device_id: str, secret_hash: str) -> bool: ...
     def put_status_entry(self, entry: StatusEntry) -> None: ...
 
@@ -148,13 +163,34 @@ class ActivationService:
         if stored is None:
             raise InvalidInput("This activation code is unknown or has already been used.", field="code")
         _check_binding(stored, exchange, now)
+        if stored.redeemed_device_id is not None:
+            return self._resume(stored, exchange)
         device = DeviceRecord(device_id=f"{exchange.device_kind.value}-{uuid.uuid4().hex[:12]}",
                               kind=exchange.device_kind, hostname=exchange.hostname, fleet_id=stored.fleet_id,
                               secret_hash=sha256_hex(secret), registered_at_ms=now, activated_by=stored.created_by)
+        attempt_hash = sha256_hex(exchange.attempt_id) if exchange.attempt_id else None
         # The check above explains a refusal; this conditional transaction is what makes the code single-use.
-        if not self._store.redeem(code_hash, exchange, now, device):
+        if not self._store.redeem(code_hash, exchange, now, device, StatusEntry.for_device(device), attempt_hash):
             raise InvalidInput("This activation code is unknown or has already been used.", field="code")
-        self._store.put_status_entry(StatusEntry.for_device(device))
+        return IssuedCredential(device_id=device.device_id, device_kind=device.kind, hostname=device.hostname,
+                                fleet_id=device.fleet_id, credential=f"{device.device_id}.{secret}")
+
+    def _resume(self, stored: ActivationRecord, exchange: ActivationExchange) -> IssuedCredential:
+        """A retry of an activation whose answer was lost: a fresh secret for the device it registered."""
+        used = InvalidInput("This activation code has already been used. If this device never got its credential, "
+                            "ask an operator for a new code.", field="code")
+        if (exchange.attempt_id is None or stored.redeemed_attempt_hash is None
+                or not hmac.compare_digest(sha256_hex(exchange.attempt_id), stored.redeemed_attempt_hash)):
+            raise used
+        device_id = stored.redeemed_device_id or ""
+        device, line = self._store.get_device(device_id), self._store.status_board().get(device_id)
+        if device is None or (line is not None and line.last_seen_ms is not None):
+            raise used  # deregistered since, or it has already used its credential: the answer did arrive
+        secret = new_secret()
+        if not self._store.replace_secret_hash(device_id, sha256_hex(secret)):
+            raise used
+        if line is None:
+            self._store.put_status_entry(StatusEntry.for_device(device))
         return IssuedCredential(device_id=device.device_id, device_kind=device.kind, hostname=device.hostname,
                                 fleet_id=device.fleet_id, credential=f"{device.device_id}.{secret}")
 

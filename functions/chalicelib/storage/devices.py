@@ -2,7 +2,7 @@
 
 Keys (docs/data-model.md, table `fleet`):
   device            DEVICE#{deviceId} / META                 registry item with the secret's SHA-256
-  activation code   ACTIVATION#{sha256(code)} / META          deleted when redeemed
+  activation code   ACTIVATION#{sha256(code)} / META          marked redeemed (device id, attempt hash)
   command           DEVICE#{deviceId} / COMMAND#{ms}#{rand}   public id "{ms}-{rand}"
   status board      STATUS / ALL                              map `devices` of deviceId -> status entry
 """
@@ -88,20 +88,33 @@ class DynamoDeviceStore:
             return None
         return ActivationRecord(code_hash=code_hash, fleet_id=item["fleetId"]["S"], hostname=item["hostname"]["S"],
                                 device_kind=item["deviceKind"]["S"], expires_at_ms=int(item["expiresAtMs"]["N"]),
-                                created_at_ms=int(item["createdAtMs"]["N"]), created_by=item["createdBy"]["S"])
+                                created_at_ms=int(item["createdAtMs"]["N"]), created_by=item["createdBy"]["S"],
+                                redeemed_device_id=item.get("redeemedDeviceId", {}).get("S"),
+                                redeemed_attempt_hash=item.get("redeemedAttemptHash", {}).get("S"))
 
-    def redeem(self, code_hash: str, exchange: ActivationExchange, now_ms: int, device: DeviceRecord) -> bool:
-        """Delete the code and register the device atomically; False when the code is gone, expired or mismatched."""
-        delete_code = {"Delete": {
-            "TableName": self._table, "Key": activation_key(code_hash),
-            "ConditionExpression": "attribute_exists(pk) AND expiresAtMs > :now AND deviceKind = :kind "
-                                   "AND hostnameKey = :host",
-            "ExpressionAttributeValues": {":now": {"N": str(now_ms)}, ":kind": {"S": exchange.device_kind.value},
-                                          ":host": {"S": exchange.hostname.lower()}}}}
+    def redeem(self, code_hash: str, exchange: ActivationExchange, now_ms: int, device: DeviceRecord,
+               line: StatusEntry, attempt_hash: str | None) -> bool:
+        """Mark the code redeemed, register the device and put its status line, atomically; False when the code is
+        gone, already redeemed, expired or mismatched. The code item stays (marked) so a retry of the same attempt
+        can resume (domain/activation.py)."""
+        self._ensure_status_item()
+        marks, values = "SET redeemedDeviceId = :d, redeemedAtMs = :now", {
+            ":now": {"N": str(now_ms)}, ":kind": {"S": exchange.device_kind.value},
+            ":host": {"S": exchange.hostname.lower()}, ":d": {"S": device.device_id}}
+        if attempt_hash:
+            marks, values[":a"] = marks + ", redeemedAttemptHash = :a", {"S": attempt_hash}
+        mark_code = {"Update": {
+            "TableName": self._table, "Key": activation_key(code_hash), "UpdateExpression": marks,
+            "ConditionExpression": "attribute_exists(pk) AND attribute_not_exists(redeemedDeviceId) "
+                                   "AND expiresAtMs > :now AND deviceKind = :kind AND hostnameKey = :host",
+            "ExpressionAttributeValues": values}}
         register = {"Put": {"TableName": self._table, "Item": _device_item(device),
                             "ConditionExpression": "attribute_not_exists(pk)"}}
+        board_line = {"Update": {"TableName": self._table, "Key": _STATUS_KEY, "UpdateExpression": "SET devices.#d = :e",
+                                 "ExpressionAttributeNames": {"#d": device.device_id},
+                                 "ExpressionAttributeValues": {":e": _attr(line.model_dump(mode="json"))}}}
         try:
-            self._client.transact_write_items(TransactItems=[delete_code, register])
+            self._client.transact_write_items(TransactItems=[mark_code, register, board_line])
         except ClientError as exc:
             if error_code(exc) == "TransactionCanceledException":
                 return False
