@@ -122,7 +122,8 @@ def test_users_events_fleets_cars_and_devices(live_stack, as_admin, outside: Pat
 def test_models_upload_and_list(as_admin, outside: Path) -> None:
     uploaded = ok(drem("models", "upload", str(SAMPLE_MODEL), cwd=outside, env=as_admin, timeout=180))
     assert "drem-bc-oval" in uploaded
-    assert "drem-bc-oval" in ok(drem("models", "list", cwd=outside, env=as_admin))
+    listed = ok(drem("models", "list", cwd=outside, env=as_admin))
+    assert "drem-bc-oval" in listed and "Ready to race" in listed and "AVAILABLE" not in listed
 
 
 def test_export_then_import_under_a_new_id(live_stack, as_admin, outside: Path, tmp_path: Path) -> None:

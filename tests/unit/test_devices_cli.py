@@ -63,7 +63,10 @@ def test_fleet_event_and_car_commands_end_to_end(cli: Any, api: Api) -> None:
     assert event["combined_board"] is True and event["race_config"]["race_time_min"] == 4
     shown = cli(events, "show", event["event_id"])[1]
     assert "4 min" in shown and "combined leaderboard" in shown and f"fleet {fleet_id}" in shown
-    assert event["event_id"] in cli(events, "list")[1]
+    # People read words, not enum values.
+    assert "AWS Summit" in shown and "ranking: fastest lap" in shown and "AWS_SUMMIT" not in shown
+    listed = cli(events, "list")[1]
+    assert event["event_id"] in listed and "AWS Summit" in listed and "AWS_SUMMIT" not in listed
 
     code, _, err = cli(events, "create", "Bad", "--date", "2026-05-14", "--country", "SE", "--race-time", "11")
     assert code == 1 and "race_config.race_time_min" in err

@@ -7,6 +7,8 @@ import sys
 from typing import Any
 from urllib.parse import quote
 
+from drem_web.labels import label
+
 HELP = "list, create, show or delete events (via the drem API)"
 EVENT_TYPES = ("PRIVATE_WORKSHOP", "PRIVATE_TRACK_RACE", "OFFICIAL_WORKSHOP", "OFFICIAL_TRACK_RACE", "AWS_SUMMIT",
                "TEST_EVENT", "OTHER")
@@ -88,14 +90,14 @@ def describe(action: str, answer: dict[str, Any]) -> str:
     if action == "list":
         if not answer["events"]:
             return "No events yet."
-        return "\n".join(f"{e['event_id']:<14} {e['date']}  {e['country_code']}  {e['event_type']:<20} {e['name']}"
+        return "\n".join(f"{e['event_id']:<14} {e['date']}  {e['country_code']}  {label(e['event_type']):<20} {e['name']}"
                          for e in answer["events"])
     rules = answer["race_config"]
-    lines = [f"{answer['name']} ({answer['event_id']}), {answer['event_type']}, {answer['date']}, "
+    lines = [f"{answer['name']} ({answer['event_id']}), {label(answer['event_type'])}, {answer['date']}, "
              f"{answer['country_code']}" + (f", sponsor {answer['sponsor']}" if answer["sponsor"] else ""),
              f"  race: {rules['race_time_min']} min, resets/lap {_limit(rules['resets_per_lap'])}, "
-             f"ranking {rules['ranking_method']}, runs/racer {_limit(rules['max_runs_per_racer'])}, "
-             f"average of {rules['average_window']}, track {rules['track_type']}"]
+             f"ranking: {label(rules['ranking_method']).lower()}, runs/racer {_limit(rules['max_runs_per_racer'])}, "
+             f"average of {rules['average_window']}, track {label(rules['track_type'])}"]
     for track in answer["tracks"]:
         lines.append(f"  track {track['track_id']}: {track['leaderboard_title'] or '(untitled)'}, "
                      f"fleet {track['fleet_id'] or '-'}")

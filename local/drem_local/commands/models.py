@@ -6,6 +6,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from drem_web.labels import label
+
 # A scrutineering drive is synchronous: up to 3 laps with a per-lap time limit in the simulator.
 SCRUTINEER_TIMEOUT_S = 600.0
 HELP = "list, upload, delete, scrutineer model archives and assign them to cars (via the drem API)"
@@ -62,7 +64,7 @@ def _list(api: Any, args: argparse.Namespace) -> int:
     print(f"{'MODEL ID':<26} {'NAME':<24} {'OWNER':<16} {'STATUS':<12} UPLOADED")
     for model in rows:
         print(f"{model['model_id']:<26} {model['name']:<24} {model['owner_username']:<16} "
-              f"{model['status']:<12} {model['uploaded_at']}")
+              f"{label(model['status']):<14} {model['uploaded_at']}")
         if model.get("reason"):
             print(f"{'':<26} reason: {model['reason']}")
     return 0
@@ -88,7 +90,7 @@ def _upload(api: Any, args: argparse.Namespace) -> int:
         print(f"drem models upload: storage refused the file (HTTP {posted.status_code})", file=sys.stderr)
         return 1
     model = api.post(f"/api/models/{model_id}/complete")["model"]
-    print(f"{model['name']} ({model['model_id']}): {model['status']}")
+    print(f"{model['name']} ({model['model_id']}): {label(model['status'])}")
     if model.get("reason"):
         print(f"reason: {model['reason']}")
     if model.get("scrutiny") == "cannot_scrutineer":
@@ -111,7 +113,7 @@ def _scrutineer(api: Any, args: argparse.Namespace) -> int:
 
 def _delete(api: Any, args: argparse.Namespace) -> int:
     model = api.delete(f"/api/models/{args.model_id}")["model"]
-    print(f"{model['name']} ({model['model_id']}): {model['status']}")
+    print(f"{model['name']} ({model['model_id']}): {label(model['status'])}")
     return 0
 
 
