@@ -110,6 +110,26 @@ def test_language_switch_translates_the_page(desk: Desk, clock: FakeClock) -> No
     assert "lang=de" in live_region_url(german, "board-live")  # the live region keeps the language
 
 
+@pytest.mark.parametrize("lang, now_racing, time_left", [
+    ("es", "En pista", "Tiempo restante"), ("fr", "En piste", "Temps restant"), ("ja", "走行中", "残り時間"),
+    ("sv", "På banan nu", "Tid kvar")])
+def test_the_big_screen_speaks_the_event_s_language(desk: Desk, clock: FakeClock, lang: str, now_racing: str,
+                                                    time_left: str) -> None:
+    eid, _ = racing(desk, clock)
+    page = html_get(desk, f"/leaderboard/{eid}?lang={lang}").body.decode()
+    assert now_racing in page and time_left in page and f'lang="{lang}"' in page
+    assert "Now racing" not in page
+
+
+def test_every_language_translates_every_text() -> None:
+    from drem_web import i18n
+
+    english = set(i18n.CATALOGUE["en"])
+    for lang, texts in i18n.CATALOGUE.items():
+        assert set(texts) == english, f"{lang}: missing {sorted(english - set(texts))}"
+        assert all(text.strip() for text in texts.values()), lang
+
+
 def test_format_and_flag_switches(desk: Desk, clock: FakeClock) -> None:
     eid, _ = racing(desk, clock, "vera", laps=(10_000,))
     hostile_profile(desk, "vera", display="vera", colour="#00ff00", country="SE")

@@ -10,8 +10,10 @@ from urllib.parse import quote, urlencode
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from drem_web.i18n import LANGUAGE_NAMES
+
 _COLOUR = re.compile(r"^#[0-9A-Fa-f]{6}$")
-LANGUAGES = (("en", "English"), ("de", "Deutsch"))
+LANGUAGES = tuple((code, LANGUAGE_NAMES[code]) for code in LANGUAGE_NAMES)
 
 
 class OverlayLinkOptions(BaseModel):
