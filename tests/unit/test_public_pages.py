@@ -218,6 +218,24 @@ def test_overlay_without_chroma_is_transparent_and_shows_lower_third_with_f1_col
     assert re.search(r'lap-red" data-testid="previous-lap">0:09.500<', html)
 
 
+def test_overlay_lower_third_shows_the_racer_s_position_and_gap_to_the_leader(desk: Desk, clock: FakeClock) -> None:
+    eid, rid = racing(desk, clock, "lea", laps=(9_000,))
+    desk.ok(desk.command(eid, rid, "end"))
+    desk.ok(desk.command(eid, rid, "submit"))
+    desk.users.create("vera", ("racer",))
+    vera = desk.ok(desk.create_race(eid, "vera"), 201)["race_id"]
+    desk.ok(desk.command(eid, vera, "start"))
+    clock.advance(10_250)
+    desk.ok(desk.command(eid, vera, "capture_lap"))
+
+    lower = re.search(r'data-testid="lower-third".*?</section>', html_get(desk, f"/overlay/{eid}").body.decode(),
+                      re.S).group(0)
+    assert "vera" in lower
+    assert re.search(r'data-testid="position">P2<', lower) and re.search(r'data-testid="gap-to-leader">\+1\.250<', lower)
+    without_gap = html_get(desk, f"/overlay/{eid}?gapToLeader=false").body.decode()
+    assert 'data-testid="position">P2<' in without_gap and "gap-to-leader" not in without_gap
+
+
 def test_overlay_after_the_race_highlights_the_racer_then_shows_the_top_four(desk: Desk, clock: FakeClock) -> None:
     eid, rid = racing(desk, clock, "vera", laps=(10_000,))
     desk.ok(desk.command(eid, rid, "end"))

@@ -281,6 +281,9 @@ class LowerThirdView(BaseModel):
     best_colour: str
     previous_lap: str
     previous_colour: str
+    # Where the racer stands on the board right now, and how far behind the leader ("" when leading or unranked).
+    position: str = "–"
+    gap_to_leader: str = ""
 
 
 class OverlayView(BaseModel):
@@ -319,7 +322,9 @@ def overlay_view(overlay: OverlaySnapshot, board: BoardSnapshot, race: Race | No
         return OverlayView(phase=phase, show_standings=show_standings, lower_third=LowerThirdView(
             footer=footer, best_colour=figure_colour(overlay.fastest_lap_ms, overlay.fastest_lap_ms, event_best),
             previous_lap=lap_time(previous.time_ms) if previous else "–",
-            previous_colour=lap_colour(previous, overlay.fastest_lap_ms, event_best) if previous else ""))
+            previous_colour=lap_colour(previous, overlay.fastest_lap_ms, event_best) if previous else "",
+            position=f"P{overlay.position}" if overlay.position else "–",
+            gap_to_leader=gap_time(overlay.gap_to_leader_ms)))
     focus = overlay.username if phase == "post_race" else None
     return OverlayView(phase=phase, rows=top_window(rows, focus), show_standings=show_standings)
 
