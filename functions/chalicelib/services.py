@@ -28,10 +28,11 @@ from chalicelib.domain.passwords import PasswordService
 from chalicelib.domain.profiles import Profile, ProfileService, ProfilesForBoards
 from chalicelib.domain.racer_models import ModelService
 from chalicelib.domain.races import RaceService
+from chalicelib.domain.stats import StatsDigests
 from chalicelib.domain.timing import TimingService
 from chalicelib.domain.users import ModelsEraser, OwnedDataEraser, UserService
 from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients, health, race_scan
+from chalicelib.storage import clients, health
 from chalicelib.storage.assignments import DynamoAssignmentStore, FleetCarDirectory
 from chalicelib.storage.audit import DynamoAuditLog
 from chalicelib.storage.cognito import CognitoIdentityProvider
@@ -45,10 +46,10 @@ from chalicelib.storage.passwords import CognitoPasswordChanger
 from chalicelib.storage.profiles import DynamoProfileStore
 from chalicelib.storage.model_files import S3ModelFiles
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
+from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.races import DynamoRaceStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
-from drem_leaderboard.models import Race
 
 
 def now_ms() -> int:
@@ -171,9 +172,13 @@ def audit_log() -> DynamoAuditLog:
     return DynamoAuditLog(clients.dynamodb(), get_settings().table("races"))
 
 
+def stats_digests() -> StatsDigests:
+    return StatsDigests(DynamoStatsDigestStore(clients.dynamodb(), get_settings().table("races")), race_store(), now_ms)
+
+
 def race_service() -> RaceService:
     return RaceService(race_store(), event_store(), user_directory(), ProfilesForBoards(public_profiles()),
-                       publisher(), now_ms, audit=audit_log())
+                       publisher(), now_ms, audit=audit_log(), stats=stats_digests())
 
 
 def shown_on_boards(profile: Profile) -> Profile:
@@ -181,11 +186,6 @@ def shown_on_boards(profile: Profile) -> Profile:
     profile change reaches every leaderboard and overlay the racer is on."""
     race_service().refresh_racer_everywhere(profile.sub)
     return profile
-
-
-def submitted_races_by_event() -> dict[str, list[Race]]:
-    """Every submitted race, grouped by event (the /stats page reads them all)."""
-    return race_scan.submitted_races_by_event(clients.dynamodb(), get_settings().table("races"))
 
 
 def timing_service() -> TimingService:

@@ -178,10 +178,18 @@ def rule_error(exc: RaceRuleError) -> Exception:
     return NotFound(exc.message, field="lap_id") if isinstance(exc, LapNotFoundError) else Conflict(exc.message)
 
 
+class StatsRefresher(Protocol):
+    """Rebuilds an event's statistics digest from its races (domain/stats.py `StatsDigests`)."""
+
+    def refresh(self, event_id: str) -> object: ...
+
+
 class RaceService:
     def __init__(self, races: RaceRepository, events: EventSource, racers: RacerDirectory, profiles: ProfileSource,
-                 boards: LeaderboardPublisher, clock_ms: Callable[[], int], audit: AuditLog | None = None) -> None:
+                 boards: LeaderboardPublisher, clock_ms: Callable[[], int], audit: AuditLog | None = None,
+                 stats: StatsRefresher | None = None) -> None:
         self._races = races
+        self._stats = stats
         self._audit = AuditTrail(audit, clock_ms)
         self._events = events
         self._racers = racers
@@ -325,6 +333,7 @@ class RaceService:
                            before={k: listing[k] for k in ("track_id", "status", "laps", "valid_laps", "fastest_lap_ms")})
         try:
             self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
+            self._refresh_stats(event_id)
             self._finish(PublishIntent.of(record.race, deleted=True))
         except DremError as exc:
             _board_behind(record.race, exc)
@@ -342,6 +351,7 @@ class RaceService:
                 rows_by_track.setdefault(track_id, []).append(row)
         boards = self._boards.rebuild(event_id, rows_by_track, event.race_config.ranking_method,
                                      [t.track_id or "" for t in event.tracks])
+        self._refresh_stats(event_id)
         self._audit.record(event_id, by, "recompute", before={"boards": before}, after={"boards": {
             track: standings(board.model_dump(mode="json")) for track, board in boards.items()}})
         return {"event_id": event_id, "boards": {track: {"version": b.version, "entries": len(b.entries)}
@@ -371,6 +381,8 @@ class RaceService:
             board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race)
             name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
             self._boards.publish_overlay(race, now_ms, board, name)
+            if race.status in TERMINAL_STATUSES:  # only submitted races count: no stats work per lap of a live race
+                self._refresh_stats(event.event_id)
             self._finish(PublishIntent.of(race))
             self.complete_pending_publishes(STALE_INTENT_MS)
         except DremError as exc:
@@ -394,9 +406,15 @@ class RaceService:
                 race = record.race
                 name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
                 self._boards.publish_overlay(race, now, board, name)
+            self._refresh_stats(intent.event_id)
             self._races.complete_publish(intent)
             finished += 1
         return finished
+
+    def _refresh_stats(self, event_id: str) -> None:
+        # Before the intent is dropped: a crash here leaves the intent, whose completion refreshes the digest too.
+        if self._stats is not None:
+            self._stats.refresh(event_id)
 
     def _finish(self, intent: PublishIntent) -> None:
         self._races.complete_publish(intent)

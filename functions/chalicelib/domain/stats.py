@@ -1,19 +1,28 @@
 """The statistics page (`/stats`): events, racers and laps over time, per country on a world map, and the fastest laps
 per track type, over every event the viewer may see, with filters (track direction, country, dates).
 
-Pure: it takes the events and their races and returns what the page prints. Rules follow DREM's statistics engine:
-test events are left out, only submitted races count, and a lap under 5 s counts as invalid (a timing artefact).
-Events the organiser keeps staff-only (`stats_visibility = "staff"`) count only for signed-in staff.
+Rules follow DREM's statistics engine: test events are left out, only submitted races count, and a lap under 5 s
+counts as invalid (a timing artefact). Events the organiser keeps staff-only (`stats_visibility = "staff"`) count
+only for signed-in staff.
+
+The page never reads races. Each event has a stored digest (`EventDigest`: per submitted race its racer, track,
+lap counts and best valid lap — all the page needs), rebuilt by the race service whenever one of the event's races
+stops being live, is edited, deleted or recomputed (DREM keeps a statistics table the same way). A digest is
+rebuilt from a consistent listing of the event's races, and a write only replaces a digest built from an older
+listing, so two races submitted at once cannot leave it behind. An event without a digest yet (imported, or from
+before digests) gets one on the first read. `compute` is pure: events and digests in, what the page prints out.
 """
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from datetime import date
+from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.domain.events import Event, EventType, TrackDirection
+from chalicelib.domain.races import RaceRecord
 from chalicelib.views.public_views import lap_time
 from drem_leaderboard.models import Race, RaceStatus
 
@@ -72,6 +81,69 @@ class Stats(BaseModel):
     countries: tuple[str, ...]  # every country with a visible event (the filter's choices)
 
 
+class RaceDigest(BaseModel):
+    """What /stats needs of one submitted race."""
+    model_config = ConfigDict(frozen=True)
+    sub: str
+    username: str
+    track_id: str
+    track_type: str
+    laps: int
+    valid_laps: int
+    best_valid_ms: int | None
+
+
+class EventDigest(BaseModel):
+    """The submitted races of one event, as /stats reads them (one stored item per event)."""
+    model_config = ConfigDict(frozen=True)
+    event_id: str
+    races: tuple[RaceDigest, ...]
+
+
+def _counts(lap_ms: int, is_valid: bool) -> bool:
+    return is_valid and lap_ms >= MIN_LAP_MS
+
+
+def digest_of(event_id: str, races: Iterable[Race]) -> EventDigest:
+    entries = []
+    for race in races:
+        if race.status is not RaceStatus.SUBMITTED:
+            continue
+        valid = [lap.time_ms for lap in race.laps if _counts(lap.time_ms, lap.is_valid)]
+        entries.append(RaceDigest(sub=race.racer.sub, username=race.racer.username, track_id=race.track_id,
+                                  track_type=race.config.track_type.value, laps=len(race.laps),
+                                  valid_laps=len(valid), best_valid_ms=min(valid, default=None)))
+    return EventDigest(event_id=event_id, races=tuple(sorted(entries, key=lambda d: (d.track_id, d.sub))))
+
+
+class DigestStore(Protocol):
+    def digests(self, event_ids: Sequence[str]) -> dict[str, EventDigest]: ...
+    def put(self, digest: EventDigest, listed_at_ms: int) -> None: ...
+
+
+class EventRaces(Protocol):
+    def list_event(self, event_id: str) -> Sequence[RaceRecord]: ...
+
+
+class StatsDigests:
+    """Keeps each event's digest equal to what its races say (see the module docstring)."""
+
+    def __init__(self, store: DigestStore, races: EventRaces, clock_ms: Callable[[], int]) -> None:
+        self._store = store
+        self._races = races
+        self._clock_ms = clock_ms
+
+    def refresh(self, event_id: str) -> EventDigest:
+        listed_at = self._clock_ms()  # before the listing: a later listing sees at least what this one sees
+        digest = digest_of(event_id, (record.race for record in self._races.list_event(event_id)))
+        self._store.put(digest, listed_at)
+        return digest
+
+    def for_events(self, events: Sequence[Event]) -> list[tuple[Event, tuple[RaceDigest, ...]]]:
+        stored = self._store.digests([event.event_id for event in events])
+        return [(event, (stored.get(event.event_id) or self.refresh(event.event_id)).races) for event in events]
+
+
 def visible_events(events: Iterable[Event], *, staff: bool) -> list[Event]:
     return [e for e in events if e.event_type is not EventType.TEST_EVENT and (staff or e.stats_visibility == "public")]
 
@@ -86,10 +158,10 @@ def _event_matches(event: Event, wanted: StatsFilter) -> bool:
     return not wanted.direction or any(t.direction == wanted.direction for t in event.tracks)
 
 
-def compute(events_and_races: Sequence[tuple[Event, Sequence[Race]]], wanted: StatsFilter,
+def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], wanted: StatsFilter,
             display_name: Callable[[str, str], str]) -> Stats:
-    """`events_and_races` holds the visible events only; `display_name(sub, username)` is what a lap is shown
-    under (a deleted racer's tombstone name)."""
+    """`events_and_races` holds the visible events only, each with its submitted races' digests;
+    `display_name(sub, username)` is what a lap is shown under (a deleted racer's tombstone name)."""
     countries = tuple(sorted({e.country_code for e, _ in events_and_races}))
     chosen = [(e, races) for e, races in events_and_races if _event_matches(e, wanted)]
     months: dict[str, list[int]] = {}
@@ -106,20 +178,17 @@ def compute(events_and_races: Sequence[tuple[Event, Sequence[Race]]], wanted: St
         event_countries[event.country_code] += 1
         for race in races:
             direction = directions.get(race.track_id, "counter_clockwise")
-            if race.status is not RaceStatus.SUBMITTED or (wanted.direction and direction != wanted.direction):
+            if wanted.direction and direction != wanted.direction:
                 continue
             race_count += 1
             month[1] += 1
-            racers.add(race.racer.sub)
-            racers_by_country.setdefault(event.country_code, set()).add(race.racer.sub)
-            track_type = race.config.track_type.value
-            by_type[track_type] += 1
-            for lap in race.laps:
-                laps += 1
-                if lap.is_valid and lap.time_ms >= MIN_LAP_MS:
-                    valid += 1
-                    candidates.append((lap.time_ms, race.racer.sub, race.racer.username, event, track_type,
-                                       direction))
+            racers.add(race.sub)
+            racers_by_country.setdefault(event.country_code, set()).add(race.sub)
+            by_type[race.track_type] += 1
+            laps += race.laps
+            valid += race.valid_laps
+            if race.best_valid_ms is not None:  # a racer's best lap is the best of their races' bests
+                candidates.append((race.best_valid_ms, race.sub, race.username, event, race.track_type, direction))
     candidates.sort(key=lambda c: (c[0], c[2]))
     per_type = [TrackTypeStats(track_type=track_type, races=count,
                                best=lap_time(next((c[0] for c in candidates if c[4] == track_type), None), "—"),

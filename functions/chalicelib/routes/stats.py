@@ -21,9 +21,7 @@ STATS_STAFF = {ADMIN, OPERATOR, COMMENTATOR}
 @route(bp, "/stats", allow=PUBLIC, query=StatsFilter)
 def stats(principal: Principal, query: StatsFilter) -> Response:
     staff = bool(principal.roles & STATS_STAFF)
-    events = visible_events(services.event_store().list(), staff=staff)
-    races = services.submitted_races_by_event()
-    data = [(event, races.get(event.event_id, [])) for event in events]
+    data = services.stats_digests().for_events(visible_events(services.event_store().list(), staff=staff))
     profiles = services.public_profiles()
 
     def display_name(sub: str, username: str) -> str:

@@ -1,0 +1,61 @@
+"""DynamoDB adapter for the statistics digests (`domain/stats.py`): one item per event in the `races` table.
+
+| item | pk | sk |
+|---|---|---|
+| statistics digest (`EventDigest` as JSON in `doc`, `listedAtMs`: when the race listing it was built from began) | `EVENT#{eventId}` | `STATS` |
+
+It sits in the event's partition, beside its races, but is not a race: listings read `RACE#` items only, and an
+event export carries races and audit entries only (the target builds its own digest on first read). A put replaces
+the stored digest only if it was built from a later listing, so a slower, older rebuild never overwrites a newer one.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from botocore.exceptions import BotoCoreError, ClientError
+
+from chalicelib.domain.stats import EventDigest
+from chalicelib.storage.aws_errors import call, error_code, translate_common
+
+_SERVICE = "The races table"
+_SK = "STATS"
+_BATCH = 100  # BatchGetItem's limit
+
+
+def _key(event_id: str) -> dict[str, Any]:
+    return {"pk": {"S": f"EVENT#{event_id}"}, "sk": {"S": _SK}}
+
+
+class DynamoStatsDigestStore:
+    def __init__(self, client: Any, table: str) -> None:
+        self._client = client
+        self._table = table
+
+    def digests(self, event_ids: Sequence[str]) -> dict[str, EventDigest]:
+        found: dict[str, EventDigest] = {}
+        wanted = list(dict.fromkeys(event_ids))
+        for start in range(0, len(wanted), _BATCH):
+            request: dict[str, Any] = {self._table: {"Keys": [_key(e) for e in wanted[start:start + _BATCH]],
+                                                     "ConsistentRead": True, "ProjectionExpression": "doc"}}
+            while request:
+                reply = call(self._client, "batch_get_item", _SERVICE, RequestItems=request)
+                for item in reply.get("Responses", {}).get(self._table, []):
+                    digest = EventDigest.model_validate_json(item["doc"]["S"])
+                    found[digest.event_id] = digest
+                request = reply.get("UnprocessedKeys") or {}
+        return found
+
+    def put(self, digest: EventDigest, listed_at_ms: int) -> None:
+        try:
+            self._client.put_item(TableName=self._table,
+                                  Item={**_key(digest.event_id), "doc": {"S": digest.model_dump_json()},
+                                        "listedAtMs": {"N": str(listed_at_ms)}},
+                                  ConditionExpression="attribute_not_exists(pk) OR listedAtMs < :listed",
+                                  ExpressionAttributeValues={":listed": {"N": str(listed_at_ms)}})
+        except ClientError as exc:
+            if error_code(exc) == "ConditionalCheckFailedException":
+                return  # a digest built from a later listing is already stored: it wins
+            raise translate_common(exc, _SERVICE, write=True) from exc
+        except BotoCoreError as exc:
+            raise translate_common(exc, _SERVICE, write=True) from exc
