@@ -51,7 +51,7 @@ class DynamoStatsDigestStore:
             self._client.put_item(TableName=self._table,
                                   Item={**_key(digest.event_id), "doc": {"S": digest.model_dump_json()},
                                         "listedAtMs": {"N": str(listed_at_ms)}},
-                                  ConditionExpression="attribute_not_exists(pk) OR listedAtMs < :listed",
+                                  ConditionExpression="attribute_not_exists(pk) OR listedAtMs <= :listed",
                                   ExpressionAttributeValues={":listed": {"N": str(listed_at_ms)}})
         except ClientError as exc:
             if error_code(exc) == "ConditionalCheckFailedException":
