@@ -24,7 +24,8 @@ from pydantic import BaseModel, ValidationError
 from chalicelib.auth.principals import Role
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
-from chalicelib.formats.model_archive import DEFAULT_LIMITS, ArchiveLimits, inspect_archive
+from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
+from chalicelib.formats.model_archive.verdict import inspect_archive
 from chalicelib.domain.racer_models import ModelStatus, model_key, upload_key
 from chalicelib.domain.profiles import anonymised_name
 from chalicelib.views.public_views import OverlaySnapshot
