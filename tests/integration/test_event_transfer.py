@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 import requests
 
-from chalicelib.formats.event_transfer import ITEM_FILES, MANIFEST, remap_items
+from chalicelib.formats.event_export.records import ITEM_FILES, MANIFEST
+from chalicelib.formats.event_export.remap import remap_items
 from chalicelib.storage.event_archive import StackLocation, connect
 from drem_local import stack as local_stack
 from drem_local.api_client import ApiClient

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from chalicelib.formats.model_archive import ArchiveStatus, inspect_archive
+from chalicelib.formats.model_archive.report import ArchiveStatus
+from chalicelib.formats.model_archive.verdict import inspect_archive
 from drem_local.cli import main
 
 pytestmark = pytest.mark.sim

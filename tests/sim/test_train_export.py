@@ -13,7 +13,8 @@ import onnxruntime
 import pytest
 import torch
 
-from chalicelib.formats.model_archive import ArchiveStatus, inspect_archive
+from chalicelib.formats.model_archive.report import ArchiveStatus
+from chalicelib.formats.model_archive.verdict import inspect_archive
 from drem_sim.demonstrator import Demonstrator
 from drem_sim.env import RaceEnv
 from drem_sim.learn.dataset import load_snapshot

@@ -20,16 +20,11 @@ import onnx
 import pytest
 from onnx import TensorProto, helper
 
-from chalicelib.formats.model_archive import (
-    ArchiveLimits,
-    ArchiveRejected,
-    ArchiveStatus,
-    InvalidModelName,
-    inspect_archive,
-    model_name_from_filename,
-    safe_extract,
-    validate_model_name,
-)
+from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extract
+from chalicelib.formats.model_archive.limits import ArchiveLimits
+from chalicelib.formats.model_archive.names import InvalidModelName, model_name_from_filename, validate_model_name
+from chalicelib.formats.model_archive.report import ArchiveStatus
+from chalicelib.formats.model_archive.verdict import inspect_archive
 
 pytestmark = pytest.mark.unit
 

@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from chalicelib.auth.principals import User
-from chalicelib.formats.model_archive import ArchiveLimits
+from chalicelib.formats.model_archive.limits import ArchiveLimits
 from chalicelib.domain.racer_models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
 from chalicelib.routes.racer_models import handle_upload_complete_event
 from chalicelib import services

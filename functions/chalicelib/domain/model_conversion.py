@@ -22,7 +22,7 @@ from typing import IO, Literal
 
 from pydantic import BaseModel, ValidationError
 
-from chalicelib.formats.model_archive import ArchiveRejected, safe_extract
+from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extract
 
 GiB = 1024 ** 3
 WORKER_MODULE = "drem_sim.console.convert"

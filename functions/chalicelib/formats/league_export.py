@@ -3,7 +3,8 @@
 An export is hostile input. Nothing is ever extracted to disk: a folder is walked without following links, an
 archive is streamed member by member and only small regular files whose names the assembler asks for are read,
 each capped, with caps on member count and on decompressed bytes (a gzip bomb stops at the cap). Names are
-normalised ("./a/b" → "a/b"); absolute names, "..", links and devices are skipped, never read.
+normalised ("./a/b" → "a/b"); a member refused by the one vetting of `chalicelib.formats.member_names` (absolute
+names, "..", backslashes, control or bidi characters, links, devices) is skipped, never read.
 """
 from __future__ import annotations
 
@@ -13,10 +14,11 @@ import tarfile
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import IO
 
 from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
+from chalicelib.formats.member_names import RefusedMember, vet_member_name, vet_member_type
 
 MiB = 1024 * 1024
 
@@ -84,7 +86,7 @@ def read_tar_gz(stream: IO[bytes], *, limits: ExportLimits = DEFAULT_LIMITS,
             for count, member in enumerate(archive, start=1):
                 if count > limits.max_members:
                     raise PayloadTooLarge(f"the export holds more than {limits.max_members} entries", field="path")
-                name = _safe_name(member.name, limits)
+                name = _vetted_name(member, limits)
                 if name is None or not member.isreg():
                     continue  # links, devices, directories and unsafe names are never read
                 names.append(name)
@@ -146,13 +148,14 @@ def _size(count: int) -> str:
     return f"{count / MiB:g} MiB" if count >= MiB else f"{count} bytes"
 
 
-def _safe_name(raw: str, limits: ExportLimits) -> str | None:
-    if "\x00" in raw or raw.startswith(("/", "\\")) or len(raw) > 512:
+def _vetted_name(member: tarfile.TarInfo, limits: ExportLimits) -> str | None:
+    """The member's normalised name, or None when it must be skipped (refused, or the root folder)."""
+    try:
+        name = vet_member_name(member.name, max_length=512, max_depth=limits.max_depth)
+        vet_member_type(member, name)
+    except RefusedMember:
         return None
-    parts = [part for part in PurePosixPath(raw.replace("\\", "/")).parts if part not in ("", ".")]
-    if not parts or ".." in parts or len(parts) > limits.max_depth:
-        return None
-    return "/".join(parts)
+    return name
 
 
 class _ExpansionGuard:

@@ -3,7 +3,7 @@
 Works against whatever endpoint it is given: the local durable moto server (endpoint + names from the state dir's
 stack.json) or real AWS (default credential chain, names from the environment contract). Items travel as DynamoDB
 attribute-value JSON; binary values as base64 text. Implements `StackReader` / `StackWriter` of
-`chalicelib.formats.event_transfer`.
+`chalicelib.domain.event_transfer.ports`.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.formats.event_transfer import Account, Item
+from chalicelib.formats.event_export.records import Account, Item
 from chalicelib.storage.aws_errors import error_code, translate_common
 from chalicelib.storage.users import COUNTRY_ATTRIBUTE, translate_account_error
 

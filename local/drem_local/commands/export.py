@@ -48,7 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from chalicelib.domain.errors import DremError
-    from chalicelib.formats.event_transfer import collect_event, write_export
+    from chalicelib.domain.event_transfer.export import collect_event
+    from chalicelib.formats.event_export.writer import write_export
 
     try:
         bundle = collect_event(open_stack(args), args.event_id)

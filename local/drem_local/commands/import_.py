@@ -50,8 +50,10 @@ def record_import(target: Any, result: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from chalicelib.domain.errors import DremError
-    from chalicelib.formats.event_transfer import (PartialImport, parse_password_file, plan_import, read_export,
-                                                  run_import)
+    from chalicelib.domain.event_transfer.import_plan import plan_import
+    from chalicelib.domain.event_transfer.import_run import PartialImport, run_import
+    from chalicelib.domain.event_transfer.passwords import parse_password_file
+    from chalicelib.formats.event_export.reader import read_export
 
     try:
         passwords = parse_password_file(args.password_file.read_text()) if args.password_file else {}

@@ -3,7 +3,8 @@
 The manifest's checksums only catch accidents: whoever edits a file can recompute them. So every item that the app
 later trusts is checked here against the rules the app itself would have applied when it was first written:
 
-* accounts: roles are known role names (granting them is a separate, explicit decision: `plan_import(grant_roles=)`);
+* accounts: roles are known role names (granting them is a separate, explicit decision:
+  `chalicelib.domain.event_transfer.import_plan.plan_import(grant_roles=)`);
 * the event and every race parse as the app's own models; races are finished, belong to this event and to the
   racer their key says; races.json holds races only (a `LIVE#` pointer would start a race on the target);
 * boards and overlays sit under the event's own tracks; a board's public body and etag must be exactly what its
@@ -17,23 +18,22 @@ from __future__ import annotations
 
 import io
 import json
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
 from chalicelib.auth.principals import Role
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
-from chalicelib.formats.model_archive import DEFAULT_LIMITS, ArchiveLimits, inspect_archive
+from chalicelib.formats.event_export.records import EventBundle, InvalidExport, Item, archive_file
+from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
+from chalicelib.formats.model_archive.verdict import inspect_archive
 from chalicelib.domain.racer_models import ModelStatus, model_key, upload_key
 from chalicelib.domain.profiles import anonymised_name
 from chalicelib.views.public_views import OverlaySnapshot
 from chalicelib.domain.races import RaceRecord
 from drem_leaderboard.models import TERMINAL_STATUSES, Race, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
-
-if TYPE_CHECKING:
-    from chalicelib.formats.event_transfer import EventBundle, Item
 
 ANONYMISED_PREFIX = anonymised_name("")  # "Deleted racer ": how a deleted racer's profile shows
 ACCOUNT_ROLES = frozenset({Role.ADMIN, Role.OPERATOR, Role.COMMENTATOR, Role.REGISTRATION, Role.RACER})
@@ -50,8 +50,6 @@ def check_bundle(bundle: EventBundle, *, limits: ArchiveLimits = DEFAULT_LIMITS)
 
 
 def _invalid(message: str, field: str | None = None) -> Exception:
-    from chalicelib.formats.event_transfer import InvalidExport
-
     return InvalidExport(message, field=field)
 
 
@@ -240,8 +238,8 @@ def _check_archives(bundle: EventBundle, records: dict[str, Item], limits: Archi
         if entry.key != expected_key or _text(record, "s3_key") != expected_key:
             raise _invalid(f"{where}: key {entry.key!r} is not {expected_key}; archives are written only to their "
                            "model's own key.", field="key")
-        if entry.file != f"archives/{entry.model_id}.tar.gz":
-            raise _invalid(f"{where}: file must be archives/{entry.model_id}.tar.gz.", field="file")
+        if entry.file != archive_file(entry.model_id):
+            raise _invalid(f"{where}: file must be {archive_file(entry.model_id)}.", field="file")
         if entry.model_id in carried:
             raise _invalid(f"{where}: model {entry.model_id} is listed twice.", field="model_id")
         carried.add(entry.model_id)

@@ -1,0 +1,90 @@
+"""Planning an import: every account, kept item and refusal decided before the first write."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from chalicelib.domain.errors import Conflict, InvalidInput
+from chalicelib.domain.event_transfer.passwords import password_problem, temporary_password
+from chalicelib.domain.event_transfer.ports import StackReader, StackWriter
+from chalicelib.formats.event_export.records import EVENT_ID, Account, EventBundle
+
+RACER_ROLE = "racer"  # the role every created account gets; staff roles need grant_roles
+
+
+@dataclass
+class AccountAction:
+    account: Account
+    action: str  # "create" or "match"
+    target_sub: str | None = None  # known up front for "match", after creation for "create"
+    temporary_password: str | None = None
+    roles_granted: list[str] = field(default_factory=list)  # for "create": what the new account gets
+    roles_skipped: list[str] = field(default_factory=list)  # exported roles not granted (no --grant-roles)
+
+
+@dataclass
+class ImportPlan:
+    bundle: EventBundle
+    event_id: str
+    accounts: list[AccountAction]
+    kept: list[str] = field(default_factory=list)  # shared items the target already has
+    skip_keys: set[tuple[str, str, str]] = field(default_factory=set)  # (table, pk, sk) not to write
+    skip_archives: set[str] = field(default_factory=set)  # model ids
+
+
+def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_event_id: str | None = None,
+                passwords: dict[str, str] | None = None, generate: Callable[[], str] | None = None,
+                grant_roles: bool = False) -> ImportPlan:
+    """Decide everything (and refuse clearly) before the first write.
+
+    Roles are power over the target event: an export (a file anyone may have edited) grants none silently. Without
+    `grant_roles`, a created account is a racer only, and its other exported roles are reported as skipped."""
+    event_id = new_event_id or bundle.event_id
+    if not EVENT_ID.match(event_id):
+        raise InvalidInput("Use 1-64 letters, digits, '-' or '_' for the event id.", field="event_id")
+    pk = f"EVENT#{event_id}"
+    if target.get_item("events", pk, "META") is not None or target.partition("races", pk) \
+            or target.partition("leaderboards", pk):
+        raise Conflict(f"The target stack already has event {event_id} (or races/boards under it); nothing was "
+                       "written. Import under another id with --event-id NEW, or delete that event first.",
+                       field="event_id")
+    passwords = {k.casefold(): v for k, v in (passwords or {}).items()}
+    generate = generate or temporary_password
+    actions: list[AccountAction] = []
+    for account in bundle.accounts:
+        existing = target.find_account(account.username)  # type: ignore[union-attr]
+        if existing is not None:
+            actions.append(AccountAction(account, "match", existing.sub))
+            continue
+        password = passwords.get(account.username.casefold()) or generate()
+        problem = password_problem(password)
+        if problem:
+            raise InvalidInput(f"The password file's password for {account.username} {problem}.", field="password")
+        granted = sorted(account.groups) if grant_roles else [RACER_ROLE]
+        skipped = sorted(set(account.groups) - set(granted))
+        actions.append(AccountAction(account, "create", temporary_password=password, roles_granted=granted,
+                                     roles_skipped=skipped))
+
+    plan = ImportPlan(bundle=bundle, event_id=event_id, accounts=actions)
+    matched = {a.account.sub: a.target_sub for a in actions if a.action == "match"}
+    for item in bundle.items.get("fleet", []):
+        if target.get_item("fleet", item["pk"]["S"], item["sk"]["S"]) is not None:
+            plan.kept.append(f"fleet {item['pk']['S'].removeprefix('FLEET#')} (the target already has it)")
+            plan.skip_keys.add(("fleet", item["pk"]["S"], item["sk"]["S"]))
+    for item in bundle.items.get("profiles", []):
+        sub = item.get("sub", {}).get("S", "")
+        if sub in matched and target.get_item("profiles", f"USER#{matched[sub]}", "PROFILE") is not None:
+            plan.kept.append(f"profile of {item.get('username', {}).get('S') or sub} (the target's own is kept)")
+            plan.skip_keys.add(("profiles", item["pk"]["S"], item["sk"]["S"]))
+    models = bundle.items.get("models", [])
+    for item in models:
+        if item["pk"]["S"].startswith("MODELID#"):
+            model_id = item["pk"]["S"].removeprefix("MODELID#")
+            if target.get_item("models", item["pk"]["S"], "OWNER") is not None:
+                plan.kept.append(f"model {model_id} (the target already has it)")
+                plan.skip_archives.add(model_id)
+    for item in models:
+        model_id = item.get("model_id", {}).get("S") or item["pk"]["S"].removeprefix("MODELID#")
+        if model_id in plan.skip_archives:
+            plan.skip_keys.add(("models", item["pk"]["S"], item["sk"]["S"]))
+    return plan

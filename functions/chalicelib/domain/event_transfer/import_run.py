@@ -1,0 +1,96 @@
+"""Running an import plan against the target stack, in an order that never shows a half-imported event."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from chalicelib.domain.errors import Conflict, DremError
+from chalicelib.domain.event_transfer.import_plan import ImportPlan
+from chalicelib.domain.event_transfer.ports import StackWriter
+from chalicelib.formats.event_export.records import EVENT_SCOPED_TABLES, ITEM_FILES
+from chalicelib.formats.event_export.remap import remap
+
+
+class PartialImport(DremError):
+    """A write failed after others had succeeded; `written` lists them (also in the message)."""
+
+    def __init__(self, message: str, written: list[str]) -> None:
+        super().__init__(message)
+        self.written = written
+
+
+@dataclass
+class ImportResult:
+    event_id: str
+    source_event_id: str
+    sub_map: dict[str, str]
+    accounts: list[dict[str, Any]]
+    written: dict[str, int]
+    archives_written: int
+    kept: list[str]
+    temporary_passwords: dict[str, str]  # printed once by the CLI, never stored in the report
+
+    def report(self) -> dict[str, Any]:
+        return {"event_id": self.event_id, "source_event_id": self.source_event_id, "sub_map": self.sub_map,
+                "accounts": self.accounts, "written": self.written, "archives_written": self.archives_written,
+                "kept_existing": self.kept}
+
+
+def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
+    """Write the plan: accounts, archives, shared items, races, boards, the event item last."""
+    written: list[str] = []
+    step = "creating accounts"
+    try:
+        sub_map: dict[str, str] = {}
+        for action in plan.accounts:
+            if action.action == "create":
+                account = action.account.model_copy(update={"groups": action.roles_granted})
+                action.target_sub = target.create_account(account, action.temporary_password or "")
+                written.append(f"account {action.account.username}")
+            sub_map[action.account.sub] = action.target_sub or action.account.sub
+        bundle = remap(plan.bundle, sub_map, plan.event_id)
+        step = "uploading model archives"
+        archives_written = 0
+        for entry in bundle.archives:
+            if entry.model_id not in plan.skip_archives:
+                target.write_object("models", entry.key, bundle.archive_data[entry.file])
+                written.append(f"archive {entry.key}")
+                archives_written += 1
+        counts: dict[str, int] = {}
+        originals = {t: plan.bundle.items.get(t, []) for t in ITEM_FILES.values()}
+        for table in ITEM_FILES.values():
+            if table == "events":  # before the event shows: imported board bodies are never what the public sees
+                step = "recomputing the boards from the races"
+                target.recompute_boards(bundle.items["events"][0])
+            step = f"writing the {table} table"
+            counts[table] = 0
+            for original, item in zip(originals[table], bundle.items.get(table, []), strict=True):
+                if (table, original["pk"]["S"], original["sk"]["S"]) in plan.skip_keys:
+                    continue
+                if not target.put_new_item(table, item):
+                    if table in EVENT_SCOPED_TABLES:
+                        raise Conflict(f"{table} item {item['pk']['S']} / {item['sk']['S']} appeared on the target "
+                                       "meanwhile; someone else is writing this event.")
+                    plan.kept.append(f"{table} item {item['pk']['S']} / {item['sk']['S']} (appeared meanwhile)")
+                    continue
+                written.append(f"{table} {item['pk']['S']} / {item['sk']['S']}")
+                counts[table] += 1
+    except DremError as exc:
+        raise PartialImport(_partial_message(step, exc.message, written), written) from exc
+    except Exception as exc:  # an unexpected failure still must say what is already on the target
+        raise PartialImport(_partial_message(step, repr(exc), written), written) from exc
+    accounts = [{"username": a.account.username, "old_sub": a.account.sub, "new_sub": a.target_sub or "",
+                 "action": "created" if a.action == "create" else "matched existing",
+                 "roles_granted": a.roles_granted, "roles_skipped": a.roles_skipped} for a in plan.accounts]
+    return ImportResult(event_id=plan.event_id, source_event_id=plan.bundle.event_id, sub_map=sub_map,
+                        accounts=accounts, written=counts, archives_written=archives_written, kept=plan.kept,
+                        temporary_passwords={a.account.username: a.temporary_password or ""
+                                             for a in plan.accounts if a.action == "create"})
+
+
+def _partial_message(step: str, reason: str, written: list[str]) -> str:
+    if not written:
+        return f"The import failed while {step}: {reason} Nothing was written."
+    listing = "\n  ".join(written)
+    return (f"The import failed while {step}: {reason}\nAlready written to the target ({len(written)}):\n  {listing}\n"
+            "Remove these (or import into a fresh stack) before trying again.")

@@ -1,0 +1,57 @@
+"""Writing an event export folder: deterministic content files, then the manifest of their checksums, last."""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from chalicelib.domain.errors import InvalidInput
+from chalicelib.formats.event_export.records import (ARCHIVES_FILE, FORMAT, FORMAT_VERSION, ITEM_FILES, MANIFEST,
+                                                     NOT_CARRIED, USERS_FILE, EventBundle, sorted_items)
+
+
+def render_files(bundle: EventBundle) -> dict[str, bytes]:
+    """Every file of the export except the manifest, deterministically."""
+    files = {name: json_bytes({"table": table, "items": sorted_items(bundle.items.get(table, []))})
+             for name, table in ITEM_FILES.items()}
+    files[USERS_FILE] = json_bytes([a.model_dump() for a in sorted(bundle.accounts,
+                                                                   key=lambda a: a.username.casefold())])
+    files[ARCHIVES_FILE] = json_bytes([a.model_dump() for a in sorted(bundle.archives, key=lambda a: a.model_id)])
+    files.update(bundle.archive_data)
+    return files
+
+
+def manifest_for(bundle: EventBundle, files: dict[str, bytes], exported_at: str) -> dict[str, Any]:
+    audit = sum(1 for i in bundle.items.get("races", []) if i["sk"]["S"].startswith("AUDIT#"))
+    counts = {table: len(items) for table, items in sorted(bundle.items.items())}
+    counts["races"] = counts.get("races", 0) - audit  # races.json also holds the audit trail, counted apart
+    return {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "event_id": bundle.event_id, "exported_at": exported_at,
+        "counts": counts | {"audit_entries": audit, "accounts": len(bundle.accounts), "archives": len(bundle.archives)},
+        "files": {path: checksums(data) for path, data in sorted(files.items())},
+        "not_carried": list(NOT_CARRIED),
+    }
+
+
+def write_export(bundle: EventBundle, out_dir: Path, exported_at: str) -> dict[str, Any]:
+    """Write the folder (which must be new or empty); returns the manifest."""
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        raise InvalidInput(f"{out_dir} already exists and is not an empty folder; export into a new folder.",
+                           field="out")
+    files = render_files(bundle)
+    manifest = manifest_for(bundle, files, exported_at)
+    for path, data in files.items():
+        target = out_dir / path
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    (out_dir / MANIFEST).write_bytes(json_bytes(manifest))  # last: a folder without it is visibly unfinished
+    return manifest
+
+
+def json_bytes(value: Any) -> bytes:
+    return (json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False) + "\n").encode()
+
+
+def checksums(data: bytes) -> dict[str, Any]:
+    return {"bytes": len(data), "md5": hashlib.md5(data).hexdigest(), "sha256": hashlib.sha256(data).hexdigest()}
