@@ -549,3 +549,63 @@ def test_forged_boards_with_matching_rows_are_recomputed_from_the_races(live_sta
         assert [(e["username"], e["fastest_lap_ms"]) for e in target_boards[track]["entries"]] == \
             [(e["username"], e["fastest_lap_ms"]) for e in source_boards[track]["entries"]]
         assert all(e["fastest_lap_ms"] != 1 for e in target_boards[track]["entries"])
+
+
+def test_an_import_cut_off_part_way_is_finished_by_running_it_again(live_stack, target_stack, source_event,
+                                                                     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Storage fails while the races are written (after the accounts were created): nothing shows on the target,
+    and the same command run again finishes the import and shows the temporary passwords nobody saw."""
+    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.storage.event_archive import StackStorage
+
+    folder = tmp_path / "export"
+    assert _export(source_event["event_id"], folder, live_stack.state_dir) == 0
+    cognito = _cognito(target_stack.config.storage_url, target_stack.config.state_dir)
+    racers = sorted(source_event["racers"].values())
+    for username in racers:  # other tests may have imported them here already: start without them
+        try:
+            cognito.admin_delete_user(UserPoolId=target_stack.outputs.user_pool_id, Username=username)
+        except cognito.exceptions.UserNotFoundException:
+            pass
+    new_id = f"resumed-{secrets.token_hex(3)}"
+    real_put = StackStorage.put_new_item
+    races_written: list[str] = []
+
+    def storage_dies_after_one_race(self, table, item):  # type: ignore[no-untyped-def]
+        if table == "races" and races_written:
+            raise ServiceUnavailable("The races table cannot be reached.")
+        if table == "races":
+            races_written.append(item["sk"]["S"])
+        return real_put(self, table, item)
+
+    monkeypatch.setattr(StackStorage, "put_new_item", storage_dies_after_one_race)
+    capsys.readouterr()
+    assert _import(folder, target_stack.config.state_dir, "--event-id", new_id) == 1
+    failed = capsys.readouterr().err
+    journal = tmp_path / f"export.import-{new_id}.resume.json"
+    assert "running the same command again" in failed and journal.stat().st_mode & 0o077 == 0
+    assert target_stack_event(target_stack, new_id) is None  # the event item is written last: not there
+
+    monkeypatch.setattr(StackStorage, "put_new_item", real_put)
+    assert _import(folder, target_stack.config.state_dir, "--event-id", new_id) == 0
+    printed = capsys.readouterr().out
+    assert "finished an interrupted import" in printed
+    for username in racers:
+        password = next(line.split("temporary password ")[1].split()[0] for line in printed.splitlines()
+                        if f"account {username}:" in line)
+        challenge = requests.post(f"{target_stack.config.app_url}/api/auth/token", timeout=30,
+                                  json={"username": username, "password": password}).json()
+        assert challenge["challenge"] == "NEW_PASSWORD_REQUIRED"  # the password shown again works
+    assert not journal.exists()
+    assert target_stack_event(target_stack, new_id) is not None
+    def without_event_id(boards: dict[str, dict]) -> dict[str, dict]:
+        return {track: {k: v for k, v in board.items() if k != "event_id"} for track, board in boards.items()}
+
+    assert without_event_id(_boards(target_stack.config.app_url, new_id)) == \
+        without_event_id(_boards(live_stack.url, source_event["event_id"]))
+
+
+def target_stack_event(target_stack, event_id: str) -> dict | None:
+    location = StackLocation.from_state_dir(target_stack.config.state_dir)
+    return connect(location).get_item("events", f"EVENT#{event_id}", "META")

@@ -6,12 +6,18 @@ every old sub is rewritten to the new one, and the items and model archives are 
 re-validated first (a tampered export is refused, naming the file), the boards are recomputed from the races, and
 created accounts are racers unless --grant-roles applies the roles the export lists (reported either way). The
 report (sub mapping, roles, what was written and kept) goes next to the folder; it never holds passwords.
+
+An import cut off part-way (a crash, storage down) is finished by running the same command again: the event item is
+written last, so the event never shows half-imported, and the re-run matches what the first run wrote. The accounts it
+created are noted, with their temporary passwords, in `DIR.import-EVENT.resume.json` (0600, beside the folder) before
+each is created; the re-run shows those passwords again and deletes the file once the import is complete.
 """
 from __future__ import annotations
 
 import argparse
 import getpass
 import json
+import os
 import sys
 import time
 from datetime import UTC, datetime
@@ -48,6 +54,38 @@ def record_import(target: Any, result: Any) -> None:
     target.put_new_item("races", audit_item(entry))
 
 
+class FileImportJournal:
+    """The accounts an import is about to create, with their temporary passwords, in a 0600 file (fsynced)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def intended(self) -> dict[str, str]:
+        try:
+            data = json.loads(self.path.read_text())
+        except (FileNotFoundError, ValueError):
+            return {}
+        return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+    def intend(self, username: str, temporary_password: str) -> None:
+        data = {**self.intended(), username: temporary_password}
+        temporary = self.path.with_name(self.path.name + ".tmp")
+        descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(descriptor, "w") as handle:
+            json.dump(data, handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, self.path)
+
+    def finished(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
+def journal_for(folder: Path, event_id: str) -> FileImportJournal:
+    folder = folder.resolve()
+    return FileImportJournal(folder.parent / f"{folder.name}.import-{event_id}.resume.json")
+
+
 def run(args: argparse.Namespace) -> int:
     from chalicelib.domain.errors import DremError
     from chalicelib.domain.event_transfer.import_plan import plan_import
@@ -59,12 +97,17 @@ def run(args: argparse.Namespace) -> int:
         passwords = parse_password_file(args.password_file.read_text()) if args.password_file else {}
         bundle = read_export(args.folder)
         target = open_stack(args)
+        journal = journal_for(args.folder, args.event_id or bundle.event_id)
         plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,
-                           grant_roles=args.grant_roles)
-        result = run_import(plan, target)
+                           grant_roles=args.grant_roles, journal=journal)
+        result = run_import(plan, target, journal)
         record_import(target, result)
+        journal.finished()
     except PartialImport as exc:
         print(f"drem import: {exc.message}", file=sys.stderr)
+        if journal.intended():
+            print(f"drem import: the temporary passwords of the accounts created so far are in {journal.path} "
+                  "(0600); running the same command again shows them and finishes the import.", file=sys.stderr)
         return 1
     except (DremError, OSError, ValueError) as exc:
         print(f"drem import: {getattr(exc, 'message', exc)}", file=sys.stderr)
@@ -76,12 +119,14 @@ def run(args: argparse.Namespace) -> int:
     written = ", ".join(f"{n} {table}" for table, n in result.written.items())
     print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
           f"{result.archives_written} model archives.")
+    if result.already_written:
+        print(f"  finished an interrupted import: {result.already_written} items were already written by it")
     for line in result.kept:
         print(f"  kept existing: {line}")
     for username, password in sorted(result.temporary_passwords.items()):
         print(f"  account {username}: temporary password {password}  (must be changed at first sign-in)")
     for account in result.accounts:
-        if account["action"] != "created":
+        if not account["action"].startswith("created"):
             continue
         granted = ", ".join(account["roles_granted"]) or "none"
         skipped = f"; NOT granted: {', '.join(account['roles_skipped'])} (use --grant-roles)" \

@@ -6,8 +6,9 @@ from dataclasses import dataclass, field
 
 from chalicelib.domain.errors import Conflict, InvalidInput
 from chalicelib.domain.event_transfer.passwords import password_problem, temporary_password
-from chalicelib.domain.event_transfer.ports import StackReader, StackWriter
-from chalicelib.formats.event_export.records import EVENT_ID, Account, EventBundle
+from chalicelib.domain.event_transfer.ports import ImportJournal, StackReader, StackWriter
+from chalicelib.formats.event_export.records import EVENT_ID, Account, EventBundle, Item
+from chalicelib.formats.event_export.remap import remap
 
 RACER_ROLE = "racer"  # the role every created account gets; staff roles need grant_roles
 
@@ -15,7 +16,7 @@ RACER_ROLE = "racer"  # the role every created account gets; staff roles need gr
 @dataclass
 class AccountAction:
     account: Account
-    action: str  # "create" or "match"
+    action: str  # "create", "match", or "resume" (created by an interrupted run of this import)
     target_sub: str | None = None  # known up front for "match", after creation for "create"
     temporary_password: str | None = None
     roles_granted: list[str] = field(default_factory=list)  # for "create": what the new account gets
@@ -30,29 +31,39 @@ class ImportPlan:
     kept: list[str] = field(default_factory=list)  # shared items the target already has
     skip_keys: set[tuple[str, str, str]] = field(default_factory=set)  # (table, pk, sk) not to write
     skip_archives: set[str] = field(default_factory=set)  # model ids
+    resuming: bool = False  # an earlier run of this import was cut off: its races are on the target already
 
 
 def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_event_id: str | None = None,
                 passwords: dict[str, str] | None = None, generate: Callable[[], str] | None = None,
-                grant_roles: bool = False) -> ImportPlan:
+                grant_roles: bool = False, journal: ImportJournal | None = None) -> ImportPlan:
     """Decide everything (and refuse clearly) before the first write.
 
     Roles are power over the target event: an export (a file anyone may have edited) grants none silently. Without
-    `grant_roles`, a created account is a racer only, and its other exported roles are reported as skipped."""
+    `grant_roles`, a created account is a racer only, and its other exported roles are reported as skipped.
+
+    An import cut off part-way (the event item, written last, is missing) is resumed by running it again: the
+    accounts it created are matched (their temporary passwords, from `journal`, shown again), and the races it wrote
+    must be exactly what this import writes, or nothing is written."""
     event_id = new_event_id or bundle.event_id
     if not EVENT_ID.match(event_id):
         raise InvalidInput("Use 1-64 letters, digits, '-' or '_' for the event id.", field="event_id")
     pk = f"EVENT#{event_id}"
-    if target.get_item("events", pk, "META") is not None or target.partition("races", pk) \
-            or target.partition("leaderboards", pk):
-        raise Conflict(f"The target stack already has event {event_id} (or races/boards under it); nothing was "
-                       "written. Import under another id with --event-id NEW, or delete that event first.",
-                       field="event_id")
+    if target.get_item("events", pk, "META") is not None:
+        raise Conflict(f"The target stack already has event {event_id}; nothing was written. Import under another "
+                       "id with --event-id NEW, or delete that event first.", field="event_id")
+    leftovers = target.partition("races", pk)
+    interrupted = journal.intended() if journal is not None else {}
     passwords = {k.casefold(): v for k, v in (passwords or {}).items()}
     generate = generate or temporary_password
     actions: list[AccountAction] = []
     for account in bundle.accounts:
         existing = target.find_account(account.username)  # type: ignore[union-attr]
+        if existing is not None and account.username in interrupted:
+            actions.append(AccountAction(account, "resume", existing.sub,
+                                         temporary_password=interrupted[account.username],
+                                         roles_granted=sorted(account.groups) if grant_roles else [RACER_ROLE]))
+            continue
         if existing is not None:
             actions.append(AccountAction(account, "match", existing.sub))
             continue
@@ -65,7 +76,9 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
         actions.append(AccountAction(account, "create", temporary_password=password, roles_granted=granted,
                                      roles_skipped=skipped))
 
-    plan = ImportPlan(bundle=bundle, event_id=event_id, accounts=actions)
+    plan = ImportPlan(bundle=bundle, event_id=event_id, accounts=actions, resuming=bool(leftovers))
+    if leftovers:
+        _check_leftovers(plan, leftovers)
     matched = {a.account.sub: a.target_sub for a in actions if a.action == "match"}
     for item in bundle.items.get("fleet", []):
         if target.get_item("fleet", item["pk"]["S"], item["sk"]["S"]) is not None:
@@ -88,3 +101,17 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
         if model_id in plan.skip_archives:
             plan.skip_keys.add(("models", item["pk"]["S"], item["sk"]["S"]))
     return plan
+
+
+def _check_leftovers(plan: ImportPlan, leftovers: list[Item]) -> None:
+    """Race items already under the event: only an interrupted run of this very import may have left them."""
+    pending = [a.account.username for a in plan.accounts if a.action == "create"]
+    ours = {(i["pk"]["S"], i["sk"]["S"]): i for i in remap(
+        plan.bundle, {a.account.sub: a.target_sub or a.account.sub for a in plan.accounts}, plan.event_id,
+    ).items.get("races", [])}
+    foreign = [f"{i['pk']['S']} / {i['sk']['S']}" for i in leftovers
+               if pending or ours.get((i["pk"]["S"], i["sk"]["S"])) != i]
+    if foreign:
+        raise Conflict(f"The target stack already has races under event {plan.event_id} that this import did not "
+                       f"write ({len(foreign)}, e.g. {foreign[0]}); nothing was written. Import under another id "
+                       "with --event-id NEW, or delete that event first.", field="event_id")

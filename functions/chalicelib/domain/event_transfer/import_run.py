@@ -6,7 +6,7 @@ from typing import Any
 
 from chalicelib.domain.errors import Conflict, DremError
 from chalicelib.domain.event_transfer.import_plan import ImportPlan
-from chalicelib.domain.event_transfer.ports import StackWriter
+from chalicelib.domain.event_transfer.ports import ImportJournal, StackWriter
 from chalicelib.formats.event_export.records import EVENT_SCOPED_TABLES, ITEM_FILES
 from chalicelib.formats.event_export.remap import remap
 
@@ -29,21 +29,28 @@ class ImportResult:
     archives_written: int
     kept: list[str]
     temporary_passwords: dict[str, str]  # printed once by the CLI, never stored in the report
+    already_written: int = 0  # items an interrupted run of this import had written (resuming)
 
     def report(self) -> dict[str, Any]:
         return {"event_id": self.event_id, "source_event_id": self.source_event_id, "sub_map": self.sub_map,
                 "accounts": self.accounts, "written": self.written, "archives_written": self.archives_written,
-                "kept_existing": self.kept}
+                "kept_existing": self.kept, "already_written_by_an_interrupted_run": self.already_written}
 
 
-def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
-    """Write the plan: accounts, archives, shared items, races, boards, the event item last."""
+def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | None = None) -> ImportResult:
+    """Write the plan: accounts, archives, shared items, races, boards, the event item last.
+
+    Each account is noted in `journal` (with its temporary password) before it is created, so a run cut off here can
+    be resumed (`plan_import`). Resuming, an event item that is already stored and equal to this import's counts as
+    written; the boards are recomputed from the races either way."""
     written: list[str] = []
     step = "creating accounts"
     try:
         sub_map: dict[str, str] = {}
         for action in plan.accounts:
             if action.action == "create":
+                if journal is not None:
+                    journal.intend(action.account.username, action.temporary_password or "")
                 account = action.account.model_copy(update={"groups": action.roles_granted})
                 action.target_sub = target.create_account(account, action.temporary_password or "")
                 written.append(f"account {action.account.username}")
@@ -57,6 +64,7 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
                 written.append(f"archive {entry.key}")
                 archives_written += 1
         counts: dict[str, int] = {}
+        resumed = 0
         originals = {t: plan.bundle.items.get(t, []) for t in ITEM_FILES.values()}
         for table in ITEM_FILES.values():
             if table == "events":  # before the event shows: imported board bodies are never what the public sees
@@ -68,6 +76,10 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
                 if (table, original["pk"]["S"], original["sk"]["S"]) in plan.skip_keys:
                     continue
                 if not target.put_new_item(table, item):
+                    if plan.resuming and (table == "leaderboards" or target.get_item(
+                            table, item["pk"]["S"], item["sk"]["S"]) == item):
+                        resumed += 1  # written by the interrupted run (boards: recomputed from the races anyway)
+                        continue
                     if table in EVENT_SCOPED_TABLES:
                         raise Conflict(f"{table} item {item['pk']['S']} / {item['sk']['S']} appeared on the target "
                                        "meanwhile; someone else is writing this event.")
@@ -79,13 +91,15 @@ def run_import(plan: ImportPlan, target: StackWriter) -> ImportResult:
         raise PartialImport(_partial_message(step, exc.message, written), written) from exc
     except Exception as exc:  # an unexpected failure still must say what is already on the target
         raise PartialImport(_partial_message(step, repr(exc), written), written) from exc
+    actions = {"create": "created", "resume": "created (by the interrupted run)", "match": "matched existing"}
     accounts = [{"username": a.account.username, "old_sub": a.account.sub, "new_sub": a.target_sub or "",
-                 "action": "created" if a.action == "create" else "matched existing",
+                 "action": actions[a.action],
                  "roles_granted": a.roles_granted, "roles_skipped": a.roles_skipped} for a in plan.accounts]
     return ImportResult(event_id=plan.event_id, source_event_id=plan.bundle.event_id, sub_map=sub_map,
                         accounts=accounts, written=counts, archives_written=archives_written, kept=plan.kept,
                         temporary_passwords={a.account.username: a.temporary_password or ""
-                                             for a in plan.accounts if a.action == "create"})
+                                             for a in plan.accounts if a.action in ("create", "resume")},
+                        already_written=resumed)
 
 
 def _partial_message(step: str, reason: str, written: list[str]) -> str:
@@ -93,4 +107,4 @@ def _partial_message(step: str, reason: str, written: list[str]) -> str:
         return f"The import failed while {step}: {reason} Nothing was written."
     listing = "\n  ".join(written)
     return (f"The import failed while {step}: {reason}\nAlready written to the target ({len(written)}):\n  {listing}\n"
-            "Remove these (or import into a fresh stack) before trying again.")
+            "Run the same import again to finish it (it resumes from here), or remove these.")

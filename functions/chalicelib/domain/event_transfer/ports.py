@@ -13,6 +13,15 @@ class StackReader(Protocol):
     def read_object(self, bucket: str, key: str) -> bytes | None: ...
 
 
+class ImportJournal(Protocol):
+    """Where an import notes each account it is about to create, with its temporary password, before creating it
+    (the CLI keeps it in a 0600 file beside the export folder). A re-run after a crash reads it back: the accounts
+    the interrupted run created are resumed and their passwords shown again, since nobody saw them."""
+
+    def intended(self) -> dict[str, str]: ...  # username → temporary password
+    def intend(self, username: str, temporary_password: str) -> None: ...
+
+
 class StackWriter(StackReader, Protocol):
     def find_account(self, username: str) -> Account | None: ...
     def create_account(self, account: Account, temporary_password: str) -> str: ...
