@@ -3,7 +3,7 @@ whose API goes away for two laps while the simulated car keeps lapping.
 
 Every wait is for what a user would see (a status, a lap, an empty outbox); timeouts only bound a failure. The agent
 runs with short poll periods (`QUICK_POLLS`) so a test waits for the agent's work, not for its idle time, and the sim
-car drives ten times faster than life (its world advances one frame per loop tick, so lap times stay exact)."""
+car drives five times faster than life (its world advances one frame per loop tick, so lap times stay exact)."""
 from __future__ import annotations
 
 import argparse
@@ -34,7 +34,9 @@ pytestmark = pytest.mark.integration
 
 # The agent's defaults (AgentTiming()) are for a car at an event; here it looks again five times a second.
 QUICK_POLLS = AgentTiming(tick_s=0.1, command_poll_s=0.2, assignment_poll_s=0.2)
-TEN_TIMES_REAL_TIME_HZ = 150.0
+# Five times faster than life: a lap is about 1.8 s, slow enough that a loaded machine delivers each crossing before
+# the next one while the API is up, fast enough that the race takes seconds, not minutes.
+FIVE_TIMES_REAL_TIME_HZ = 75.0
 
 
 @pytest.fixture(scope="module")
@@ -154,11 +156,11 @@ def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin,
                                                            "racer_username": live_stack.admin_username})["race_id"]
     car, agent, outbox = car_runtime(tmp_path, Safety(heartbeat_limit_s=60), event_id)
     agent.start()
-    driving = threading.Thread(target=car.vehicle.start, kwargs={"rate_hz": TEN_TIMES_REAL_TIME_HZ}, daemon=True)
+    driving = threading.Thread(target=car.vehicle.start, kwargs={"rate_hz": FIVE_TIMES_REAL_TIME_HZ}, daemon=True)
     driving.start()
     running = live_stack.running
     try:
-        wait_until(lambda: car.strips.queued >= 2 and outbox.count() == 0, 60,
+        wait_until(lambda: outbox.count("delivered") >= 2, 60,
                    "the car laps and its crossings are delivered before the outage")
         running.app.stop()  # the API is really gone: its process has exited
         outage_started_with = car.strips.queued
@@ -169,11 +171,10 @@ def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin,
         print(f"\nAPI down for {time.monotonic() - outage_started:.1f} s")
         running.restart_app()  # also records its pid in stack.json, where `drem` finds the stack
         restarted_with = car.strips.queued
-        wait_until(lambda: car.strips.queued > restarted_with and outbox.count() == 0, 60,
-                   "after the restart the backlog is delivered and the next crossing too")
-        car.vehicle.stop()
+        wait_until(lambda: car.strips.queued > restarted_with, 60, "the car crosses the line after the restart too")
+        car.vehicle.stop()  # a fixed number of crossings to deliver: the backlog, and the one after the restart
         driving.join(10)
-        wait_until(lambda: outbox.count() == 0, 30, "nothing is left undelivered")
+        wait_until(lambda: outbox.count() == 0, 120, "the backlog and the next crossing are delivered")
         assert outbox.count("rejected") == 0, outbox.rejected()
     finally:
         car.vehicle.stop()
@@ -181,6 +182,7 @@ def test_laps_survive_an_api_outage_exactly_once_and_in_order(live_stack, admin,
         if not running.app.alive():
             running.restart_app()  # also records its pid in stack.json, where `drem` finds the stack
     crossings = [item["timestamp_ms"] for item in _delivered_bodies(outbox)]
+    assert len(crossings) == car.strips.queued, "every crossing the car made reached the server"
     laps = laps_of(admin, event_id, race_id)
     expected = [b - a for a, b in zip(crossings, crossings[1:])]
     print(f"\n{len(crossings)} crossings, {len(laps)} laps: {[lap['time_ms'] for lap in laps]}")
