@@ -23,8 +23,8 @@ def open_agent_files(config_dir: Path) -> tuple[Outbox, ModelStore]:
 
 def run_until_stopped(agent: CarAgent, deadline: float | None) -> None:
     """Run the agent's background work until it stops itself (revoked, restart), the deadline, or Ctrl-C."""
-    agent.start()
     try:
+        agent.start()  # inside: its first thread may already be at work (and Ctrl-C pressed) while it starts the next
         while not agent.wait(0.5):
             if deadline is not None and time.monotonic() >= deadline:
                 break

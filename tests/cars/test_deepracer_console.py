@@ -19,6 +19,7 @@ from chalicelib.domain.devices import Telemetry
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole
+from tests.waiting import wait_until
 
 pytestmark = pytest.mark.unit
 
@@ -235,11 +236,8 @@ def logged_in_session(fake: FakeConsole) -> tuple[requests.Session, dict[str, st
 
 
 def wait_for_status(session: requests.Session, fake: FakeConsole, wanted: str) -> None:
-    for _ in range(200):
-        if session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == wanted:
-            return
-        fake.state.stopping.wait(0.02)
-    raise AssertionError(f"isModelLoading never said {wanted!r}")
+    wait_until(lambda: session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == wanted,
+               10, f"isModelLoading says {wanted!r}", poll_s=0.02)
 
 
 def test_fake_login_and_api_need_the_csrf_token(fake: FakeConsole) -> None:
@@ -339,7 +337,9 @@ def test_the_csrf_token_is_read_from_the_meta_tag_whatever_the_attribute_order()
 
 
 def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake: FakeConsole, tmp_path: Path) -> None:
-    """`drem car run --deepracer` as a user runs it: the installed entry point, from outside the repository."""
+    """`drem car run --deepracer` as a user runs it: the installed entry point, from outside the repository, stopped
+    with Ctrl-C once its heartbeat has read the car (`--seconds` only bounds a hang)."""
+    import signal
     import subprocess
     import sys
 
@@ -350,17 +350,28 @@ def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake
                                                   hostname="deepracer-07", fleet_id="f", credential="car-1.secret"))
     drem = str(Path(sys.executable).with_name("drem"))
 
-    def run(password: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([drem, "car", "--config-dir", str(config), "run", "--deepracer", fake.url,
-                               "--seconds", "2"], cwd=tmp_path, capture_output=True, text=True, timeout=60,
-                              env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": password,
-                                   "DREM_CAR_NO_REEXEC": "1"})
+    def start(password: str) -> subprocess.Popen[str]:
+        return subprocess.Popen([drem, "car", "--config-dir", str(config), "run", "--deepracer", fake.url,
+                                 "--seconds", "60"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": password,
+                                                "DREM_CAR_NO_REEXEC": "1"})
 
-    refused = run("wrong")
-    assert refused.returncode == 1 and "refused the password" in refused.stderr, refused.stderr
-    ran = run("car-password")
-    assert ran.returncode == 0, ran.stderr
-    assert "GET /api/get_battery_level" in paths(fake), "the heartbeat reads the car's battery (API unreachable)"
+    refused = start("wrong")
+    _out, err = refused.communicate(timeout=60)
+    assert refused.returncode == 1 and "refused the password" in err, err
+    running = start("car-password")
+    try:
+        wait_until(lambda: "GET /api/get_battery_level" in paths(fake) or running.poll() is not None, 30,
+                   "the heartbeat reads the car's battery (API unreachable)")
+        assert running.poll() is None, running.communicate()[1]
+        running.send_signal(signal.SIGINT)  # Ctrl-C, as a user stops it
+        _out, err = running.communicate(timeout=30)
+    finally:
+        if running.poll() is None:
+            running.kill()
+            running.communicate()
+    assert running.returncode == 0, err
+    assert "Traceback" not in err, err
 
 
 def test_the_agents_two_threads_sharing_the_console_do_not_take_each_other_for_someone_else(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,8 @@ pytestmark = pytest.mark.unit
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
 VIDEO_FRAMES = 23  # about 1.5 s at 15 fps
+LOOP_HZ = 15
+BOUND_TICKS = LOOP_HZ * 30  # a loop that never meets its condition fails after 30 s instead of hanging
 NEUTRAL_MOTOR, CENTRED_SERVO = MOTOR_DEFAULT.mid_ns, SERVO_DEFAULT.mid_ns
 
 
@@ -96,12 +99,13 @@ def servo_power(root: Path) -> str:
 
 
 class Recorder:
-    """Last part of the loop: what each tick saw and what it wrote to the PWM files; may act at a given tick."""
+    """Last part of the loop: what each tick saw and what it wrote to the PWM files. After each tick it calls
+    `after_tick(ticks)`, where a test acts on what it has seen so far (an emergency stop, stopping the loop)."""
 
-    def __init__(self, root: Path, at_tick: dict[int, Any] | None = None) -> None:
+    def __init__(self, root: Path, after_tick: Callable[[list[dict[str, Any]]], None] | None = None) -> None:
         self.root = root
         self.ticks: list[dict[str, Any]] = []
-        self.at_tick = at_tick or {}
+        self.after_tick = after_tick
 
     def run(self, image, steering, speed, stopped, reason, servo_ns, motor_ns):  # type: ignore[no-untyped-def]
         self.ticks.append({"image": None if image is None else image.copy(), "steering": steering, "speed": speed,
@@ -109,16 +113,14 @@ class Recorder:
                            "servo_file": written(self.root, SERVO_CHANNEL, "duty_cycle"),
                            "motor_file": written(self.root, MOTOR_CHANNEL, "duty_cycle"),
                            "servo_power": servo_power(self.root)})
-        action = self.at_tick.get(len(self.ticks))
-        if action is not None:
-            action()
+        if self.after_tick is not None:
+            self.after_tick(self.ticks)
 
 
-def car_with_recorder(video: Path, root: Path, model: InstalledModel,
-                      at_tick: dict[int, Any] | None = None) -> tuple[PwmCar, Recorder]:
+def car_with_recorder(video: Path, root: Path, model: InstalledModel) -> tuple[PwmCar, Recorder]:
     car = build_pwm_car(str(video), PwmWiring(root=root, gpio_root=gpio_root(root)))
     car.driver.load_model(model)  # what the agent does once the assigned model is verified and unpacked
-    recorder = Recorder(root, at_tick)
+    recorder = Recorder(root)
     car.vehicle.add(recorder, inputs=[ch.CAMERA_IMAGE, ch.PILOT_STEERING, ch.PILOT_SPEED, ch.SAFETY_STOPPED,
                                       ch.SAFETY_REASON, ch.PWM_SERVO_NS, ch.PWM_MOTOR_NS])
     return car, recorder
@@ -134,7 +136,15 @@ def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_en
     car, recorder = car_with_recorder(video, root, sample_model)
     assert written(root, 0, "period") == 20_000_000 and written(root, 1, "enable") == 1
     assert servo_power(root) == "0", "GPIO 436 low: servos powered (after both channels went neutral)"
-    car.vehicle.start(rate_hz=15, max_loops=45)  # 3 s: the 1.5 s video, then its last frame goes stale
+
+    def stop_five_ticks_after_the_video_ended_and_its_last_frame_went_stale(ticks: list[dict[str, Any]]) -> None:
+        stale = [i for i, t in enumerate(ticks) if t["reason"] and "camera frame is" in t["reason"]]
+        if car.camera.ended and stale and len(ticks) - stale[0] >= 5:
+            car.vehicle.stop()
+
+    recorder.after_tick = stop_five_ticks_after_the_video_ended_and_its_last_frame_went_stale
+    stats = car.vehicle.start(rate_hz=LOOP_HZ, max_loops=BOUND_TICKS)  # the 1.5 s video, then 0.5 s until stale
+    assert stats.loops < BOUND_TICKS, "the loop stopped on its condition, not at the bound"
 
     driving = [t for t in recorder.ticks if not t["stopped"]]
     seen = set()
@@ -167,11 +177,22 @@ def test_throttle_cap_scales_the_motor_and_emergency_stop_puts_it_to_neutral(
     root = pwm_tree(tmp_path / "pwm")
     space = OnnxPilot(sample_model.path).action_space
     car, recorder = car_with_recorder(video, root, sample_model)
-    recorder.at_tick = {8: car.driver.emergency_stop}  # what the agent does on staff's EMERGENCY_STOP
-    car.driver.set_throttle_cap(50)
-    car.vehicle.start(rate_hz=15, max_loops=14)
+    stopped_at: list[int] = []
 
-    before, after = recorder.ticks[:8], recorder.ticks[8:]
+    def emergency_stop_after_three_driving_ticks_then_watch_six_more(ticks: list[dict[str, Any]]) -> None:
+        if not stopped_at and sum(not t["stopped"] for t in ticks) == 3:
+            car.driver.emergency_stop()  # what the agent does on staff's EMERGENCY_STOP
+            stopped_at.append(len(ticks))
+        elif stopped_at and len(ticks) - stopped_at[0] >= 6:
+            car.vehicle.stop()
+
+    recorder.after_tick = emergency_stop_after_three_driving_ticks_then_watch_six_more
+    car.driver.set_throttle_cap(50)
+    stats = car.vehicle.start(rate_hz=LOOP_HZ, max_loops=BOUND_TICKS)
+    assert stats.loops < BOUND_TICKS and stopped_at, "the loop stopped on its condition, not at the bound"
+
+    before, after = recorder.ticks[:stopped_at[0]], recorder.ticks[stopped_at[0]:]
+    assert len(after) == 6
     driving = [t for t in before if not t["stopped"]]
     assert driving, [t["reason"] for t in before]
     for tick in driving:
