@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -47,7 +48,7 @@ class Control:
     throttle: float = 0.0  # -1 (brake) .. 1 (full speed)
 
     @classmethod
-    def parse(cls, body: Any) -> "Control":
+    def parse(cls, body: Any) -> Control:
         if not isinstance(body, dict) or set(body) - {"steering", "throttle"}:
             raise ControlError('a control is {"steering": -1..1, "throttle": -1..1}')
         values = []

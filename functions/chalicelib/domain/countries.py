@@ -11,7 +11,7 @@ from chalicelib.domain.errors import InvalidInput
 
 def _short_name(country: object) -> str:
     # pycountry's `common_name` where ISO's is long or formal ("Bolivia" for "Bolivia, Plurinational State of").
-    return str(getattr(country, "common_name", None) or getattr(country, "name"))
+    return str(getattr(country, "common_name", None) or country.name)
 
 
 COUNTRY_NAMES: dict[str, str] = {c.alpha_2: _short_name(c) for c in pycountry.countries}

@@ -3,7 +3,8 @@
 A board item keeps, next to its public body, the state it was ranked from: one `BoardRow` (summary + profile) per
 racer. Refreshing one racer replaces their row and re-ranks; nothing else is read. The combined board is ranked from
 the rows of every track board; it is written for single-track events too (then equal to the track's board), so a
-poll without `?track=` always finds a board without looking the event up. Versions go up by one per write; a write is skipped
+poll without `?track=` always finds a board without looking the event up. Versions go up by one per write; a write is
+skipped
 when neither what viewers see (the board's etag) nor the stored rows changed, so polls keep getting 304.
 
 Poll reads (`board`, `overlay`) go through a per-process `PublicViewCache`: hundreds of spectators polling every second
@@ -230,7 +231,8 @@ class LeaderboardPublisher:
         """Replace every board of an event from scratch (race admin's "recompute")."""
         tracks = list(all_tracks)
         boards = {track: self._write_board(event_id, track, method,
-                                           lambda _old, t=track: {r.summary.racer_sub: r for r in rows_by_track.get(t, [])})
+                                           lambda _old, t=track: {r.summary.racer_sub: r for r in rows_by_track.get(t,
+                                                                                                                    [])})
                   for track in tracks}
         boards[COMBINED_TRACK_ID] = self._refresh_combined(event_id, tracks, method)
         return boards
@@ -251,7 +253,8 @@ class LeaderboardPublisher:
             # Clock readings as of `as_of_ms`; while `running`, a viewer adds the time since to interpolate.
             "as_of_ms": now_ms, "running": race.status is RaceStatus.RUNNING,
             "time_left_ms": race_time_left_ms(race, now_ms), "current_lap_ms": current_lap_ms(race, now_ms),
-            "position": entry.position if entry else None, "gap_to_leader_ms": entry.gap_to_leader_ms if entry else None,
+            "position": entry.position if entry else None,
+            "gap_to_leader_ms": entry.gap_to_leader_ms if entry else None,
         }
         self._write(event_id=race.event_id, sort_key=overlay_key(race.track_id),
                     build=lambda version, _state: (_dumps({**state, "version": version}), f'"v{version}"', ""))

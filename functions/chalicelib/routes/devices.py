@@ -14,7 +14,8 @@ from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_activation
-from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode, IssuedCredential)
+from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode,
+                                          IssuedCredential)
 from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceView, MoveToFleet,
                                       Telemetry)
 from chalicelib.domain.errors import InvalidInput
@@ -78,7 +79,8 @@ def device_commands(principal: User, device_id: str) -> dict:
 @route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC, csrf=False, body=ActivationExchange,
        response=IssuedCredential, status_code=201)
 def activate_device(principal: Principal, body: ActivationExchange) -> Response:
-    issued = guarded_activation(lambda: services.activation_service().activate(body), client_address(bp.current_request))
+    issued = guarded_activation(lambda: services.activation_service().activate(body),
+                                client_address(bp.current_request))
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 

@@ -65,7 +65,8 @@ def new_password(principal: Principal) -> Response:
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
-        tokens = services.identity_provider().complete_new_password(challenge, _matching_new_password(form_fields(request)))
+        tokens = services.identity_provider().complete_new_password(challenge,
+                                                                    _matching_new_password(form_fields(request)))
     except TokenExpired:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     except _SHOWN_ON_FORM as exc:

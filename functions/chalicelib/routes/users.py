@@ -7,8 +7,8 @@ from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.domain.numbers import whole_number
-from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
-                                     UserPage)
+from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser,
+                                     RoleChange, SignUpForm, StaffRegistrationForm, UserPage)
 from chalicelib import services
 
 bp = Blueprint(__name__)

@@ -10,7 +10,8 @@ import json
 import logging
 import threading
 from collections.abc import Iterable
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from werkzeug.test import run_wsgi_app
 

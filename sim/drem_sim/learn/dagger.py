@@ -22,7 +22,8 @@ import json
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import Any, TextIO
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -106,7 +107,8 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
     teacher = Demonstrator(track)
     rng = np.random.default_rng(seed)
     recorder = RunRecorder(root, track.track_id, direction="reverse" if track.is_reversed else "forward",
-                           driver=f"dagger-round-{round_number}", seed=seed, camera=env.camera.config if env.camera else None,
+                           driver=f"dagger-round-{round_number}", seed=seed,
+                           camera=env.camera.config if env.camera else None,
                            extra={"track_direction": track.direction, "decision_hz": env.config.decision_hz,
                                   "dagger": {"round": round_number, "beta": beta, "model": archive.name}})
     obs, info = env.reset(seed=seed)
@@ -215,7 +217,7 @@ def plot_rounds(reports: Sequence[RoundReport], path: Path, width: int = 640, he
         colour = palette[n % len(palette)]
         points = [(x_of(i), int(bottom - (bottom - top) * m.laps_completed_pct / 100.0))
                   for i, r in enumerate(reports) for m in r.evaluation if m.track == track]
-        for a, b in zip(points, points[1:]):
+        for a, b in zip(points, points[1:], strict=False):
             cv2.line(canvas, a, b, colour, 2, cv2.LINE_AA)
         for point in points:
             cv2.circle(canvas, point, 3, colour, -1)
@@ -224,7 +226,7 @@ def plot_rounds(reports: Sequence[RoundReport], path: Path, width: int = 640, he
     if losses:
         peak = max(losses) * 1.05 or 1.0
         points = [(x_of(i), int(bottom - (bottom - top) * v / peak)) for i, v in enumerate(losses)]
-        for a, b in zip(points, points[1:]):
+        for a, b in zip(points, points[1:], strict=False):
             cv2.line(canvas, a, b, (0, 0, 0), 1, cv2.LINE_AA)
         cv2.putText(canvas, f"train loss (peak {peak:.3f})", (right + 8, bottom), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                     (0, 0, 0), 1)

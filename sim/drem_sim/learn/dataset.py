@@ -12,7 +12,8 @@ import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
+from collections.abc import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -48,7 +49,7 @@ class ActionScale:
                 _from_unit(unit[..., 1], self.speed_low, self.speed_high))
 
     @classmethod
-    def from_speeds(cls, speeds: np.ndarray) -> "ActionScale":
+    def from_speeds(cls, speeds: np.ndarray) -> ActionScale:
         low, high = float(np.min(speeds)), float(np.max(speeds))
         if high - low < MIN_SPEED_SPREAD:
             middle = (high + low) / 2
@@ -209,12 +210,13 @@ class Augmentation:
     blur_probability: float = 0.0
 
     @classmethod
-    def from_names(cls, names: Iterable[str]) -> "Augmentation":
+    def from_names(cls, names: Iterable[str]) -> Augmentation:
         """`["brightness", "shift", ...]` → those switched on (camera-matched strengths), the rest off."""
         chosen = {name.strip() for name in names if name.strip()}
         unknown = chosen - set(AUGMENTATIONS) - {"none"}
         if unknown:
-            raise DatasetError(f"unknown augmentation(s) {sorted(unknown)}; choose from {', '.join(AUGMENTATIONS)} or none")
+            raise DatasetError(f"unknown augmentation(s) {sorted(unknown)}; "
+                               f"choose from {', '.join(AUGMENTATIONS)} or none")
         return cls(brightness=0.25 if "brightness" in chosen else 0.0, noise=6.0 if "noise" in chosen else 0.0,
                    flip="flip" in chosen, shift_px=4.0 if "shift" in chosen else 0.0,
                    rotate_deg=2.0 if "shift" in chosen else 0.0, blur_probability=0.3 if "blur" in chosen else 0.0)
