@@ -245,6 +245,7 @@ class CarAgent:
             return
 
     def _ensure_installed(self, entry: dict[str, Any]) -> InstalledModel | None:
+        assert self.store is not None  # only the sync with a model store installs
         model_id, md5 = entry["model_id"], entry.get("md5")
         if not md5:
             self._report(model_id, "failed", reason="the server gave no md5 for this model")

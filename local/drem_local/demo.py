@@ -108,9 +108,9 @@ class Demo:
         self.model_ids = [f"sample-{sample}"]
         self._ensure_racers()
         saved = self._load()
-        self.fleet_id = saved.get("fleet_id") if saved.get("fleet_id") and self._exists(
+        self.fleet_id = str(saved.get("fleet_id")) if saved.get("fleet_id") and self._exists(
             f"/api/fleets/{saved['fleet_id']}") else self.api.post("/api/fleets", {"name": "Demo sim cars"})["fleet_id"]
-        self.event_id = saved.get("event_id") if saved.get("event_id") and self._exists(
+        self.event_id = str(saved.get("event_id")) if saved.get("event_id") and self._exists(
             f"/api/events/{saved['event_id']}") else self._create_event()
         self.cars = [self._ensure_car(track_id) for track_id in TRACK_IDS]
         self._save()

@@ -97,6 +97,7 @@ def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: s
     obs, info = env.reset(seed=seed)
     params = info["params"]
     for _ in range(limit):
+        assert obs is not None  # the env has a camera (checked above)
         action = policy(obs, params)
         t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
         next_obs, params, terminated, truncated, info = env.step(action)

@@ -107,7 +107,9 @@ class PublicViewCache:
             entry = self._entries.get(key)
             age_ms = (self._monotonic() - entry.read_started) * 1000 if entry is not None else None
             held = entry if age_ms is not None and age_ms <= self.fresh_ms else None
+            flight: _Flight | None
             if held is not None:
+                assert age_ms is not None  # held only when it was measured
                 if age_ms < self.refresh_after_ms or key in self._flights:
                     return held.value
                 flight = self._flights[key] = _Flight()  # refresh ahead: this asker reads, the others keep the entry
@@ -230,9 +232,7 @@ class LeaderboardPublisher:
                 all_tracks: Iterable[str]) -> dict[str, Leaderboard]:
         """Replace every board of an event from scratch (race admin's "recompute")."""
         tracks = list(all_tracks)
-        boards = {track: self._write_board(event_id, track, method,
-                                           lambda _old, t=track: {r.summary.racer_sub: r for r in rows_by_track.get(t,
-                                                                                                                    [])})
+        boards = {track: self._write_board(event_id, track, method, _replace_rows(rows_by_track.get(track, [])))
                   for track in tracks}
         boards[COMBINED_TRACK_ID] = self._refresh_combined(event_id, tracks, method)
         return boards
@@ -335,6 +335,11 @@ def _rows(state: str) -> dict[str, BoardRow]:
     if not state:
         return {}
     return {row.summary.racer_sub: row for row in BoardState.model_validate_json(state).rows}
+
+
+def _replace_rows(rows: list[BoardRow]) -> Callable[[dict[str, BoardRow]], dict[str, BoardRow]]:
+    """A board change that drops whatever the board held and keeps these rows (one per racer)."""
+    return lambda _old: {r.summary.racer_sub: r for r in rows}
 
 
 def _ranked(rows: Iterable[BoardRow], method: RankingMethod, track_id: str, version: int) -> Leaderboard:

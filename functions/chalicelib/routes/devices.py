@@ -9,6 +9,7 @@ route acts on the caller's own device id, taken from its verified credential.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
@@ -40,7 +41,7 @@ def create_activation_code(principal: User, body: ActivationCodeRequest) -> Resp
 
 @route(bp, "/api/devices", methods=["GET"], allow=DEVICE_STAFF)
 def list_devices(principal: User) -> dict:
-    query = bp.current_request.query_params or {}
+    query: Mapping[str, str] = bp.current_request.query_params or {}
     devices = services.device_service().list_devices(online=_flag(query.get("online")), fleet_id=query.get("fleet_id"))
     return {"devices": [d.model_dump(mode="json") for d in devices]}
 

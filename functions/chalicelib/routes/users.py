@@ -1,6 +1,7 @@
 """Accounts (JSON): self sign-up and confirmation, staff registration, user listing, roles, disabling, self-delete."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
@@ -34,7 +35,7 @@ def register_racer(principal: User, body: StaffRegistrationForm) -> Response:
 
 @route(bp, "/api/users", allow={ADMIN, REGISTRATION, OPERATOR}, response=UserPage)
 def list_users(principal: User) -> dict:
-    query = bp.current_request.query_params or {}
+    query: Mapping[str, str] = bp.current_request.query_params or {}
     page = services.user_service().list_users(query.get("prefix"), _limit(query.get("limit")), query.get("next"))
     return page.model_dump()
 

@@ -76,7 +76,11 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
     """The demonstrator laps each track and direction once per `laps` (one run per lap, its own noise seed)."""
     from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
     from drem_sim.env import RaceEnv
-    from drem_sim.runs import record_run
+    from drem_sim.runs import Policy, record_run
+
+    def _teacher_policy(teacher: Demonstrator) -> Policy:
+        """The demonstrator as a run policy: it steers from the track parameters and ignores the frame."""
+        return lambda _obs, params: teacher.act(params)
 
     runs = []
     for number, direction in enumerate(directions):
@@ -86,7 +90,7 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
             run_seed = seed * 1000 + number * 50 + lap + 1
             teacher = Demonstrator(track, DemonstratorConfig(steering_noise_deg=noise_deg),
                                    rng=np.random.default_rng(run_seed))
-            runs.append(record_run(RaceEnv(track), lambda _obs, params, t=teacher: t.act(params), root, laps=1,
+            runs.append(record_run(RaceEnv(track), _teacher_policy(teacher), root, laps=1,
                                    driver="demonstrator", seed=run_seed))
     _bar(progress, "round 0 recording", len(directions), len(directions), "done")
     return runs
@@ -115,6 +119,7 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
     params = info["params"]
     limit = int(laps * SECONDS_PER_LAP_LIMIT * env.config.decision_hz)
     for _ in range(limit):
+        assert obs is not None  # the env observes (its camera makes the frames the pilot reads)
         label = teacher.act(params)
         executed = label if rng.random() < beta else pilot.act(obs)
         t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params

@@ -169,7 +169,7 @@ def _read_controls(run_dir: Path) -> list[dict[str, Any]]:
 
 
 def _frame_path(run_dir: Path, row: dict[str, Any]) -> Path:
-    frame = row.get("frame", row.get("index"))
+    frame: Any = row.get("frame", row.get("index"))  # a path (str) or a frame number, as the run wrote it
     if isinstance(frame, str):
         candidate = (run_dir / frame).resolve()
         if run_dir.resolve() not in candidate.parents:
@@ -261,8 +261,8 @@ def _shift_and_roll(images: np.ndarray, rng: np.random.Generator, shift_px: floa
     """Per image: translate by up to ±shift_px and roll by up to ±rotate_deg about the centre (edge pixels repeat,
     as a slightly moved camera still sees floor there, not black)."""
     count, height, width = images.shape
-    shifts = rng.uniform(-shift_px, shift_px, size=(count, 2))
-    angles = rng.uniform(-rotate_deg, rotate_deg, size=count)
+    shifts: np.ndarray = rng.uniform(-shift_px, shift_px, size=(count, 2))
+    angles = rng.uniform(-rotate_deg, rotate_deg, size=(count,))
     out = np.empty_like(images)
     for i in range(count):
         matrix = cv2.getRotationMatrix2D((width / 2, height / 2), float(angles[i]), 1.0)
