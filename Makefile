@@ -44,8 +44,7 @@ test: install-test
 ## make lint: ruff (style and likely bugs) and mypy (types; strict for leaderboard/ and chalicelib/domain/), as
 ## configured in pyproject.toml. mypy keeps its cache in .mypy_cache/, so a second run takes seconds.
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check --quiet .
-	$(BIN)/mypy
+	@status=0; $(BIN)/ruff check --quiet --output-format concise . || status=1; $(BIN)/mypy || status=1; exit $$status
 
 install: $(VENV)/.installed-runtime $(HTMX) $(FLAGS) font-debs
 
