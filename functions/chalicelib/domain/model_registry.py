@@ -151,9 +151,10 @@ class RegistryService:
         if lineage is None:
             return ModelDetail(model, verdict(model), evaluations, [], [], None,
                                note or "No training lineage: this model was not trained by drem.")
-        shown: list[tuple[str, str]] = [(key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
-                                                     "learning_rate", "augment", "train_frames", "validation_frames",
-                                                     "train_seconds") if key in lineage]
+        shown: list[tuple[str, str]] = [
+            (key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
+                                                 "learning_rate", "augment", "train_frames", "validation_frames",
+                                                 "train_seconds") if key in lineage]
         shown += _training_recipe(lineage)
         dataset: Any = lineage.get("dataset") if isinstance(lineage.get("dataset"), dict) else {}
         runs = [str(r.get("run_id") or r.get("run")) + (f" ({r.get('track_id') or r.get('track')})"
