@@ -26,7 +26,7 @@ FONT_DEBS := fonts-noto-core fonts-droid-fallback
 TEST_DEBS := chromium poppler-utils $(FONT_DEBS)
 BENCH_DEBS := wrk nginx-light
 
-.PHONY: up demo test install install-test test-debs font-debs lock build bench clean-state deploy destroy
+.PHONY: up demo test lint install install-test test-debs font-debs lock build bench clean-state deploy destroy
 
 ## make up: install everything, then start the local event stack on http://127.0.0.1:8000
 up: install
@@ -36,9 +36,15 @@ up: install
 demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
-## make test: install the test dependencies (Python, npm htmx, Debian chromium), then run every test
+## make test: install the test dependencies (Python, npm htmx, Debian chromium), lint, then run every test
 test: install-test
+	$(MAKE) --no-print-directory lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+## make lint: ruff (style and likely bugs) and mypy (types; strict for leaderboard/ and chalicelib/domain/), as
+## configured in pyproject.toml. mypy keeps its cache in .mypy_cache/, so a second run takes seconds.
+lint: $(VENV)/.installed-test
+	@status=0; $(BIN)/ruff check --quiet --output-format concise . || status=1; $(BIN)/mypy || status=1; exit $$status
 
 install: $(VENV)/.installed-runtime $(HTMX) $(FLAGS) font-debs
 

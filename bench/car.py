@@ -1,7 +1,8 @@
 """Car agent bench: how long a staff assignment takes to drive the car, the pilot's inference cost, loop jitter.
 
 One run, side by side, on the real local stack (durable moto + app server on free ports in a temp dir):
-- assign → loaded: a sim car (`drem car run --sim` as a subprocess: agent + 15 Hz drive loop) gets the sample model assigned 20 times,
+- assign → loaded: a sim car (`drem car run --sim` as a subprocess: agent + 15 Hz drive loop) gets the sample model
+assigned 20 times,
   alternating between two uploads of it so every assignment is a fresh pull (download, md5, unpack, swap, load);
   the time runs from the staff's `PUT /api/cars/{id}/models` answer to the first `GET` that shows `loaded`, as staff
   see it. The agent watches its assignment every 2 s, so ~1 s of it is waiting by design; rounds start at random

@@ -61,11 +61,12 @@ def main(argv: list[str] | None = None) -> int:
           f"misleading error answers: {len(report.misleading_answers)}; unexplained errors: {len(report.errors)}")
     for error in report.errors[:5]:
         print("   error:", error)
-    print(f"\nrestart to first authenticated 200      median    max")
+    print("\nrestart to first authenticated 200      median    max")
     print(f"  after kill -9 ({len(report.crash_restart_s):>2} crashes)          "
           f"{crash_s:6.2f}s {max(report.crash_restart_s):6.2f}s")
     for role, seconds in sorted(report.crash_restart_by_role.items()):
-        print(f"    of which {role:<8} ({len(seconds):>2})          {statistics.median(seconds):6.2f}s {max(seconds):6.2f}s")
+        print(f"    of which {role:<8} ({len(seconds):>2})          "
+              f"{statistics.median(seconds):6.2f}s {max(seconds):6.2f}s")
     print(f"  clean stop and start ({len(report.clean_restart_s)}x)          "
           f"{clean_s:6.2f}s {max(report.clean_restart_s):6.2f}s")
     met = (report.lost == 0 and report.duplicated == 0 and report.stale_boards == 0

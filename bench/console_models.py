@@ -72,7 +72,8 @@ def main() -> int:
     graph = ov.Core().read_model(str(pb))
     graph.reshape([1, 120, 160, 1])  # static, as the car's model optimizer fixes it (dynamic shapes cost OpenVINO)
     compiled = ov.Core().compile_model(graph, "CPU",
-                                       {"INFERENCE_NUM_THREADS": 1, "INFERENCE_PRECISION_HINT": "f32", "ENABLE_CPU_PINNING": False,
+                                       {"INFERENCE_NUM_THREADS": 1, "INFERENCE_PRECISION_HINT": "f32",
+                                        "ENABLE_CPU_PINNING": False,
                                         "PERFORMANCE_HINT": "LATENCY"})
     request = compiled.create_infer_request()
     for frame in frames[:20]:  # warm both up

@@ -73,7 +73,8 @@ def main() -> int:
     print(f"train on     {len(kept)} track directions: {', '.join(d.label for d in kept)}")
     print(f"held out     {', '.join(d.label for d in held)}")
     print(f"data         {args.demo_laps} demonstrator laps per track direction (noise {args.noise} deg), "
-          f"{args.dagger_rounds} DAgger round(s) of {args.dagger_laps} lap(s); epochs {args.epochs}+{args.round_epochs}/round; "
+          f"{args.dagger_rounds} DAgger round(s) of {args.dagger_laps} lap(s); "
+          f"epochs {args.epochs}+{args.round_epochs}/round; "
           f"augment {args.augment}", flush=True)
 
     started = time.monotonic()
@@ -85,7 +86,8 @@ def main() -> int:
     pipeline_seconds = time.monotonic() - started
     train_seconds = sum(r.train_seconds for r in reports)
     for r in reports:
-        print(f"round {r.round}: {r.frames} frames, train loss {r.final_train_loss:.4f}, {r.train_seconds:.0f}s training")
+        print(f"round {r.round}: {r.frames} frames, train loss {r.final_train_loss:.4f}, "
+              f"{r.train_seconds:.0f}s training")
     print(f"pipeline     {pipeline_seconds:.0f}s (training {train_seconds:.0f}s, recording and DAgger driving "
           f"{pipeline_seconds - train_seconds:.0f}s)", flush=True)
 
@@ -93,7 +95,7 @@ def main() -> int:
     print(f"{'held-out track':<30} {'model laps':>10} {'done %':>7} {'progress':>9} {'off':>4} {'model lap':>10} "
           f"{'demo lap':>9} {'ratio':>6}")
     worst_pct, worst_ratio = 100.0, 0.0
-    for direction, model in zip(held, models):
+    for direction, model in zip(held, models, strict=True):
         teacher = Demonstrator(direction.load())
         demo = drive(RaceEnv(direction.load(), EnvConfig(observe=False)), lambda _o, p, t=teacher: t.act(p),
                      3, args.seed, "demonstrator", direction.label)

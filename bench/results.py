@@ -53,7 +53,8 @@ def submitted_race(event_id: str, index: int, sub: str, username: str, config: A
     race = new_race(race_id=uuid.uuid4().hex, event_id=event_id, track_id="1",
                     racer=Racer(sub=sub, username=username), config=config, now_ms=start_ms)
     now = start_ms
-    for kind, step in (("start", 0), ("capture_lap", 9_000 + index * 7 % 2_000), ("capture_lap", 8_800 + index * 13 % 1_500),
+    for kind, step in (("start", 0), ("capture_lap", 9_000 + index * 7 % 2_000), ("capture_lap",
+                                                                                  8_800 + index * 13 % 1_500),
                        ("capture_lap", 9_100 + index * 3 % 900), ("end", 0), ("submit", 0)):
         now += step
         race, _ = race_machine.apply(race, parse_command({"kind": kind}), now)
@@ -75,7 +76,8 @@ def seed(dynamodb: Any, events: int, races_per_event: int, countries: list[str])
     ids, config = [], RaceConfig(min_lap_ms=0, debounce_ms=0)
     for number in range(events):
         event = Event(event_id=uuid.uuid4().hex[:12], name=f"Bench Cup {number}", event_type=EventType.AWS_SUMMIT,
-                      date=date(2026, 1, 1) + timedelta(days=7 * number), country_code=countries[number % len(countries)],
+                      date=date(2026, 1, 1) + timedelta(days=7 * number),
+                      country_code=countries[number % len(countries)],
                       sponsor="", race_config=config, tracks=(Track(track_id="1"),), landing_page_links=(),
                       created_at_ms=0, created_by="bench", updated_at_ms=0)
         store.create(event)
@@ -111,7 +113,8 @@ def main() -> int:
 
     from drem_local.bootstrap import clients_for, ensure_stack
 
-    os.environ.update({"AWS_DEFAULT_REGION": REGION, "AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing"})
+    os.environ.update({"AWS_DEFAULT_REGION": REGION, "AWS_ACCESS_KEY_ID": "testing",
+                       "AWS_SECRET_ACCESS_KEY": "testing"})
     with mock_aws():
         outputs = ensure_stack(clients_for(None, REGION), STAGE)
         os.environ.update(outputs.to_env())

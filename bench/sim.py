@@ -162,7 +162,8 @@ def main() -> int:
     print(f"onnxruntime  p50 {ort_p50:.3f} ms  p99 {ort_p99:.3f} ms")
     print(f"torch eager  p50 {torch_p50:.3f} ms  p99 {torch_p99:.3f} ms  (max |torch - ort| {max_difference:.1e})")
     met = rtf >= 100 and ort_p99 <= 1.0 and speedup >= 2
-    print(f"RESULT sim: rtf={rtf:.0f}x ref={reference_ms:.0f}ms rtf_at_ref100={rtf_at_ref100:.0f}x ort_p99={ort_p99:.3f}ms speedup={speedup:.1f}x "
+    print(f"RESULT sim: rtf={rtf:.0f}x ref={reference_ms:.0f}ms rtf_at_ref100={rtf_at_ref100:.0f}x "
+          f"ort_p99={ort_p99:.3f}ms speedup={speedup:.1f}x "
           f"| goal rtf>=100 ort_p99<=1ms speedup>=2 | {'met' if met else 'not met'}")
     return 0 if met else 1
 

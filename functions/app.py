@@ -6,8 +6,8 @@ from chalice import Chalice
 
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
-from chalicelib.routes import (accounts, api_docs, assignments, commentator, devices, event_landing, events, fleets, health,
-                               labels, leaderboards, league, login, pages, ping, profiles, public_pages, races,
+from chalicelib.routes import (accounts, api_docs, assignments, commentator, devices, event_landing, events, fleets,
+                               health, labels, leaderboards, league, login, pages, ping, profiles, public_pages, races,
                                racer_models, registry, results, stats, timing, users)
 from chalicelib.routes.console import events as console_events, fleets as console_fleets, models as console_models
 from chalicelib.routes.console import racer as console_racer, races as console_races
@@ -24,10 +24,10 @@ app.register_middleware(security_headers_middleware, "http")
 app.api.binary_types.append("application/pdf")
 app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
 
-for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models, assignments,
-                         races, timing, leaderboards, api_docs, public_pages, commentator, console_events, console_fleets,
-                         console_timekeeper, console_races, console_racer, console_registration, console_users,
-                         console_models, league, registry, results, labels, stats, event_landing, ping):
+for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models,
+                         assignments, races, timing, leaderboards, api_docs, public_pages, commentator, console_events,
+                         console_fleets, console_timekeeper, console_races, console_racer, console_registration,
+                         console_users, console_models, league, registry, results, labels, stats, event_landing, ping):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

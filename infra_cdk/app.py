@@ -39,7 +39,8 @@ def main() -> None:
         functions_dir = FUNCTIONS_DIR
         # The Chalice construct writes chalice.out/ into the working directory; keep it inside the (ignored) outdir.
         os.chdir(app.outdir)
-    context = {name: app.node.try_get_context(name) or None for name in ("public_url", "domain_name", "certificate_arn")}
+    context = {name: app.node.try_get_context(name) or None for name in ("public_url", "domain_name",
+                                                                         "certificate_arn")}
     DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context,
               env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),
                                   region=os.environ.get("CDK_DEFAULT_REGION")))

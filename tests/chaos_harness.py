@@ -10,7 +10,8 @@ would). Meanwhile, the way an event runs:
 - an operator creates events; when storage stops answering mid-create, the client checks the event list before
   creating it again (what the error message tells a user to do), since event creation has no idempotency key.
 
-Each round kills -9 the storage server or the app (in turn) at a random moment, then restarts it. At the end every count a user
+Each round kills -9 the storage server or the app (in turn) at a random moment, then restarts it. At the end every count
+a user
 would notice is compared with what was acknowledged: laps lost or counted twice, racers or events lost or created
 twice, boards that differ from their races, and accounts left half-registered.
 """

@@ -228,7 +228,7 @@ class CarAgent:
         if self.loaded is not None and self.loaded.model_id not in {m["model_id"] for m in assigned}:
             self.driver.unload_models()
             self.loaded = None
-        for entry, model in installed:  # the first assigned model that loads is the one that drives
+        for _entry, model in installed:  # the first assigned model that loads is the one that drives
             if (model.model_id, model.archive_md5) in self._failed:
                 continue
             if self.loaded is not None and self.loaded.path == model.path:
@@ -245,6 +245,7 @@ class CarAgent:
             return
 
     def _ensure_installed(self, entry: dict[str, Any]) -> InstalledModel | None:
+        assert self.store is not None  # only the sync with a model store installs
         model_id, md5 = entry["model_id"], entry.get("md5")
         if not md5:
             self._report(model_id, "failed", reason="the server gave no md5 for this model")

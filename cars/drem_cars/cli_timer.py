@@ -7,7 +7,8 @@ import os
 import sys
 import time
 
-HELP = "timing-strip agent for a Raspberry Pi: GPIO17/27 crossings → strip events (activate with `drem car activate --kind timer`)"
+HELP = ("timing-strip agent for a Raspberry Pi: GPIO17/27 crossings → strip events "
+        "(activate with `drem car activate --kind timer`)")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -39,7 +39,7 @@ class ActionSpace:
 
 def action_space_of(metadata: dict[str, Any]) -> ActionSpace:
     kind = str(metadata.get("action_space_type", "discrete"))  # DeepRacer's default when missing
-    space = metadata.get("action_space")
+    space: Any = metadata.get("action_space")  # checked by the parse below (bad shapes raise)
     try:
         if kind == "continuous":
             return ActionSpace("continuous", steering=_bounds(space["steering_angle"]), speed=_bounds(space["speed"]))

@@ -65,7 +65,7 @@ def run_agent(args: argparse.Namespace) -> int:
     return _finish(agent)
 
 
-def _sim_car(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, track: str):  # type: ignore[no-untyped-def]
+def _sim_car(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, track: str):
     from drem_cars.parts.safety import Safety
     from drem_cars.sim_car import build_sim_car
 
@@ -101,7 +101,7 @@ def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, mod
     return _finish(agent)
 
 
-def _drive(agent: CarAgent, vehicle, rate_hz: float, deadline: float | None):  # type: ignore[no-untyped-def]
+def _drive(agent: CarAgent, vehicle, rate_hz: float, deadline: float | None):
     """Run the agent next to the drive loop until stopped (Ctrl-C, deadline, revocation, restart)."""
     agent.start()
     watcher = threading.Thread(target=_stop_vehicle_when, args=(agent, vehicle, deadline), daemon=True)
@@ -115,7 +115,7 @@ def _drive(agent: CarAgent, vehicle, rate_hz: float, deadline: float | None):  #
     return stats
 
 
-def _stop_vehicle_when(agent: CarAgent, vehicle, deadline: float | None) -> None:  # type: ignore[no-untyped-def]
+def _stop_vehicle_when(agent: CarAgent, vehicle, deadline: float | None) -> None:
     while not agent.wait(0.2):
         if deadline is not None and time.monotonic() >= deadline:
             break

@@ -93,7 +93,7 @@ class Vehicle:
             result = (None,) * len(entry.outputs)
         if len(result) != len(entry.outputs):
             raise ValueError(f"part {entry.name} returned {len(result)} values for outputs {entry.outputs}")
-        self.memory.update(zip(entry.outputs, result))
+        self.memory.update(zip(entry.outputs, result, strict=True))
 
     def start(self, rate_hz: float = 15.0, max_loops: int | None = None) -> LoopStats:
         if rate_hz <= 0:

@@ -94,7 +94,7 @@ def _error_response(exc: Exception, request: Request | None) -> Response:
         logs.log_exception("unhandled error", exc)
     message, field, fields = describe(exc)
     if wants_json(request):
-        headers = {"WWW-Authenticate": "Bearer"} if status == 401 else {}
+        headers: dict[str, str | list[str]] = {"WWW-Authenticate": "Bearer"} if status == 401 else {}
         body: dict[str, Any] = {"code": type(exc).__name__ if status != 500 else "InternalError",
                                 "message": message, "field": field, "fields": fields, "requestId": request_id}
         return Response(body={"error": body}, status_code=status, headers=headers)

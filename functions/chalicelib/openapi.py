@@ -151,7 +151,7 @@ def _operation(declared: DeclaredRoute, refs: dict[tuple[type, str], dict[str, A
 
 def _model_refs(routes: Iterable[DeclaredRoute], schemas: dict[str, Any]) -> dict[tuple[type, str], dict[str, Any]]:
     """Schemas of every declared body/response model at once, so pydantic resolves name clashes across them."""
-    wanted: list[tuple[type[BaseModel], str]] = []
+    wanted: list[tuple[type[BaseModel], typing.Literal["validation", "serialization"]]] = []
     for declared in routes:
         docs = declared.docs
         if docs.body is not None:
@@ -163,7 +163,7 @@ def _model_refs(routes: Iterable[DeclaredRoute], schemas: dict[str, Any]) -> dic
         return {}
     by_key, top = models_json_schema(unique, ref_template=REF_TEMPLATE)
     schemas.update(top.get("$defs", {}))
-    return dict(by_key)
+    return {key: schema for key, schema in by_key.items()}
 
 
 def _response_models(response: Any) -> list[type[BaseModel]]:

@@ -42,7 +42,7 @@ def add_security_headers(response: Response, request: Request, settings: Setting
     if _served_over_https(request, settings):
         headers["Strict-Transport-Security"] = HSTS
     cache = headers.get("Cache-Control") or ""
-    if headers.get("Set-Cookie") and "public" in cache:
+    if isinstance(cache, str) and headers.get("Set-Cookie") and "public" in cache:
         headers["Cache-Control"] = cache.replace("public", "private")
 
 
@@ -72,5 +72,5 @@ def _upload_origin(settings: Settings) -> str:
 
 
 def _served_over_https(request: Request, settings: Settings) -> bool:
-    forwarded = (request.headers or {}).get("x-forwarded-proto", "")
+    forwarded = request.headers.get("x-forwarded-proto", "")
     return settings.cookie_secure or forwarded.lower() == "https"

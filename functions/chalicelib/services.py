@@ -64,21 +64,23 @@ def probe_storage() -> str:
 
 # --- accounts and sessions ------------------------------------------------------------------------------------------
 
-def _require_user_pool(settings: Settings, what: str) -> None:
+def _require_user_pool(settings: Settings, what: str) -> tuple[str, str]:
+    """(user pool id, app client id), or ServiceUnavailable when either is not configured."""
     if not settings.user_pool_id or not settings.user_pool_client_id:
         raise ServiceUnavailable(f"{what} not configured (DREM_USER_POOL_ID / DREM_USER_POOL_CLIENT_ID).")
+    return settings.user_pool_id, settings.user_pool_client_id
 
 
 def identity_provider(settings: Settings | None = None) -> CognitoIdentityProvider:
     settings = settings or get_settings()
-    _require_user_pool(settings, "Sign-in is")
-    return CognitoIdentityProvider(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
+    pool_id, client_id = _require_user_pool(settings, "Sign-in is")
+    return CognitoIdentityProvider(clients.cognito(), pool_id, client_id)
 
 
 def user_directory(settings: Settings | None = None) -> CognitoUserDirectory:
     settings = settings or get_settings()
-    _require_user_pool(settings, "Accounts are")
-    return CognitoUserDirectory(clients.cognito(), settings.user_pool_id, settings.user_pool_client_id)
+    pool_id, client_id = _require_user_pool(settings, "Accounts are")
+    return CognitoUserDirectory(clients.cognito(), pool_id, client_id)
 
 
 def session_store() -> DynamoSessionStore:

@@ -171,6 +171,7 @@ class DremStack(cdk.Stack):
     def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
         """Everything through CloudFront: /static/* cached at the edge, the rest passed to the API uncached (with
         cookies, query strings and headers, but not the viewer's Host, which API Gateway must see as its own)."""
+        assert self.app is not None  # a distribution is made only with the app
         api_domain = f"{self.app.get_resource('RestAPI').ref}.execute-api.{self.region}.{self.url_suffix}"
         api = origins.HttpOrigin(api_domain, origin_path="/api",
                                  protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)

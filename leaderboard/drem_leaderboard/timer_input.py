@@ -111,7 +111,8 @@ def decide(race: Race, event: StripEvent) -> StripDecision:
             f"crossing ignored: a {lap_time} ms lap is under the {config.min_lap_ms} ms minimum",
             sensor_fired=True,
         )
-    return StripDecision(action=StripAction.LAP, message=f"lap of {lap_time} ms", lap_time_ms=lap_time, sensor_fired=True)
+    return StripDecision(action=StripAction.LAP, message=f"lap of {lap_time} ms", lap_time_ms=lap_time,
+                         sensor_fired=True)
 
 
 def _ignore(reason: IgnoreReason, message: str, *, sensor_fired: bool = False) -> StripDecision:
@@ -123,7 +124,8 @@ def handle_strip_event(race: Race, event: StripEvent, now_ms: int) -> tuple[Race
     decision = decide(race, event)
     after = note_expiry(race, now_ms)
     if decision.sensor_fired:
-        after = after.model_copy(update={"sensor_last_ts_ms": {**after.sensor_last_ts_ms, event.sensor: event.timestamp_ms}})
+        after = after.model_copy(update={"sensor_last_ts_ms": {**after.sensor_last_ts_ms,
+                                                               event.sensor: event.timestamp_ms}})
     lap: Lap | None = None
     ts = event.timestamp_ms
     if decision.action is StripAction.START:

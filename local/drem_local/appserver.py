@@ -46,10 +46,10 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local",
     local.ChaliceRequestHandler.disable_nagle_algorithm = True
     local.ThreadedHTTPServer.request_queue_size = REQUEST_QUEUE_SIZE
     local.ThreadedHTTPServer.daemon_threads = True
-    local.ThreadedHTTPServer.handle_error = _handle_error  # type: ignore[method-assign]
+    local.ThreadedHTTPServer.handle_error = _handle_error
     _answer_unknown_urls_with_404(local.LocalGateway)
     # The request middleware already writes one JSON line per request; drop http.server's plain-text access log.
-    local.ChaliceRequestHandler.log_message = _quiet  # type: ignore[method-assign]
+    local.ChaliceRequestHandler.log_message = _quiet
     factory = CLIFactory(str(PROJECT_DIR))
     config = factory.create_config_obj(chalice_stage_name=stage)
     # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
@@ -63,7 +63,7 @@ def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local",
 def _add_storage_gateway(server: Any, handler_class: type, storage_url: str) -> None:
     from drem_local.storage_gateway import forward, is_gateway_path
 
-    class GatewayRequestHandler(handler_class):  # type: ignore[misc, valid-type]
+    class GatewayRequestHandler(handler_class):
         def _route(self) -> None:
             if is_gateway_path(self.path.split("?", 1)[0]):
                 forward(self, storage_url)

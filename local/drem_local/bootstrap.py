@@ -109,8 +109,8 @@ def ensure_stack(clients: AwsClients, stage: str = "local") -> StackOutputs:
         _ensure_table(clients.dynamodb, spec, tables[spec.logical], existing_tables)
 
     existing_buckets = {b["Name"] for b in clients.s3.list_buckets().get("Buckets", [])}
-    for spec in resources.BUCKETS:
-        _ensure_bucket(clients.s3, spec, buckets[spec.logical], existing_buckets, clients.region)
+    for bucket in resources.BUCKETS:
+        _ensure_bucket(clients.s3, bucket, buckets[bucket.logical], existing_buckets, clients.region)
 
     pool_id = _ensure_user_pool(clients.cognito, resources.user_pool_name(stage))
     client_id = _ensure_user_pool_client(clients.cognito, pool_id, resources.client_name(stage))

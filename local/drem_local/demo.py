@@ -31,7 +31,8 @@ DIRECTOR = "demo-director"
 # The sim track the cars drive and the sample model trained on it. re:Invent 2018 comes from the DeepRacer route files
 # (DREM_TRACKS_DIR or the shared folder beside the repository); drem_oval ships with drem_sim, so a fresh clone without
 # the route files still gets a demo.
-SIM_TRACKS_AND_SAMPLES: tuple[tuple[str, str], ...] = (("reinvent_base", "drem-bc-sample"), ("drem_oval", "drem-bc-oval"))
+SIM_TRACKS_AND_SAMPLES: tuple[tuple[str, str], ...] = (("reinvent_base", "drem-bc-sample"), ("drem_oval",
+                                                                                             "drem-bc-oval"))
 TRACK_IDS = ("1", "2")  # one sim car per track
 RACE_TIME_MIN = 1
 OVERDUE_S = 90.0  # a race still running this long after its race time is ended by the director
@@ -107,9 +108,9 @@ class Demo:
         self.model_ids = [f"sample-{sample}"]
         self._ensure_racers()
         saved = self._load()
-        self.fleet_id = saved.get("fleet_id") if saved.get("fleet_id") and self._exists(
+        self.fleet_id = str(saved.get("fleet_id")) if saved.get("fleet_id") and self._exists(
             f"/api/fleets/{saved['fleet_id']}") else self.api.post("/api/fleets", {"name": "Demo sim cars"})["fleet_id"]
-        self.event_id = saved.get("event_id") if saved.get("event_id") and self._exists(
+        self.event_id = str(saved.get("event_id")) if saved.get("event_id") and self._exists(
             f"/api/events/{saved['event_id']}") else self._create_event()
         self.cars = [self._ensure_car(track_id) for track_id in TRACK_IDS]
         self._save()

@@ -50,6 +50,7 @@ def forward(handler: BaseHTTPRequestHandler, storage_url: str, timeout_s: float 
         _plain(handler, 400, "Content-Length is not a number")
         return
     target = urlsplit(storage_url)
+    assert target.hostname is not None, "the storage URL names a host"
     connection = http.client.HTTPConnection(target.hostname, target.port, timeout=timeout_s)
     try:
         connection.putrequest(handler.command, handler.path, skip_host=True, skip_accept_encoding=True)
@@ -82,7 +83,7 @@ def _relay(handler: BaseHTTPRequestHandler, answer: http.client.HTTPResponse) ->
             handler.send_header(name, value)
     for name, value in _SAFE_RESPONSE_HEADERS:
         handler.send_header(name, value)
-    handler.send_header("Content-Length", declared if body is None else str(len(body)))
+    handler.send_header("Content-Length", str(len(body)) if body is not None else str(declared))
     handler.end_headers()
     if handler.command == "HEAD":
         return

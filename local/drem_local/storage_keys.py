@@ -85,7 +85,7 @@ def load_or_create(state_dir: Path) -> StorageKeys:
 def secure_state_dir(state_dir: Path) -> None:
     """Create the state dir 0700 and tighten everything already in it (older installs wrote 0644 files)."""
     state_dir.mkdir(parents=True, exist_ok=True, mode=DIR_MODE)
-    for directory, dirnames, filenames in os.walk(state_dir):
+    for directory, _dirnames, filenames in os.walk(state_dir):
         _restrict(Path(directory), DIR_MODE)
         for name in filenames:
             _restrict(Path(directory) / name, FILE_MODE)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -41,10 +42,10 @@ class CameraConfig:
 
     @classmethod
     def for_track(cls, track: Track, **overrides: object) -> CameraConfig:
-        base = {"width": track.sim.camera_width, "height": track.sim.camera_height,
-                "hfov_rad": track.sim.camera_hfov_rad}
+        base: dict[str, Any] = {"width": track.sim.camera_width, "height": track.sim.camera_height,
+                                "hfov_rad": track.sim.camera_hfov_rad}
         base.update(overrides)
-        return cls(**base)  # type: ignore[arg-type]
+        return cls(**base)
 
     def as_dict(self) -> dict[str, float | int]:
         return dict(self.__dict__)
@@ -141,6 +142,7 @@ class Camera:
         cv2.warpPerspective(self.texture.image, self.homography(x, y, heading), (self._w, self._h - self._row0),
                             dst=self._ground, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                             borderValue=GRASS)
+        frame: np.ndarray
         if cfg.supersample == 1:
             frame = self._frame.copy()
         else:

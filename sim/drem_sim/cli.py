@@ -35,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     drive.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765)")
     drive.add_argument("--out", type=Path, default=Path("runs"), help="runs root for recordings (default ./runs)")
     drive.add_argument("--upload", action="store_true",
-                       help="upload each recording to the runs bucket of the local stack when it stops (needs AWS_ENDPOINT_URL)")
+                       help="upload each recording to the runs bucket of the local stack when it stops "
+                            "(needs AWS_ENDPOINT_URL)")
 
     evaluate = sub.add_parser("eval", help="drive a model archive round a track and write metrics")
     evaluate.add_argument("--model", required=True, type=Path, help="model archive (.tar.gz) or folder")

@@ -13,8 +13,10 @@ TRAIN_EXTRA_HINT = ("training needs the `train` extra (torch, onnx), which `make
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", nargs="+", metavar="RUN",
-                        help="run folders (runs/{track}/{date}/{run_id}), folders holding run folders, or s3:// run prefixes")
-    parser.add_argument("--out", required=True, type=Path, help="output folder for the archive, ONNX, manifest and loss curve")
+                        help="run folders (runs/{track}/{date}/{run_id}), folders holding run folders, "
+                             "or s3:// run prefixes")
+    parser.add_argument("--out", required=True, type=Path,
+                        help="output folder for the archive, ONNX, manifest and loss curve")
     parser.add_argument("--name", default="drem-bc-model", help="archive name without .tar.gz ([A-Za-z0-9_-]+)")
     parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
@@ -36,8 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                      "demonstrator labels (default 0)")
     dagger.add_argument("--demo-laps", type=int, default=2, help="demonstrator laps per track and direction (max 10)")
     dagger.add_argument("--noise", type=float, default=6.0, help="demonstrator steering noise in degrees")
-    dagger.add_argument("--dagger-laps", type=int, default=1, help="laps the model drives per track and direction per round")
-    dagger.add_argument("--round-epochs", type=int, default=4, help="epochs per DAgger round (from the previous weights)")
+    dagger.add_argument("--dagger-laps", type=int, default=1,
+                        help="laps the model drives per track and direction per round")
+    dagger.add_argument("--round-epochs", type=int, default=4,
+                        help="epochs per DAgger round (from the previous weights)")
     dagger.add_argument("--eval-laps", type=int, default=2, help="lap attempts per held-out track after each round")
 
 
@@ -62,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
         if not str(run).startswith("s3://") and path.is_dir() and not (path / "controls.jsonl").is_file():
             found = list(iter_run_dirs(path))
             if not found:
-                print(f"drem train: no run folders under {path} (record some with `drem sim record` or `drem sim drive`)")
+                print(f"drem train: no run folders under {path} "
+                      "(record some with `drem sim record` or `drem sim drive`)")
                 return 2
             runs.extend(found)
         else:

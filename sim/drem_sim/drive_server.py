@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -47,7 +48,7 @@ class Control:
     throttle: float = 0.0  # -1 (brake) .. 1 (full speed)
 
     @classmethod
-    def parse(cls, body: Any) -> "Control":
+    def parse(cls, body: Any) -> Control:
         if not isinstance(body, dict) or set(body) - {"steering", "throttle"}:
             raise ControlError('a control is {"steering": -1..1, "throttle": -1..1}')
         values = []
@@ -102,6 +103,7 @@ class DriveSession:
             t_ms, lap = round(self.env.sim_time * 1000), self.env.laps
             self._obs, self._params, _, _, _ = self.env.step(action)
             if self._recorder is not None:
+                assert obs is not None, "a drive session's env always has a camera"
                 self._recorder.add(obs, action, seen, t_ms=t_ms - round(self._record_from[2] * 1000),
                                    lap=lap - self._record_from[0], offtrack=bool(self._params["is_offtrack"]))
             self._png = _encode_png(self._obs)
@@ -137,7 +139,7 @@ class DriveSession:
                 track = self.env.track
                 self._recorder = RunRecorder(
                     self.runs_root, track.track_id, direction="reverse" if track.is_reversed else "forward",
-                    driver="human", seed=None, camera=self.env.camera.config,
+                    driver="human", seed=None, camera=self.env.camera.config if self.env.camera else None,
                     extra={"track_direction": track.direction, "decision_hz": self.env.config.decision_hz})
                 self._record_from = (self.env.laps, self.env.resets, self.env.sim_time)
             finished = None if on else self._finish_recording()
@@ -185,7 +187,8 @@ class DriveSession:
                 "last_run": self.last_run}
 
 
-def _encode_png(frame: np.ndarray) -> bytes:
+def _encode_png(frame: np.ndarray | None) -> bytes:
+    assert frame is not None, "a drive session's env always has a camera"
     ok, data = cv2.imencode(".png", frame)
     if not ok:
         raise RuntimeError("could not encode a camera frame")

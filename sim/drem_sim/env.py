@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -95,7 +96,7 @@ class RaceEnv:
         else:
             start = self.config.start_offset_m
         self._new_episode(start)
-        self._params = self._make_params(False)
+        self._params: dict[str, Any] = self._make_params(False)
         return self._observe(), self._info([], False, False)
 
     def _new_episode(self, start_s: float) -> None:
@@ -110,7 +111,7 @@ class RaceEnv:
         self._speed_cmd = 0.0
         self.timing = TimingLine.for_track(self.track, self.config.timing)
         self._place_front_at(start_s)
-        self._params: dict[str, Any] = {}
+        self._params = {}
 
     def _place_front_at(self, s: float) -> None:
         """Put the car at rest on the centre line with its front point at arc length s."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
@@ -53,12 +53,14 @@ def run_video(run_dir: Path, out: Path, scale: int = 4, fps: float = 15.0) -> Pa
         raise ValueError(f"{run_dir}: the run has no frames")
     size = (160 * scale, 120 * scale)
     out.parent.mkdir(parents=True, exist_ok=True)
-    writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+    writer = cv2.VideoWriter(str(out), cv2.VideoWriter.fourcc(*"mp4v"), fps, size)
     if not writer.isOpened():
         raise OSError(f"cannot open a video writer for {out}")
     try:
         for row in rows:
             gray = cv2.imread(str(run_dir / row["frame"]), cv2.IMREAD_GRAYSCALE)
+            if gray is None:
+                raise OSError(f"{run_dir}: cannot read the frame {row['frame']}")
             frame = cv2.cvtColor(cv2.resize(gray, size, interpolation=cv2.INTER_NEAREST), cv2.COLOR_GRAY2BGR)
             text = (f"t {row['t_ms'] / 1000:6.2f}s lap {row['lap'] + 1} steer {row['steering_angle']:+5.1f}"
                     f" speed {row['speed']:.2f}")

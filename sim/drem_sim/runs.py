@@ -16,7 +16,8 @@ import json
 import os
 import secrets
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -42,7 +43,7 @@ class RunRecorder:
     def __init__(self, root: Path, track_id: str, *, direction: str, driver: str, seed: int | None,
                  camera: CameraConfig | None = None, run_id: str | None = None,
                  started_at: dt.datetime | None = None, extra: dict[str, Any] | None = None) -> None:
-        self.started_at = started_at or dt.datetime.now(dt.timezone.utc)
+        self.started_at = started_at or dt.datetime.now(dt.UTC)
         self.run_id = run_id or new_run_id(self.started_at)
         self.path = Path(root) / track_id / f"{self.started_at:%Y-%m-%d}" / self.run_id
         (self.path / "frames").mkdir(parents=True, exist_ok=False)
@@ -77,7 +78,7 @@ class RunRecorder:
     def close(self, *, laps: int, lap_times_ms: list[int], resets: int = 0) -> Path:
         self._controls.close()
         meta = {**self._meta, "started_at": self.started_at.isoformat(),
-                "ended_at": dt.datetime.now(dt.timezone.utc).isoformat(), "frames": self.frames, "laps": laps,
+                "ended_at": dt.datetime.now(dt.UTC).isoformat(), "frames": self.frames, "laps": laps,
                 "lap_times_ms": lap_times_ms, "resets": resets}
         (self.path / "metadata.json").write_text(json.dumps(meta, indent=2) + "\n")
         return self.path
@@ -96,6 +97,7 @@ def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: s
     obs, info = env.reset(seed=seed)
     params = info["params"]
     for _ in range(limit):
+        assert obs is not None  # the env has a camera (checked above)
         action = policy(obs, params)
         t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
         next_obs, params, terminated, truncated, info = env.step(action)

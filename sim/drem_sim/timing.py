@@ -71,7 +71,8 @@ class TimingLine:
         self._prev = (t_s, x, y)
 
     def observe(self, t_s: float, x: float, y: float) -> dict[str, Any] | None:
-        """The point reached (x, y) at sim time t_s; returns a strip event if it crossed the line since the last call."""
+        """The point reached (x, y) at sim time t_s; returns a strip event if it crossed the line since the last
+        call."""
         prev, self._prev = self._prev, (t_s, x, y)
         if prev is None:
             return None

@@ -141,7 +141,8 @@ def test_chroma_overlay_panels_are_opaque_with_no_soft_shadow(chromium, event_da
     page.get_by_test_id("lower-third").wait_for()
     styles = page.evaluate("""() => [...document.querySelectorAll('.lower-third, .standings, .overlay-title')]
         .map(el => { const s = getComputedStyle(el);
-                     return {bg: s.backgroundColor, shadow: s.textShadow, box: s.boxShadow, radius: s.borderRadius}; })""")
+                     return {bg: s.backgroundColor, shadow: s.textShadow, box: s.boxShadow,
+                             radius: s.borderRadius}; })""")
     assert styles
     for style in styles:
         assert style["bg"].startswith("rgb(") and not style["bg"].startswith("rgba("), style  # alpha 1
@@ -248,7 +249,8 @@ def test_the_cars_page_confirms_an_emergency_stop_and_refreshes_itself(chromium,
     call(url, "POST", f"/api/devices/self/commands/{stop['command_id']}/ack", device=credential,
          body={"result": "ok"})
     call(url, "POST", "/api/devices/self/heartbeat", device=credential,
-         body={"battery_pct": 64, "model": {"name": "fast-model", "md5": "0" * 32}, "faults": ["stopped: emergency stop"]})
+         body={"battery_pct": 64, "model": {"name": "fast-model", "md5": "0" * 32},
+               "faults": ["stopped: emergency stop"]})
     page.wait_for_function("""() => {
         const cell = document.querySelector("tr[data-hostname='estop-car'] [data-testid=car-live]");
         return cell && cell.innerText.includes('Emergency stop: done by the car') && cell.innerText.includes('64 %');

@@ -35,7 +35,8 @@ def test_a_racer_gets_not_allowed_on_every_staff_page_and_from_the_api(app_url, 
     page.get_by_role("button", name="Sign in").click()
     page.wait_for_url(app_url + "/")
     nav = page.get_by_test_id("nav-links").inner_text().split("\n")
-    assert [line.strip() for line in nav if line.strip()] == ["My models", "My races", "My model versions", "Profile", "League"]
+    assert [line.strip() for line in nav if line.strip()] == ["My models", "My races", "My model versions", "Profile",
+                                                              "League"]
 
     for path in STAFF_PAGES:
         response = page.goto(app_url + path)

@@ -43,7 +43,8 @@ def test_holding_the_up_arrow_drives_the_car_and_the_page_shows_progress(drive_p
 
     assert _number(page, "progress") > 3 and server.session.state()["progress"] > 3
     # the camera view is a live 160x120 frame (polled: while the next frame loads the image may be empty)
-    page.wait_for_function("document.getElementById('camera').complete && document.getElementById('camera').naturalWidth === 160")
+    page.wait_for_function("document.getElementById('camera').complete"
+                           " && document.getElementById('camera').naturalWidth === 160")
 
 
 def test_steering_keys_and_the_record_button(drive_page) -> None:

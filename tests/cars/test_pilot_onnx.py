@@ -85,7 +85,7 @@ def test_a_converted_console_model_drives_the_car_agent_like_the_console_graph(t
     pilot = OnnxPilot(folder)
     frames = np.load(console_fixture.FRAMES)
     expected = np.load(console_fixture.EXPECTED)
-    for camera_frame, probabilities in zip(frames, expected):
+    for camera_frame, probabilities in zip(frames, expected, strict=True):
         chosen = metadata["action_space"][int(np.argmax(probabilities))]
         steering, speed, _ = pilot.run(camera_frame[:, :, 0])
         assert (steering, speed) == (chosen["steering_angle"], chosen["speed"])

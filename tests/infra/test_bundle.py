@@ -54,7 +54,8 @@ def bundle(tmp_path_factory, lambda_build):
     work = tmp_path_factory.mktemp("bundle")
     package = subprocess.run([str(Path(sys.executable).with_name("chalice")), "package", str(work / "out")],
                              cwd=FUNCTIONS_DIR, capture_output=True, text=True, timeout=300,
-                             env={**os.environ, "AWS_DEFAULT_REGION": os.environ.get("AWS_DEFAULT_REGION", "us-east-1")})
+                             env={**os.environ, "AWS_DEFAULT_REGION": os.environ.get("AWS_DEFAULT_REGION",
+                                                                                     "us-east-1")})
     assert package.returncode == 0, f"chalice package failed:\n{package.stdout}\n{package.stderr}"
     unzipped = work / "unzipped"
     with zipfile.ZipFile(work / "out" / "deployment.zip") as archive:

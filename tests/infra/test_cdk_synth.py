@@ -1,5 +1,6 @@
 """The synthesized AWS stack matches drem_infra.resources: every expectation below is derived from it, so a change
-to one without the other fails here. Synth is slow (seconds), so it happens once per session (tests/infra/conftest.py)."""
+to one without the other fails here. Synth is slow (seconds), so it happens once per session
+(tests/infra/conftest.py)."""
 from __future__ import annotations
 
 import json

@@ -50,7 +50,8 @@ done = requests.post(app + "/api/models/" + ticket["model"]["model_id"] + "/comp
                      timeout=30).json()
 seen["model_status"] = done["model"]["status"]
 host = app.split("//")[1].split(":")[0]
-for name, target in (("storage_on_lan", (host, storage_port)), ("storage_on_own_loopback", ("127.0.0.1", storage_port))):
+for name, target in (("storage_on_lan", (host, storage_port)),
+                     ("storage_on_own_loopback", ("127.0.0.1", storage_port))):
     try:
         requests.get("http://%s:%d/_drem/health" % target, timeout=3)
         seen[name] = "answered"

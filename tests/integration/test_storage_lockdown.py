@@ -129,7 +129,8 @@ def test_the_gateway_does_not_pass_sdk_calls_even_with_the_keys(live_stack):
 def test_the_state_dir_is_private_to_its_user(live_stack):
     assert stat.S_IMODE(live_stack.state_dir.stat().st_mode) == 0o700
     files = [path for path in live_stack.state_dir.rglob("*") if path.is_file()]
-    assert {"journal.bin", "manifest.json", "storage-keys.json", "stack.json", "storage.log", "app.log"} <= {p.name for p in files}
+    assert {"journal.bin", "manifest.json", "storage-keys.json", "stack.json", "storage.log",
+            "app.log"} <= {p.name for p in files}
     loose = {str(p.relative_to(live_stack.state_dir)): oct(stat.S_IMODE(p.stat().st_mode)) for p in files
              if stat.S_IMODE(p.stat().st_mode) & 0o077}
     assert loose == {}, f"readable by others: {loose}"

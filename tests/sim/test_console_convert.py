@@ -33,7 +33,8 @@ def test_the_console_fixture_converts_and_reproduces_the_graphs_own_outputs(tmp_
     assert result.outcome == "converted", result.reason
     assert result.max_abs_diff is not None and result.max_abs_diff <= TOLERANCE
     session = onnx_session(out)
-    assert session.get_inputs()[0].name == "main_level/agent/main/online/network_0/FRONT_FACING_CAMERA/FRONT_FACING_CAMERA"
+    assert session.get_inputs()[0].name == ("main_level/agent/main/online/network_0/FRONT_FACING_CAMERA/"
+                                            "FRONT_FACING_CAMERA")
     frames = np.load(console_fixture.FRAMES).astype(np.float32)  # raw 0..255: the graph divides by 255 itself
     expected = np.load(console_fixture.EXPECTED)
     actual = session.run(None, {session.get_inputs()[0].name: frames})[0]
@@ -107,9 +108,11 @@ def _tiny_pb(path: Path, *, network: str, head: str, extra_op: str | None = None
     camera = f"main_level/agent/{network}/online/network_0/FRONT_FACING_CAMERA/FRONT_FACING_CAMERA"
     t = {"T": Attr.type(DT_FLOAT)}
     nodes = [Node(camera, "Placeholder", attrs={"dtype": Attr.type(DT_FLOAT), "shape": Attr.shape([-1, 120, 160, 1])}),
-             Node("scale", "Const", attrs={"dtype": Attr.type(DT_FLOAT), "value": Attr.tensor(np.array(1 / 255, np.float32))}),
+             Node("scale", "Const", attrs={"dtype": Attr.type(DT_FLOAT), "value": Attr.tensor(np.array(1 / 255,
+                                                                                                       np.float32))}),
              Node("scaled", "Mul", [camera, "scale"], dict(t)),
-             Node("shape", "Const", attrs={"dtype": Attr.type(DT_INT32), "value": Attr.tensor(np.array([-1, 19200], np.int32))}),
+             Node("shape", "Const", attrs={"dtype": Attr.type(DT_INT32), "value": Attr.tensor(np.array([-1, 19200],
+                                                                                                       np.int32))}),
              Node("flat", "Reshape", ["scaled", "shape"], {**t, "Tshape": Attr.type(DT_INT32)})]
     last = "flat"
     if extra_op:

@@ -31,7 +31,8 @@ def dagger_run(tmp_path_factory: pytest.TempPathFactory):
     config = DaggerConfig(train_tracks=[TrackDirection("drem_oval"), TrackDirection("drem_oval", True)],
                           eval_tracks=[TrackDirection("reinvent_base")], rounds=1, demo_laps=1, first_epochs=1,
                           round_epochs=1, eval_laps=1, seed=3)
-    train = TrainConfig(batch_size=64, num_threads=1, augmentation=Augmentation.from_names(["brightness", "shift", "blur"]))
+    train = TrainConfig(batch_size=64, num_threads=1, augmentation=Augmentation.from_names(["brightness", "shift",
+                                                                                            "blur"]))
     progress = io.StringIO()
     reports = run_dagger(config, out, "dagger-test", train, progress=progress)
     return out, reports, progress.getvalue()

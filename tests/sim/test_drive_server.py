@@ -35,7 +35,8 @@ def _get(server: drive_server.DriveServer, path: str) -> tuple[int, str, bytes]:
         return response.status, response.headers.get_content_type(), response.read()
 
 
-def _post(server: drive_server.DriveServer, path: str, body: Any, content_type: str = "application/json") -> tuple[int, Any]:
+def _post(server: drive_server.DriveServer, path: str, body: Any, content_type: str = "application/json") -> tuple[int,
+                                                                                                                   Any]:
     data = body if isinstance(body, bytes) else json.dumps(body).encode()
     request = urllib.request.Request(server.url.rstrip("/") + path, data=data, method="POST",
                                      headers={"Content-Type": content_type})

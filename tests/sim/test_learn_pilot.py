@@ -49,7 +49,8 @@ def test_continuous_means_rescale_linearly_to_low_high(means: list[float], steer
 
 def test_discrete_picks_the_most_probable_action_from_the_list() -> None:
     metadata = {"action_space_type": "discrete", "action_space": [
-        {"steering_angle": -30, "speed": 0.6}, {"steering_angle": 0, "speed": 1.2}, {"steering_angle": 30, "speed": 0.8}]}
+        {"steering_angle": -30, "speed": 0.6}, {"steering_angle": 0, "speed": 1.2}, {"steering_angle": 30,
+                                                                                     "speed": 0.8}]}
     pilot = OnnxPilot(metadata, _constant_policy([0.1, 0.2, 0.7]))
     assert pilot.act(FRAME) == {"steering_angle": 30.0, "speed": 0.8}
 

@@ -49,7 +49,7 @@ def test_too_fast_into_a_tight_bend_slides_wide() -> None:
             car.step()
             slid |= car.sliding
             points.append((car.x, car.y))
-        xs, ys = zip(*points)
+        xs, ys = zip(*points, strict=True)
         return (max(xs) - min(xs) + max(ys) - min(ys)) / 4, slid
 
     slow, slow_slid = radius_of(0.5)

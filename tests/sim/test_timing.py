@@ -74,5 +74,5 @@ def test_env_reports_one_strip_event_per_lap_matching_its_lap_times() -> None:
         done = terminated or truncated
     assert [e["idempotency_key"] for e in events] == ["timer-a-1", "timer-a-2"]
     laps_ms = [events[0]["timestamp_ms"] - epoch, events[1]["timestamp_ms"] - events[0]["timestamp_ms"]]
-    for strip_ms, lap_s in zip(laps_ms, info["lap_times_s"]):
+    for strip_ms, lap_s in zip(laps_ms, info["lap_times_s"], strict=False):
         assert math.isclose(strip_ms, lap_s * 1000, abs_tol=3.0)

@@ -46,7 +46,8 @@ def trained(run_dir: Path, tmp_path_factory: pytest.TempPathFactory):  # noqa: A
 
 def test_exported_onnx_gives_the_torch_model_outputs(trained, run_dir: Path) -> None:
     model, _ = trained
-    frames = np.stack([cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted((run_dir / "frames").glob("*.png"))[:8]])
+    frames = np.stack([cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+                       for p in sorted((run_dir / "frames").glob("*.png"))[:8]])
     inputs = frames.astype(np.float32)[..., None]
     with torch.no_grad():
         expected = model.result.model(torch.from_numpy(inputs)).numpy()

@@ -70,8 +70,9 @@ def console_old_export(root: Path, *, world: str, laps: list[tuple[int, int]],
             f"INFO: params {{'JOB_TYPE': 'TRAINING', 'WORLD_NAME': '{world}', 'RACE_TYPE': 'TIME_TRIAL'}}\n",
         f"logs/training/training-{job}-sagemaker.log": "sagemaker\n",
         f"metrics/training/training-{job}.json": training_metrics(training or [12, 40, 100, 76]),
-        f"metrics/evaluation/evaluation-20201021101010-XyXyXyXyXyXyXyXyXyXyXy.json": evaluation_metrics(laps),
-        "sim-trace/training/training-simtrace/0-iteration.csv": SIMTRACE_HEADER + "1,1,0,0,0,0,0.6,2,1,False,True,1,1,17.7,0.06,in_progress,0\n",
+        "metrics/evaluation/evaluation-20201021101010-XyXyXyXyXyXyXyXyXyXyXy.json": evaluation_metrics(laps),
+        "sim-trace/training/training-simtrace/0-iteration.csv":
+            SIMTRACE_HEADER + "1,1,0,0,0,0,0.6,2,1,False,True,1,1,17.7,0.06,in_progress,0\n",
         "model/model_metadata.json": metadata or DISCRETE_METADATA,
         "ip/hyperparameters.json": HYPERPARAMETERS,
     })
@@ -152,7 +153,8 @@ def console_log(world: str, metrics_key: str) -> str:
     """A console robomaker log as the simapp writes it: printenv, then the params dict, then roslaunch's summary."""
     return (f"Executing simulation-entrypoint.sh script\nMETRICS_S3_OBJECT_KEY=leaderboard/private/acct-1/metrics/"
             f"{metrics_key}\nNUMBER_OF_TRIALS=3\nWORLD_NAME={world}\n"
-            f"{{'JOB_TYPE': 'EVALUATION', 'RACE_TYPE': 'TIME_TRIAL', 'WORLD_NAME': '{world}', 'NUMBER_OF_TRIALS': '3'}}\n"
+            f"{{'JOB_TYPE': 'EVALUATION', 'RACE_TYPE': 'TIME_TRIAL', 'WORLD_NAME': '{world}', "
+            f"'NUMBER_OF_TRIALS': '3'}}\n"
             f"SUMMARY\n========\nPARAMETERS\n * /JOB_TYPE: EVALUATION\n * /WORLD_NAME: {world}\n")
 
 

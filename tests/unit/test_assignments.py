@@ -157,7 +157,7 @@ def test_a_wrong_checksum_is_recorded_as_failed(racer: ModelsApi, operator: Mode
 def test_a_car_reports_only_on_its_own_assignment(racer: ModelsApi, operator: ModelsApi,
                                                   car_x: tuple[str, ModelsApi], car_y: tuple[str, ModelsApi]) -> None:
     model = racer.upload_and_complete("m.tar.gz", onnx_archive())
-    (x_id, car_x_api), (_, car_y_api) = car_x, car_y
+    (x_id, _), (_, car_y_api) = car_x, car_y
     assign(operator, x_id, [model["model_id"]])
 
     assert report(car_y_api, model["model_id"], "loaded").status_code == 404
@@ -219,12 +219,13 @@ def test_a_console_model_reaches_a_drem_car_with_its_onnx_conversion(racer: Mode
         return lambda handle: handle.write(requests.get(url, timeout=30).content)
 
     store = ModelStore(tmp_path / "models")
-    installed = store.install(entry["model_id"], entry["name"], entry["folder"], entry["md5"], download=fetch(entry["url"]),
+    installed = store.install(entry["model_id"], entry["name"], entry["folder"], entry["md5"],
+                              download=fetch(entry["url"]),
                               converted=(fetch(entry["onnx"]["url"]), entry["onnx"]["md5"]))
     assert (installed.path / "agent" / "model.pb").is_file() and (installed.path / "model.onnx").is_file()
     steering, speed, _ = OnnxPilot(installed.path).run(np.zeros((120, 160), np.uint8))
-    assert (steering, speed) in {(a["steering_angle"], a["speed"])
-                                 for a in json.loads((installed.path / "model_metadata.json").read_text())["action_space"]}
+    action_space = json.loads((installed.path / "model_metadata.json").read_text())["action_space"]
+    assert (steering, speed) in {(a["steering_angle"], a["speed"]) for a in action_space}
 
     from drem_cars.model_store import ModelInstallError
     with pytest.raises(ModelInstallError, match="model.onnx md5"):

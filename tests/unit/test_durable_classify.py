@@ -7,7 +7,8 @@ from drem_local.durable.classify import COGNITO, DYNAMODB, S3, is_state_changing
 
 pytestmark = pytest.mark.unit
 
-_SIGV4 = "AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/{service}/aws4_request, SignedHeaders=host, Signature=0"
+_SIGV4 = ("AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/{service}/aws4_request, "
+          "SignedHeaders=host, Signature=0")
 
 
 def _target(target: str, service: str = "dynamodb") -> dict:
@@ -54,7 +55,8 @@ def test_s3_reads_pass_and_multipart_create_and_complete_are_snapshotted():
 
 def test_a_presigned_browser_upload_counts_as_s3():
     presigned_put = {"REQUEST_METHOD": "PUT", "PATH_INFO": "/bucket/key",
-                     "QUERY_STRING": "X-Amz-Credential=testing%2F20260101%2Fus-east-1%2Fs3%2Faws4_request&X-Amz-Signature=0"}
+                     "QUERY_STRING": "X-Amz-Credential=testing%2F20260101%2Fus-east-1%2Fs3%2Faws4_request"
+                                     "&X-Amz-Signature=0"}
     presigned_post_form = {"REQUEST_METHOD": "POST", "PATH_INFO": "/bucket", "CONTENT_TYPE": "multipart/form-data"}
 
     assert service_of(presigned_put) == S3 and service_of(presigned_post_form) == S3

@@ -17,7 +17,8 @@ from drem_local.durable.state import DurableState, MotoVersionMismatch, running_
 
 pytestmark = pytest.mark.unit
 
-_DDB_AUTH = "AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/dynamodb/aws4_request, SignedHeaders=host, Signature=0"
+_DDB_AUTH = ("AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/dynamodb/aws4_request, "
+             "SignedHeaders=host, Signature=0")
 TABLE = "counters"
 
 

@@ -472,7 +472,7 @@ def test_single_member_over_limit_is_refused() -> None:
     report = inspect_archive(io.BytesIO(archive), limits=limits)
 
     assert report.status is NOT_VALID
-    assert "'agent/model.pb' is 2.0 MiB; a single file may be at most 1.0 MiB" == report.reason
+    assert report.reason == "'agent/model.pb' is 2.0 MiB; a single file may be at most 1.0 MiB"
 
 
 def test_oversize_compressed_upload_is_refused_from_a_path_and_from_a_stream(tmp_path: Path) -> None:

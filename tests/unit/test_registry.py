@@ -70,22 +70,25 @@ def test_owner_records_evaluations_and_sees_plots(alice: ModelsApi, client: Any)
 
 def test_detail_shows_lineage_and_loss_curve(alice: ModelsApi, client: Any) -> None:
     v1, v2 = _models(alice)
-    detail = client.http.get(f"/models/registry/{v1['model_id']}", headers={"Authorization": alice.headers["Authorization"]})
+    detail = client.http.get(f"/models/registry/{v1['model_id']}",
+                             headers={"Authorization": alice.headers["Authorization"]})
     html = detail.body.decode()
     assert detail.status_code == 200 and "<html" not in html
     assert "run-2026-01-01-a (reinvent_base)" in html and 'data-testid="plot-loss"' in html
     assert 'data-testid="registry-verdict">passed' in html
-    plain = client.http.get(f"/models/registry/{v2['model_id']}", headers={"Authorization": alice.headers["Authorization"]})
+    plain = client.http.get(f"/models/registry/{v2['model_id']}",
+                            headers={"Authorization": alice.headers["Authorization"]})
     assert "No training lineage" in plain.body.decode()
 
 
 def test_other_racers_cannot_see_or_evaluate(alice: ModelsApi, client: Any, users: Any) -> None:
     v1, _ = _models(alice)
     bob = ModelsApi(client, bearer(users.access_token("bob", ("racer",))))
-    assert bob.call("POST", f"/api/models/{v1['model_id']}/evaluations", metrics("reinvent_base", [1.0])).status_code == 403
+    evaluation = metrics("reinvent_base", [1.0])
+    assert bob.call("POST", f"/api/models/{v1['model_id']}/evaluations", evaluation).status_code == 403
     assert bob.call("GET", f"/api/models/{v1['model_id']}/evaluations").status_code == 403
-    assert client.http.get(f"/models/registry/{v1['model_id']}", headers={"Authorization": bob.headers["Authorization"],
-                                                                          "Accept": "application/json"}).status_code == 403
+    as_json = {"Authorization": bob.headers["Authorization"], "Accept": "application/json"}
+    assert client.http.get(f"/models/registry/{v1['model_id']}", headers=as_json).status_code == 403
     own = client.http.get("/models/registry", headers={"Authorization": bob.headers["Authorization"]}).body.decode()
     assert "bc-v1" not in own and 'data-testid="registry-empty"' in own
     assert client.http.get("/console/models/registry", headers={"Authorization": bob.headers["Authorization"],

@@ -39,7 +39,7 @@ def test_first_crossing_starts_and_laps_come_from_device_timestamps(desk: Desk, 
     assert lap["action"] == "lap" and lap["lap"]["time_ms"] == 10_250 and lap["lap"]["source"] == "timer"
     desk.ok(desk.strip(timer, eid, T0 + 19_000, "k3", sensor=27))
     race = _race(desk, eid, rid)
-    assert [l["time_ms"] for l in race["laps"]] == [10_250, 8_750]
+    assert [lap["time_ms"] for lap in race["laps"]] == [10_250, 8_750]
     assert desk.board(eid)["entries"][0]["fastest_lap_ms"] == 8_750
 
 
@@ -184,7 +184,7 @@ def test_a_device_clock_past_2100_is_a_400_and_the_race_keeps_counting(desk: Des
     # Before the bound, 10**18 froze the race: every true crossing after it read as out of order.
     lap = desk.ok(desk.strip(timer, eid, T0 + 11_000, "true lap"))
     assert lap["action"] == "lap" and lap["lap"]["time_ms"] == 11_000
-    assert [l["time_ms"] for l in _race(desk, eid, rid)["laps"]] == [11_000]
+    assert [lap["time_ms"] for lap in _race(desk, eid, rid)["laps"]] == [11_000]
 
 
 def test_a_second_timer_in_the_fleet_cannot_lap_a_race_another_timer_is_timing(desk: Desk, clock: FakeClock,

@@ -51,7 +51,8 @@ def test_a_taken_name_is_a_409_that_says_so(api, users):
 def _crash_after_the_account_step(aws_clients, stack, username: str) -> None:
     """What an interrupted registration leaves: the Cognito account only (no profile, no racer group)."""
     aws_clients.cognito.admin_create_user(
-        UserPoolId=stack.user_pool_id, Username=username, TemporaryPassword="Lost-Password-1!", MessageAction="SUPPRESS",
+        UserPoolId=stack.user_pool_id, Username=username, TemporaryPassword="Lost-Password-1!",
+        MessageAction="SUPPRESS",
         UserAttributes=[{"Name": "email", "Value": f"{username}@example.test"},
                         {"Name": "custom:countryCode", "Value": "NL"}, {"Name": "email_verified", "Value": "true"}])
 

@@ -32,7 +32,7 @@ class PilotSlot:
         pilot = self._pilot
         return pilot.action_space if pilot is not None else None
 
-    def run(self, image):  # type: ignore[no-untyped-def]
+    def run(self, image):
         pilot = self._pilot
         if pilot is None:
             return None, None, None

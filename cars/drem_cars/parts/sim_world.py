@@ -58,6 +58,7 @@ class SimWorld:
 
     def render(self) -> np.ndarray:
         """The camera frame of the current pose (rendered by the environment when it stepped)."""
+        assert self._frame is not None, "the sim car's environment has a camera"
         return self._frame
 
     def command(self, steering_deg: float, speed_mps: float) -> None:

@@ -168,7 +168,9 @@ def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], 
     def decorator(view: Callable[..., Any]) -> Callable[..., Any]:
         @functools.wraps(view)
         def handler(**params: Any) -> Response:
-            return _handle(bp.current_request, declared, view, params, docs)
+            request = bp.current_request
+            assert request is not None  # Chalice sets it before calling a view
+            return _handle(request, declared, view, params, docs)
 
         doc_lines = (view.__doc__ or "").strip().splitlines()
         docs = RouteDocs(body=body, query=query, response=response, status_code=status_code,
@@ -204,7 +206,8 @@ def form_fields(request: Request) -> dict[str, str]:
     content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
     if content_type != "application/x-www-form-urlencoded" or not request.raw_body:
         return {}
-    parsed = parse_qs(request.raw_body.decode("utf-8", errors="replace"), keep_blank_values=True)
+    raw = request.raw_body  # bytes from API Gateway and chalice local; typed str | bytes by Chalice
+    parsed = parse_qs(raw.decode("utf-8", errors="replace") if isinstance(raw, bytes) else raw, keep_blank_values=True)
     return {name: values[0] for name, values in parsed.items()}
 
 
@@ -239,7 +242,7 @@ def _validated_input(request: Request, docs: RouteDocs | None) -> dict[str, Base
     return found
 
 
-def _json_body(model: type[BaseModel], raw: bytes | None) -> BaseModel:
+def _json_body(model: type[BaseModel], raw: str | bytes | None) -> BaseModel:
     """`model` from a JSON body (none counts as `{}`); a body that is not a JSON object is named as such."""
     try:
         return model.model_validate_json(raw or b"{}")

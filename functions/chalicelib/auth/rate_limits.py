@@ -14,7 +14,8 @@ import threading
 import time
 from collections import OrderedDict, deque
 from dataclasses import dataclass
-from typing import Callable, TypeVar
+from typing import TypeVar
+from collections.abc import Callable
 
 from chalicelib.domain.errors import InvalidCredentials, InvalidInput, RateLimited
 

@@ -76,7 +76,8 @@ def describe(state: Mapping[str, Any] | None) -> str:
     if "is_valid" in state:
         parts.append("valid" if state["is_valid"] else "invalid")
     if "status" in state:
-        parts.append(f"{state['status']}, {state.get('laps', 0)} laps, fastest {lap_time(state.get('fastest_lap_ms'), '—')}")
+        fastest = lap_time(state.get("fastest_lap_ms"), "—")
+        parts.append(f"{state['status']}, {state.get('laps', 0)} laps, fastest {fastest}")
     if "boards" in state:
         parts.extend(f"{board}: {', '.join(lines[:3]) or 'empty'}" for board, lines in state["boards"].items())
     if "source_event_id" in state:

@@ -4,14 +4,16 @@ The list comes from pycountry (a maintained copy of the ISO 3166 data, Debian's 
 """
 from __future__ import annotations
 
+from typing import Any
+
 import pycountry
 
 from chalicelib.domain.errors import InvalidInput
 
 
-def _short_name(country: object) -> str:
+def _short_name(country: Any) -> str:  # a pycountry record: its fields are set at run time
     # pycountry's `common_name` where ISO's is long or formal ("Bolivia" for "Bolivia, Plurinational State of").
-    return str(getattr(country, "common_name", None) or getattr(country, "name"))
+    return str(getattr(country, "common_name", None) or country.name)
 
 
 COUNTRY_NAMES: dict[str, str] = {c.alpha_2: _short_name(c) for c in pycountry.countries}

@@ -12,7 +12,7 @@ import uuid
 from collections.abc import Callable
 from datetime import date
 from enum import StrEnum
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
@@ -227,7 +227,7 @@ class EventService:
             raise Conflict(f"Track {track_id} has a race in progress; finish or discard it before you {action}.",
                            field="tracks")
 
-    def _fields(self, data: EventInput, keep: tuple[Track, ...] = ()) -> dict:
+    def _fields(self, data: EventInput, keep: tuple[Track, ...] = ()) -> dict[str, Any]:
         # A fleet the event already names may since have been deleted; only newly named fleets must exist.
         already_named = {t.fleet_id for t in keep}
         for index, track in enumerate(data.tracks):

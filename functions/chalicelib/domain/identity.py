@@ -1,6 +1,8 @@
 """Sign-in results and forms, as the identity provider adapter returns and the login pages consume them."""
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from drem_infra import resources
@@ -30,7 +32,7 @@ class SignInForm(BaseModel):
 
     @model_validator(mode="before")
     @classmethod
-    def _strip_username(cls, data: dict) -> dict:
+    def _strip_username(cls, data: Any) -> Any:
         if isinstance(data, dict) and isinstance(data.get("username"), str):
             data = {**data, "username": data["username"].strip()}
         return data

@@ -3,7 +3,8 @@
 A board item keeps, next to its public body, the state it was ranked from: one `BoardRow` (summary + profile) per
 racer. Refreshing one racer replaces their row and re-ranks; nothing else is read. The combined board is ranked from
 the rows of every track board; it is written for single-track events too (then equal to the track's board), so a
-poll without `?track=` always finds a board without looking the event up. Versions go up by one per write; a write is skipped
+poll without `?track=` always finds a board without looking the event up. Versions go up by one per write; a write is
+skipped
 when neither what viewers see (the board's etag) nor the stored rows changed, so polls keep getting 304.
 
 Poll reads (`board`, `overlay`) go through a per-process `PublicViewCache`: hundreds of spectators polling every second
@@ -106,7 +107,9 @@ class PublicViewCache:
             entry = self._entries.get(key)
             age_ms = (self._monotonic() - entry.read_started) * 1000 if entry is not None else None
             held = entry if age_ms is not None and age_ms <= self.fresh_ms else None
+            flight: _Flight | None
             if held is not None:
+                assert age_ms is not None  # held only when it was measured
                 if age_ms < self.refresh_after_ms or key in self._flights:
                     return held.value
                 flight = self._flights[key] = _Flight()  # refresh ahead: this asker reads, the others keep the entry
@@ -229,8 +232,7 @@ class LeaderboardPublisher:
                 all_tracks: Iterable[str]) -> dict[str, Leaderboard]:
         """Replace every board of an event from scratch (race admin's "recompute")."""
         tracks = list(all_tracks)
-        boards = {track: self._write_board(event_id, track, method,
-                                           lambda _old, t=track: {r.summary.racer_sub: r for r in rows_by_track.get(t, [])})
+        boards = {track: self._write_board(event_id, track, method, _replace_rows(rows_by_track.get(track, [])))
                   for track in tracks}
         boards[COMBINED_TRACK_ID] = self._refresh_combined(event_id, tracks, method)
         return boards
@@ -251,7 +253,8 @@ class LeaderboardPublisher:
             # Clock readings as of `as_of_ms`; while `running`, a viewer adds the time since to interpolate.
             "as_of_ms": now_ms, "running": race.status is RaceStatus.RUNNING,
             "time_left_ms": race_time_left_ms(race, now_ms), "current_lap_ms": current_lap_ms(race, now_ms),
-            "position": entry.position if entry else None, "gap_to_leader_ms": entry.gap_to_leader_ms if entry else None,
+            "position": entry.position if entry else None,
+            "gap_to_leader_ms": entry.gap_to_leader_ms if entry else None,
         }
         self._write(event_id=race.event_id, sort_key=overlay_key(race.track_id),
                     build=lambda version, _state: (_dumps({**state, "version": version}), f'"v{version}"', ""))
@@ -332,6 +335,11 @@ def _rows(state: str) -> dict[str, BoardRow]:
     if not state:
         return {}
     return {row.summary.racer_sub: row for row in BoardState.model_validate_json(state).rows}
+
+
+def _replace_rows(rows: list[BoardRow]) -> Callable[[dict[str, BoardRow]], dict[str, BoardRow]]:
+    """A board change that drops whatever the board held and keeps these rows (one per racer)."""
+    return lambda _old: {r.summary.racer_sub: r for r in rows}
 
 
 def _ranked(rows: Iterable[BoardRow], method: RankingMethod, track_id: str, version: int) -> Leaderboard:

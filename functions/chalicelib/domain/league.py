@@ -165,7 +165,7 @@ def board_row(ranked: RankedEntry) -> dict[str, Any]:
 def rank(entries: list[BoardEntry], sort: SortKey) -> list[RankedEntry]:
     """Racers with a completed lap first, by the chosen time (ties: the other time, then who submitted first);
     then racers without one, by average completion."""
-    def key(entry: BoardEntry) -> tuple:
+    def key(entry: BoardEntry) -> tuple[Any, ...]:
         primary, secondary = ((entry.best_lap_s, entry.average_lap_s) if sort is SortKey.BEST
                               else (entry.average_lap_s, entry.best_lap_s))
         if primary is None:

@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Literal
 
@@ -107,7 +108,7 @@ class ConsoleConverter:
             return _cannot("the converter gave no answer")
 
 
-def _limit(limits: ConversionLimits):  # noqa: ANN202 - a preexec_fn
+def _limit(limits: ConversionLimits) -> Callable[[], None]:  # a preexec_fn
     def apply() -> None:
         import resource
 
@@ -117,7 +118,7 @@ def _limit(limits: ConversionLimits):  # noqa: ANN202 - a preexec_fn
     return apply
 
 
-def _kill_group(process: subprocess.Popen) -> None:
+def _kill_group(process: subprocess.Popen[bytes]) -> None:
     try:
         os.killpg(process.pid, signal.SIGKILL)
     except ProcessLookupError:

@@ -151,11 +151,12 @@ class RegistryService:
         if lineage is None:
             return ModelDetail(model, verdict(model), evaluations, [], [], None,
                                note or "No training lineage: this model was not trained by drem.")
-        shown = [(key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
-                                                     "learning_rate", "augment", "train_frames", "validation_frames",
-                                                     "train_seconds") if key in lineage]
+        shown: list[tuple[str, str]] = [
+            (key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
+                                                 "learning_rate", "augment", "train_frames", "validation_frames",
+                                                 "train_seconds") if key in lineage]
         shown += _training_recipe(lineage)
-        dataset = lineage.get("dataset") if isinstance(lineage.get("dataset"), dict) else {}
+        dataset: Any = lineage.get("dataset") if isinstance(lineage.get("dataset"), dict) else {}
         runs = [str(r.get("run_id") or r.get("run")) + (f" ({r.get('track_id') or r.get('track')})"
                                                         if r.get("track_id") or r.get("track") else "")
                 for r in (dataset.get("runs") or []) if isinstance(r, dict)][:50]
@@ -250,11 +251,11 @@ def _plots(models: list[ModelRecord], evaluations: list[Evaluation]) -> dict[str
                     laps.append((index, mine[0].best_lap_s))
         lap_series.append(svg_plots.Series(track, laps))
         completion_series.append(svg_plots.Series(track, completion))
-    bars = []
+    bars: list[tuple[str, float]] = []
     for track in tracks:
         on_track = [e for e in evaluations if e.track == track and e.best_lap_s is not None]
         if on_track:
-            bars.append((track, min(e.best_lap_s for e in on_track)))  # type: ignore[misc]
+            bars.append((track, min(e.best_lap_s for e in on_track)))  # type: ignore[type-var, arg-type]  # none is None
     return {
         "lap_time_plot": svg_plots.line_chart([s for s in lap_series if s.points], labels,
                                               title="Best lap over model versions", y_label="seconds",

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from datetime import UTC, datetime, timedelta
 from enum import StrEnum
 from pathlib import Path
-from typing import IO, Any, Protocol
+from typing import IO, Any, NoReturn, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -312,7 +312,7 @@ class ModelService:
         declared = self.files.size_of(record.upload_key)
         if declared is None:
             self._raise_not_arrived(record)
-        if declared > limit:  # type: ignore[operator]
+        if declared > limit:
             return self._verdict(record, ModelStatus.NOT_VALID, size_bytes=declared,
                                  reason=f"the archive is {_size(declared)}; uploads are limited to {_size(limit)}")
         download = self.files.download_bounded(record.upload_key, limit=limit)
@@ -376,7 +376,7 @@ class ModelService:
     def _verdict(self, record: ModelRecord, status: ModelStatus, **facts: Any) -> ModelRecord:
         return record.model_copy(update={"status": status, "updated_at": self._clock(), **facts})
 
-    def _raise_not_arrived(self, record: ModelRecord) -> None:
+    def _raise_not_arrived(self, record: ModelRecord) -> NoReturn:
         latest = self._reread(record)
         if latest.status is not ModelStatus.UPLOADED:
             raise _AlreadyJudged(latest)

@@ -330,7 +330,8 @@ class RaceService:
         self._races.delete(record)
         listing = _listing(record)
         self._audit.record(event_id, by, "race_delete", race_id=race_id, racer=record.race.racer.username,
-                           before={k: listing[k] for k in ("track_id", "status", "laps", "valid_laps", "fastest_lap_ms")})
+                           before={k: listing[k] for k in ("track_id", "status", "laps", "valid_laps",
+                                                           "fastest_lap_ms")})
         try:
             self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
             self._refresh_stats(event_id)

@@ -9,7 +9,8 @@ A post names the event and track. Who may time a race (docs/racing.md, "Who may 
 
 The crossing is applied to the track's live race with `drem_leaderboard.timer_input.handle_strip_event`. Devices
 retry, so the answer is stored under `(device, idempotency_key)` in the same transaction as the race change, BEFORE it
-is returned; a repeated key gets the stored answer back (`replayed: true`) and never a second lap. A replay also finishes any board publish a crash
+is returned; a repeated key gets the stored answer back (`replayed: true`) and never a second lap. A replay also
+finishes any board publish a crash
 left pending (the race write and its publish intent are stored together, the board after), so a retry of a post whose
 answer was lost brings the board up to date.
 """

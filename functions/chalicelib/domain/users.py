@@ -210,13 +210,17 @@ class _KeepSessions:
         pass
 
 
+_KEEP_SESSIONS = _KeepSessions()
+
+
 class OwnedDataEraser(Protocol):
     """Removes or anonymises what a user owns (their models) when they delete themselves; returns how many items."""
     def erase_owned_by(self, sub: str) -> int: ...
 
 
 class ModelsEraser:
-    """Satisfies OwnedDataEraser over `chalicelib.domain.racer_models.ModelService`: every model the user owns is deleted
+    """Satisfies OwnedDataEraser over `chalicelib.domain.racer_models.ModelService`: every model the user owns is
+    deleted
     (its archive removed, the record kept as DELETED under an anonymised owner name, so race history stays whole),
     including models the racer had already soft-deleted (those keep their archive and name until now).
     Best moved into the models service as `erase_owned_by` — it reaches into the service's store and files."""
@@ -249,7 +253,7 @@ class ModelsEraser:
 class UserService:
     def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
                  erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False,
-                 sessions: SessionEnder = _KeepSessions()) -> None:
+                 sessions: SessionEnder = _KEEP_SESSIONS) -> None:
         self._directory = directory
         self._sessions = sessions
         self._profiles = profiles

@@ -231,7 +231,7 @@ def _metric_entries(files: ExportFiles, name: str, required: tuple[str, ...]) ->
     return entries
 
 
-# -- drem's own sim runs -------------------------------------------------------------------------------------------------
+# -- drem's own sim runs -----------------------------------------------------------------------------------------------
 
 def _drem_parts(files: ExportFiles, track: str) -> dict[str, Any]:
     lineage_name = "training/lineage.json" if "training/lineage.json" in files else "lineage.json"
@@ -275,7 +275,7 @@ def _drem_parts(files: ExportFiles, track: str) -> dict[str, Any]:
                 trials=trials)
 
 
-# -- small readers -------------------------------------------------------------------------------------------------------
+# -- small readers -----------------------------------------------------------------------------------------------------
 
 def _json(files: ExportFiles, name: str) -> Any:
     if name not in files:

@@ -9,12 +9,14 @@ route acts on the caller's own device id, taken from its verified credential.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_activation
-from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode, IssuedCredential)
+from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode,
+                                          IssuedCredential)
 from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceView, MoveToFleet,
                                       Telemetry)
 from chalicelib.domain.errors import InvalidInput
@@ -39,7 +41,7 @@ def create_activation_code(principal: User, body: ActivationCodeRequest) -> Resp
 
 @route(bp, "/api/devices", methods=["GET"], allow=DEVICE_STAFF)
 def list_devices(principal: User) -> dict:
-    query = bp.current_request.query_params or {}
+    query: Mapping[str, str] = bp.current_request.query_params or {}
     devices = services.device_service().list_devices(online=_flag(query.get("online")), fleet_id=query.get("fleet_id"))
     return {"devices": [d.model_dump(mode="json") for d in devices]}
 
@@ -78,7 +80,8 @@ def device_commands(principal: User, device_id: str) -> dict:
 @route(bp, "/api/devices/activate", methods=["POST"], allow=PUBLIC, csrf=False, body=ActivationExchange,
        response=IssuedCredential, status_code=201)
 def activate_device(principal: Principal, body: ActivationExchange) -> Response:
-    issued = guarded_activation(lambda: services.activation_service().activate(body), client_address(bp.current_request))
+    issued = guarded_activation(lambda: services.activation_service().activate(body),
+                                client_address(bp.current_request))
     return Response(issued.model_dump(mode="json"), status_code=201, headers={"Cache-Control": "no-store"})
 
 

@@ -11,7 +11,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.devices import DeviceKind
-from chalicelib.formats.labels_pdf import CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers, racer_card_pdf
+from chalicelib.formats.labels_pdf import (CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers,
+                                          racer_card_pdf)
 from chalicelib.routes.console.common import form
 from chalicelib import services
 from chalicelib.settings import get_settings
@@ -36,7 +37,8 @@ class RacerCardForm(BaseModel):
 def car_labels(principal: User, query: CarLabelsQuery) -> Response:
     names = {f.fleet_id: f.name for f in services.fleet_service().list_fleets()}
     cars = [CarLabel(device_id=d.device_id, hostname=d.hostname, fleet_name=names.get(d.fleet_id or "", "no fleet"))
-            for d in services.device_service().list_devices(fleet_id=query.fleet_id or None) if d.kind is DeviceKind.CAR]
+            for d in services.device_service().list_devices(fleet_id=query.fleet_id or None)
+            if d.kind is DeviceKind.CAR]
     body = car_labels_pdf(cars, query.format, get_settings().public_url)
     return Response(body=body, headers=label_headers(f"car-labels-{query.format}.pdf"))
 

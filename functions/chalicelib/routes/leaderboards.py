@@ -3,6 +3,7 @@
 answers 304 with an empty body while nothing changed."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
@@ -17,8 +18,9 @@ bp = Blueprint(__name__)
 def conditional(view: PublicView) -> Response:
     request = bp.current_request
     etag = f'"v{view.version}"'
-    since = (request.query_params or {}).get("since")
-    headers = {"ETag": etag, "Cache-Control": "no-cache"}
+    query: Mapping[str, str] = request.query_params or {}
+    since = query.get("since")
+    headers: dict[str, str | list[str]] = {"ETag": etag, "Cache-Control": "no-cache"}
     offered = [tag.strip().removeprefix("W/") for tag in (request.headers.get("if-none-match") or "").split(",")]
     if etag in offered or since == str(view.version):
         return Response(body="", status_code=304, headers=headers)
@@ -27,11 +29,13 @@ def conditional(view: PublicView) -> Response:
 
 @route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC, conditional=True)
 def leaderboard(principal: Principal, event_id: str) -> Response:
-    track = (bp.current_request.query_params or {}).get("track") or COMBINED_TRACK_ID
+    query: Mapping[str, str] = bp.current_request.query_params or {}
+    track = query.get("track") or COMBINED_TRACK_ID
     return conditional(services.publisher().board(event_id, track))
 
 
 @route(bp, "/api/overlay/{event_id}", allow=PUBLIC, conditional=True)
 def overlay(principal: Principal, event_id: str) -> Response:
-    track = (bp.current_request.query_params or {}).get("track") or "1"
+    query: Mapping[str, str] = bp.current_request.query_params or {}
+    track = query.get("track") or "1"
     return conditional(services.publisher().overlay(event_id, track))

@@ -2,6 +2,7 @@
 the JSON token exchange for API clients (`POST /api/auth/token`, `POST /api/auth/refresh`)."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 from typing import Literal
 
@@ -31,7 +32,7 @@ _SHOWN_ON_FORM = (ValidationError, InvalidInput, NotAuthenticated, AccountNotRea
 
 @route(bp, "/login", allow=PUBLIC)
 def login_page(principal: Principal) -> Response:
-    query = bp.current_request.query_params or {}
+    query: Mapping[str, str] = bp.current_request.query_params or {}
     return _login_form(next_path=safe_next(query.get("next")))
 
 
@@ -65,7 +66,8 @@ def new_password(principal: Principal) -> Response:
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
-        tokens = services.identity_provider().complete_new_password(challenge, _matching_new_password(form_fields(request)))
+        tokens = services.identity_provider().complete_new_password(challenge,
+                                                                    _matching_new_password(form_fields(request)))
     except TokenExpired:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     except _SHOWN_ON_FORM as exc:
@@ -81,6 +83,7 @@ def logout(principal: Principal) -> Response:
     if principal.is_user and access_token:
         services.identity_provider().sign_out_everywhere(access_token)
         # Cognito revokes the refresh tokens; the access tokens already issued are revoked here.
+        assert principal.sub is not None  # a signed-in user has one
         REVOKED.signed_out(services.session_store(), principal.sub, unverified_claim(access_token, "origin_jti"))
     return redirect("/login", cookies=cookies.clear_session_cookies(secure=get_settings().cookie_secure))
 

@@ -24,7 +24,8 @@ def update_own_profile(principal: User, body: ProfileUpdate) -> dict:
 @route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN}, body=ProfileUpdate,
        response=PublicProfile)
 def update_user_profile(principal: User, username: str, body: ProfileUpdate) -> dict:
-    return public_view(services.shown_on_boards(services.profile_service().update_for(principal, username, body))).model_dump()
+    return public_view(services.shown_on_boards(services.profile_service().update_for(principal, username,
+                                                                                      body))).model_dump()
 
 
 @route(bp, "/api/profiles/{username}", allow=PUBLIC, response=PublicProfile)

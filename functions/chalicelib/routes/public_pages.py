@@ -204,7 +204,8 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
     shown = next((t for t in event.tracks if t.track_id == track), None)  # None on the combined board
     return render.page("leaderboard", title=event.name, track=track, tracks=event.boards, lang=i18n.resolve_language(
         query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url,
-        track_title=shown.leaderboard_title if shown else "", board_footer=(shown or event.tracks[0]).leaderboard_footer,
+        track_title=shown.leaderboard_title if shown else "",
+        board_footer=(shown or event.tracks[0]).leaderboard_footer,
         sponsor=event.sponsor, links=event.landing_page_links, **live())
 
 

@@ -2,6 +2,7 @@
 their own. Every handler parses its input and calls one service method; `race_service()` wires the adapters."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 
 from chalice import Blueprint, Response
 from pydantic import RootModel
@@ -31,7 +32,8 @@ def create_race(principal: User, event_id: str, body: CreateRaceInput) -> Respon
 
 @route(bp, "/api/events/{event_id}/races", methods=["GET"], allow=RACE_READERS)
 def list_races(principal: User, event_id: str) -> dict:
-    track = (bp.current_request.query_params or {}).get("track")
+    query: Mapping[str, str] = bp.current_request.query_params or {}
+    track = query.get("track")
     return {"races": services.race_service().list_races(event_id, track)}
 
 

@@ -1,14 +1,15 @@
 """Accounts (JSON): self sign-up and confirmation, staff registration, user listing, roles, disabling, self-delete."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.domain.numbers import whole_number
-from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser, RoleChange, SignUpForm, StaffRegistrationForm,
-                                     UserPage)
+from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser,
+                                     RoleChange, SignUpForm, StaffRegistrationForm, UserPage)
 from chalicelib import services
 
 bp = Blueprint(__name__)
@@ -34,7 +35,7 @@ def register_racer(principal: User, body: StaffRegistrationForm) -> Response:
 
 @route(bp, "/api/users", allow={ADMIN, REGISTRATION, OPERATOR}, response=UserPage)
 def list_users(principal: User) -> dict:
-    query = bp.current_request.query_params or {}
+    query: Mapping[str, str] = bp.current_request.query_params or {}
     page = services.user_service().list_users(query.get("prefix"), _limit(query.get("limit")), query.get("next"))
     return page.model_dump()
 

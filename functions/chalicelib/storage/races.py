@@ -236,7 +236,8 @@ class DynamoRaceStore:
         try:
             self._client.delete_item(TableName=self._table,
                                      Key=intent_key(intent.event_id, intent.track_id, intent.racer_sub),
-                                     ConditionExpression="#token = :token", ExpressionAttributeNames={"#token": "token"},
+                                     ConditionExpression="#token = :token",
+                                     ExpressionAttributeNames={"#token": "token"},
                                      ExpressionAttributeValues={":token": _s(intent.token)})
         except ClientError as exc:
             if error_code(exc) != "ConditionalCheckFailedException":

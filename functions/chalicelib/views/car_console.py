@@ -30,7 +30,8 @@ class CarLine(BaseModel):
     loaded_model: str
     battery: str
     assigned: list[AssignedLine]
-    faults: list[str] = []  # what the car's last heartbeat said is wrong (e.g. someone else holds a DeepRacer's console)
+    # What the car's last heartbeat said is wrong (e.g. someone else holds a DeepRacer's console).
+    faults: list[str] = []
     last_command: str = ""
     last_command_state: str = ""  # pending | ok | failed: the page colours it
 
@@ -55,7 +56,8 @@ def seen_text(view: DeviceView) -> str:
     return f"{seconds:.0f} s ago ({stamp})" if seconds < 3600 else stamp
 
 
-COMMAND_LABELS = {"RESTART_SERVICE": "Restart", "EMERGENCY_STOP": "Emergency stop", "START_CAR": "Start car", "SET_TAIL_LIGHT": "Tail light",
+COMMAND_LABELS = {"RESTART_SERVICE": "Restart", "EMERGENCY_STOP": "Emergency stop", "START_CAR": "Start car",
+                  "SET_TAIL_LIGHT": "Tail light",
                   "DELETE_ALL_MODELS": "Delete models", "SET_THROTTLE_CAP": "Throttle cap"}
 _COMMAND_STATES = {CommandStatus.PENDING: "sent, waiting for the car", CommandStatus.OK: "done by the car",
                    CommandStatus.FAILED: "failed"}
@@ -113,4 +115,5 @@ def cars_overview(principal: User, devices: DeviceService, fleets: FleetService,
     choices = [ModelChoice(model_id=m.model_id, label=f"{m.owner_username} · {m.name}")
                for m in page.models if m.status is ModelStatus.AVAILABLE]
     return CarsOverview(cars=lines, fleets=sorted(fleet_names.items(), key=lambda item: item[1].lower()),
-                        models=choices, tail_lights=[(name, name) for name in TAIL_LIGHT_PALETTE] + [("#FFFFFF", "white")])
+                        models=choices, tail_lights=[(name, name) for name in TAIL_LIGHT_PALETTE] + [("#FFFFFF",
+                                                                                                      "white")])

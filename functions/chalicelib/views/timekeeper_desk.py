@@ -188,7 +188,8 @@ class TimekeeperDesk:
         return RaceScreen(
             race_id=race.race_id, racer=race.racer.username, raced_by_proxy=race.raced_by_proxy, car=race.car,
             car_label=labels.get(race.car or "", race.car or "No car"), status=race.status.value,
-            status_text=_STATUS_TEXT[race.status], toggle_label=_TOGGLE_LABEL.get(race.status, "Start"), running=race.status is RaceStatus.RUNNING,
+            status_text=_STATUS_TEXT[race.status], toggle_label=_TOGGLE_LABEL.get(race.status, "Start"),
+            running=race.status is RaceStatus.RUNNING,
             live=race.status in {RaceStatus.RUNNING, RaceStatus.PAUSED}, over=race.status is RaceStatus.OVER,
             time_left_ms=time_left, current_lap_ms=current_lap, time_left=clock_text(time_left),
             current_lap=clock_text(current_lap), resets=f"{race.current_lap_resets} / {allowed}",

@@ -142,5 +142,6 @@ def table(rows: list[dict[str, Any]], columns: tuple[str, ...]) -> str:
     widths = [max(len(column), *(len(line[i]) for line in cells)) for i, column in enumerate(columns)]
     numeric = [all(isinstance(row[key], int | float) or row[key] is None for row in rows) for key in columns]
     def line(values: list[str]) -> str:
-        return "  ".join(v.rjust(w) if num else v.ljust(w) for v, w, num in zip(values, widths, numeric)).rstrip()
+        return "  ".join(v.rjust(w) if num else v.ljust(w) for v, w, num in zip(values, widths, numeric,
+                                                                                strict=True)).rstrip()
     return "\n".join([line(list(columns)), line(["-" * w for w in widths]), *(line(values) for values in cells)])

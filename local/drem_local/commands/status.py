@@ -80,7 +80,8 @@ def describe(facts: dict) -> str:
     else:
         lines.append("The app is not running. Start everything with `drem up`.")
     lines.append(f"Data lives in {facts['state_dir']}: snapshots {_human(facts['snapshot_bytes'])}, "
-                 f"journal {_human(health['journal_bytes'] if health else facts['journal_bytes'])} (moto {facts['moto_version'] or 'unknown'}).")
+                 f"journal {_human(health['journal_bytes'] if health else facts['journal_bytes'])} "
+                 f"(moto {facts['moto_version'] or 'unknown'}).")
     age = health["last_snapshot_age_s"] if health else facts.get("last_snapshot_age_s")
     if age is not None:
         lines.append(f"Last snapshot {age:.0f}s ago; writes since then are in the journal and survive a crash.")
@@ -120,7 +121,7 @@ def _size(path: Path) -> int:
     return 0
 
 
-def _human(size: int) -> str:
+def _human(size: float) -> str:
     for unit in ("B", "KB", "MB", "GB"):
         if size < 1024 or unit == "GB":
             return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"

@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
 
-def _start_demo(stack):  # type: ignore[no-untyped-def]
+def _start_demo(stack):
     """The demo (drem_local.demo) on the running stack, its URLs printed; None (and why, printed) if it failed."""
     from drem_local.api_client import ApiError
     from drem_local.demo import Demo, DemoError
@@ -151,7 +151,7 @@ def _print_ready(stack, *, admin_password_from_env: bool) -> None:
     print("\n".join(lines), flush=True)
 
 
-def admin_login(admin, password_from_env: bool) -> str:  # type: ignore[no-untyped-def]
+def admin_login(admin, password_from_env: bool) -> str:
     """What the banner says about the admin account: exactly what this start did to it."""
     if admin.created:
         if password_from_env:

@@ -15,7 +15,8 @@ import json
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 from xml.sax.saxutils import escape
 
 from drem_local.durable.sigv4 import Refusal, raw_target, verify

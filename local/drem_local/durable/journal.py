@@ -123,6 +123,7 @@ class Journal:
         return existing
 
     def append(self, record: JournalRecord) -> None:
+        assert self._fd is not None, "the journal is closed"
         # The record and a zero header after it, in one write: a reader always finds where the journal ends, even
         # when the record ends inside a longer record of an earlier cycle (left behind by `truncate`). Without it,
         # recovery took those leftovers for a torn tail of megabytes.
@@ -136,6 +137,7 @@ class Journal:
 
     def truncate(self) -> None:
         """Empty the journal (its records are now in a snapshot)."""
+        assert self._fd is not None, "the journal is closed"
         if self._capacity > _SHRINK_ABOVE_BYTES:
             os.ftruncate(self._fd, 0)
             self._capacity = 0
@@ -153,6 +155,7 @@ class Journal:
             self._fd = None
 
     def _ensure_capacity(self, needed: int) -> None:
+        assert self._fd is not None, "the journal is closed"
         if needed <= self._capacity:
             return
         new_capacity = -(-needed // SEGMENT_BYTES) * SEGMENT_BYTES

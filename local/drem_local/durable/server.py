@@ -10,7 +10,8 @@ import json
 import logging
 import threading
 from collections.abc import Iterable
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from werkzeug.test import run_wsgi_app
 
@@ -66,8 +67,9 @@ class DurableApp:
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
         if environ.get("PATH_INFO") == HEALTH_PATH:
             return self._health(start_response)
-        form_upload = self.upload_guard is not None and is_form_upload(environ)
-        if form_upload and (too_big := self.upload_guard.refusal_before_reading(environ)):
+        upload_guard = self.upload_guard
+        form_upload = upload_guard is not None and is_form_upload(environ)
+        if form_upload and upload_guard and (too_big := upload_guard.refusal_before_reading(environ)):
             return refusal_response(too_big, start_response)
         body = read_body(environ)
         environ["wsgi.input"] = io.BytesIO(body)  # moto's dispatcher and Flask may each read it
@@ -77,7 +79,7 @@ class DurableApp:
             return refuse(refusal, environ, start_response)
         service = service_of(environ)
         # After the signature check (which also strips the app's /_storage gateway prefix): the policy's conditions.
-        if form_upload and service == S3 and (broken := self.upload_guard.refusal(environ, body)):
+        if form_upload and upload_guard and service == S3 and (broken := upload_guard.refusal(environ, body)):
             return refusal_response(broken, start_response)
         changing = is_state_changing(environ)
         captured: dict[str, Any] = {}

@@ -204,7 +204,7 @@ def _signature(signer_class: type[SigV4Auth], keys: StorageKeys, scope: _Scope, 
 def _only_signed_headers(signer_class: type[SigV4Auth]) -> type[SigV4Auth]:
     """A botocore signer whose header selection is the client's SignedHeaders list, not "every header we have"."""
 
-    class Verifying(signer_class):  # type: ignore[valid-type, misc]
+    class Verifying(signer_class):
         signed_header_names: frozenset[str] = frozenset()
 
         def headers_to_sign(self, request: AWSRequest) -> Any:
@@ -266,7 +266,7 @@ def _authorization_fields(text: str) -> dict[str, str]:
 
 
 def _raw_query_params(query: str) -> dict[str, str]:
-    params = {}
+    params: dict[str, str] = {}
     for pair in query.split("&"):
         key, _, value = pair.partition("=")
         params.setdefault(unquote(key), unquote(value))

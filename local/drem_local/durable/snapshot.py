@@ -80,7 +80,7 @@ class SnapshotStore:
     def load_into_moto(self, manifest: Manifest) -> None:
         from moto.backends import get_backend
 
-        for service, entry in manifest.files.items():
+        for entry in manifest.files.values():
             state = pickle.loads((self.directory / entry["file"]).read_bytes())
             for backend_name, accounts in state.items():
                 live = get_backend(backend_name)

@@ -7,7 +7,8 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from drem_local.durable.classify import PERSISTED
 from drem_local.durable.journal import Journal, JournalRecord

@@ -280,7 +280,8 @@ class _Translator:
     def _clamp(self, op: Any) -> None:
         attributes = op.get_attributes()
         name = op.get_name()
-        bounds = [self.writer.constant(f"{name}:{key}", np.array(attributes[key], np.float32)) for key in ("min", "max")]
+        bounds = [self.writer.constant(f"{name}:{key}", np.array(attributes[key], np.float32)) for key in ("min",
+                                                                                                           "max")]
         self.writer.node("Clip", [self.input_name_of(op, 0), *bounds], self.outputs_of(op))
 
     def _batch_norm(self, op: Any) -> None:

@@ -22,7 +22,8 @@ import json
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import Any, TextIO
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -75,7 +76,11 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
     """The demonstrator laps each track and direction once per `laps` (one run per lap, its own noise seed)."""
     from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
     from drem_sim.env import RaceEnv
-    from drem_sim.runs import record_run
+    from drem_sim.runs import Policy, record_run
+
+    def _teacher_policy(teacher: Demonstrator) -> Policy:
+        """The demonstrator as a run policy: it steers from the track parameters and ignores the frame."""
+        return lambda _obs, params: teacher.act(params)
 
     runs = []
     for number, direction in enumerate(directions):
@@ -85,7 +90,7 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
             run_seed = seed * 1000 + number * 50 + lap + 1
             teacher = Demonstrator(track, DemonstratorConfig(steering_noise_deg=noise_deg),
                                    rng=np.random.default_rng(run_seed))
-            runs.append(record_run(RaceEnv(track), lambda _obs, params, t=teacher: t.act(params), root, laps=1,
+            runs.append(record_run(RaceEnv(track), _teacher_policy(teacher), root, laps=1,
                                    driver="demonstrator", seed=run_seed))
     _bar(progress, "round 0 recording", len(directions), len(directions), "done")
     return runs
@@ -106,13 +111,15 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
     teacher = Demonstrator(track)
     rng = np.random.default_rng(seed)
     recorder = RunRecorder(root, track.track_id, direction="reverse" if track.is_reversed else "forward",
-                           driver=f"dagger-round-{round_number}", seed=seed, camera=env.camera.config if env.camera else None,
+                           driver=f"dagger-round-{round_number}", seed=seed,
+                           camera=env.camera.config if env.camera else None,
                            extra={"track_direction": track.direction, "decision_hz": env.config.decision_hz,
                                   "dagger": {"round": round_number, "beta": beta, "model": archive.name}})
     obs, info = env.reset(seed=seed)
     params = info["params"]
     limit = int(laps * SECONDS_PER_LAP_LIMIT * env.config.decision_hz)
     for _ in range(limit):
+        assert obs is not None  # the env observes (its camera makes the frames the pilot reads)
         label = teacher.act(params)
         executed = label if rng.random() < beta else pilot.act(obs)
         t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
@@ -215,7 +222,7 @@ def plot_rounds(reports: Sequence[RoundReport], path: Path, width: int = 640, he
         colour = palette[n % len(palette)]
         points = [(x_of(i), int(bottom - (bottom - top) * m.laps_completed_pct / 100.0))
                   for i, r in enumerate(reports) for m in r.evaluation if m.track == track]
-        for a, b in zip(points, points[1:]):
+        for a, b in zip(points, points[1:], strict=False):
             cv2.line(canvas, a, b, colour, 2, cv2.LINE_AA)
         for point in points:
             cv2.circle(canvas, point, 3, colour, -1)
@@ -224,7 +231,7 @@ def plot_rounds(reports: Sequence[RoundReport], path: Path, width: int = 640, he
     if losses:
         peak = max(losses) * 1.05 or 1.0
         points = [(x_of(i), int(bottom - (bottom - top) * v / peak)) for i, v in enumerate(losses)]
-        for a, b in zip(points, points[1:]):
+        for a, b in zip(points, points[1:], strict=False):
             cv2.line(canvas, a, b, (0, 0, 0), 1, cv2.LINE_AA)
         cv2.putText(canvas, f"train loss (peak {peak:.3f})", (right + 8, bottom), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                     (0, 0, 0), 1)

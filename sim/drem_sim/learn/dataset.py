@@ -12,7 +12,8 @@ import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
+from collections.abc import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -48,7 +49,7 @@ class ActionScale:
                 _from_unit(unit[..., 1], self.speed_low, self.speed_high))
 
     @classmethod
-    def from_speeds(cls, speeds: np.ndarray) -> "ActionScale":
+    def from_speeds(cls, speeds: np.ndarray) -> ActionScale:
         low, high = float(np.min(speeds)), float(np.max(speeds))
         if high - low < MIN_SPEED_SPREAD:
             middle = (high + low) / 2
@@ -168,7 +169,7 @@ def _read_controls(run_dir: Path) -> list[dict[str, Any]]:
 
 
 def _frame_path(run_dir: Path, row: dict[str, Any]) -> Path:
-    frame = row.get("frame", row.get("index"))
+    frame: Any = row.get("frame", row.get("index"))  # a path (str) or a frame number, as the run wrote it
     if isinstance(frame, str):
         candidate = (run_dir / frame).resolve()
         if run_dir.resolve() not in candidate.parents:
@@ -209,12 +210,13 @@ class Augmentation:
     blur_probability: float = 0.0
 
     @classmethod
-    def from_names(cls, names: Iterable[str]) -> "Augmentation":
+    def from_names(cls, names: Iterable[str]) -> Augmentation:
         """`["brightness", "shift", ...]` → those switched on (camera-matched strengths), the rest off."""
         chosen = {name.strip() for name in names if name.strip()}
         unknown = chosen - set(AUGMENTATIONS) - {"none"}
         if unknown:
-            raise DatasetError(f"unknown augmentation(s) {sorted(unknown)}; choose from {', '.join(AUGMENTATIONS)} or none")
+            raise DatasetError(f"unknown augmentation(s) {sorted(unknown)}; "
+                               f"choose from {', '.join(AUGMENTATIONS)} or none")
         return cls(brightness=0.25 if "brightness" in chosen else 0.0, noise=6.0 if "noise" in chosen else 0.0,
                    flip="flip" in chosen, shift_px=4.0 if "shift" in chosen else 0.0,
                    rotate_deg=2.0 if "shift" in chosen else 0.0, blur_probability=0.3 if "blur" in chosen else 0.0)
@@ -259,8 +261,8 @@ def _shift_and_roll(images: np.ndarray, rng: np.random.Generator, shift_px: floa
     """Per image: translate by up to ±shift_px and roll by up to ±rotate_deg about the centre (edge pixels repeat,
     as a slightly moved camera still sees floor there, not black)."""
     count, height, width = images.shape
-    shifts = rng.uniform(-shift_px, shift_px, size=(count, 2))
-    angles = rng.uniform(-rotate_deg, rotate_deg, size=count)
+    shifts: np.ndarray = rng.uniform(-shift_px, shift_px, size=(count, 2))
+    angles = rng.uniform(-rotate_deg, rotate_deg, size=(count,))
     out = np.empty_like(images)
     for i in range(count):
         matrix = cv2.getRotationMatrix2D((width / 2, height / 2), float(angles[i]), 1.0)

@@ -34,7 +34,7 @@ class ArchiveError(ValueError):
 def build_metadata(scale: ActionScale, *, car_loadable: bool = False) -> dict[str, Any]:
     """DeepRacer metadata; `car_loadable` (the archive also holds agent/model.pb) names the algorithm as a stock car
     requires (it accepts only clipped_ppo / sac) and keeps the real training origin in the drem block."""
-    metadata = {
+    metadata: dict[str, Any] = {
         "action_space": {
             "steering_angle": {"low": scale.steering_low, "high": scale.steering_high},
             "speed": {"low": scale.speed_low, "high": scale.speed_high},

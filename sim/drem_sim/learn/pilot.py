@@ -29,7 +29,7 @@ class OnnxPilot:
         self.output_name = tensors.get("output", {}).get("name") or self.session.get_outputs()[0].name
 
     @classmethod
-    def from_archive(cls, source: Path | str) -> "OnnxPilot":
+    def from_archive(cls, source: Path | str) -> OnnxPilot:
         """An ONNX archive drives as is; a console archive (agent/model.pb) is converted to ONNX first."""
         files = read_model_files(Path(source))
         metadata = load_metadata(files)

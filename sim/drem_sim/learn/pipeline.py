@@ -6,7 +6,8 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import Any, TextIO
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -40,7 +41,8 @@ def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, confi
     snapshot = load_snapshot(runs, scale=scale)
     result = train_behaviour_cloning(snapshot, config, progress=progress, initial_state=initial_state)
     onnx_path = export_onnx(result.model, out_dir / "model.onnx")
-    picks = np.random.default_rng(config.seed).choice(len(snapshot), size=min(VERIFY_SAMPLES, len(snapshot)), replace=False)
+    picks = np.random.default_rng(config.seed).choice(len(snapshot), size=min(VERIFY_SAMPLES, len(snapshot)),
+                                                      replace=False)
     difference = verify_onnx(result.model, onnx_path, snapshot.images[np.sort(picks)])
     manifest_path = snapshot.write_manifest(out_dir / "snapshot_manifest.json")
     loss_curve = plot_loss_curve(result, out_dir / "loss_curve.png")

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from drem_sim.learn.evaluate import EvalMetrics, drive
 from drem_sim.learn.track_sets import TrackDirection

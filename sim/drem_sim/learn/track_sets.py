@@ -7,7 +7,7 @@ removes both of its directions; holding `name:reverse` out removes only that dir
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable
+from collections.abc import Iterable
 
 REVERSE_SUFFIX = ":reverse"
 ALL = "all"

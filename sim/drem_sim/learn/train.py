@@ -93,7 +93,8 @@ def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
             batch = order[start:start + config.batch_size]
             images, batch_targets = snapshot.images[batch], targets[batch]
             if config.augment:
-                images, batch_targets = augment_batch(images, batch_targets, rng, augmentation=config.effective_augmentation)
+                images, batch_targets = augment_batch(images, batch_targets, rng,
+                                                      augmentation=config.effective_augmentation)
             inputs = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32))[..., None]
             loss = _weighted_mse(model(inputs), torch.from_numpy(batch_targets), weights)
             optimiser.zero_grad()
@@ -109,7 +110,8 @@ def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
         result.epochs_run = epoch
         if progress is not None:
             val = f" val {result.validation_losses[-1]:.4f}" if result.validation_losses else ""
-            line = f"epoch {epoch}/{config.epochs} train {result.train_losses[-1]:.4f}{val} {time.monotonic() - started:6.1f}s"
+            line = (f"epoch {epoch}/{config.epochs} train {result.train_losses[-1]:.4f}{val} "
+                    f"{time.monotonic() - started:6.1f}s")
             progress.write(f"\r{line:<64}\n")
             progress.flush()
         if config.max_seconds is not None and time.monotonic() - started > config.max_seconds:
@@ -158,10 +160,10 @@ def plot_loss_curve(result: TrainResult, path: Path, width: int = 640, height: i
     if values:
         peak = max(values) * 1.05 or 1.0
         epochs = max(len(result.train_losses), 2)
-        for losses, colour, label in series:
+        for losses, colour, _label in series:
             points = [(int(left + (right - left) * i / (epochs - 1)),
                        int(bottom - (bottom - top) * v / peak)) for i, v in enumerate(losses)]
-            for a, b in zip(points, points[1:]):
+            for a, b in zip(points, points[1:], strict=False):
                 cv2.line(canvas, a, b, colour, 2, cv2.LINE_AA)
             for point in points:
                 cv2.circle(canvas, point, 3, colour, -1)
@@ -170,7 +172,8 @@ def plot_loss_curve(result: TrainResult, path: Path, width: int = 640, height: i
         for offset, (_, colour, label) in enumerate(series):
             cv2.putText(canvas, label, (right - 110, top + 20 + 18 * offset), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1)
     cv2.putText(canvas, "behaviour cloning loss per epoch", (left, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1)
-    cv2.putText(canvas, f"epochs: {result.epochs_run}", (left, height - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
+    cv2.putText(canvas, f"epochs: {result.epochs_run}", (left, height - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                (0, 0, 0), 1)
     if not cv2.imwrite(str(path), canvas):
         raise OSError(f"could not write {path}")
     return path

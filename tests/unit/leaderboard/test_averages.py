@@ -23,7 +23,8 @@ def test_every_run_of_consecutive_valid_laps_is_a_window():
 
 
 def test_an_invalid_lap_breaks_the_run():
-    windows = _windows([10_000, 10_000, 10_000, 10_000, 10_000, 10_000, 10_000], valid=[True, True, False, True, True, True, True])
+    windows = _windows([10_000, 10_000, 10_000, 10_000, 10_000, 10_000, 10_000], valid=[True, True, False, True, True,
+                                                                                        True, True])
 
     assert [(w.start_lap_id, w.end_lap_id) for w in windows] == [(3, 5), (4, 6)]
 
@@ -57,4 +58,5 @@ def test_windows_match_a_brute_force_count_of_valid_runs(seed):
     expected = [i for i in range(count - window + 1) if all(valid[i : i + window])]
     assert [w.start_lap_id for w in windows] == expected
     for w in windows:
-        assert min(times[w.start_lap_id : w.end_lap_id + 1]) <= w.avg_ms <= max(times[w.start_lap_id : w.end_lap_id + 1])
+        in_window = times[w.start_lap_id : w.end_lap_id + 1]
+        assert min(in_window) <= w.avg_ms <= max(in_window)

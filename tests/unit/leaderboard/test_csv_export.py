@@ -54,7 +54,8 @@ def test_racer_summary_has_one_row_per_racer_and_track():
 
     assert text.splitlines()[0].split(",") == list(RACER_SUMMARY_COLUMNS)
     alice, bob = rows
-    assert [alice[k] for k in ("Races", "Total laps", "Valid laps", "Invalid laps", "Fastest", "Avg", "Total resets", "Completion %")] == [
+    assert [alice[k] for k in ("Races", "Total laps", "Valid laps", "Invalid laps", "Fastest", "Avg", "Total resets",
+                               "Completion %")] == [
         "1", "3", "2", "1", "10.000", "11.000", "4", "66.7",
     ]  # fmt: skip
     assert (bob["Fastest"], bob["Avg"], bob["Completion %"]) == ("", "", "0.0")

@@ -13,7 +13,8 @@ def test_defaults_match_drem():
     config = RaceConfig()
 
     assert (config.race_time_min, config.resets_per_lap, config.track_type) == (2, None, TrackType.REINVENT_2018)
-    assert (config.ranking_method, config.max_runs_per_racer, config.average_window) == (RankingMethod.BEST_LAP_TIME, 3, 3)
+    assert (config.ranking_method, config.max_runs_per_racer, config.average_window) == (RankingMethod.BEST_LAP_TIME, 3,
+                                                                                         3)
     assert (config.debounce_ms, config.min_lap_ms, config.race_time_ms) == (2_000, 3_000, 120_000)
 
 

@@ -104,7 +104,8 @@ def test_lap_count_ranks_more_valid_laps_first_then_less_elapsed_time():
 
 
 def test_a_track_board_only_shows_that_track():
-    board = rank([_summary("ann", [9_000], track_id="1"), _summary("bob", [8_000], track_id="2")], M.BEST_LAP_TIME, track_id="2")
+    board = rank([_summary("ann", [9_000], track_id="1"), _summary("bob", [8_000], track_id="2")], M.BEST_LAP_TIME,
+                 track_id="2")
 
     assert _order(board) == ["bob"]
 
@@ -126,10 +127,12 @@ def test_combined_board_keeps_each_racers_best_track_once():
 
 def test_entries_carry_profile_details_for_the_public_board():
     profiles = {"ann": RacerProfile(username="Ann R.", country_code="SE", highlight_colour="#FF00FF")}
-    board = rank([_summary("ann", [9_000], proxy=True), _summary("bob", [9_500])], M.BEST_LAP_TIME, track_id="1", profiles=profiles)
+    board = rank([_summary("ann", [9_000], proxy=True), _summary("bob", [9_500])], M.BEST_LAP_TIME, track_id="1",
+                 profiles=profiles)
 
     ann, bob = board.entries
-    assert (ann.username, ann.country_code, ann.highlight_colour, ann.raced_by_proxy) == ("Ann R.", "SE", "#FF00FF", True)
+    assert (ann.username, ann.country_code, ann.highlight_colour, ann.raced_by_proxy) == ("Ann R.", "SE", "#FF00FF",
+                                                                                          True)
     assert (bob.country_code, bob.highlight_colour, bob.raced_by_proxy) == (None, "#0000FF", False)
 
 

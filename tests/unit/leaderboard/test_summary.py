@@ -12,7 +12,8 @@ pytestmark = pytest.mark.unit
 
 
 def test_summary_over_all_submitted_races_of_a_racer_on_a_track():
-    first = submitted_race([12_000, 11_000, 30_000, 10_500], valid=[True, True, False, True], resets=[0, 1, 4, 0], race_id="a")
+    first = submitted_race([12_000, 11_000, 30_000, 10_500], valid=[True, True, False, True], resets=[0, 1, 4, 0],
+                           race_id="a")
     second = submitted_race([9_800, 10_000, 10_200], race_id="b", finished_at_ms=first.submitted_at_ms + 60_000)
 
     summary = summarise_racer([first, second])
@@ -46,7 +47,8 @@ def test_a_submitted_race_without_laps_counts_as_an_attempt():
     summary = summarise_racer([submitted_race([])])
 
     assert summary is not None
-    assert (summary.races, summary.total_laps, summary.lap_completion_pct, summary.laps_per_attempt) == (1, 0, None, 0.0)
+    assert (summary.races, summary.total_laps, summary.lap_completion_pct, summary.laps_per_attempt) == (1, 0, None,
+                                                                                                         0.0)
 
 
 def test_races_that_were_not_submitted_do_not_count():

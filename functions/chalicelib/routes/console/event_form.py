@@ -106,7 +106,8 @@ def rename_for(fields: dict[str, str]):  # noqa: ANN201 - a small closure
         parts = location.split(".")
         if parts[0] == "race_config":
             return parts[1] if len(parts) > 1 else "lap_count_target"
-        if parts[0] == "tracks" and len(parts) > 2 and parts[1].isascii() and parts[1].isdigit() and int(parts[1]) < len(used):
+        if (parts[0] == "tracks" and len(parts) > 2 and parts[1].isascii() and parts[1].isdigit()
+                and int(parts[1]) < len(used)):
             return f"track-{used[int(parts[1])]}-{_TRACK_FIELD.get(parts[2], parts[2])}"
         if parts[0] in {"tracks", "landing_page_links"}:
             return parts[0]

@@ -31,8 +31,8 @@ def fleets_page(principal: User) -> Response:
 @route(bp, "/console/fleets", methods=["POST"], allow=DEVICE_STAFF)
 def create_fleet(principal: User) -> Response:
     fields = form(bp.current_request)
-    return render_or_errors(lambda: _created(services.fleet_service().create_fleet(principal, FleetInput(name=fields.get(
-        "name", "")))), lambda errors, status: _fleets_page(errors, fields, status))
+    return render_or_errors(lambda: _created(services.fleet_service().create_fleet(principal, FleetInput(
+        name=fields.get("name", "")))), lambda errors, status: _fleets_page(errors, fields, status))
 
 
 @route(bp, "/console/cars", allow=DEVICE_STAFF)
@@ -44,7 +44,8 @@ def cars_page(principal: User) -> Response:
 def cars_live(principal: User) -> Response:
     """Every car's status cell (status, battery, faults, loaded model, last command) as out-of-band swaps: the page
     polls this, so the operator sees an emergency stop confirmed without reloading"""
-    lines = car_lines(services.device_service(), services.fleet_service(), services.assignment_service(), services.now_ms())
+    lines = car_lines(services.device_service(), services.fleet_service(), services.assignment_service(),
+                      services.now_ms())
     return render.fragment("console/cars_live", cars=lines, headers={"Cache-Control": "no-store"})
 
 
@@ -130,8 +131,8 @@ def _sent_notice(query: dict[str, str]) -> str:
 
 
 def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notice: str = "") -> Response:
-    overview = cars_overview(principal, services.device_service(), services.fleet_service(), services.assignment_service(),
-                             services.model_service(), services.now_ms())
+    overview = cars_overview(principal, services.device_service(), services.fleet_service(),
+                             services.assignment_service(), services.model_service(), services.now_ms())
     return render.page("console/cars", status=status, overview=overview, errors=errors,
                        is_admin=ADMIN in principal.roles, notice=notice)
 

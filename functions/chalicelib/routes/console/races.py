@@ -51,7 +51,8 @@ def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> Respo
     fields = form(bp.current_request)
 
     def save() -> Response:
-        services.race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields), by=principal.username)
+        services.race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields),
+                                         by=principal.username)
         return redirect(f"/console/races/{event_id}/{race_id}")
 
     return render_or_errors(save, lambda errors, status: _edit_page(
