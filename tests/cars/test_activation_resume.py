@@ -13,7 +13,6 @@ import requests
 from drem_cars.client import DeviceClient, activate
 from drem_cars.credentials import CredentialStore
 from drem_local.api_client import ApiClient
-from tests.stack_fixtures import live_stack  # noqa: F401 - the shared running stack
 
 pytestmark = pytest.mark.integration
 
@@ -35,7 +34,8 @@ class _Forward(http.server.BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:  # noqa: N802 - the stdlib's name
         body = self.rfile.read(int(self.headers.get("Content-Length", "0")))
-        headers = {name: value for name, value in self.headers.items() if name.lower() not in ("host", "content-length")}
+        headers = {name: value for name, value in self.headers.items()
+                   if name.lower() not in ("host", "content-length")}
         reply = requests.post(self.server.upstream + self.path, data=body, headers=headers, timeout=30)
         self.server.forwarded += 1
         if self.server.dropped == 0:
@@ -53,7 +53,7 @@ class _Forward(http.server.BaseHTTPRequestHandler):
 
 
 @pytest.fixture
-def lossy(live_stack) -> Iterator[AnswerLosingProxy]:  # noqa: F811
+def lossy(live_stack) -> Iterator[AnswerLosingProxy]:
     proxy = AnswerLosingProxy(live_stack.url)
     thread = threading.Thread(target=proxy.serve_forever, daemon=True)
     thread.start()
@@ -61,7 +61,7 @@ def lossy(live_stack) -> Iterator[AnswerLosingProxy]:  # noqa: F811
     proxy.shutdown()
 
 
-def test_a_lost_activation_answer_is_resumed_and_leaves_one_device(live_stack, lossy: AnswerLosingProxy,  # noqa: F811
+def test_a_lost_activation_answer_is_resumed_and_leaves_one_device(live_stack, lossy: AnswerLosingProxy,
                                                                    tmp_path: Path) -> None:
     admin = ApiClient(live_stack.url)
     admin.sign_in(live_stack.admin_username, live_stack.admin_password)

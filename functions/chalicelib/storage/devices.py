@@ -110,7 +110,8 @@ class DynamoDeviceStore:
             "ExpressionAttributeValues": values}}
         register = {"Put": {"TableName": self._table, "Item": _device_item(device),
                             "ConditionExpression": "attribute_not_exists(pk)"}}
-        board_line = {"Update": {"TableName": self._table, "Key": _STATUS_KEY, "UpdateExpression": "SET devices.#d = :e",
+        board_line = {"Update": {"TableName": self._table, "Key": _STATUS_KEY,
+                                 "UpdateExpression": "SET devices.#d = :e",
                                  "ExpressionAttributeNames": {"#d": device.device_id},
                                  "ExpressionAttributeValues": {":e": _attr(line.model_dump(mode="json"))}}}
         try:

@@ -1,8 +1,7 @@
 """DynamoDB adapter for the statistics digests (`domain/stats.py`): one item per event in the `races` table.
 
-| item | pk | sk |
-|---|---|---|
-| statistics digest (`EventDigest` as JSON in `doc`, `listedAtMs`: when the race listing it was built from began) | `EVENT#{eventId}` | `STATS` |
+  statistics digest   EVENT#{eventId} / STATS   `EventDigest` as JSON in `doc`; `listedAtMs`: when the race listing
+                                                it was built from began
 
 It sits in the event's partition, beside its races, but is not a race: listings read `RACE#` items only, and an
 event export carries races and audit entries only (the target builds its own digest on first read). A put replaces

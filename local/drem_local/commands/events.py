@@ -90,7 +90,8 @@ def describe(action: str, answer: dict[str, Any]) -> str:
     if action == "list":
         if not answer["events"]:
             return "No events yet."
-        return "\n".join(f"{e['event_id']:<14} {e['date']}  {e['country_code']}  {label(e['event_type']):<20} {e['name']}"
+        return "\n".join(f"{e['event_id']:<14} {e['date']}  {e['country_code']}  "
+                         f"{label(e['event_type']):<20} {e['name']}"
                          for e in answer["events"])
     rules = answer["race_config"]
     lines = [f"{answer['name']} ({answer['event_id']}), {label(answer['event_type'])}, {answer['date']}, "
