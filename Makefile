@@ -36,10 +36,14 @@ up: install
 demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
+# pytest-xdist workers for `make test`: one per core (CI has two). Tests that share a folder of the repository are
+# kept in one worker with xdist_group (tests/infra/conftest.py). TEST_WORKERS=0 runs them all in this process.
+TEST_WORKERS ?= auto
+
 ## make test: install the test dependencies (Python, npm htmx, Debian chromium), lint, then run every test
 test: install-test
 	$(MAKE) --no-print-directory lint
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
 
 ## make lint: ruff (style and likely bugs) and mypy (types; strict for leaderboard/ and chalicelib/domain/), as
 ## configured in pyproject.toml. mypy keeps its cache in .mypy_cache/, so a second run takes seconds.
