@@ -26,6 +26,7 @@ from pydantic import ValidationError
 from chalicelib.auth.access import form_fields
 from chalicelib.domain.errors import DremError, NotFound
 from chalicelib.http_errors import status_for
+from chalicelib.routes import responses
 
 # What a form shows next to its inputs: pydantic's and the domain's refusals, never unexpected errors.
 SHOWN_ON_FORM = (ValidationError, DremError)
@@ -81,7 +82,9 @@ def error_status(exc: Exception) -> int:
 
 def redirect(location: str) -> Response:
     """After a successful post: 303 for a plain browser, HX-Redirect for htmx (which would swap a 303's body)."""
-    return Response(body="", status_code=303, headers={"Location": location, "HX-Redirect": location})
+    response = responses.redirect(location)
+    response.headers["HX-Redirect"] = location
+    return response
 
 
 def checkbox(fields: dict[str, Any], name: str) -> bool:
