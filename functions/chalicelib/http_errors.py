@@ -14,6 +14,7 @@ from pydantic import ValidationError
 
 from chalicelib import logs
 from chalicelib.domain import errors as e
+from chalicelib.htmx import is_htmx
 from drem_web import render
 
 # Most specific first: the first isinstance match wins.
@@ -98,12 +99,9 @@ def _error_response(exc: Exception, request: Request | None) -> Response:
         body: dict[str, Any] = {"code": type(exc).__name__ if status != 500 else "InternalError",
                                 "message": message, "field": field, "fields": fields, "requestId": request_id}
         return Response(body={"error": body}, status_code=status, headers=headers)
-    if status == 401 and request is not None and request.method == "GET" and not _is_htmx(request):
+    if status == 401 and request is not None and request.method == "GET" and not is_htmx(request):
         login = f"/login?next={quote(logs.request_path(request), safe='/')}"
         return Response(body="", status_code=303, headers={"Location": login})
     return render.page("error", status=status, title=_TITLES.get(status, "Error"), message=message,
                        status_code=status, request_id=request_id)
 
-
-def _is_htmx(request: Request) -> bool:
-    return request.headers.get("hx-request") == "true"

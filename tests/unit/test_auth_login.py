@@ -76,6 +76,9 @@ def test_empty_username_is_shown_next_to_the_username_field(browser, stack):
 
     assert response.status_code == 400
     assert _field_error(response.body.decode(), "username") == "Enter your username."
+    too_long = _login(browser, "u" * 129, "x")
+    assert too_long.status_code == 400
+    assert _field_error(too_long.body.decode(), "username") == "The username is too long (at most 128 characters)."
 
 
 def test_login_redirects_only_to_local_paths(browser, users):

@@ -47,6 +47,11 @@ def test_bad_activation_input_is_named_next_to_the_field(console):
     assert reply.status_code == 400
     assert field_error(reply.body.decode(), "hostname")
     assert console.post("/console/fleets", {"name": "  "}).status_code == 400
+    empty = console.post("/console/fleets", {"name": ""})
+    assert empty.status_code == 400 and field_error(empty.body.decode(), "name") == "Enter the name."
+    long = console.post("/console/fleets", {"name": "f" * 81})
+    assert field_error(long.body.decode(), "name") == "The name is too long (at most 80 characters)."
+    assert 'value="' + "f" * 81 + '"' in long.body.decode()  # what was typed is kept
 
 
 def test_car_actions_become_device_commands(console):

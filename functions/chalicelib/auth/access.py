@@ -53,6 +53,7 @@ from chalicelib.auth.cookies import CSRF_COOKIE, request_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, Role
 from chalicelib.auth.sessions import resolve_caller
 from chalicelib.domain.errors import Forbidden, InvalidInput, NotAuthenticated
+from chalicelib.htmx import is_htmx
 from chalicelib.settings import get_settings
 from drem_web import render
 
@@ -264,7 +265,7 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
     if browser and not double_submit.fits(scope.csrf_token, None):
         _issue_csrf_token(scope, None, settings.cookie_secure)
     _local.scope = scope
-    htmx = request.headers.get("hx-request") == "true"
+    htmx = is_htmx(request)
     render.bind_request(htmx=htmx, principal=ANONYMOUS, csrf_token=scope.csrf_token)
     try:
         caller = resolve_caller(request.headers, cookies)

@@ -13,7 +13,7 @@ from chalicelib.auth.principals import User
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.formats.labels_pdf import (CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers,
                                           racer_card_pdf)
-from chalicelib.routes.console.common import form
+from chalicelib.routes.console.forms import submitted
 from chalicelib import services
 from chalicelib.settings import get_settings
 
@@ -45,7 +45,7 @@ def car_labels(principal: User, query: CarLabelsQuery) -> Response:
 
 @route(bp, "/console/registration/card.pdf", methods=["POST"], allow={ADMIN, REGISTRATION})
 def racer_card(principal: User) -> Response:
-    card = RacerCardForm.model_validate(form(bp.current_request))
+    card = RacerCardForm.model_validate(submitted(bp.current_request, "username", "temporary_password", "format"))
     body = racer_card_pdf(RacerCard(username=card.username, temporary_password=card.temporary_password),
                           card.format, get_settings().public_url)
     return Response(body=body, headers=label_headers(f"racer-card-{card.username}.pdf"))

@@ -6,19 +6,20 @@ from collections.abc import Mapping
 from chalice import Blueprint, Response
 from typing import Literal
 
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field
 
 from chalicelib.auth import cookies
 from chalicelib.auth import csrf as double_submit
-from chalicelib.auth.access import PUBLIC, form_fields, route
+from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.auth.rate_limits import client_address, guarded_sign_in
 from chalicelib.auth.revocation import REVOKED
 from chalicelib import services
 from chalicelib.auth.tokens import unverified_claim
-from chalicelib.domain.errors import AccountNotReady, InvalidInput, NotAuthenticated, RateLimited, TokenExpired
+from chalicelib.domain.errors import InvalidInput, TokenExpired
 from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
-from chalicelib.http_errors import retry_after_headers, status_for
+from chalicelib.http_errors import retry_after_headers
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
 from chalicelib.routes.responses import redirect, safe_next
 from chalicelib.settings import get_settings
 from chalicelib.storage.sessions import CHALLENGE_TTL_S
@@ -27,7 +28,7 @@ from drem_web import render
 bp = Blueprint(__name__)
 
 _CHALLENGE_PATH = "/login/new-password"
-_SHOWN_ON_FORM = (ValidationError, InvalidInput, NotAuthenticated, AccountNotReady, RateLimited)
+_MISSING = "Enter your {label}."
 
 
 @route(bp, "/login", allow=PUBLIC)
@@ -38,13 +39,13 @@ def login_page(principal: Principal) -> Response:
 
 @route(bp, "/login", methods=["POST"], allow=PUBLIC)
 def login(principal: Principal) -> Response:
-    form = form_fields(bp.current_request)
-    next_path, secure = safe_next(form.get("next")), get_settings().cookie_secure
+    values = submitted(bp.current_request, "username", "password", "next")
+    next_path, secure = safe_next(values.get("next")), get_settings().cookie_secure
     try:
-        credentials = SignInForm.model_validate(form)
+        credentials = SignInForm.model_validate(values)
         result = _sign_in(credentials)
-    except _SHOWN_ON_FORM as exc:
-        return _login_form(exc, username=form.get("username", ""), next_path=next_path)
+    except SHOWN_ON_FORM as exc:
+        return _login_form(exc, username=values.get("username", ""), next_path=next_path)
     if isinstance(result, NewPasswordChallenge):
         return redirect(_CHALLENGE_PATH, cookies=[_challenge_cookie(result, secure)])
     return redirect(next_path, cookies=_new_session(result, secure))
@@ -66,11 +67,11 @@ def new_password(principal: Principal) -> Response:
     if challenge is None:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
     try:
-        tokens = services.identity_provider().complete_new_password(challenge,
-                                                                    _matching_new_password(form_fields(request)))
+        passwords = submitted(request, "new_password", "confirm_password")
+        tokens = services.identity_provider().complete_new_password(challenge, _matching_new_password(passwords))
     except TokenExpired:
         return _login_form(notice="That sign-in has expired; sign in again with your temporary password.")
-    except _SHOWN_ON_FORM as exc:
+    except SHOWN_ON_FORM as exc:
         return _new_password_form(challenge, exc)
     store.forget_challenge(challenge_id)  # used once: the id cannot be replayed
     done = cookies.clear_cookie(cookies.CHALLENGE_COOKIE, secure=secure, path=_CHALLENGE_PATH, same_site="Strict")
@@ -137,13 +138,15 @@ def _no_store(answer: BaseModel) -> Response:
 
 def _login_form(exc: Exception | None = None, *, username: str = "", next_path: str = "/",
                 notice: str = "") -> Response:
-    return render.page("login", status=status_for(exc) if exc else 200, errors=_field_errors(exc, "password"),
+    errors = field_errors(exc, "password", missing=_MISSING) if exc else {}
+    return render.page("login", status=error_status(exc) if exc else 200, errors=errors,
                        username=username, next_path=next_path, notice=notice, headers=retry_after_headers(exc))
 
 
 def _new_password_form(challenge: NewPasswordChallenge, exc: Exception | None = None) -> Response:
-    return render.page("new_password", status=status_for(exc) if exc else 200, username=challenge.username,
-                       policy=password_policy_text(), errors=_field_errors(exc, "new_password"))
+    return render.page("new_password", status=error_status(exc) if exc else 200, username=challenge.username,
+                       policy=password_policy_text(),
+                       errors=field_errors(exc, "new_password", missing=_MISSING) if exc else {})
 
 
 def _matching_new_password(form: dict[str, str]) -> str:
@@ -151,16 +154,6 @@ def _matching_new_password(form: dict[str, str]) -> str:
     if passwords.new_password != passwords.confirm_password:
         raise InvalidInput("The two passwords differ.", field="confirm_password")
     return passwords.new_password
-
-
-def _field_errors(exc: Exception | None, default_field: str) -> dict[str, str]:
-    """{field: message} for the form; pydantic's 'missing/too short' becomes a plain 'Enter your …'."""
-    if exc is None:
-        return {}
-    if isinstance(exc, ValidationError):
-        fields = [str(err["loc"][0]) if err.get("loc") else default_field for err in exc.errors(include_url=False)]
-        return {name: f"Enter your {name.replace('_', ' ')}." for name in fields}
-    return {getattr(exc, "field", None) or default_field: getattr(exc, "message", str(exc))}
 
 
 def _new_session(tokens: Tokens, secure: bool) -> list[str]:

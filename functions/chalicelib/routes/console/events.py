@@ -9,7 +9,7 @@ from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.views.overlay_links import OverlayLinkOptions, overlay_link
 from chalicelib.routes.console import event_form
-from chalicelib.routes.console.common import form, redirect, render_or_errors
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
 from chalicelib import services
 from chalicelib.settings import get_settings
 from drem_web import render
@@ -40,14 +40,12 @@ def new_event_page(principal: User) -> Response:
 
 @route(bp, "/console/events", methods=["POST"], allow=EVENT_EDITORS)
 def create_event(principal: User) -> Response:
-    fields = form(bp.current_request)
-
-    def create() -> Response:
-        services.event_service().create_event(principal, event_form.event_input(fields))
-        return redirect("/console/events")
-
-    return render_or_errors(create, lambda errors, status: _form_page(None, event_form.posted_form(fields), errors,
-                                                                      status), event_form.rename_for(fields))
+    values = submitted(bp.current_request)  # every field: the track rows are numbered
+    try:
+        services.event_service().create_event(principal, event_form.event_input(values))
+    except SHOWN_ON_FORM as exc:
+        return _form_page(None, event_form.posted_form(values), _event_errors(exc, values), error_status(exc))
+    return redirect("/console/events")
 
 
 @route(bp, "/console/events/{event_id}/edit", allow=EVENT_EDITORS)
@@ -57,14 +55,12 @@ def edit_event_page(principal: User, event_id: str) -> Response:
 
 @route(bp, "/console/events/{event_id}", methods=["POST"], allow=EVENT_EDITORS)
 def update_event(principal: User, event_id: str) -> Response:
-    fields = form(bp.current_request)
-
-    def update() -> Response:
-        services.event_service().update_event(principal, event_id, event_form.event_input(fields))
-        return redirect("/console/events")
-
-    return render_or_errors(update, lambda errors, status: _form_page(
-        event_id, event_form.posted_form(fields), errors, status), event_form.rename_for(fields))
+    values = submitted(bp.current_request)
+    try:
+        services.event_service().update_event(principal, event_id, event_form.event_input(values))
+    except SHOWN_ON_FORM as exc:
+        return _form_page(event_id, event_form.posted_form(values), _event_errors(exc, values), error_status(exc))
+    return redirect("/console/events")
 
 
 @route(bp, "/console/events/{event_id}/delete", allow=EVENT_EDITORS)
@@ -74,12 +70,18 @@ def confirm_delete_page(principal: User, event_id: str) -> Response:
 
 @route(bp, "/console/events/{event_id}/delete", methods=["POST"], allow=EVENT_EDITORS)
 def delete_event(principal: User, event_id: str) -> Response:
-    def delete() -> Response:
+    try:
         services.event_service().delete_event(principal, event_id)
-        return redirect("/console/events")
+    except SHOWN_ON_FORM as exc:
+        # The confirmation has no inputs: every refusal (races still on a track) goes at its top.
+        return render.page("console/event_delete", status=error_status(exc),
+                           event=services.event_service().get_event(event_id),
+                           errors=field_errors(exc, rename=lambda _name: "form"))
+    return redirect("/console/events")
 
-    return render_or_errors(delete, lambda errors, status: render.page(
-        "console/event_delete", status=status, event=services.event_service().get_event(event_id), errors=errors))
+
+def _event_errors(exc: Exception, values: dict[str, str]) -> dict[str, str]:
+    return field_errors(exc, rename=event_form.rename_for(values))
 
 
 def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],

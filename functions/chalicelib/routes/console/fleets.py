@@ -13,7 +13,8 @@ from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overvie
 from chalicelib.domain.devices import CommandRequest
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.fleets import FleetInput
-from chalicelib.routes.console.common import checkbox, form, optional, redirect, render_or_errors
+from chalicelib.routes.console.forms import (SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, redirect,
+                                             submitted)
 from chalicelib import services
 from chalicelib.settings import get_settings
 from drem_web import render
@@ -30,9 +31,12 @@ def fleets_page(principal: User) -> Response:
 
 @route(bp, "/console/fleets", methods=["POST"], allow=DEVICE_STAFF)
 def create_fleet(principal: User) -> Response:
-    fields = form(bp.current_request)
-    return render_or_errors(lambda: _created(services.fleet_service().create_fleet(principal, FleetInput(
-        name=fields.get("name", "")))), lambda errors, status: _fleets_page(errors, fields, status))
+    values = submitted(bp.current_request, "name")
+    try:
+        services.fleet_service().create_fleet(principal, FleetInput.model_validate(values))
+    except SHOWN_ON_FORM as exc:
+        return _fleets_page(field_errors(exc), values, error_status(exc))
+    return redirect("/console/fleets")
 
 
 @route(bp, "/console/cars", allow=DEVICE_STAFF)
@@ -56,36 +60,37 @@ def activation_page(principal: User) -> Response:
 
 @route(bp, "/console/cars/activate", methods=["POST"], allow=DEVICE_STAFF)
 def create_activation_code(principal: User) -> Response:
-    fields = form(bp.current_request)
-    return render_or_errors(
-        lambda: _activation_page({}, fields, services.activation_service().issue_code(
-            principal, ActivationCodeRequest.model_validate(fields))),
-        lambda errors, status: _activation_page(errors, fields, None, status))
+    values = submitted(bp.current_request, "device_kind", "hostname", "fleet_id", "ttl_minutes")
+    try:
+        issued = services.activation_service().issue_code(principal, ActivationCodeRequest.model_validate(values))
+    except SHOWN_ON_FORM as exc:
+        return _activation_page(field_errors(exc), values, None, error_status(exc))
+    return _activation_page({}, values, issued)
 
 
 @route(bp, "/console/cars/{device_id}/commands", methods=["POST"], allow=DEVICE_STAFF)
 def car_command(principal: User, device_id: str) -> Response:
-    fields = form(bp.current_request)
-    request = {"type": fields.get("type", ""), "colour": optional(fields.get("colour")),
-               **({"with_system_logs": True} if checkbox(fields, "with_system_logs") else {})}
+    values = submitted(bp.current_request, "type", "colour", "with_system_logs")
+    command = {"type": values.get("type", ""), "colour": optional(values.get("colour")),
+               **({"with_system_logs": True} if checkbox(values, "with_system_logs") else {})}
     return _car_action(principal, device_id, lambda: services.device_service().queue_command(
-        principal, device_id, CommandRequest.model_validate(request)))
+        principal, device_id, CommandRequest.model_validate(command)), sent=values.get("type", ""))
 
 
 @route(bp, "/console/cars/{device_id}/fleet", methods=["POST"], allow=DEVICE_STAFF)
 def move_car(principal: User, device_id: str) -> Response:
-    fleet_id = optional(form(bp.current_request).get("fleet_id"))
+    fleet_id = optional(submitted(bp.current_request, "fleet_id").get("fleet_id"))
     return _car_action(principal, device_id, lambda: services.device_service().move_to_fleet(device_id, fleet_id))
 
 
 @route(bp, "/console/cars/{device_id}/models", methods=["POST"], allow=DEVICE_STAFF)
 def assign_model(principal: User, device_id: str) -> Response:
-    fields = form(bp.current_request)
+    values = submitted(bp.current_request, "clear", "model_id")
     service = services.assignment_service()
 
     def assign() -> object:
         current = [m.model_id for m in service.for_staff(device_id).models]
-        wanted = [] if fields.get("clear") == "1" else current + [m for m in [optional(fields.get("model_id"))]
+        wanted = [] if values.get("clear") == "1" else current + [m for m in [optional(values.get("model_id"))]
                                                                   if m and m not in current]
         return service.assign(principal, device_id, wanted)
 
@@ -97,19 +102,15 @@ def deregister_car(principal: User, device_id: str) -> Response:
     return _car_action(principal, device_id, lambda: services.device_service().deregister(device_id))
 
 
-def _car_action(principal: User, device_id: str, action) -> Response:  # noqa: ANN001 - a thunk
-    def run() -> Response:
+def _car_action(principal: User, device_id: str, action, sent: str = "") -> Response:  # noqa: ANN001 - a thunk
+    """Run one car's action; a refusal is shown in that car's row (errors keyed `{device_id}-{field}`)."""
+    try:
         action()
-        sent = form(bp.current_request).get("type", "") if bp.current_request.method == "POST" else ""
-        query = f"?sent={quote(sent)}&device={quote(device_id)}" if sent else ""
-        return redirect(f"/console/cars{query}#car-{device_id}")
-
-    return render_or_errors(run, lambda errors, status: _cars_page(
-        principal, {f"{device_id}-{name}": message for name, message in errors.items()}, status))
-
-
-def _created(_fleet: object) -> Response:
-    return redirect("/console/fleets")
+    except SHOWN_ON_FORM as exc:
+        errors = {f"{device_id}-{name}": message for name, message in field_errors(exc).items()}
+        return _cars_page(principal, errors, error_status(exc))
+    query = f"?sent={quote(sent)}&device={quote(device_id)}" if sent else ""
+    return redirect(f"/console/cars{query}#car-{device_id}")
 
 
 def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 200) -> Response:

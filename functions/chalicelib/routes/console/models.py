@@ -59,7 +59,9 @@ def assign_models(principal: User) -> Response:
     try:
         assignment = service.assign(principal, _chosen_car(device_id), submitted_list(request, "model_ids"))
     except SHOWN_ON_FORM as exc:
-        return _car_status(None, device_id, field_errors(exc, "model_ids"), error_status(exc))
+        # A car deregistered meanwhile: said in the status box, not as a 404 page swapped into it.
+        errors = field_errors(exc, "model_ids", missing_object_field="device_id")
+        return _car_status(None, device_id, errors, error_status(exc))
     return _car_status(assignment, device_id, {}, 200, notice="Models sent to the car.")
 
 
@@ -104,10 +106,10 @@ def _cars() -> list:
 
 @route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
 def scrutineer_model(principal: User, model_id: str) -> Response:
-    form = submitted(bp.current_request, "track_type", "event_id", "laps")
+    values = submitted(bp.current_request, "track_type", "event_id", "laps")
     error, status = "", 200
     try:
-        request = ScrutineerRequest.model_validate({key: value for key, value in form.items() if value})
+        request = ScrutineerRequest.model_validate({key: value for key, value in values.items() if value})
         model = services.scrutineer_service().scrutineer(principal, model_id, request)
     except SHOWN_ON_FORM as exc:
         model = services.model_service().get(principal, model_id)

@@ -21,8 +21,8 @@ from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.http_errors import retry_after_headers
 from chalicelib import services
-from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
-from chalicelib.routes.responses import redirect
+from chalicelib.htmx import is_htmx
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
 from drem_leaderboard.ranking import DEFAULT_HIGHLIGHT_COLOUR
 from drem_web import render
 
@@ -41,12 +41,12 @@ def signup_page(principal: Principal) -> Response:
 
 @route(bp, "/signup", methods=["POST"], allow=PUBLIC)
 def signup(principal: Principal) -> Response:
-    form = submitted(bp.current_request, *_SIGN_UP_FIELDS)
+    values = submitted(bp.current_request, *_SIGN_UP_FIELDS)
     try:
-        body = SignUpForm.model_validate(form)
+        body = SignUpForm.model_validate(values)
         result = guarded_sign_up(lambda: services.user_service().sign_up(body), client_address(bp.current_request))
     except SHOWN_ON_FORM as exc:
-        return _signup_form(exc, form)
+        return _signup_form(values, field_errors(exc, "username"), error_status(exc), retry_after_headers(exc))
     if result.confirmed:  # a local stack: no code to wait for
         return render.page("console/confirm", username=result.username, errors={}, confirmed=True)
     return redirect(f"/signup/confirm?username={quote(result.username)}")
@@ -60,13 +60,13 @@ def confirm_page(principal: Principal) -> Response:
 
 @route(bp, "/signup/confirm", methods=["POST"], allow=PUBLIC)
 def confirm(principal: Principal) -> Response:
-    form = submitted(bp.current_request, "username", "code")
+    values = submitted(bp.current_request, "username", "code")
     try:
-        services.user_service().confirm_sign_up(ConfirmSignUpForm.model_validate(form))
+        services.user_service().confirm_sign_up(ConfirmSignUpForm.model_validate(values))
     except SHOWN_ON_FORM as exc:
-        return render.page("console/confirm", status=error_status(exc), username=form.get("username", ""),
+        return render.page("console/confirm", status=error_status(exc), username=values.get("username", ""),
                            errors=field_errors(exc, "code"), confirmed=False)
-    return render.page("console/confirm", username=form["username"].strip(), errors={}, confirmed=True)
+    return render.page("console/confirm", username=values["username"].strip(), errors={}, confirmed=True)
 
 
 # --- password and profile (the caller's own) ----------------------------------------------------------------------
@@ -85,7 +85,7 @@ def change_password(principal: User) -> Response:
             submitted(request, "current_password", "new_password", "confirm_password"))
         done = services.password_service().change(access_token, form)
     except SHOWN_ON_FORM as exc:
-        return _password_form(exc)
+        return _password_form(field_errors(exc, "current_password"), error_status(exc))
     return _password_form(notice=done)
 
 
@@ -101,7 +101,7 @@ def update_profile(principal: User) -> Response:
         saved = service.update_own(principal, ProfileUpdate.model_validate(
             submitted(bp.current_request, "highlight_colour", "avatar")))
     except SHOWN_ON_FORM as exc:
-        return _profile_form(service.own(principal), exc)
+        return _profile_form(service.own(principal), field_errors(exc, "highlight_colour"), error_status(exc))
     return _profile_form(services.shown_on_boards(saved), notice="Your profile is saved; the leaderboards show it now.")
 
 
@@ -160,21 +160,20 @@ def _own_models(service, principal: User) -> list:
     return [m for m in page.models if m.status is not ModelStatus.DELETED]
 
 
-def _signup_form(exc: Exception | None = None, form: dict[str, str] | None = None) -> Response:
-    values = {name: (form or {}).get(name, "") for name in _SIGN_UP_FIELDS if name != "password"}
-    return render.page("console/signup", status=error_status(exc) if exc else 200, values=values,
-                       errors=field_errors(exc, "username") if exc else {}, countries=COUNTRY_CHOICES,
-                       policy=password_policy_text(), headers=retry_after_headers(exc))
+def _signup_form(values: dict[str, str] | None = None, errors: dict[str, str] | None = None, status: int = 200,
+                 headers: dict[str, str] | None = None) -> Response:
+    # The password is never sent back into the page.
+    shown = {name: (values or {}).get(name, "") for name in _SIGN_UP_FIELDS if name != "password"}
+    return render.page("console/signup", status=status, values=shown, errors=errors or {}, countries=COUNTRY_CHOICES,
+                       policy=password_policy_text(), headers=headers)
 
 
-def _password_form(exc: Exception | None = None, notice: str = "") -> Response:
-    return render.page("console/password", status=error_status(exc) if exc else 200, notice=notice,
-                       errors=field_errors(exc, "current_password") if exc else {}, policy=password_policy_text())
+def _password_form(errors: dict[str, str] | None = None, status: int = 200, notice: str = "") -> Response:
+    return render.page("console/password", status=status, notice=notice, errors=errors or {},
+                       policy=password_policy_text())
 
 
-def _profile_form(profile, exc: Exception | None = None, notice: str = "") -> Response:
-    return render.page("console/profile", status=error_status(exc) if exc else 200, profile=profile,
-                       palette=HIGHLIGHT_PALETTE, notice=notice,
+def _profile_form(profile, errors: dict[str, str] | None = None, status: int = 200, notice: str = "") -> Response:
+    return render.page("console/profile", status=status, profile=profile, palette=HIGHLIGHT_PALETTE, notice=notice,
                        # Before the first save the boards show the default colour: the form says so by selecting it.
-                       shown_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR,
-                       errors=field_errors(exc, "highlight_colour") if exc else {})
+                       shown_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR, errors=errors or {})

@@ -16,7 +16,7 @@ from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.races import LapEdit
 from chalicelib.views.timekeeper_desk import clock_text
-from chalicelib.routes.console.common import checkbox, form, redirect, render_or_errors
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, redirect, submitted
 from chalicelib import services
 from drem_web import render
 
@@ -48,16 +48,16 @@ def race_edit_page(principal: User, event_id: str, race_id: str) -> Response:
 
 @route(bp, "/console/races/{event_id}/{race_id}/laps/{lap_id}", methods=["POST"], allow=RACE_ADMINS)
 def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> Response:
-    fields = form(bp.current_request)
-
-    def save() -> Response:
-        services.race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(fields),
+    values = submitted(bp.current_request, "time_s", "resets", "is_valid")
+    try:
+        services.race_service().edit_lap(event_id, race_id, _lap_number(lap_id), _lap_edit(values),
                                          by=principal.username)
-        return redirect(f"/console/races/{event_id}/{race_id}")
-
-    return render_or_errors(save, lambda errors, status: _edit_page(
-        principal, event_id, race_id, {f"lap-{lap_id}-{name}": message for name, message in errors.items()}, status),
-        rename=lambda name: "time_s" if name == "time_ms" else name)
+    except SHOWN_ON_FORM as exc:
+        # One form per lap row: the messages are keyed `lap-{lap_id}-{field}` to sit in that row.
+        errors = field_errors(exc, rename=lambda name: "time_s" if name == "time_ms" else name)
+        return _edit_page(principal, event_id, race_id, {f"lap-{lap_id}-{name}": message
+                                                         for name, message in errors.items()}, error_status(exc))
+    return redirect(f"/console/races/{event_id}/{race_id}")
 
 
 @route(bp, "/console/races/{event_id}/{race_id}/delete", allow=RACE_ADMINS)
@@ -68,13 +68,14 @@ def confirm_delete_page(principal: User, event_id: str, race_id: str) -> Respons
 
 @route(bp, "/console/races/{event_id}/{race_id}/delete", methods=["POST"], allow=RACE_ADMINS)
 def delete_race(principal: User, event_id: str, race_id: str) -> Response:
-    def delete() -> Response:
+    try:
         services.race_service().delete_race(event_id, race_id, by=principal.username)
-        return redirect(f"/console/races?event_id={event_id}")
-
-    return render_or_errors(delete, lambda errors, status: render.page(
-        "console/race_delete", status=status, race=services.race_service().get_race(principal, event_id, race_id),
-        errors=errors))
+    except SHOWN_ON_FORM as exc:
+        # The confirmation has no inputs: every refusal goes at its top.
+        return render.page("console/race_delete", status=error_status(exc),
+                           race=services.race_service().get_race(principal, event_id, race_id),
+                           errors=field_errors(exc, rename=lambda _name: "form"))
+    return redirect(f"/console/races?event_id={event_id}")
 
 
 def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, str], status: int = 200) -> Response:
@@ -100,17 +101,17 @@ MAX_LAP_SECONDS = 3600  # LapEdit's own bound (time_ms <= 3,600,000)
 MAX_RESETS = 1000
 
 
-def _lap_edit(fields: dict[str, str]) -> LapEdit:
+def _lap_edit(values: dict[str, str]) -> LapEdit:
     try:
-        seconds = Decimal(fields.get("time_s", "").strip())
+        seconds = Decimal(values.get("time_s", "").strip())
     except InvalidOperation:
         raise InvalidInput("Write the lap time in seconds, e.g. 12.345.", field="time_s") from None
     # Bounded before int(): Decimal("1e999999999") is finite, and turning it into an int would take gigabytes.
     if not seconds.is_finite() or not 0 <= seconds <= MAX_LAP_SECONDS:
         raise InvalidInput(f"Write the lap time in seconds, e.g. 12.345 (at most {MAX_LAP_SECONDS}).", field="time_s")
-    resets = whole_number(fields.get("resets", ""), field="resets", message="Resets is a whole number (0 or more).",
+    resets = whole_number(values.get("resets", ""), field="resets", message="Resets is a whole number (0 or more).",
                           maximum=MAX_RESETS)
-    return LapEdit(time_ms=int(seconds * 1000), resets=resets, is_valid=checkbox(fields, "is_valid"))
+    return LapEdit(time_ms=int(seconds * 1000), resets=resets, is_valid=checkbox(values, "is_valid"))
 
 
 def _race_row(race: dict[str, Any]) -> dict[str, Any]:

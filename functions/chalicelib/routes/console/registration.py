@@ -7,7 +7,8 @@ from chalice import Blueprint, Response
 from chalicelib.auth.access import ADMIN, REGISTRATION, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.users import RegisteredUser, StaffRegistrationForm
-from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, is_htmx, submitted
+from chalicelib.htmx import is_htmx
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib import services
 from drem_web import render
@@ -25,20 +26,19 @@ def registration_page(principal: User) -> Response:
 
 @route(bp, "/console/registration", methods=["POST"], allow=DESK_STAFF)
 def register_racer(principal: User) -> Response:
-    form = submitted(bp.current_request, *_FIELDS)
+    values = submitted(bp.current_request, *_FIELDS)
     try:
-        registered = services.user_service().register_racer(StaffRegistrationForm.model_validate(form))
+        registered = services.user_service().register_racer(StaffRegistrationForm.model_validate(values))
     except SHOWN_ON_FORM as exc:
-        return _desk(exc, form)
+        return _desk(values, field_errors(exc, "username"), error_status(exc))
     # The next racer at an event usually comes from the same country: keep it, clear the rest.
-    return _desk(values={"country_code": registered.country_code}, registered=registered)
+    return _desk({"country_code": registered.country_code}, registered=registered)
 
 
-def _desk(exc: Exception | None = None, values: dict[str, str] | None = None,
+def _desk(values: dict[str, str] | None = None, errors: dict[str, str] | None = None, status: int = 200,
           registered: RegisteredUser | None = None) -> Response:
     context = dict(values={name: (values or {}).get(name, "") for name in _FIELDS}, countries=COUNTRY_CHOICES,
-                   errors=field_errors(exc, "username") if exc else {}, registered=registered,
-                   status=error_status(exc) if exc else (201 if registered else 200),
+                   errors=errors or {}, registered=registered, status=201 if registered else status,
                    # The temporary password must not stay in any cache.
                    headers={"Cache-Control": "no-store"})
     if is_htmx(bp.current_request):

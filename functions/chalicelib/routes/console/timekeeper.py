@@ -11,7 +11,7 @@ from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.races import CreateRaceInput
 from chalicelib.views.timekeeper_desk import ScreenCommand, TimekeeperDesk, TimekeeperScreen
-from chalicelib.routes.console.common import checkbox, form, optional, render_or_errors
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, submitted
 from chalicelib import services
 from drem_web import render
 
@@ -64,22 +64,27 @@ def race_state(principal: User, event_id: str, track_id: str) -> Response:
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}/races", methods=["POST"], allow=TIMEKEEPERS)
 def start_race(principal: User, event_id: str, track_id: str) -> Response:
-    fields = form(bp.current_request)
-    data = {"track_id": track_id, "racer_username": fields.get("racer_username", "").strip(),
-            "car": optional(fields.get("car")), "raced_by_proxy": checkbox(fields, "raced_by_proxy"),
-            "override_max_runs": checkbox(fields, "override_max_runs")}
-    return render_or_errors(
-        lambda: _state(desk().start_race(principal, event_id, CreateRaceInput.model_validate(data))),
-        lambda errors, status: _state(desk().screen(event_id, track_id), errors, fields, status),
-        rename=lambda name: "racer_username" if name == "username" else name, missing_field="racer_username")
+    values = submitted(bp.current_request, "racer_username", "car", "raced_by_proxy", "override_max_runs")
+    data = {"track_id": track_id, "racer_username": values.get("racer_username", "").strip(),
+            "car": optional(values.get("car")), "raced_by_proxy": checkbox(values, "raced_by_proxy"),
+            "override_max_runs": checkbox(values, "override_max_runs")}
+    try:
+        screen = desk().start_race(principal, event_id, CreateRaceInput.model_validate(data))
+    except SHOWN_ON_FORM as exc:
+        errors = field_errors(exc, rename=lambda name: "racer_username" if name == "username" else name,
+                              missing_object_field="racer_username")  # a racer nobody registered
+        return _state(desk().screen(event_id, track_id), errors, values, error_status(exc))
+    return _state(screen)
 
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}/commands", methods=["POST"], allow=TIMEKEEPERS)
 def press_button(principal: User, event_id: str, track_id: str) -> Response:
-    fields = form(bp.current_request)
-    return render_or_errors(
-        lambda: _state(desk().press(principal, event_id, track_id, ScreenCommand.model_validate(fields))),
-        lambda errors, status: _state(desk().screen(event_id, track_id), errors, {}, status))
+    values = submitted(bp.current_request, "race_id", "kind", "lap_id", "is_valid")  # a button's hx-vals
+    try:
+        screen = desk().press(principal, event_id, track_id, ScreenCommand.model_validate(values))
+    except SHOWN_ON_FORM as exc:
+        return _state(desk().screen(event_id, track_id), field_errors(exc), {}, error_status(exc))
+    return _state(screen)
 
 
 def _state(screen: TimekeeperScreen, errors: dict[str, str] | None = None, setup: dict[str, str] | None = None,
