@@ -76,6 +76,7 @@ def test_the_tail_light_gets_the_racers_colour_at_the_start_and_white_at_the_end
     race_id = _race_id(console.post(f"{base}/races", {"racer_username": "speedy", "car": car}, htmx=True).body.decode())
 
     _press(console, event["event_id"], race_id, "toggle")
+    clock.advance(30_000)  # the race runs a while (commands queued in one millisecond have no defined order)
     _press(console, event["event_id"], race_id, "end")
 
     commands = json.loads(console.desk.call("GET", f"/api/devices/{car}/commands").body)["commands"]
