@@ -6,10 +6,10 @@ Bearer), admin_cookie (an admin signed in through /login like a browser: session
 token, so the cookie + CSRF path is covered too), cars X and Y and a timer (activated through the real activation
 API, sent as `Authorization: Device <id>.<secret>`).
 
-The matrix makes ~900 calls; bootstrapping the stack for each would take minutes, so this module replaces the
-per-test wipe (`fresh_moto`) with one wipe per module. The test module imports `fresh_moto` from here to override
-conftest's. Every scenario creates its own objects, and a call that uses up its caller (deleting one's own account,
-rotating a device secret) runs as a freshly minted principal of the same kind.
+The matrix makes ~900 calls; bootstrapping the stack for each would take minutes, so a module using `world` is
+marked `one_stack_per_module` (tests/unit/conftest.py): moto is wiped once per module instead of before every test.
+Every scenario creates its own objects, and a call that uses up its caller (deleting one's own account, rotating a
+device secret) runs as a freshly minted principal of the same kind.
 """
 from __future__ import annotations
 
@@ -24,7 +24,6 @@ from typing import Any
 import pytest
 from chalice import Blueprint
 from chalice.test import Client
-from moto.core.base_backend import BackendDict
 
 from drem_local.bootstrap import clients_for, ensure_stack
 from tests.unit.conftest import PASSWORD, REGION, STAGE, Users, _reset_app_caches, bearer, set_cookie_headers
@@ -61,15 +60,6 @@ def full_app(chalice_app: Any) -> Any:
 
         principals.set_device_credential_verifier(devices.verify_device_credential)
     return chalice_app
-
-
-@pytest.fixture(scope="module")
-def fresh_moto(moto_session: None) -> Iterator[None]:
-    BackendDict.reset()
-    _reset_app_caches()
-    yield
-    BackendDict.reset()
-    _reset_app_caches()
 
 
 @dataclass
@@ -161,8 +151,9 @@ def _anonymous_headers() -> dict[str, str]:
     return {"Accept": "application/json", "Cookie": f"drem_csrf={token}", "X-CSRF-Token": token}
 
 
-@pytest.fixture(scope="module")
-def world(fresh_moto: None, chalice_app: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[World]:
+def build_world(chalice_app: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[World]:
+    """The `world` fixture's body (tests/unit/conftest.py): a stack, the full app and every principal, until the
+    generator is closed."""
     patch = pytest.MonkeyPatch()
     aws = clients_for(None, REGION)
     outputs = ensure_stack(aws, STAGE)

@@ -1,6 +1,11 @@
 """Unit-test fixtures: ONE in-process moto (`mock_aws`) for the whole run, wiped before every test, plus the drem
 stack bootstrapped from `drem_infra.resources`, a Chalice test client, and helpers for users with real moto tokens.
 
+Every fixture the unit tests share lives here (test modules import helper classes and functions, never fixtures):
+the API drivers `desk`, `api`, `console`, `alice` and `scenario` (their classes are in race_helpers, device_api,
+operator_console_helpers, models_helpers and scenario), the fake server `clock`, and `world` for the modules marked
+`one_stack_per_module`.
+
 moto is patched the way the durable server patches it (drem_local.durable.token_signing): every pool signs with a
 per-session installation key, the app pins that key (DREM_TOKEN_KEY_FILE), sign-up codes never match and the
 new-password session is bound to its user. `aws_mode` turns the pinning off to exercise the AWS (JWKS) path.
@@ -15,7 +20,7 @@ import json
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from chalice.test import Client
@@ -25,10 +30,20 @@ from moto.core.base_backend import BackendDict
 from drem_infra.resources import TOKEN_SIGNING_KEY_ENV
 from drem_local.bootstrap import StackOutputs, clients_for, ensure_stack
 
+if TYPE_CHECKING:
+    from tests.unit.authz_principals import World
+    from tests.unit.device_api import Api
+    from tests.unit.models_helpers import ModelsApi
+    from tests.unit.operator_console_helpers import Console
+    from tests.unit.race_helpers import Desk, FakeClock
+    from tests.unit.scenario import Scenario
+
 STAGE = "test"
 REGION = "us-east-1"
 # Meets the pool's password policy (drem_infra.resources.PasswordPolicy).
 PASSWORD = "Correct-Horse-9"
+# The marker of modules whose tests share one stack (see module_wipe and world at the end of this file).
+ONE_STACK_PER_MODULE = "one_stack_per_module"
 
 
 def _reset_app_caches() -> None:
@@ -69,7 +84,10 @@ def moto_session(installation_key_file: Path) -> Iterator[None]:
 
 
 @pytest.fixture(autouse=True)
-def fresh_moto(moto_session: None) -> Iterator[None]:
+def fresh_moto(request: pytest.FixtureRequest, moto_session: None) -> Iterator[None]:
+    if request.node.get_closest_marker(ONE_STACK_PER_MODULE) is not None:
+        yield  # module_wipe wiped once for the whole module
+        return
     BackendDict.reset()
     _reset_app_caches()
     yield
@@ -229,3 +247,106 @@ def _b64json(segment: str) -> dict[str, Any]:
 
 def b64url(data: bytes) -> str:
     return base64.urlsafe_b64encode(data).rstrip(b"=").decode()
+
+
+# --- The API as the tests drive it. app.py registers every blueprint and the real device-credential verifier; the
+# classes behind these fixtures (Desk, Api, Console, ModelsApi, World) live in the helper modules named. ---
+
+@pytest.fixture
+def device_verifier() -> Iterator[None]:
+    """The real device-credential verifier, whatever an earlier test left installed (and put back afterwards)."""
+    from chalicelib.auth import principals
+    from chalicelib.routes.devices import verify_device_credential
+
+    previous = principals._device_verifier
+    principals.set_device_credential_verifier(verify_device_credential)
+    yield
+    principals.set_device_credential_verifier(previous)
+
+
+@pytest.fixture
+def clock(monkeypatch: pytest.MonkeyPatch) -> FakeClock:
+    """The server clock, moved by hand so manual lap times are exact."""
+    from chalicelib import services
+    from tests.unit.race_helpers import FakeClock
+
+    fake = FakeClock()
+    monkeypatch.setattr(services, "now_ms", fake)
+    return fake
+
+
+@pytest.fixture
+def desk(client: Client, users: Users, device_verifier: None) -> Desk:
+    """race_helpers.Desk: the race/timing/leaderboard API driven as operator "op" and as activated devices."""
+    from tests.unit.race_helpers import Desk
+
+    desk = Desk(client, users)
+    desk.token("op", "operator")
+    return desk
+
+
+@pytest.fixture
+def scenario(desk: Desk, clock: FakeClock) -> Scenario:
+    """scenario.Scenario: racers, a fleet with a timer, an event and races with laps, built through the API."""
+    from tests.unit.scenario import Scenario
+
+    return Scenario(desk, clock)
+
+
+@pytest.fixture
+def api(client: Client, users: Users, device_verifier: None) -> Api:
+    """device_api.Api: the events/fleets/devices API as staff of any role (`as_=`) or as a device."""
+    from tests.unit.device_api import Api
+
+    return Api(client, users)
+
+
+@pytest.fixture
+def console(client: Client, users: Users, device_verifier: None) -> Console:
+    """operator_console_helpers.Console: a browser on the operator console plus a desk for setting things up."""
+    from tests.unit.operator_console_helpers import Console
+    from tests.unit.race_helpers import Desk
+
+    desk = Desk(client, users)
+    desk.token("op", "operator")
+    return Console(desk, Browser(client), users)
+
+
+@pytest.fixture
+def alice(client: Client, users: Users) -> ModelsApi:
+    """The racer "alice" on the models API (models_helpers.ModelsApi)."""
+    from tests.unit.models_helpers import ModelsApi
+
+    return ModelsApi(client, bearer(users.access_token("alice", ("racer",))))
+
+
+# --- One stack per module (marker `one_stack_per_module`): for the authorization matrix and the route fuzz, which
+# make hundreds of calls as the principals of `world`; bootstrapping a stack per test would take minutes. ---
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", f"{ONE_STACK_PER_MODULE}: wipe moto once per module, not before every test "
+                                       "(the module's tests share the `world` fixture's principals)")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def module_wipe(request: pytest.FixtureRequest, moto_session: None) -> Iterator[None]:
+    if request.node.get_closest_marker(ONE_STACK_PER_MODULE) is None:
+        yield
+        return
+    BackendDict.reset()
+    _reset_app_caches()
+    yield
+    BackendDict.reset()
+    _reset_app_caches()
+
+
+@pytest.fixture(scope="module")
+def world(request: pytest.FixtureRequest, module_wipe: None, chalice_app: Any,
+          tmp_path_factory: pytest.TempPathFactory) -> Iterator[World]:
+    """authz_principals.World: the stack, the app and the eleven principals with real credentials."""
+    from tests.unit.authz_principals import build_world
+
+    if request.node.get_closest_marker(ONE_STACK_PER_MODULE) is None:
+        pytest.fail(f"`world` lives for a module: mark the module `pytest.mark.{ONE_STACK_PER_MODULE}`")
+
+    yield from build_world(chalice_app, tmp_path_factory)

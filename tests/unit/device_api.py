@@ -1,35 +1,17 @@
-"""Shared fixtures and helpers for the events, fleets and devices API tests (imported by those test modules).
-
-`api` gives a Chalice test client with the events/fleets/devices blueprints and the device-credential verifier in
-place, plus signed-in staff of every role. Until `functions/app.py` registers the blueprints itself, the fixture
-registers them on the session app (once; a no-op afterwards).
+"""The driver of the events, fleets and devices API tests (their fixture, `api`, is in conftest.py): JSON calls as
+signed-in staff of every role or as a device, and the common set-ups (a fleet, an activation code, a device).
 """
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import pytest
 from chalice.test import Client
 
 from tests.unit.conftest import Users, bearer
 
 JSON = {"Content-Type": "application/json", "Accept": "application/json"}
-
-
-@pytest.fixture
-def f2_app(chalice_app: Any) -> Any:
-    from chalicelib.auth import principals
-    from chalicelib.routes import devices, events, fleets
-
-    for module, probe in ((events, "/api/events"), (fleets, "/api/fleets"), (devices, "/api/devices")):
-        if probe not in chalice_app.routes:
-            chalice_app.register_blueprint(module.bp)
-    if principals._device_verifier is principals.reject_all_device_credentials:
-        principals.set_device_credential_verifier(devices.verify_device_credential)
-    return chalice_app
 
 
 @dataclass
@@ -90,8 +72,3 @@ class Api:
         assert reply.status_code == 201, reply.data
         return reply.data
 
-
-@pytest.fixture
-def api(f2_app: Any, stack: Any, users: Users, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Api]:
-    with Client(f2_app, project_dir=str(tmp_path_factory.mktemp("no-chalice-config"))) as test_client:
-        yield Api(test_client, users)

@@ -75,17 +75,6 @@ def traversal_archive() -> bytes:
                    ("../../etc/cron.d/evil", b"* * * * * root rm -rf /\n")])
 
 
-def ensure_model_routes(app: Any) -> Any:
-    """Register this area's blueprints on the app if app.py does not (yet): the lead wires them in app.py."""
-    from chalicelib.routes import assignments, racer_models as models
-
-    if "/api/models" not in app.routes:
-        app.register_blueprint(models.bp)
-    if "/api/cars/{device_id}/models" not in app.routes:
-        app.register_blueprint(assignments.bp)
-    return app
-
-
 def bearer(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}", "Accept": "application/json", "Content-Type": "application/json"}
 

@@ -1,56 +1,17 @@
-"""Shared fixtures for the race, timing and leaderboard API tests (imported by those test modules, not a conftest).
+"""Drivers for the race, timing and leaderboard API tests (their fixtures, `desk` and `clock`, are in conftest.py).
 
-`race_app` is the app with the blueprints these tests drive (events, fleets, devices, races, timing, leaderboards)
-registered if app.py does not do it yet, and `device_verifier` installs the real device-credential verifier.
-`desk` is a staff-side driver over the Chalice test client with real Cognito tokens and real activated devices.
-`clock` replaces the server clock so manual lap times are exact.
+`Desk` is a staff-side driver over the Chalice test client with real Cognito tokens and real activated devices;
+`FakeClock` stands in for the server clock so manual lap times are exact.
 """
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import pytest
-from chalice import Chalice
 from chalice.test import Client
 
 from tests.unit.conftest import Users, bearer
-
-
-def _app_with_race_routes() -> Chalice:
-    """The real app, with any of the blueprints these tests need that app.py does not register (yet) added.
-
-    A Chalice blueprint can be registered only once per process (registration consumes its route options), so the
-    tests add to the one app instead of building another, and skip what is already there.
-    """
-    from app import app
-    from chalicelib.routes import devices, events, fleets, leaderboards, races, timing
-
-    needed = ((events, "/api/events"), (fleets, "/api/fleets"), (devices, "/api/devices"),
-              (races, "/api/events/{event_id}/races"), (timing, "/api/timing/strip-events"),
-              (leaderboards, "/api/leaderboard/{event_id}"))
-    for module, marker in needed:
-        if marker not in app.routes:
-            app.register_blueprint(module.bp)
-    return app
-
-
-@pytest.fixture
-def race_app() -> Chalice:
-    return _app_with_race_routes()
-
-
-@pytest.fixture
-def device_verifier() -> Iterator[None]:
-    from chalicelib.auth import principals
-    from chalicelib.routes.devices import verify_device_credential
-
-    previous = principals._device_verifier
-    principals.set_device_credential_verifier(verify_device_credential)
-    yield
-    principals.set_device_credential_verifier(previous)
 
 
 @dataclass
@@ -63,22 +24,6 @@ class FakeClock:
     def advance(self, ms: int) -> int:
         self.now += ms
         return self.now
-
-
-@pytest.fixture
-def clock(monkeypatch: pytest.MonkeyPatch) -> FakeClock:
-    from chalicelib import services
-
-    fake = FakeClock()
-    monkeypatch.setattr(services, "now_ms", fake)
-    return fake
-
-
-@pytest.fixture
-def race_client(stack: Any, race_app: Chalice, device_verifier: None,
-                tmp_path_factory: pytest.TempPathFactory) -> Iterator[Client]:
-    with Client(race_app, project_dir=str(tmp_path_factory.mktemp("no-chalice-config"))) as test_client:
-        yield test_client
 
 
 @dataclass
@@ -151,9 +96,3 @@ class Desk:
     def board(self, event_id: str, track: str = "1") -> dict[str, Any]:
         return self.ok(self.anonymous_get(f"/api/leaderboard/{event_id}?track={track}"))
 
-
-@pytest.fixture
-def desk(race_client: Client, users: Users) -> Desk:
-    desk = Desk(race_client, users)
-    desk.token("op", "operator")
-    return desk

@@ -1,32 +1,13 @@
-"""Shared pieces for the racer/desk/users/models console tests (HTML over the Chalice test client): the app with
-those console blueprints, browsers signed in as a role, and reading what a page shows."""
+"""Shared pieces for the racer/desk/users/models console tests (HTML over conftest's `client`): browsers signed in
+as a role, form posts with the CSRF token, and reading what a page shows."""
 from __future__ import annotations
 
 import re
 from typing import Any
 
-import pytest
 from chalice.test import Client
 
 from tests.unit.conftest import PASSWORD, Browser, Users
-
-CONSOLE_PROBES = {"console_racer": "/console/profile", "console_registration": "/console/registration",
-                  "console_users": "/console/users", "console_models": "/console/models"}
-
-
-def ensure_console_blueprints(app: Any) -> None:
-    """Register the console blueprints unless app.py already does (a blueprint registers once per process)."""
-    import importlib
-
-    for module_name, probe in CONSOLE_PROBES.items():
-        if probe not in app.routes:
-            app.register_blueprint(importlib.import_module(f"chalicelib.routes.{module_name}").bp)
-
-
-@pytest.fixture
-def console(client: Client, chalice_app: Any) -> Client:
-    ensure_console_blueprints(chalice_app)
-    return client
 
 
 def sign_in(browser: Browser, username: str, password: str = PASSWORD) -> Browser:
@@ -36,9 +17,9 @@ def sign_in(browser: Browser, username: str, password: str = PASSWORD) -> Browse
     return browser
 
 
-def signed_in(console: Client, users: Users, username: str, *groups: str) -> Browser:
+def signed_in(client: Client, users: Users, username: str, *groups: str) -> Browser:
     users.create(username, groups)
-    return sign_in(Browser(console), username)
+    return sign_in(Browser(client), username)
 
 
 def post(browser: Browser, path: str, form: dict[str, Any] | None = None, *, htmx: bool = False) -> Any:

@@ -4,7 +4,6 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -12,21 +11,15 @@ import pytest
 import requests
 from chalice.test import Client
 
-from chalicelib.auth import principals
-from tests.unit.models_helpers import (ModelsApi, activate_device, bearer, device_headers, ensure_model_routes,
-                                       make_fleet, onnx_archive, traversal_archive)
+from tests.unit.models_helpers import (ModelsApi, activate_device, bearer, device_headers, make_fleet, onnx_archive,
+                                       traversal_archive)
 
 pytestmark = pytest.mark.unit
 
 
 @pytest.fixture
-def app_client(chalice_app: Any, request: pytest.FixtureRequest) -> Iterator[Client]:
-    from chalicelib.routes.devices import verify_device_credential
-
-    ensure_model_routes(chalice_app)
-    principals.set_device_credential_verifier(verify_device_credential)
-    yield request.getfixturevalue("client")
-    principals.set_device_credential_verifier(principals.reject_all_device_credentials)
+def app_client(client: Client, device_verifier: None) -> Client:
+    return client
 
 
 @pytest.fixture

@@ -8,10 +8,9 @@ import re
 import pytest
 
 from tests.unit.authz_principals import PRINCIPALS, World, full_app
-from tests.unit.authz_principals import fresh_moto, world  # noqa: F401 - one stack per module (overrides the wipe)
 from tests.unit.authz_table import TABLE, Call
 
-pytestmark = pytest.mark.unit
+pytestmark = [pytest.mark.unit, pytest.mark.one_stack_per_module]  # ~900 calls as `world`'s principals
 
 DENIED = {"deny": {401, 403}, "deny404": {401, 403, 404}}
 _PARAM = re.compile(r"{([^}]+)}")

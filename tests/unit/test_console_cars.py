@@ -7,8 +7,8 @@ import re
 
 import pytest
 
-from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
-from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture
+from tests.unit.operator_console_helpers import field_error, text_of
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -18,9 +18,7 @@ def _commands(console, device_id: str) -> list[dict]:
 
 
 def _car(console, fleet: str, hostname: str = "car-1") -> str:
-    console.desk.device(fleet, hostname, kind="car")
-    devices = json.loads(console.desk.call("GET", "/api/devices").body)["devices"]
-    return next(d["device_id"] for d in devices if d["hostname"] == hostname)
+    return Scenario(console.desk, fleet_id=fleet).add_car(hostname)
 
 
 def test_a_fleet_made_on_screen_then_an_activation_code_with_the_command_to_run(console):

@@ -5,8 +5,7 @@ import json
 
 import pytest
 
-from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
-from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture
+from tests.unit.operator_console_helpers import field_error
 
 pytestmark = pytest.mark.unit
 

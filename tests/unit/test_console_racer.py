@@ -8,16 +8,15 @@ from typing import Any
 import pytest
 
 from tests.unit.conftest import PASSWORD, Browser
-from tests.unit.racer_console_helpers import body, console, field_error, post, sign_in, signed_in, text  # noqa: F401
-from tests.unit.models_helpers import ModelsApi, archive_without_metadata, bearer, ensure_model_routes, onnx_archive
+from tests.unit.racer_console_helpers import body, field_error, post, sign_in, signed_in, text
+from tests.unit.models_helpers import ModelsApi, archive_without_metadata, bearer, onnx_archive
 
 pytestmark = pytest.mark.unit
 
 
 @pytest.fixture
-def app(console: Any, chalice_app: Any) -> Any:
-    ensure_model_routes(chalice_app)
-    return console
+def app(client: Any) -> Any:
+    return client
 
 
 def test_sign_up_shows_each_refusal_next_to_its_field_and_keeps_what_was_typed(app: Any) -> None:

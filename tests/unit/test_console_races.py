@@ -6,29 +6,20 @@ import json
 
 import pytest
 
-from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
-from tests.unit.race_helpers import clock, device_verifier  # noqa: F401 - fixtures
+from tests.unit.operator_console_helpers import field_error, text_of
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
 
 def _submitted_race(console, clock, event_id: str, racer: str, track: str = "1") -> str:
-    desk = console.desk
-    race = desk.ok(desk.create_race(event_id, racer, track_id=track), 201)
-    desk.ok(desk.command(event_id, race["race_id"], "start"))
-    clock.advance(12_345)
-    desk.ok(desk.command(event_id, race["race_id"], "capture_lap"))
-    desk.ok(desk.command(event_id, race["race_id"], "end"))
-    desk.ok(desk.command(event_id, race["race_id"], "submit"))
-    return race["race_id"]
+    return Scenario(console.desk, clock).submitted_race(racer, [12_345], track=track, event_id=event_id)
 
 
 @pytest.fixture
 def event(console, clock) -> dict:
-    event = console.desk.event(tracks=[{"track_id": "1"}, {"track_id": "2"}])
-    console.users.create("ann", ("racer",))
-    console.users.create("bob", ("racer",))
-    return event
+    return Scenario(console.desk, clock).add_racers("ann", "bob").add_event(
+        tracks=[{"track_id": "1"}, {"track_id": "2"}]).event
 
 
 def test_races_are_listed_and_filtered_by_track(console, clock, event):

@@ -6,10 +6,9 @@ from typing import Any
 
 import pytest
 
-from chalicelib.auth import principals
 from tests.unit.models_helpers import (ModelsApi, activate_device, archive_without_metadata, bearer, device_headers,
-                                       ensure_model_routes, make_fleet, onnx_archive)
-from tests.unit.racer_console_helpers import body, console, field_error, post, signed_in, text  # noqa: F401
+                                       make_fleet, onnx_archive)
+from tests.unit.racer_console_helpers import body, field_error, post, signed_in, text
 
 pytestmark = pytest.mark.unit
 
@@ -18,13 +17,8 @@ STAFF_PAGES = {"/console/registration": {"admin", "registration"}, "/console/use
 
 
 @pytest.fixture
-def app(console: Any, chalice_app: Any) -> Any:
-    from chalicelib.routes.devices import verify_device_credential
-
-    ensure_model_routes(chalice_app)
-    principals.set_device_credential_verifier(verify_device_credential)
-    yield console
-    principals.set_device_credential_verifier(principals.reject_all_device_credentials)
+def app(client: Any, device_verifier: None) -> Any:
+    return client
 
 
 @pytest.mark.parametrize("role", ["racer", "registration", "commentator", "operator", "admin"])

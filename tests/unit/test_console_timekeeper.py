@@ -6,23 +6,18 @@ import json
 
 import pytest
 
-from tests.unit.operator_console_helpers import console, field_error, text_of  # noqa: F401 - fixture
-from tests.unit.race_helpers import clock, device_verifier  # noqa: F401 - fixtures
+from tests.unit.operator_console_helpers import field_error, text_of
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
 
 def _setup(console, *, with_car: bool = True) -> tuple[dict, str | None]:
-    desk = console.desk
-    fleet = desk.fleet()
-    event = desk.event(tracks=[{"track_id": "1", "fleet_id": fleet}], race_time_min=2)
-    car = None
-    if with_car:
-        desk.device(fleet, "car-1", kind="car")
-        car = json.loads(desk.call("GET", "/api/devices").body)["devices"][0]["device_id"]
-    console.users.create("speedy", ("racer",))
+    scenario = Scenario(console.desk).add_fleet().add_event(race_time_min=2)
+    car = scenario.add_car("car-1") if with_car else None
+    scenario.add_racers("speedy")
     console.sign_in("timekeeper", "operator")
-    return event, car
+    return scenario.event, car
 
 
 def _press(console, event_id: str, race_id: str, kind: str, **extra: str):
@@ -109,11 +104,10 @@ def test_a_command_the_rules_refuse_is_shown_not_a_500(console):
 
 def test_the_timer_shows_as_connected_once_it_sends_a_heartbeat(console):
     desk = console.desk
-    fleet = desk.fleet()
-    event = desk.event(tracks=[{"track_id": "1", "fleet_id": fleet}])
-    timer = desk.device(fleet, "timer-1", kind="timer")
+    scenario = Scenario(desk).add_fleet().add_event().add_timer("timer-1")
+    timer = scenario.timer
     console.sign_in("timekeeper", "operator")
-    page = f"/console/timekeeper/{event['event_id']}/1"
+    page = f"/console/timekeeper/{scenario.event_id}/1"
     assert "Timer offline" in text_of(console.web.get(page).body.decode())
 
     beat = desk.client.http.post("/api/devices/self/heartbeat", body=b"{}", headers={

@@ -10,7 +10,7 @@ from urllib.parse import urlencode
 import pytest
 
 from drem_local.api_client import ApiClient, ApiError
-from tests.unit.device_api import Api, api, f2_app  # noqa: F401  (fixtures)
+from tests.unit.device_api import Api
 
 pytestmark = pytest.mark.unit
 

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from tests.unit.race_helpers import Desk, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk
 
 pytestmark = pytest.mark.unit
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from tests.unit.device_api import Api, api, f2_app  # noqa: F401  (fixtures)
+from tests.unit.device_api import Api
 
 pytestmark = pytest.mark.unit
 

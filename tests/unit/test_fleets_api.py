@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.unit.device_api import Api, api, f2_app  # noqa: F401  (fixtures)
+from tests.unit.device_api import Api
 
 pytestmark = pytest.mark.unit
 

@@ -8,9 +8,10 @@ from typing import Any
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
-from tests.unit.test_registry import DREM_METADATA, alice, onnx_policy, registry_app, tar_gz  # noqa: F401
-from tests.unit.users_helpers import api, call  # noqa: F401
+from tests.unit.race_helpers import Desk
+from tests.unit.scenario import Scenario
+from tests.unit.test_registry import DREM_METADATA, onnx_policy, tar_gz
+from tests.unit.users_helpers import call
 
 pytestmark = pytest.mark.unit
 
@@ -22,14 +23,9 @@ def _field(reply: Any) -> str | None:
 
 
 @pytest.fixture
-def race_with_a_lap(desk: Desk, clock: FakeClock) -> tuple[str, str]:
-    desk.users.create("lea", ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "lea"), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    clock.advance(12_000)
-    desk.ok(desk.command(eid, rid, "capture_lap"))
-    return eid, rid
+def race_with_a_lap(scenario: Scenario) -> tuple[str, str]:
+    scenario.add_racers("lea").add_event().add_race("lea", laps=[12_000])
+    return scenario.event_id, scenario.race_id
 
 
 @pytest.mark.parametrize("lap_id", [PAST_PYTHONS_INT_LIMIT, "²", "٣", "-1", "0x1", "1e3", "10000"])
@@ -44,28 +40,28 @@ def test_lap_ids_python_cannot_read_are_a_400(desk: Desk, race_with_a_lap, lap_i
 
 
 @pytest.mark.parametrize("limit", ["²", PAST_PYTHONS_INT_LIMIT, "0", "61", " ", "1.5"])
-def test_user_listing_limit_that_is_not_a_small_whole_number_is_a_400(api, users, limit: str) -> None:
+def test_user_listing_limit_that_is_not_a_small_whole_number_is_a_400(client, users, limit: str) -> None:
     admin = users.access_token("boss", ("admin",))
 
-    status, body = call(api, "GET", f"/api/users?limit={limit}", token=admin)
+    status, body = call(client, "GET", f"/api/users?limit={limit}", token=admin)
 
     assert status == 400, body
     assert body["error"]["field"] == "limit" and "between 1 and 60" in body["error"]["message"]
-    assert call(api, "GET", "/api/users?limit=60", token=admin)[0] == 200
+    assert call(client, "GET", "/api/users?limit=60", token=admin)[0] == 200
 
 
-def test_a_page_token_cognito_never_issued_is_a_400_not_a_502(api, users) -> None:
+def test_a_page_token_cognito_never_issued_is_a_400_not_a_502(client, users) -> None:
     admin = users.access_token("boss", ("admin",))
     for name in ("p1", "p2", "p3"):
         users.create(name, ("racer",))
 
-    status, body = call(api, "GET", "/api/users?limit=2&next=garbage", token=admin)
+    status, body = call(client, "GET", "/api/users?limit=2&next=garbage", token=admin)
 
     assert status == 400, body
     assert body["error"]["field"] == "next" and "start again from the first page" in body["error"]["message"]
-    status, first = call(api, "GET", "/api/users?limit=2", token=admin)
+    status, first = call(client, "GET", "/api/users?limit=2", token=admin)
     assert status == 200 and first["next_token"]
-    assert call(api, "GET", f"/api/users?limit=2&next={first['next_token']}", token=admin)[0] == 200
+    assert call(client, "GET", f"/api/users?limit=2&next={first['next_token']}", token=admin)[0] == 200
 
 
 def test_lineage_nested_thousands_deep_is_a_note_not_a_500(alice, client) -> None:

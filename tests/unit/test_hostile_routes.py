@@ -10,9 +10,9 @@ import pytest
 
 from chalicelib.auth.access import declared_routes
 from chalicelib.auth.principals import Role
-from tests.unit.authz_principals import World, fresh_moto, world  # noqa: F401
+from tests.unit.authz_principals import World
 
-pytestmark = pytest.mark.unit
+pytestmark = [pytest.mark.unit, pytest.mark.one_stack_per_module]  # the fuzz calls as `world`'s principals
 
 HOSTILE_PATH_VALUES = ["9" * 4_301, "%C2%B2", "x" * 5_000, "..%2F..%2Fetc%2Fpasswd", "%00"]
 HOSTILE_QUERY = "limit=%C2%B2&next=garbage&track=%C2%B2&since=%C2%B2&prefix=%00&page=" + "9" * 4_301

@@ -3,7 +3,6 @@ label roll (Brother DK-11202). The QR codes are decoded from the rendered page w
 from __future__ import annotations
 
 import html
-import json
 import re
 from pathlib import Path
 
@@ -12,9 +11,8 @@ import numpy as np
 import pytest
 
 from chalicelib.formats.labels_pdf import CarLabel, RacerCard, car_labels_pdf, racer_card_pdf
-from tests.unit.operator_console_helpers import console  # noqa: F401 - fixture
 from tests.unit.pdf_helpers import pdf_pages, pdf_text
-from tests.unit.race_helpers import device_verifier  # noqa: F401 - fixture
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -80,11 +78,9 @@ def test_operators_print_car_labels_pointing_at_the_public_url(console, monkeypa
 
     monkeypatch.setenv("DREM_PUBLIC_URL", PUBLIC_URL)
     get_settings.cache_clear()
-    fleet = console.desk.fleet("Pit lane")
-    console.desk.device(fleet, "car-blue", kind="car")
-    console.desk.device(fleet, "timer-1", kind="timer")
-    device_id = next(d["device_id"] for d in json.loads(console.desk.call("GET", "/api/devices").body)["devices"]
-                     if d["hostname"] == "car-blue")
+    scenario = Scenario(console.desk).add_fleet("Pit lane")
+    device_id = scenario.add_car("car-blue")
+    scenario.add_timer("timer-1")
     web = console.sign_in("op-web", "operator")
     page = web.get("/console/cars").body.decode()
     link = html.unescape(re.search(r'href="([^"]+)" data-testid="labels-roll"', page).group(1))

@@ -5,23 +5,20 @@ import json
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk, FakeClock
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
 
-def _live_race_with_a_lap(desk: Desk, clock: FakeClock, racer: str = "vera") -> tuple[str, str]:
-    desk.users.create(racer, ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, racer), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    clock.advance(10_000)
-    desk.ok(desk.command(eid, rid, "capture_lap"))
-    return eid, rid
+def _live_race_with_a_lap(scenario: Scenario, racer: str = "vera") -> tuple[str, str]:
+    scenario.add_racers(racer).add_event().add_race(racer, laps=[10_000])
+    return scenario.event_id, scenario.race_id
 
 
-def test_conditional_get_answers_304_until_the_board_changes(desk: Desk, clock: FakeClock) -> None:
-    eid, rid = _live_race_with_a_lap(desk, clock)
+def test_conditional_get_answers_304_until_the_board_changes(desk: Desk, clock: FakeClock,
+                                                             scenario: Scenario) -> None:
+    eid, rid = _live_race_with_a_lap(scenario)
     first = desk.anonymous_get(f"/api/leaderboard/{eid}?track=1")
     assert first.status_code == 200
     etag, body = first.headers["ETag"], json.loads(first.body)
@@ -42,8 +39,8 @@ def test_conditional_get_answers_304_until_the_board_changes(desk: Desk, clock: 
     assert desk.anonymous_get(f"/api/leaderboard/{eid}?track=1&since={body['version']}").status_code == 200
 
 
-def test_board_without_track_is_the_combined_board(desk: Desk, clock: FakeClock) -> None:
-    eid, _ = _live_race_with_a_lap(desk, clock, "walt")
+def test_board_without_track_is_the_combined_board(desk: Desk, scenario: Scenario) -> None:
+    eid, _ = _live_race_with_a_lap(scenario, "walt")
     board = desk.ok(desk.anonymous_get(f"/api/leaderboard/{eid}"))
     assert board["track_id"] == "combined" and [e["username"] for e in board["entries"]] == ["walt"]
 
@@ -54,8 +51,8 @@ def test_unknown_board_is_empty_not_an_error(desk: Desk, clock: FakeClock) -> No
     assert reply.headers["ETag"] == '"v0"'
 
 
-def test_overlay_follows_the_live_race(desk: Desk, clock: FakeClock) -> None:
-    eid, rid = _live_race_with_a_lap(desk, clock, "xena")
+def test_overlay_follows_the_live_race(desk: Desk, scenario: Scenario) -> None:
+    eid, rid = _live_race_with_a_lap(scenario, "xena")
     overlay = desk.anonymous_get(f"/api/overlay/{eid}?track=1")
     state = json.loads(overlay.body)
     assert (state["status"], state["username"], state["laps"], state["last_lap_ms"], state["position"]) == (
@@ -69,7 +66,7 @@ def test_overlay_follows_the_live_race(desk: Desk, clock: FakeClock) -> None:
     assert json.loads(desk.anonymous_get("/api/overlay/none?track=1").body)["status"] == "NO_RACE"
 
 
-def test_board_names_come_from_profiles_and_deleted_racers_are_anonymised(desk: Desk, clock: FakeClock) -> None:
+def test_board_names_come_from_profiles_and_deleted_racers_are_anonymised(desk: Desk, scenario: Scenario) -> None:
     from chalicelib.domain.profiles import Profile, anonymised_name
     from chalicelib.settings import get_settings
     from chalicelib.storage import clients
@@ -80,11 +77,7 @@ def test_board_names_come_from_profiles_and_deleted_racers_are_anonymised(desk: 
     sub = next(a["Value"] for a in desk.users.clients.cognito.admin_get_user(
         UserPoolId=desk.users.outputs.user_pool_id, Username="yuri")["UserAttributes"] if a["Name"] == "sub")
     store.put(Profile(sub=sub, username="yuri", country_code="SE", highlight_colour="#FF0000"))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "yuri"), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    clock.advance(10_000)
-    desk.ok(desk.command(eid, rid, "capture_lap"))
+    eid = scenario.add_event().add_race("yuri", laps=[10_000]).event_id
     entry = desk.board(eid)["entries"][0]
     assert (entry["username"], entry["country_code"], entry["highlight_colour"]) == ("yuri", "SE", "#FF0000")
 

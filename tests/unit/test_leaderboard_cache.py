@@ -11,7 +11,8 @@ import pytest
 
 from chalicelib.domain.leaderboards import (LeaderboardPublisher, Materialised, PublicView, PublicViewCache,
                                             StaleBoard, board_key)
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -182,14 +183,10 @@ def test_a_failed_read_is_not_cached_and_the_next_poll_reads_again() -> None:
     assert cache.get("k", lambda: PublicView(version=5, etag='"v5"', body="five")).version == 5
 
 
-def test_a_lap_through_the_race_api_shows_on_the_next_poll(desk: Desk, clock: FakeClock) -> None:
-    desk.users.create("alice", ("racer",))
-    eid = desk.event()["event_id"]
+def test_a_lap_through_the_race_api_shows_on_the_next_poll(desk: Desk, scenario: Scenario) -> None:
+    eid = scenario.add_racers("alice").add_event().event_id
     assert desk.board(eid)["entries"] == []  # cached now (as an empty board)
-    rid = desk.ok(desk.create_race(eid, "alice"), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    clock.advance(11_111)
-    desk.ok(desk.command(eid, rid, "capture_lap"))
+    scenario.add_race("alice", laps=[11_111])
     assert [e["fastest_lap_ms"] for e in desk.board(eid)["entries"]] == [11_111]
     overlay = desk.ok(desk.anonymous_get(f"/api/overlay/{eid}?track=1"))
     assert overlay["last_lap_ms"] == 11_111

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from chalice import Chalice
 
 from chalicelib.domain.league import BOARD_COLUMNS
 from chalicelib.formats.league_assembler import assemble
@@ -23,16 +22,6 @@ pytestmark = pytest.mark.unit
 REINVENT, OVAL = "reinvent_base", "Oval_track"
 
 
-@pytest.fixture
-def league_app() -> Chalice:
-    from app import app
-    from chalicelib.routes import league
-
-    if "/api/league/{track}" not in app.routes:
-        app.register_blueprint(league.bp)
-    return app
-
-
 def _submission(path: Path, racer: str, track: str) -> dict[str, Any]:
     return assemble(read_export(path), racer=racer, track=track).model_dump(mode="json")
 
@@ -44,7 +33,7 @@ def _push(client: Any, token: str, submission: dict[str, Any], track: str | None
 
 
 @pytest.fixture
-def pushed(league_app: Chalice, client: Any, users: Any, tmp_path: Path) -> dict[str, str]:
+def pushed(client: Any, users: Any, tmp_path: Path) -> dict[str, str]:
     tokens = {name: users.access_token(name, ("racer",)) for name in ("alice", "bob", "carol")}
     # alice: best 15.0 but slow average; bob: steady 15.5s; carol: no completed lap on reinvent.
     exports = [

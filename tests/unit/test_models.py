@@ -12,16 +12,15 @@ from typing import Any
 import pytest
 from chalice.test import Client
 
-from tests.unit.models_helpers import (ModelsApi, archive_without_metadata, bearer, ensure_model_routes, onnx_archive,
-                                       onnx_policy, traversal_archive)
+from tests.unit.models_helpers import (ModelsApi, archive_without_metadata, bearer, onnx_archive, onnx_policy,
+                                       traversal_archive)
 
 pytestmark = pytest.mark.unit
 
 
 @pytest.fixture
-def app_client(chalice_app: Any, request: pytest.FixtureRequest) -> Client:
-    ensure_model_routes(chalice_app)  # before the test client builds its route table
-    return request.getfixturevalue("client")
+def app_client(client: Client) -> Client:
+    return client
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ import pytest
 
 from chalicelib.views.avatars import identicon_cells, identicon_svg
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE
-from tests.unit.users_helpers import api, call, error_message  # noqa: F401
+from tests.unit.users_helpers import call, error_message
 
 pytestmark = pytest.mark.unit
 
@@ -20,64 +20,64 @@ def _racer_with_country(users, aws_clients, stack, username, country="JP", group
     return token
 
 
-def test_own_profile_starts_with_the_account_country(api, users, aws_clients, stack):
+def test_own_profile_starts_with_the_account_country(client, users, aws_clients, stack):
     token = _racer_with_country(users, aws_clients, stack, "kei")
-    status, body = call(api, "GET", "/api/me/profile", token=token)
+    status, body = call(client, "GET", "/api/me/profile", token=token)
     assert status == 200
     assert (body["username"], body["country_code"], body["highlight_colour"]) == ("kei", "JP", None)
 
 
-def test_highlight_colour_must_come_from_the_palette(api, users):
+def test_highlight_colour_must_come_from_the_palette(client, users):
     token = users.access_token("kei", ("racer",))
-    status, body = call(api, "PUT", "/api/me/profile", {"highlight_colour": "#ff8200"}, token=token)
+    status, body = call(client, "PUT", "/api/me/profile", {"highlight_colour": "#ff8200"}, token=token)
     assert status == 200 and body["highlight_colour"] == "#FF8200"
     for colour in ("#FFFFFF", "#123456", "red"):
-        status, body = call(api, "PUT", "/api/me/profile", {"highlight_colour": colour}, token=token)
+        status, body = call(client, "PUT", "/api/me/profile", {"highlight_colour": colour}, token=token)
         assert status == 400 and body["error"]["field"] == "highlight_colour"
         assert all(hex_colour in error_message(body) for hex_colour in HIGHLIGHT_PALETTE)
-    assert call(api, "GET", "/api/me/profile", token=token)[1]["highlight_colour"] == "#FF8200"
-    status, body = call(api, "PUT", "/api/me/profile", {"email": "x@example.test"}, token=token)
+    assert call(client, "GET", "/api/me/profile", token=token)[1]["highlight_colour"] == "#FF8200"
+    status, body = call(client, "PUT", "/api/me/profile", {"email": "x@example.test"}, token=token)
     assert status == 400
 
 
-def test_public_profile_shows_only_public_fields(api, users, aws_clients, stack):
+def test_public_profile_shows_only_public_fields(client, users, aws_clients, stack):
     token = _racer_with_country(users, aws_clients, stack, "kei")
-    call(api, "PUT", "/api/me/profile", {"highlight_colour": "#0000FF"}, token=token)
-    status, body = call(api, "GET", "/api/profiles/KEI")
+    call(client, "PUT", "/api/me/profile", {"highlight_colour": "#0000FF"}, token=token)
+    status, body = call(client, "GET", "/api/profiles/KEI")
     assert status == 200
     assert body == {"username": "kei", "country_code": "JP", "highlight_colour": "#0000FF",
                     "avatar_url": "/api/profiles/kei/avatar.svg", "deleted": False}
-    assert call(api, "GET", "/api/profiles/nobody")[0] == 404
+    assert call(client, "GET", "/api/profiles/nobody")[0] == 404
 
 
-def test_only_admins_edit_someone_elses_profile(api, users):
+def test_only_admins_edit_someone_elses_profile(client, users):
     racer_a = users.access_token("racer-a", ("racer",))
     racer_b = users.access_token("racer-b", ("racer",))
     operator = users.access_token("op", ("operator",))
     admin = users.access_token("boss", ("admin",))
-    call(api, "GET", "/api/me/profile", token=racer_a)
-    assert call(api, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=racer_b)[0] == 403
-    assert call(api, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=operator)[0] == 403
-    status, body = call(api, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=admin)
+    call(client, "GET", "/api/me/profile", token=racer_a)
+    assert call(client, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=racer_b)[0] == 403
+    assert call(client, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=operator)[0] == 403
+    status, body = call(client, "PUT", "/api/users/racer-a/profile", {"highlight_colour": "#FF0000"}, token=admin)
     assert status == 200 and body["highlight_colour"] == "#FF0000"
     # A user who never opened their profile (made outside drem) gets one when an admin edits it.
     users.create("imported", ("racer",))
-    assert call(api, "PUT", "/api/users/imported/profile", {"avatar": "none"}, token=admin)[0] == 200
-    assert call(api, "PUT", "/api/users/ghost/profile", {"avatar": "none"}, token=admin)[0] == 404
+    assert call(client, "PUT", "/api/users/imported/profile", {"avatar": "none"}, token=admin)[0] == 200
+    assert call(client, "PUT", "/api/users/ghost/profile", {"avatar": "none"}, token=admin)[0] == 404
 
 
-def test_avatar_is_a_deterministic_svg_in_the_highlight_colour(api, users):
+def test_avatar_is_a_deterministic_svg_in_the_highlight_colour(client, users):
     token = users.access_token("kei", ("racer",))
-    sub = call(api, "PUT", "/api/me/profile", {"highlight_colour": "#7CFC00"}, token=token)[1]["sub"]
-    response = api.http.get("/api/profiles/kei/avatar.svg")
+    sub = call(client, "PUT", "/api/me/profile", {"highlight_colour": "#7CFC00"}, token=token)[1]["sub"]
+    response = client.http.get("/api/profiles/kei/avatar.svg")
     assert response.status_code == 200
     assert response.headers["Content-Type"] == "image/svg+xml"
     svg = response.body.decode()
     assert svg == identicon_svg(sub, "#7CFC00", "kei") and 'fill="#7CFC00"' in svg
-    assert api.http.get("/api/profiles/kei/avatar.svg").body.decode() == svg
+    assert client.http.get("/api/profiles/kei/avatar.svg").body.decode() == svg
 
-    call(api, "PUT", "/api/me/profile", {"avatar": "none"}, token=token)
-    assert api.http.get("/api/profiles/kei/avatar.svg").status_code == 404
+    call(client, "PUT", "/api/me/profile", {"avatar": "none"}, token=token)
+    assert client.http.get("/api/profiles/kei/avatar.svg").status_code == 404
 
 
 def test_avatar_escapes_every_value_it_embeds():

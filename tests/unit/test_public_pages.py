@@ -8,24 +8,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk, FakeClock
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
 HOSTILE_NAME = "<script>alert('pwned')</script>"
-
-
-@pytest.fixture
-def desk(race_app: Any, race_client: Any, users: Any) -> Desk:
-    """race_helpers' desk, with the public-page blueprints on the app (until app.py registers them)."""
-    from chalicelib.routes import commentator, public_pages
-
-    for module, marker in ((public_pages, "/leaderboard/{event_id}"), (commentator, "/commentator/{event_id}")):
-        if marker not in race_app.routes:
-            race_app.register_blueprint(module.bp)
-    desk = Desk(race_client, users)
-    desk.token("op", "operator")
-    return desk
 
 
 def html_get(desk: Desk, path: str, headers: dict[str, str] | None = None) -> Any:
@@ -34,14 +22,9 @@ def html_get(desk: Desk, path: str, headers: dict[str, str] | None = None) -> An
 
 def racing(desk: Desk, clock: FakeClock, racer: str = "vera", laps: tuple[int, ...] = (10_000,),
            event_name: str = "Summit Stockholm 2026") -> tuple[str, str]:
-    desk.users.create(racer, ("racer",))
-    eid = desk.event(name=event_name)["event_id"]
-    rid = desk.ok(desk.create_race(eid, racer), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    for lap_ms in laps:
-        clock.advance(lap_ms)
-        desk.ok(desk.command(eid, rid, "capture_lap"))
-    return eid, rid
+    """(event id, race id): `racer`'s live race with `laps` at a new event."""
+    scenario = Scenario(desk, clock).add_racers(racer).add_event(name=event_name).add_race(racer, laps)
+    return scenario.event_id, scenario.race_id
 
 
 def hostile_profile(desk: Desk, username: str, *, display: str, colour: str, country: str | None = "DE") -> None:

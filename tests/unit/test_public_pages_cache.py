@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, device_verifier, race_app, race_client  # noqa: F401
-from tests.unit.test_public_pages import desk, html_get, live_region_url, racing  # noqa: F401
+from tests.unit.race_helpers import Desk, FakeClock
+from tests.unit.test_public_pages import html_get, live_region_url, racing
 
 pytestmark = pytest.mark.unit
 

@@ -8,7 +8,8 @@ import json
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk, FakeClock
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -71,23 +72,18 @@ def test_full_race_updates_the_board_item_after_every_lap(desk: Desk, clock: Fak
     desk.ok(desk.create_race(eid, "alice"), 201)
 
 
-def test_illegal_command_is_a_clear_conflict(desk: Desk, clock: FakeClock) -> None:
-    desk.users.create("bob", ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "bob"), 201)["race_id"]
+def test_illegal_command_is_a_clear_conflict(desk: Desk, scenario: Scenario) -> None:
+    scenario.add_racers("bob").add_event().add_race("bob", start=False)
+    eid, rid = scenario.event_id, scenario.race_id
     reply = desk.command(eid, rid, "capture_lap")
     assert reply.status_code == 409
     assert json.loads(reply.body)["error"]["message"] == "cannot capture a lap: the race has not started"
     assert desk.command(eid, rid, "warp_speed").status_code == 400
 
 
-def test_discarded_race_leaves_the_board(desk: Desk, clock: FakeClock) -> None:
-    desk.users.create("carol", ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "carol"), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    clock.advance(12_345)
-    desk.ok(desk.command(eid, rid, "capture_lap"))
+def test_discarded_race_leaves_the_board(desk: Desk, scenario: Scenario) -> None:
+    scenario.add_racers("carol").add_event().add_race("carol", laps=[12_345])
+    eid, rid = scenario.event_id, scenario.race_id
     assert [e["username"] for e in desk.board(eid)["entries"]] == ["carol"]
     desk.ok(desk.command(eid, rid, "end"))
     desk.ok(desk.command(eid, rid, "discard"))
@@ -162,23 +158,10 @@ def test_racers_read_only_their_own_races(desk: Desk, clock: FakeClock) -> None:
     assert desk.anonymous_get(path).status_code == 401
 
 
-def _submitted_race(desk: Desk, clock: FakeClock, eid: str, racer: str, lap_times: list[int], track: str = "1") -> str:
-    rid = desk.ok(desk.create_race(eid, racer, track), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    for ms in lap_times:
-        clock.advance(ms)
-        desk.ok(desk.command(eid, rid, "capture_lap"))
-    desk.ok(desk.command(eid, rid, "end"))
-    desk.ok(desk.command(eid, rid, "submit"))
-    return rid
-
-
-def test_edit_lap_and_delete_race_recompute_the_board(desk: Desk, clock: FakeClock) -> None:
-    for name in ("lea", "max"):
-        desk.users.create(name, ("racer",))
-    eid = desk.event()["event_id"]
-    lea = _submitted_race(desk, clock, eid, "lea", [11_000, 10_000])
-    _submitted_race(desk, clock, eid, "max", [10_500])
+def test_edit_lap_and_delete_race_recompute_the_board(desk: Desk, scenario: Scenario) -> None:
+    eid = scenario.add_racers("lea", "max").add_event().event_id
+    lea = scenario.submitted_race("lea", [11_000, 10_000])
+    scenario.submitted_race("max", [10_500])
     assert [e["username"] for e in desk.board(eid)["entries"]] == ["lea", "max"]
 
     edited = desk.ok(desk.call("PUT", f"/api/events/{eid}/races/{lea}/laps/1", {"is_valid": False}))
@@ -194,22 +177,19 @@ def test_edit_lap_and_delete_race_recompute_the_board(desk: Desk, clock: FakeClo
     assert desk.call("GET", f"/api/events/{eid}/races/{lea}").status_code == 404
 
 
-def test_live_race_cannot_be_deleted(desk: Desk, clock: FakeClock) -> None:
-    desk.users.create("ned", ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "ned"), 201)["race_id"]
+def test_live_race_cannot_be_deleted(desk: Desk, scenario: Scenario) -> None:
+    scenario.add_racers("ned").add_event().add_race("ned", start=False)
+    eid, rid = scenario.event_id, scenario.race_id
     assert desk.call("DELETE", f"/api/events/{eid}/races/{rid}").status_code == 409
 
 
-def test_recompute_rebuilds_every_board_including_combined(desk: Desk, clock: FakeClock, aws_clients) -> None:
+def test_recompute_rebuilds_every_board_including_combined(desk: Desk, scenario: Scenario, aws_clients) -> None:
     from drem_infra.resources import table_name
 
-    for name in ("ola", "pia"):
-        desk.users.create(name, ("racer",))
-    eid = desk.event(tracks=[{"track_id": "1"}, {"track_id": "2"}])["event_id"]
-    _submitted_race(desk, clock, eid, "ola", [12_000], "1")
-    _submitted_race(desk, clock, eid, "pia", [11_000], "2")
-    _submitted_race(desk, clock, eid, "ola", [10_000], "2")
+    eid = scenario.add_racers("ola", "pia").add_event(tracks=[{"track_id": "1"}, {"track_id": "2"}]).event_id
+    scenario.submitted_race("ola", [12_000], track="1")
+    scenario.submitted_race("pia", [11_000], track="2")
+    scenario.submitted_race("ola", [10_000], track="2")
     combined = desk.board(eid, "combined")
     assert [(e["username"], e["track_id"], e["time_ms"]) for e in combined["entries"]] == [
         ("ola", "2", 10_000), ("pia", "2", 11_000)]
@@ -221,17 +201,14 @@ def test_recompute_rebuilds_every_board_including_combined(desk: Desk, clock: Fa
     assert [e["username"] for e in desk.board(eid, "2")["entries"]] == ["ola", "pia"]
 
 
-def test_racer_with_zero_valid_laps_shows_as_dnf(desk: Desk, clock: FakeClock) -> None:
-    for name in ("quinn", "rose"):
-        desk.users.create(name, ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "quinn"), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
+def test_racer_with_zero_valid_laps_shows_as_dnf(desk: Desk, clock: FakeClock, scenario: Scenario) -> None:
+    scenario.add_racers("quinn", "rose").add_event().add_race("quinn")
+    eid, rid = scenario.event_id, scenario.race_id
     clock.advance(7_000)
     desk.ok(desk.command(eid, rid, "dnf"))
     desk.ok(desk.command(eid, rid, "end"))
     desk.ok(desk.command(eid, rid, "submit"))
-    _submitted_race(desk, clock, eid, "rose", [15_000])
+    scenario.submitted_race("rose", [15_000])
     entries = desk.board(eid)["entries"]
     assert [(e["username"], e["is_dnf"], e["time_ms"]) for e in entries] == [("rose", False, 15_000),
                                                                              ("quinn", True, None)]
@@ -241,10 +218,9 @@ def test_racer_with_zero_valid_laps_shows_as_dnf(desk: Desk, clock: FakeClock) -
     assert quinn[7:9] == ["", ""]  # Fastest and Avg blank, no crash
 
 
-def test_csv_exports_have_drem_columns_and_file_names(desk: Desk, clock: FakeClock) -> None:
-    desk.users.create("=sam", ("racer",))
-    eid = desk.event(name="Summit Stockholm 2026")["event_id"]
-    rid = _submitted_race(desk, clock, eid, "=sam", [10_000, 11_500])
+def test_csv_exports_have_drem_columns_and_file_names(desk: Desk, clock: FakeClock, scenario: Scenario) -> None:
+    eid = scenario.add_racers("=sam").add_event(name="Summit Stockholm 2026").event_id
+    rid = scenario.submitted_race("=sam", [10_000, 11_500])
     laps = desk.call("GET", f"/api/events/{eid}/export/laps.csv")
     assert laps.status_code == 200 and laps.headers["Content-Type"].startswith("text/csv")
     day = __import__("datetime").datetime.fromtimestamp(clock.now / 1000, tz=__import__("datetime").UTC).date()
@@ -263,14 +239,13 @@ def test_csv_exports_have_drem_columns_and_file_names(desk: Desk, clock: FakeClo
     assert desk.call("GET", f"/api/events/{eid}/export/everything.csv").status_code == 400
 
 
-def test_race_writes_are_conditional_on_the_version(desk: Desk, clock: FakeClock) -> None:
+def test_race_writes_are_conditional_on_the_version(scenario: Scenario) -> None:
     """Two writers that read the same version: the second one is refused instead of overwriting the first."""
     from chalicelib.domain.races import StaleRace
     from chalicelib import services
 
-    desk.users.create("tom", ("racer",))
-    eid = desk.event()["event_id"]
-    rid = desk.ok(desk.create_race(eid, "tom"), 201)["race_id"]
+    scenario.add_racers("tom").add_event().add_race("tom", start=False)
+    eid, rid = scenario.event_id, scenario.race_id
     store = services.race_store()
     record = store.get(eid, rid)
     assert record is not None

@@ -9,7 +9,7 @@ import pytest
 from chalicelib.auth.rate_limits import Limit, SlidingWindow
 from chalicelib.domain.errors import RateLimited
 from tests.unit.conftest import PASSWORD
-from tests.unit.users_helpers import api, call, sign_up_body  # noqa: F401
+from tests.unit.users_helpers import call, sign_up_body
 
 pytestmark = pytest.mark.unit
 
@@ -81,8 +81,8 @@ def test_the_login_form_shows_the_limit_next_to_the_password(browser, users, sou
     assert "Too many wrong passwords for this account" in reply.body.decode()
 
 
-def test_sign_up_flood_from_one_address_is_limited(api, source_ip):
-    answers = [call(api, "POST", "/api/signup", sign_up_body(f"flood{n}"))[0] for n in range(21)]
+def test_sign_up_flood_from_one_address_is_limited(client, source_ip):
+    answers = [call(client, "POST", "/api/signup", sign_up_body(f"flood{n}"))[0] for n in range(21)]
 
     assert answers[:20] == [201] * 20 and answers[20] == 429
 

@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from chalicelib.views import svg_plots
-from tests.unit.models_helpers import DREM_METADATA, ModelsApi, bearer, ensure_model_routes, onnx_policy, tar_gz
+from tests.unit.models_helpers import DREM_METADATA, ModelsApi, bearer, onnx_policy, tar_gz
 
 pytestmark = pytest.mark.unit
 
@@ -23,21 +23,6 @@ def metrics(track: str, laps: list[float], attempts: int = 3, jitter: float = 1.
             "attempt_progress": [], "offtrack_count": attempts - len(laps), "resets": 0, "lap_times_s": laps,
             "mean_lap_time_s": None, "best_lap_time_s": None, "steering_jitter_deg": jitter, "steps": 1,
             "sim_seconds": 1.0}
-
-
-@pytest.fixture
-def registry_app(chalice_app: Any) -> Any:
-    from chalicelib.routes import registry
-
-    ensure_model_routes(chalice_app)
-    if "/models/registry" not in chalice_app.routes:
-        chalice_app.register_blueprint(registry.bp)
-    return chalice_app
-
-
-@pytest.fixture
-def alice(registry_app: Any, client: Any, users: Any) -> ModelsApi:
-    return ModelsApi(client, bearer(users.access_token("alice", ("racer",))))
 
 
 def _models(api: ModelsApi) -> list[dict[str, Any]]:

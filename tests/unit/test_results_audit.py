@@ -6,8 +6,8 @@ import re
 
 import pytest
 
-from tests.unit.operator_console_helpers import console, text_of  # noqa: F401 - fixture
-from tests.unit.race_helpers import clock, device_verifier  # noqa: F401 - fixtures
+from tests.unit.operator_console_helpers import text_of
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -25,23 +25,12 @@ def _trail(html: str) -> list[dict[str, str]]:
 
 
 def _race(console, clock, event_id: str, racer: str, laps: list[int], *, submit: bool = True) -> str:
-    desk = console.desk
-    race_id = desk.ok(desk.create_race(event_id, racer), 201)["race_id"]
-    desk.ok(desk.command(event_id, race_id, "start"))
-    for ms in laps:
-        clock.advance(ms)
-        desk.ok(desk.command(event_id, race_id, "capture_lap"))
-    if submit:
-        desk.ok(desk.command(event_id, race_id, "end"))
-        desk.ok(desk.command(event_id, race_id, "submit"))
-    return race_id
+    return Scenario(console.desk, clock).add_race(racer, laps, submit=submit, event_id=event_id).race_id
 
 
 @pytest.fixture
 def event_id(console, clock) -> str:
-    for name in ("ann", "bob"):
-        console.users.create(name, ("racer",))
-    return console.desk.event()["event_id"]
+    return Scenario(console.desk, clock).add_racers("ann", "bob").add_event().event_id
 
 
 def test_a_lap_edit_records_who_and_the_lap_before_and_after(console, clock, event_id):

@@ -13,7 +13,8 @@ from chalicelib.views.avatars import identicon_cells
 from chalicelib.domain.results import EventResults, ResultEntry, ResultsBoard
 from chalicelib.formats.results_pdf import certificates_pdf, podium_pdf, render_document, summary_pdf
 from tests.unit.pdf_helpers import embedded_fonts, pdf_pages, pdf_text, pixels_of, words
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -108,23 +109,11 @@ def test_unknown_document_or_board_is_a_clear_error() -> None:
         render_document(RESULTS, "podium.pdf", "9")
 
 
-def _race(desk: Desk, clock: FakeClock, eid: str, racer: str, lap_times: list[int]) -> None:
-    rid = desk.ok(desk.create_race(eid, racer), 201)["race_id"]
-    desk.ok(desk.command(eid, rid, "start"))
-    for ms in lap_times:
-        clock.advance(ms)
-        desk.ok(desk.command(eid, rid, "capture_lap"))
-    desk.ok(desk.command(eid, rid, "end"))
-    desk.ok(desk.command(eid, rid, "submit"))
-
-
-def test_staff_download_the_event_results_through_the_api(desk: Desk, clock: FakeClock, tmp_path: Path) -> None:
-    for name in ("lea", "max", "kim"):
-        desk.users.create(name, ("racer",))
-    eid = desk.event(name="Tokyo 東京 Cup")["event_id"]
-    _race(desk, clock, eid, "lea", [9_120, 8_838])
-    _race(desk, clock, eid, "max", [10_004])
-    _race(desk, clock, eid, "kim", [12_500, 11_000])
+def test_staff_download_the_event_results_through_the_api(desk: Desk, scenario: Scenario, tmp_path: Path) -> None:
+    eid = scenario.add_racers("lea", "max", "kim").add_event(name="Tokyo 東京 Cup").event_id
+    scenario.submitted_race("lea", [9_120, 8_838])
+    scenario.submitted_race("max", [10_004])
+    scenario.submitted_race("kim", [12_500, 11_000])
 
     reply = desk.call("GET", f"/api/events/{eid}/results/summary.pdf", headers=PDF)
     assert reply.status_code == 200, reply.body

@@ -7,7 +7,7 @@ import pytest
 
 from chalicelib.auth.revocation import RevocationMark
 from tests.unit.conftest import PASSWORD, bearer
-from tests.unit.users_helpers import api, call  # noqa: F401
+from tests.unit.users_helpers import call
 
 pytestmark = pytest.mark.unit
 
@@ -39,44 +39,44 @@ def test_sign_out_does_not_end_a_new_sign_in(browser, client, users):
     assert client.http.get("/api/me", headers=bearer(fresh)).status_code == 200
 
 
-def test_a_disabled_users_token_is_refused_at_once(api, client, users):
+def test_a_disabled_users_token_is_refused_at_once(client, users):
     admin = users.access_token("boss", ("admin",))
     racer = users.access_token("troublemaker", ("racer",))
 
-    assert call(api, "POST", "/api/users/troublemaker/disable", token=admin)[0] == 200
+    assert call(client, "POST", "/api/users/troublemaker/disable", token=admin)[0] == 200
 
     assert client.http.get("/api/me", headers=bearer(racer)).status_code == 401
 
 
-def test_a_demoted_admins_token_loses_admin_at_once(api, client, users):
+def test_a_demoted_admins_token_loses_admin_at_once(client, users):
     boss = users.access_token("boss", ("admin",))
     second = users.access_token("second", ("admin",))
     assert client.http.get("/api/users?limit=1", headers=bearer(second)).status_code == 200
 
-    assert call(api, "PUT", "/api/users/second/role", {"role": "racer"}, token=boss)[0] == 200
+    assert call(client, "PUT", "/api/users/second/role", {"role": "racer"}, token=boss)[0] == 200
 
     assert client.http.get("/api/users?limit=1", headers=bearer(second)).status_code == 401
     fresh = users.sign_in("second")["AccessToken"]
     assert client.http.get("/api/me", headers=bearer(fresh)).json_body["roles"] == ["racer"]
 
 
-def test_a_demoted_admins_browser_carries_on_with_the_new_role(api, browser, users):
+def test_a_demoted_admins_browser_carries_on_with_the_new_role(client, browser, users):
     boss = users.access_token("boss", ("admin",))
     users.create("second", ("admin",))
     _browser_session(browser, "second")
     assert browser.get("/api/me").json_body["roles"] == ["admin"]
 
-    call(api, "PUT", "/api/users/second/role", {"role": "racer"}, token=boss)
+    call(client, "PUT", "/api/users/second/role", {"role": "racer"}, token=boss)
 
     me = browser.get("/api/me")  # the session renews itself from the refresh token, with the new groups
     assert me.status_code == 200 and me.json_body["roles"] == ["racer"]
     assert browser.get("/api/users?limit=1").status_code == 403
 
 
-def test_a_deleted_users_token_is_refused(api, client, users):
+def test_a_deleted_users_token_is_refused(client, users):
     token = users.access_token("leaving", ("racer",))
 
-    assert call(api, "DELETE", "/api/me", {"confirm": "leaving"}, token=token)[0] == 200
+    assert call(client, "DELETE", "/api/me", {"confirm": "leaving"}, token=token)[0] == 200
 
     assert client.http.get("/api/me", headers=bearer(token)).status_code == 401
 

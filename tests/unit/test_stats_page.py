@@ -7,7 +7,8 @@ import re
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -20,16 +21,6 @@ def _event(desk: Desk, name: str, country: str, day: str, *, visibility: str, di
             "race_config": {"track_type": track_type, "min_lap_ms": 0}, "stats_visibility": visibility,
             "tracks": [{"track_id": "1", "direction": direction}]}
     return desk.ok(desk.call("POST", "/api/events", body), 201)["event_id"]
-
-
-def _race(desk: Desk, clock: FakeClock, event_id: str, racer: str, laps: list[int]) -> None:
-    race_id = desk.ok(desk.create_race(event_id, racer), 201)["race_id"]
-    desk.ok(desk.command(event_id, race_id, "start"))
-    for ms in laps:
-        clock.advance(ms)
-        desk.ok(desk.command(event_id, race_id, "capture_lap"))
-    desk.ok(desk.command(event_id, race_id, "end"))
-    desk.ok(desk.command(event_id, race_id, "submit"))
 
 
 def _cards(page: str) -> dict[str, str]:
@@ -49,22 +40,22 @@ def _map_values(page: str) -> dict[str, str]:
 
 
 @pytest.fixture
-def world(desk: Desk, clock: FakeClock) -> Desk:
-    for name in ("sven", "amy", "tess"):
-        desk.users.create(name, ("racer",))
+def raced_events(desk: Desk, scenario: Scenario) -> Desk:
+    """Three events, each with one submitted race: two public (one a test event), one staff-only."""
+    scenario.add_racers("sven", "amy", "tess")
     stockholm = _event(desk, "Summit Stockholm", "SE", "2026-05-14", visibility="public", direction="clockwise")
     austin = _event(desk, "Austin private cup", "US", "2026-06-20", visibility="staff",
                     direction="counter_clockwise", event_type="PRIVATE_TRACK_RACE")
     trial = _event(desk, "Dry run", "GB", "2026-05-01", visibility="public", direction="clockwise",
                    event_type="TEST_EVENT")
-    _race(desk, clock, stockholm, "sven", [9_120, 8_838, 4_000])  # the 4.0 s lap is a timing artefact
-    _race(desk, clock, austin, "amy", [7_500])
-    _race(desk, clock, trial, "tess", [6_000])
+    scenario.submitted_race("sven", [9_120, 8_838, 4_000], event_id=stockholm)  # the 4.0 s lap is a timing artefact
+    scenario.submitted_race("amy", [7_500], event_id=austin)
+    scenario.submitted_race("tess", [6_000], event_id=trial)
     return desk
 
 
-def test_anyone_sees_the_public_events_only(world: Desk) -> None:
-    reply = world.anonymous_get("/stats", headers=HTML)
+def test_anyone_sees_the_public_events_only(raced_events: Desk) -> None:
+    reply = raced_events.anonymous_get("/stats", headers=HTML)
     assert reply.status_code == 200
     page = reply.body.decode()
     cards = _cards(page)
@@ -77,14 +68,14 @@ def test_anyone_sees_the_public_events_only(world: Desk) -> None:
     assert page.count("data-country=") > 200  # every country of the package's map is drawn
 
 
-def test_staff_also_see_staff_only_events_and_filter_without_javascript(world: Desk) -> None:
-    world.token("com", "commentator")
-    page = world.call("GET", "/stats", as_user="com", headers=HTML).body.decode()
+def test_staff_also_see_staff_only_events_and_filter_without_javascript(raced_events: Desk) -> None:
+    raced_events.token("com", "commentator")
+    page = raced_events.call("GET", "/stats", as_user="com", headers=HTML).body.decode()
     assert _fastest(page) == [("amy", "0:07.500", "Austin private cup"), ("sven", "0:08.838", "Summit Stockholm")]
     assert _map_values(page) == {"SE": "1", "US": "1"}
 
     def filtered(query: str) -> str:
-        return world.call("GET", f"/stats?{query}", as_user="com", headers=HTML).body.decode()
+        return raced_events.call("GET", f"/stats?{query}", as_user="com", headers=HTML).body.decode()
 
     assert [r[0] for r in _fastest(filtered("direction=clockwise"))] == ["sven"]
     assert [r[0] for r in _fastest(filtered("country=US"))] == ["amy"]
@@ -94,8 +85,8 @@ def test_staff_also_see_staff_only_events_and_filter_without_javascript(world: D
     assert _cards(filtered("country=SE&direction=counter_clockwise"))["Events"] == "0"
 
 
-def test_a_bad_filter_is_a_clear_400(world: Desk) -> None:
-    reply = world.anonymous_get("/stats?country=Sweden", headers={"Accept": "application/json"})
+def test_a_bad_filter_is_a_clear_400(raced_events: Desk) -> None:
+    reply = raced_events.anonymous_get("/stats?country=Sweden", headers={"Accept": "application/json"})
     assert reply.status_code == 400
     assert "country" in json.dumps(json.loads(reply.body))
 

@@ -7,7 +7,8 @@ import json
 
 import pytest
 
-from tests.unit.race_helpers import Desk, FakeClock, clock, desk, device_verifier, race_app, race_client  # noqa: F401
+from tests.unit.race_helpers import Desk, FakeClock
+from tests.unit.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -15,14 +16,10 @@ T0 = 1_700_000_000_000  # device clock
 
 
 @pytest.fixture
-def timed_track(desk: Desk, clock: FakeClock) -> tuple[str, str, str]:
+def timed_track(scenario: Scenario) -> tuple[str, str, str]:
     """(event id, race id, timer credential): a live race on track 1, whose fleet holds the timer."""
-    fleet = desk.fleet()
-    credential = desk.device(fleet, "timer-1")
-    desk.users.create("tia", ("racer",))
-    eid = desk.event(tracks=[{"track_id": "1", "fleet_id": fleet}])["event_id"]
-    rid = desk.ok(desk.create_race(eid, "tia"), 201)["race_id"]
-    return eid, rid, credential
+    scenario.add_timer("timer-1").add_racers("tia").add_event().add_race("tia", start=False)
+    return scenario.event_id, scenario.race_id, scenario.timer
 
 
 def _race(desk: Desk, eid: str, rid: str) -> dict:

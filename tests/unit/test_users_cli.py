@@ -9,7 +9,6 @@ from requests.adapters import BaseAdapter
 
 from drem_local.api_client import ApiClient, ApiError
 from drem_local.commands import users as users_command
-from tests.unit.users_helpers import api  # noqa: F401
 
 pytestmark = pytest.mark.unit
 
@@ -35,33 +34,33 @@ class ChaliceTransport(BaseAdapter):
         pass
 
 
-def _run(api, token, *argv):
+def _run(client, token, *argv):
     parser = argparse.ArgumentParser()
     users_command.add_arguments(parser)
     args = parser.parse_args(["--token", token, *argv])
-    client = ApiClient(args.api, args.token)
-    client._http.mount("http://", ChaliceTransport(api))
-    answer = users_command._perform(client, args)
+    api_client = ApiClient(args.api, args.token)
+    api_client._http.mount("http://", ChaliceTransport(client))
+    answer = users_command._perform(api_client, args)
     return users_command.describe(args.action, answer)
 
 
-def test_cli_creates_lists_changes_role_and_disables(api, users, aws_clients, stack):
+def test_cli_creates_lists_changes_role_and_disables(client, users, aws_clients, stack):
     admin = users.access_token("boss", ("admin",))
-    created = _run(api, admin, "create", "walk_in-7", "--email", "w7@example.test", "--country", "fr")
+    created = _run(client, admin, "create", "walk_in-7", "--email", "w7@example.test", "--country", "fr")
     assert created.startswith("Created racer walk_in-7 (FR).") and "Temporary password" in created
 
-    listed = _run(api, admin, "list", "--prefix", "walk")
+    listed = _run(client, admin, "list", "--prefix", "walk")
     assert listed.splitlines()[0].split()[:2] == ["walk_in-7", "FR"]
 
-    assert _run(api, admin, "role", "walk_in-7", "operator") == "walk_in-7 is now operator."
+    assert _run(client, admin, "role", "walk_in-7", "operator") == "walk_in-7 is now operator."
     groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="walk_in-7")
     assert [g["GroupName"] for g in groups["Groups"]] == ["operator"]
 
-    assert _run(api, admin, "disable", "walk_in-7") == "walk_in-7 is disabled."
-    assert "DISABLED" in _run(api, admin, "list", "--prefix", "walk_in")
+    assert _run(client, admin, "disable", "walk_in-7") == "walk_in-7 is disabled."
+    assert "DISABLED" in _run(client, admin, "list", "--prefix", "walk_in")
 
 
-def test_cli_reports_the_api_error(api, users):
+def test_cli_reports_the_api_error(client, users):
     racer = users.access_token("racer1", ("racer",))
     with pytest.raises(ApiError, match=r"needs the role .*\(HTTP 403\)"):
-        _run(api, racer, "create", "someone", "--email", "s@example.test", "--country", "GB")
+        _run(client, racer, "create", "someone", "--email", "s@example.test", "--country", "GB")

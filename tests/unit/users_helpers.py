@@ -1,34 +1,17 @@
-"""Shared pieces for the users/sign-up/profile tests: the app with the account blueprints, JSON calls, sign-in."""
+"""Shared pieces for the users/sign-up/profile tests (over conftest's `client`): JSON calls, bodies, claims."""
 from __future__ import annotations
 
 import json
 from typing import Any
 
-import pytest
 from chalice.test import Client
 
 from tests.unit.conftest import PASSWORD, bearer
 
-
-def ensure_account_blueprints(app: Any) -> None:
-    """Register the users/profiles blueprints unless app.py already does (idempotent)."""
-    from chalicelib.routes import profiles, users
-
-    if "/api/signup" not in app.routes:
-        app.register_blueprint(users.bp)
-        app.register_blueprint(profiles.bp)
-
-
-@pytest.fixture
-def api(client: Client, chalice_app: Any) -> Client:
-    ensure_account_blueprints(chalice_app)
-    return client
-
-
 _CSRF = "t" * 43
 
 
-def call(api: Client, method: str, path: str, body: Any = None, token: str | None = None) -> tuple[int, Any]:
+def call(client: Client, method: str, path: str, body: Any = None, token: str | None = None) -> tuple[int, Any]:
     headers = bearer(token) if token else {"Accept": "application/json"}
     if token is None and method.upper() != "GET":
         # No Authorization header means the CSRF double-submit applies (as for a browser on the sign-up page).
@@ -37,7 +20,7 @@ def call(api: Client, method: str, path: str, body: Any = None, token: str | Non
     if body is not None:
         headers["Content-Type"] = "application/json"
         payload = json.dumps(body).encode()
-    response = getattr(api.http, method.lower())(path, headers=headers, body=payload)
+    response = getattr(client.http, method.lower())(path, headers=headers, body=payload)
     text = response.body.decode() if response.body else ""
     try:
         return response.status_code, json.loads(text) if text else None
