@@ -132,7 +132,7 @@ def seed_board(env: dict[str, str], event_id: str, racers: int = SEEDED_RACERS) 
     from chalicelib.settings import get_settings
     from chalicelib.storage import clients
     from chalicelib.storage.leaderboards import DynamoBoardStore
-    from drem_leaderboard.models import Lap, LapSource, RaceConfig, RaceStatus, Racer, new_race
+    from drem_leaderboard.models import Lap, LapSource, RaceConfig, Racer, RaceStatus, new_race
     from drem_leaderboard.ranking import RacerProfile
     from drem_leaderboard.summary import summarise_racer
 

@@ -119,12 +119,13 @@ def main() -> int:
         outputs = ensure_stack(clients_for(None, REGION), STAGE)
         os.environ.update(outputs.to_env())
         from app import app
-        from chalicelib.formats import pdf_fonts
-        from chalicelib.views import world_map
-        from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
+
         from chalicelib import services
+        from chalicelib.formats import pdf_fonts
         from chalicelib.settings import get_settings
         from chalicelib.storage import clients
+        from chalicelib.views import world_map
+        from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 
         get_settings.cache_clear()
         dynamodb = clients.dynamodb()

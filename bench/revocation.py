@@ -59,9 +59,9 @@ def main() -> None:
 
 
 def measure(outputs, username: str, password: str) -> None:
+    from chalicelib import services
     from chalicelib.auth.revocation import REVOKED
     from chalicelib.auth.sessions import current_token
-    from chalicelib import services
     from chalicelib.auth.tokens import verify_token
     from chalicelib.settings import get_settings
 

@@ -6,12 +6,39 @@ from chalice import Chalice
 
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
-from chalicelib.routes import (accounts, api_docs, assignments, commentator, devices, event_landing, events, fleets,
-                               health, labels, leaderboards, league, login, pages, ping, profiles, public_pages, races,
-                               racer_models, registry, results, stats, timing, users)
-from chalicelib.routes.console import events as console_events, fleets as console_fleets, models as console_models
-from chalicelib.routes.console import racer as console_racer, races as console_races
-from chalicelib.routes.console import registration as console_registration, timekeeper as console_timekeeper
+from chalicelib.routes import (
+    accounts,
+    api_docs,
+    assignments,
+    commentator,
+    devices,
+    event_landing,
+    events,
+    fleets,
+    health,
+    labels,
+    leaderboards,
+    league,
+    login,
+    pages,
+    ping,
+    profiles,
+    public_pages,
+    racer_models,
+    races,
+    registry,
+    results,
+    stats,
+    timing,
+    users,
+)
+from chalicelib.routes.console import events as console_events
+from chalicelib.routes.console import fleets as console_fleets
+from chalicelib.routes.console import models as console_models
+from chalicelib.routes.console import racer as console_racer
+from chalicelib.routes.console import races as console_races
+from chalicelib.routes.console import registration as console_registration
+from chalicelib.routes.console import timekeeper as console_timekeeper
 from chalicelib.routes.console import users as console_users
 from chalicelib.security_headers import security_headers_middleware
 from drem_infra.resources import UPLOAD_COMPLETE_FUNCTION

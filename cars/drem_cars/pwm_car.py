@@ -15,16 +15,27 @@ from pathlib import Path
 from drem_cars import channels as ch
 from drem_cars.drivers.camera_cv import CameraUnavailable, OpenCvCamera
 from drem_cars.drivers.local import LocalDriver
-from drem_cars.drivers.pwm import (DEEPRACER_SERVO_ENABLE_GPIO, DEEPRACER_STEERING_CHANNEL,
-                                   DEEPRACER_THROTTLE_CHANNEL, MOTOR_DEFAULT, SERVO_DEFAULT, SYSFS_GPIO, SYSFS_PWM,
-                                   Calibration, PwmActuator, PwmChannel, PwmUnavailable, ServoEnable,
-                                   load_calibration, pwm_chip_dir)
+from drem_cars.drivers.pwm import (
+    DEEPRACER_SERVO_ENABLE_GPIO,
+    DEEPRACER_STEERING_CHANNEL,
+    DEEPRACER_THROTTLE_CHANNEL,
+    MOTOR_DEFAULT,
+    SERVO_DEFAULT,
+    SYSFS_GPIO,
+    SYSFS_PWM,
+    Calibration,
+    PwmActuator,
+    PwmChannel,
+    PwmUnavailable,
+    ServoEnable,
+    load_calibration,
+    pwm_chip_dir,
+)
 from drem_cars.parts.drive_mapping import ActionToDrive
 from drem_cars.parts.pilot_slot import PilotSlot
 from drem_cars.parts.safety import Safety
 from drem_cars.parts.telemetry import Telemetry
 from drem_cars.vehicle import Vehicle
-
 
 
 class HardwareUnavailable(RuntimeError):

@@ -42,11 +42,11 @@ from chalicelib.storage.events import DynamoEventStore, DynamoLiveRaceProbe
 from chalicelib.storage.fleets import DynamoFleetStore
 from chalicelib.storage.leaderboards import DynamoBoardStore
 from chalicelib.storage.league import DynamoLeagueStore
+from chalicelib.storage.model_files import S3ModelFiles
 from chalicelib.storage.passwords import CognitoPasswordChanger
 from chalicelib.storage.profiles import DynamoProfileStore
-from chalicelib.storage.model_files import S3ModelFiles
-from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.race_stats import DynamoStatsDigestStore
+from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.races import DynamoRaceStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory

@@ -15,7 +15,6 @@ from drem_leaderboard.models import TERMINAL_STATUSES, Lap, LapSource, Race, Rac
 from drem_leaderboard.race_clock import running_time_ms
 from drem_leaderboard.race_machine import begin_running, note_expiry, record_lap, resume_running
 
-
 # 2100-01-01T00:00:00Z. A device clock beyond it is a fault or an attack: 10**18 once froze a race (every later,
 # true crossing read as out of order) and 10**30 overflowed storage. A Pi without network time may start near 1970,
 # so there is no lower bound beyond 0.

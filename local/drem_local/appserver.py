@@ -28,7 +28,8 @@ import sys
 import threading
 from typing import Any
 
-from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR, use_app_source
+from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR
+from drem_local.app_source import use_app_source
 
 REQUEST_QUEUE_SIZE = 1024
 SWEEP_INTERVAL_S = 2.0
@@ -78,9 +79,8 @@ def _add_storage_gateway(server: Any, handler_class: type, storage_url: str) -> 
 
 def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
     """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set."""
-    from chalicelib import logs
+    from chalicelib import logs, services
     from chalicelib.domain.races import STALE_INTENT_MS
-    from chalicelib import services
 
     _finish_interrupted_registrations()
     older_than_ms = 0  # at start nothing is in flight: every intent left is a crash's
@@ -98,8 +98,7 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
 
 def _finish_interrupted_registrations() -> None:
     """Once at start: accounts a crash left without profile or role group get them, and the log says who."""
-    from chalicelib import logs
-    from chalicelib import services
+    from chalicelib import logs, services
 
     try:
         finished = services.user_service().finish_interrupted_registrations()
@@ -113,8 +112,7 @@ def _finish_interrupted_registrations() -> None:
 
 
 def _purge_stale_uploads(stopping: threading.Event) -> None:
-    from chalicelib import logs
-    from chalicelib import services
+    from chalicelib import logs, services
 
     while not stopping.wait(PURGE_INTERVAL_S):
         try:

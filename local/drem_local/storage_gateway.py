@@ -16,6 +16,7 @@ from http.server import BaseHTTPRequestHandler
 from urllib.parse import urlsplit
 
 from drem_local.durable.guard import GATEWAY_PATH
+
 _CHUNK = 256 * 1024
 _METHODS = ("GET", "HEAD", "POST")
 # Hop-by-hop (RFC 9110 7.6.1), plus what must never reach the storage journal (the racer's session cookie).

@@ -47,8 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:  # torch is imported only when training really runs: the rest of the CLI stays fast.
-        import torch  # noqa: F401
         import onnx  # noqa: F401
+        import torch  # noqa: F401
     except ImportError as error:
         print(f"drem train: {TRAIN_EXTRA_HINT} ({error})", file=sys.stderr)
         return 2

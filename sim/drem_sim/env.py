@@ -14,9 +14,9 @@ interpolated crossings in `info["strip_events"]`. All randomness comes from `sel
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
-from collections.abc import Mapping, Sequence
 
 import numpy as np
 

@@ -3,8 +3,8 @@ video of a recorded run."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from collections.abc import Iterable
+from pathlib import Path
 
 import cv2
 import numpy as np

@@ -15,9 +15,9 @@ import datetime as dt
 import json
 import os
 import secrets
+from collections.abc import Callable
 from pathlib import Path, PurePosixPath
 from typing import Any
-from collections.abc import Callable
 
 import cv2
 import numpy as np

@@ -6,7 +6,6 @@ import secrets
 
 import pytest
 
-
 pytestmark = pytest.mark.browser
 
 PASSWORD = "Only-Racing-42"

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import os
-from datetime import date
 import shlex
 import subprocess
+from datetime import date
 from pathlib import Path
 
 import pytest

@@ -7,7 +7,6 @@ import secrets
 
 import pytest
 
-
 pytestmark = pytest.mark.browser
 
 

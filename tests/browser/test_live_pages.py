@@ -28,6 +28,7 @@ def serve(port: int) -> None:
 
     appserver._put_project_on_path()
     import app as app_module
+
     from chalicelib.routes import commentator, public_pages
 
     for module in (public_pages, commentator):

@@ -13,9 +13,8 @@ from pathlib import Path
 import pytest
 import requests
 
-from drem_cars.drivers.deepracer_console import (ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver,
-                                                 csrf_meta_token)
 from chalicelib.domain.devices import Telemetry
+from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver, csrf_meta_token
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole

@@ -5,8 +5,16 @@ from pathlib import Path
 
 import pytest
 
-from drem_cars.drivers.pwm import (MOTOR_DEFAULT, SERVO_DEFAULT, PwmActuator, PwmChannel, PwmUnavailable,
-                                   ServoEnable, load_calibration, pwm_chip_dir)
+from drem_cars.drivers.pwm import (
+    MOTOR_DEFAULT,
+    SERVO_DEFAULT,
+    PwmActuator,
+    PwmChannel,
+    PwmUnavailable,
+    ServoEnable,
+    load_calibration,
+    pwm_chip_dir,
+)
 
 pytestmark = pytest.mark.unit
 

@@ -35,9 +35,8 @@ NEUTRAL_MOTOR, CENTRED_SERVO = MOTOR_DEFAULT.mid_ns, SERVO_DEFAULT.mid_ns
 def video(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sim car's camera view while the simulator's demonstrator drives it off the start of reinvent_base,
     written losslessly (FFV1) so the test can decode exactly what the car's camera part will see."""
-    from drem_sim.demonstrator import Demonstrator
-
     from drem_cars.parts.sim_world import SimWorld
+    from drem_sim.demonstrator import Demonstrator
 
     world = SimWorld("reinvent_base")
     demonstrator = Demonstrator(world.track)

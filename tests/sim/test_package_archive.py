@@ -10,7 +10,11 @@ import pytest
 
 from drem_sim.learn.dataset import ActionScale
 from drem_sim.learn.package import (
-    ArchiveError, build_archive, build_metadata, load_metadata, read_model_files,
+    ArchiveError,
+    build_archive,
+    build_metadata,
+    load_metadata,
+    read_model_files,
 )
 
 pytestmark = pytest.mark.sim

@@ -7,7 +7,6 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-
 from tests.unit.conftest import PASSWORD, Browser, Users
 from tests.unit.race_helpers import Desk
 

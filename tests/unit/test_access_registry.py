@@ -4,8 +4,17 @@ from __future__ import annotations
 import pytest
 from chalice import Blueprint, Chalice
 
-from chalicelib.auth.access import ADMIN, CAR, PUBLIC, SIGNED_IN, TIMER, Allow, declared_routes, route, \
-    undeclared_routes
+from chalicelib.auth.access import (
+    ADMIN,
+    CAR,
+    PUBLIC,
+    SIGNED_IN,
+    TIMER,
+    Allow,
+    declared_routes,
+    route,
+    undeclared_routes,
+)
 from chalicelib.auth.principals import ANONYMOUS, Device, User
 
 pytestmark = pytest.mark.unit

@@ -89,8 +89,8 @@ def test_code_request_is_validated(api: Api) -> None:
 
 def test_redeeming_is_conditional_so_a_race_for_one_code_registers_one_device(api: Api) -> None:
     """Two devices that both read the code before either redeemed it: only the first transaction goes through."""
-    from chalicelib.domain.activation import ActivationExchange, normalise_code, sha256_hex
     from chalicelib import services
+    from chalicelib.domain.activation import ActivationExchange, normalise_code, sha256_hex
     from chalicelib.domain.devices import DeviceRecord, StatusEntry
 
     code = api.activation_code(api.fleet(), "car-01")

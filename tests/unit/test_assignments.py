@@ -11,8 +11,15 @@ import pytest
 import requests
 from chalice.test import Client
 
-from tests.unit.models_helpers import (ModelsApi, activate_device, bearer, device_headers, make_fleet, onnx_archive,
-                                       traversal_archive)
+from tests.unit.models_helpers import (
+    ModelsApi,
+    activate_device,
+    bearer,
+    device_headers,
+    make_fleet,
+    onnx_archive,
+    traversal_archive,
+)
 
 pytestmark = pytest.mark.unit
 
@@ -178,9 +185,9 @@ def test_clearing_a_car_and_deleting_a_model_withdraw_it(racer: ModelsApi, opera
 
 
 def create_event(fleet_id: str) -> str:
+    from chalicelib import services
     from chalicelib.auth.principals import User
     from chalicelib.domain.events import EventInput
-    from chalicelib import services
 
     operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))
     event = services.event_service().create_event(operator, EventInput.model_validate_json(json.dumps({

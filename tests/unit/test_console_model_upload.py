@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from chalicelib import services
 from chalicelib.auth.principals import User
 from chalicelib.domain.model_conversion import ConsoleConverter, ConversionLimits
 from chalicelib.domain.racer_models import ModelStatus, UploadRequest
-from chalicelib import services
 from tests import console_fixture
 
 pytestmark = pytest.mark.unit

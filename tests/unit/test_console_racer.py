@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 
 from tests.unit.conftest import PASSWORD, Browser
-from tests.unit.racer_console_helpers import body, field_error, post, sign_in, signed_in, text
 from tests.unit.models_helpers import ModelsApi, archive_without_metadata, bearer, onnx_archive
+from tests.unit.racer_console_helpers import body, field_error, post, sign_in, signed_in, text
 
 pytestmark = pytest.mark.unit
 

@@ -6,8 +6,15 @@ from typing import Any
 
 import pytest
 
-from tests.unit.models_helpers import (ModelsApi, activate_device, archive_without_metadata, bearer, device_headers,
-                                       make_fleet, onnx_archive)
+from tests.unit.models_helpers import (
+    ModelsApi,
+    activate_device,
+    archive_without_metadata,
+    bearer,
+    device_headers,
+    make_fleet,
+    onnx_archive,
+)
 from tests.unit.racer_console_helpers import body, field_error, post, signed_in, text
 
 pytestmark = pytest.mark.unit

@@ -11,7 +11,8 @@ import pytest
 from moto.core.base_backend import BackendDict
 from werkzeug.test import Client
 
-from drem_local.durable.__main__ import EXIT_VERSION_MISMATCH, main as durable_main
+from drem_local.durable.__main__ import EXIT_VERSION_MISMATCH
+from drem_local.durable.__main__ import main as durable_main
 from drem_local.durable.server import DurableApp
 from drem_local.durable.state import DurableState, MotoVersionMismatch, running_moto_version
 

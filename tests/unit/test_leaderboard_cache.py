@@ -9,8 +9,14 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from chalicelib.domain.leaderboards import (LeaderboardPublisher, Materialised, PublicView, PublicViewCache,
-                                            StaleBoard, board_key)
+from chalicelib.domain.leaderboards import (
+    LeaderboardPublisher,
+    Materialised,
+    PublicView,
+    PublicViewCache,
+    StaleBoard,
+    board_key,
+)
 from tests.unit.race_helpers import Desk
 from tests.unit.scenario import Scenario
 

@@ -11,9 +11,18 @@ import pytest
 from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
 from chalicelib.formats.league_assembler import ExportProblem, assemble
 from chalicelib.formats.league_export import ExportLimits, read_export
-from tests.unit.league_helpers import (HYPERPARAMETERS, console_log, console_new_export, console_old_export,
-                                       droa_export, drem_sim_export, drfc_export, raw_tar_gz, tar_gz_of,
-                                       training_metrics)
+from tests.unit.league_helpers import (
+    HYPERPARAMETERS,
+    console_log,
+    console_new_export,
+    console_old_export,
+    drem_sim_export,
+    drfc_export,
+    droa_export,
+    raw_tar_gz,
+    tar_gz_of,
+    training_metrics,
+)
 
 pytestmark = pytest.mark.unit
 

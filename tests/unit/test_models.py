@@ -12,8 +12,14 @@ from typing import Any
 import pytest
 from chalice.test import Client
 
-from tests.unit.models_helpers import (ModelsApi, archive_without_metadata, bearer, onnx_archive, onnx_policy,
-                                       traversal_archive)
+from tests.unit.models_helpers import (
+    ModelsApi,
+    archive_without_metadata,
+    bearer,
+    onnx_archive,
+    onnx_policy,
+    traversal_archive,
+)
 
 pytestmark = pytest.mark.unit
 

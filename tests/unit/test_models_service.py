@@ -7,11 +7,11 @@ from typing import Any
 
 import pytest
 
-from chalicelib.auth.principals import User
-from chalicelib.formats.model_archive.limits import ArchiveLimits
-from chalicelib.domain.racer_models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
-from chalicelib.routes.racer_models import handle_upload_complete_event
 from chalicelib import services
+from chalicelib.auth.principals import User
+from chalicelib.domain.racer_models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
+from chalicelib.formats.model_archive.limits import ArchiveLimits
+from chalicelib.routes.racer_models import handle_upload_complete_event
 from tests.unit.models_helpers import onnx_archive, traversal_archive
 
 pytestmark = pytest.mark.unit

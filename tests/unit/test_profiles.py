@@ -5,8 +5,8 @@ from xml.etree import ElementTree
 
 import pytest
 
-from chalicelib.views.avatars import identicon_cells, identicon_svg
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE
+from chalicelib.views.avatars import identicon_cells, identicon_svg
 from tests.unit.users_helpers import call, error_message
 
 pytestmark = pytest.mark.unit

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from chalicelib.views.avatars import identicon_cells
 from chalicelib.domain.results import EventResults, ResultEntry, ResultsBoard
 from chalicelib.formats.results_pdf import certificates_pdf, podium_pdf, render_document, summary_pdf
+from chalicelib.views.avatars import identicon_cells
 from tests.unit.pdf_helpers import embedded_fonts, pdf_pages, pdf_text, pixels_of, words
 from tests.unit.race_helpers import Desk
 from tests.unit.scenario import Scenario

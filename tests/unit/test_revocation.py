@@ -83,8 +83,8 @@ def test_a_deleted_users_token_is_refused(client, users):
 
 def test_another_process_sees_the_revocation_within_the_cache_ttl(client, users, monkeypatch):
     # Another app process (another Lambda container) only learns of the mark when its cached copy expires.
-    from chalicelib.auth.revocation import REVOKED, RevocationList
     from chalicelib import services
+    from chalicelib.auth.revocation import REVOKED, RevocationList
 
     monkeypatch.setattr(REVOKED, "_ttl_s", 0.3)
     token = users.access_token("sam", ("racer",))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from typing import Any
 
 import pytest
 
@@ -108,54 +109,54 @@ def _race_id(desk: Desk, event_id: str, racer: str) -> str:
     return next(r["race_id"] for r in races if r["username"] == racer)
 
 
-def test_the_page_follows_submits_edits_and_deletes_through_the_digest(world: Desk, clock: FakeClock) -> None:
-    stockholm = next(e["event_id"] for e in world.ok(world.call("GET", "/api/events"))["events"]
+def test_the_page_follows_submits_edits_and_deletes_through_the_digest(raced_events: Desk, scenario: Scenario,
+                                                                       clock: Any) -> None:
+    stockholm = next(e["event_id"] for e in raced_events.ok(raced_events.call("GET", "/api/events"))["events"]
                      if e["name"] == "Summit Stockholm")
     assert [r["username"] for r in _stored_digest(stockholm)["races"]] == ["sven"]  # built when the race was submitted
 
-    world.users.create("nora", ("racer",))
-    _race(world, clock, stockholm, "nora", [8_500])
-    page = world.anonymous_get("/stats", headers=HTML).body.decode()
+    scenario.add_racers("nora").submitted_race("nora", [8_500], event_id=stockholm)
+    page = raced_events.anonymous_get("/stats", headers=HTML).body.decode()
     assert _cards(page)["Racers"] == "2" and _fastest(page)[0] == ("nora", "0:08.500", "Summit Stockholm")
 
-    nora = _race_id(world, stockholm, "nora")
-    lap_id = world.ok(world.call("GET", f"/api/events/{stockholm}/races/{nora}"))["laps"][0]["lap_id"]
-    world.ok(world.call("PUT", f"/api/events/{stockholm}/races/{nora}/laps/{lap_id}", {"is_valid": False}))
-    page = world.anonymous_get("/stats", headers=HTML).body.decode()
+    nora = _race_id(raced_events, stockholm, "nora")
+    race = f"/api/events/{stockholm}/races/{nora}"
+    lap_id = raced_events.ok(raced_events.call("GET", race))["laps"][0]["lap_id"]
+    raced_events.ok(raced_events.call("PUT", f"{race}/laps/{lap_id}", {"is_valid": False}))
+    page = raced_events.anonymous_get("/stats", headers=HTML).body.decode()
     assert _fastest(page)[0] == ("sven", "0:08.838", "Summit Stockholm")  # nora's only lap no longer counts
 
-    assert world.call("DELETE", f"/api/events/{stockholm}/races/{nora}").status_code == 204
-    page = world.anonymous_get("/stats", headers=HTML).body.decode()
+    assert raced_events.call("DELETE", f"/api/events/{stockholm}/races/{nora}").status_code == 204
+    page = raced_events.anonymous_get("/stats", headers=HTML).body.decode()
     assert _cards(page)["Racers"] == "1" and [r["username"] for r in _stored_digest(stockholm)["races"]] == ["sven"]
 
 
-def test_a_digest_lost_to_a_crash_is_rebuilt_by_the_publish_intent(world: Desk, clock: FakeClock,
+def test_a_digest_lost_to_a_crash_is_rebuilt_by_the_publish_intent(raced_events: Desk, scenario: Scenario, clock: Any,
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """Storage fails right after the race write (the digest write is lost): the race's publish intent stays, and
     the next race write finishes it, digest included, with no recompute by hand."""
     from chalicelib.domain.errors import ServiceUnavailable
     from chalicelib.storage.race_stats import DynamoStatsDigestStore
 
-    stockholm = next(e["event_id"] for e in world.ok(world.call("GET", "/api/events"))["events"]
+    stockholm = next(e["event_id"] for e in raced_events.ok(raced_events.call("GET", "/api/events"))["events"]
                      if e["name"] == "Summit Stockholm")
-    world.users.create("nora", ("racer",))
+    scenario.add_racers("nora")
     real_put = DynamoStatsDigestStore.put
 
     def storage_down(self, digest, listed_at_ms):  # type: ignore[no-untyped-def]
         raise ServiceUnavailable("The races table cannot be reached.")
 
     monkeypatch.setattr(DynamoStatsDigestStore, "put", storage_down)
-    _race(world, clock, stockholm, "nora", [8_500])  # acknowledged: the race is stored with its intent
+    scenario.submitted_race("nora", [8_500], event_id=stockholm)  # acknowledged: the race is stored with its intent
     assert [r["username"] for r in _stored_digest(stockholm)["races"]] == ["sven"]  # the digest is behind
 
     monkeypatch.setattr(DynamoStatsDigestStore, "put", real_put)
     clock.advance(60_000)  # the intent is old enough for any writer to finish it
-    world.users.create("olle", ("racer",))
-    _race(world, clock, stockholm, "olle", [9_900])
+    scenario.add_racers("olle").submitted_race("olle", [9_900], event_id=stockholm)
     assert sorted(r["username"] for r in _stored_digest(stockholm)["races"]) == ["nora", "olle", "sven"]
 
 
-def test_an_older_rebuild_never_overwrites_a_newer_digest(world: Desk) -> None:
+def test_an_older_rebuild_never_overwrites_a_newer_digest(raced_events: Desk) -> None:
     from chalicelib import services
     from chalicelib.domain.stats import EventDigest
     from chalicelib.settings import get_settings
@@ -170,14 +171,14 @@ def test_an_older_rebuild_never_overwrites_a_newer_digest(world: Desk) -> None:
     assert store.digests(["later-event"])["later-event"] == newer
 
 
-def test_an_event_without_a_digest_gets_one_on_the_first_read(world: Desk) -> None:
+def test_an_event_without_a_digest_gets_one_on_the_first_read(raced_events: Desk) -> None:
     from chalicelib.settings import get_settings
     from chalicelib.storage import clients
 
-    stockholm = next(e["event_id"] for e in world.ok(world.call("GET", "/api/events"))["events"]
+    stockholm = next(e["event_id"] for e in raced_events.ok(raced_events.call("GET", "/api/events"))["events"]
                      if e["name"] == "Summit Stockholm")
     clients.dynamodb().delete_item(TableName=get_settings().table("races"),
                                    Key={"pk": {"S": f"EVENT#{stockholm}"}, "sk": {"S": "STATS"}})  # e.g. imported
-    page = world.anonymous_get("/stats", headers=HTML).body.decode()
+    page = raced_events.anonymous_get("/stats", headers=HTML).body.decode()
     assert _fastest(page) == [("sven", "0:08.838", "Summit Stockholm")]
     assert _stored_digest(stockholm) is not None

@@ -126,8 +126,8 @@ def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
 
 def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
         desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
-    from chalicelib.domain.races import RaceService
     from chalicelib import services
+    from chalicelib.domain.races import RaceService
 
     eid, rid, timer = timed_track
     desk.ok(desk.strip(timer, eid, T0, "s"))

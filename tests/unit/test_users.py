@@ -204,8 +204,8 @@ def test_self_delete_removes_the_account_and_anonymises_the_profile(client, user
 
 
 def test_self_delete_removes_the_racers_models(client, users, aws_clients, stack):
-    from chalicelib.domain.racer_models import ModelRecord, ModelStatus, model_key
     from chalicelib import services
+    from chalicelib.domain.racer_models import ModelRecord, ModelStatus, model_key
 
     token = users.access_token("modeller", ("racer",))
     sub = call(client, "GET", "/api/me", token=token)[1]["sub"]
@@ -226,9 +226,10 @@ def test_self_delete_removes_the_racers_models(client, users, aws_clients, stack
 
 
 def test_self_delete_also_erases_models_the_racer_had_already_deleted(client, users, aws_clients, stack):
-    from chalicelib.domain.racer_models import ModelStatus
     from chalicelib import services
-    from tests.unit.models_helpers import ModelsApi, bearer as json_bearer, onnx_archive
+    from chalicelib.domain.racer_models import ModelStatus
+    from tests.unit.models_helpers import ModelsApi, onnx_archive
+    from tests.unit.models_helpers import bearer as json_bearer
 
     token = users.access_token("binned", ("racer",))
     racer = ModelsApi(client, json_bearer(token))

@@ -4,13 +4,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from chalicelib import services
 from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.tokens import VerifiedToken, verify_token
 from chalicelib.domain.errors import NotAuthenticated, TokenExpired
 from chalicelib.settings import Settings, get_settings
-from chalicelib import services
 
 
 @dataclass

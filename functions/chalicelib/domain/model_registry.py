@@ -16,11 +16,11 @@ from markupsafe import Markup
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.auth.principals import Principal
-from chalicelib.views import svg_plots
 from chalicelib.domain.errors import DremError, InvalidInput
 from chalicelib.domain.league import TRACK_PATTERN
-from chalicelib.formats.league_export import ExportLimits, read_tar_gz
 from chalicelib.domain.racer_models import ModelRecord, ModelService, ModelStatus, utc_now
+from chalicelib.formats.league_export import ExportLimits, read_tar_gz
+from chalicelib.views import svg_plots
 
 LINEAGE_MEMBER = "training/lineage.json"
 _LINEAGE_LIMITS = ExportLimits(max_file_bytes=2 * 1024 * 1024, max_total_read_bytes=2 * 1024 * 1024)

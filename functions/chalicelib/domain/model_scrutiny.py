@@ -17,8 +17,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib import logs
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.errors import Conflict, NotFound
-from chalicelib.formats.league_export import ExportLimits, read_tar_gz
 from chalicelib.domain.racer_models import ModelChanged, ModelRecord, ModelService, ModelStatus, ScrutineerResult
+from chalicelib.formats.league_export import ExportLimits, read_tar_gz
 
 MAX_LAPS = 3
 DEFAULT_TRACK_TYPE = "REINVENT_2018"

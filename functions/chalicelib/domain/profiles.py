@@ -11,9 +11,9 @@ from typing import Literal, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Role, User
-from chalicelib.views.avatars import identicon_svg
 from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.ownership import require_owner_or_role
+from chalicelib.views.avatars import identicon_svg
 from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.

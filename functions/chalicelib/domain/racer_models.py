@@ -25,12 +25,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from chalicelib import logs
 from chalicelib.auth.principals import Principal, Role
 from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, RateLimited
+from chalicelib.domain.model_conversion import ConversionOutcome
+from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
 from chalicelib.formats.model_archive.names import model_name_from_filename
 from chalicelib.formats.model_archive.report import ArchiveStatus
 from chalicelib.formats.model_archive.verdict import inspect_archive
-from chalicelib.domain.model_conversion import ConversionOutcome
-from chalicelib.domain.ownership import require_owner_or_role
 
 SAMPLE_OWNER = "default"
 UPLOAD_EXPIRES_S = 15 * 60

@@ -35,7 +35,7 @@ from chalicelib.formats.race_export import CsvFile, ExportKind, export_csv
 from drem_leaderboard import race_machine
 from drem_leaderboard.commands import RaceCommand, SetLapValidity
 from drem_leaderboard.errors import LapNotFoundError, RaceRuleError
-from drem_leaderboard.models import TERMINAL_STATUSES, LapSource, Race, RaceStatus, Racer, new_race
+from drem_leaderboard.models import TERMINAL_STATUSES, LapSource, Race, Racer, RaceStatus, new_race
 from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer

@@ -12,9 +12,9 @@ from datetime import date
 
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.views.avatars import NEUTRAL_COLOUR, identicon_cells
 from chalicelib.domain.events import Event
 from chalicelib.domain.profiles import PublicProfile
+from chalicelib.views.avatars import NEUTRAL_COLOUR, identicon_cells
 from chalicelib.views.public_views import gap_time, lap_time, safe_colour
 from drem_leaderboard.models import Race, RaceConfig, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, RacerProfile, rank

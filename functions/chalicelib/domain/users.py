@@ -229,8 +229,8 @@ class ModelsEraser:
         self._service = service
 
     def erase_owned_by(self, sub: str) -> int:
-        from chalicelib.domain.racer_models import ModelChanged, ModelStatus
         from chalicelib.domain.profiles import anonymised_name
+        from chalicelib.domain.racer_models import ModelChanged, ModelStatus
 
         store, files = self._service.store, self._service.files  # type: ignore[attr-defined]
         erased, token = 0, None

@@ -21,8 +21,8 @@ import qrcode
 from fpdf import FPDF
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.formats import pdf_fonts
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.formats import pdf_fonts
 
 QUIET_ZONE = 4
 LabelFormat = Literal["avery-l7160", "brother-dk-11202"]

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from chalice import Blueprint
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, SIGNED_IN, route
 from chalicelib.auth.principals import User
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from chalice import Blueprint
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, STAFF, route
 from chalicelib.auth.principals import Device, User
 from chalicelib.domain.assignments import AssignInput, StatusReport
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

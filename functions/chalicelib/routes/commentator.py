@@ -12,9 +12,16 @@ from pydantic import Field
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
 from chalicelib.auth.principals import User
+from chalicelib.routes.public_pages import (
+    PageOptions,
+    event_or_404,
+    fragment_headers,
+    live_race,
+    live_url,
+    read_live,
+    unchanged,
+)
 from chalicelib.views import public_views as views
-from chalicelib.routes.public_pages import (PageOptions, event_or_404, fragment_headers, live_race, live_url,
-                                            read_live, unchanged)
 from drem_web import i18n, render
 
 bp = Blueprint(__name__)

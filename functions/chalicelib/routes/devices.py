@@ -10,15 +10,20 @@ route acts on the caller's own device id, taken from its verified credential.
 from __future__ import annotations
 
 from collections.abc import Mapping
+
 from chalice import Blueprint, Response
+
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
 from chalicelib.auth.principals import Device, Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_activation
-from chalicelib.domain.activation import (ActivationCodeRequest, ActivationExchange, IssuedActivationCode,
-                                          IssuedCredential)
-from chalicelib.domain.devices import (Command, CommandAck, CommandRequest, DeviceView, MoveToFleet,
-                                      Telemetry)
+from chalicelib.domain.activation import (
+    ActivationCodeRequest,
+    ActivationExchange,
+    IssuedActivationCode,
+    IssuedCredential,
+)
+from chalicelib.domain.devices import Command, CommandAck, CommandRequest, DeviceView, MoveToFleet, Telemetry
 from chalicelib.domain.errors import InvalidInput
 
 bp = Blueprint(__name__)

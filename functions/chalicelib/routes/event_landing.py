@@ -5,8 +5,8 @@ from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
-from chalicelib.views.event_landing import landing_view
 from chalicelib.routes.public_pages import event_or_404
+from chalicelib.views.event_landing import landing_view
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -1,7 +1,6 @@
 """JSON API for events: staff read them, admins and operators create, replace and delete them."""
 from __future__ import annotations
 
-
 from chalice import Blueprint, Response
 
 from chalicelib import services

@@ -1,7 +1,6 @@
 """JSON API for fleets (admins and operators)."""
 from __future__ import annotations
 
-
 from chalice import Blueprint, Response
 
 from chalicelib import services

@@ -8,13 +8,19 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.devices import DeviceKind
-from chalicelib.formats.labels_pdf import (CarLabel, LabelFormat, RacerCard, car_labels_pdf, label_headers,
-                                          racer_card_pdf)
+from chalicelib.formats.labels_pdf import (
+    CarLabel,
+    LabelFormat,
+    RacerCard,
+    car_labels_pdf,
+    label_headers,
+    racer_card_pdf,
+)
 from chalicelib.routes.console.forms import submitted
-from chalicelib import services
 from chalicelib.settings import get_settings
 
 bp = Blueprint(__name__)

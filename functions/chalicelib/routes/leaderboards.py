@@ -4,12 +4,13 @@ answers 304 with an empty body while nothing changed."""
 from __future__ import annotations
 
 from collections.abc import Mapping
+
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.leaderboards import PublicView
-from chalicelib import services
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 
 bp = Blueprint(__name__)

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.league import Board, BoardQuery, Submission, SubmissionInput
 from chalicelib.views.league_views import board_view, submission_view
-from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)

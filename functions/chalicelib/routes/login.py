@@ -3,18 +3,18 @@ the JSON token exchange for API clients (`POST /api/auth/token`, `POST /api/auth
 from __future__ import annotations
 
 from collections.abc import Mapping
-from chalice import Blueprint, Response
 from typing import Literal
 
+from chalice import Blueprint, Response
 from pydantic import BaseModel, Field
 
+from chalicelib import services
 from chalicelib.auth import cookies
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.auth.rate_limits import client_address, guarded_sign_in
 from chalicelib.auth.revocation import REVOKED
-from chalicelib import services
 from chalicelib.auth.tokens import unverified_claim
 from chalicelib.domain.errors import InvalidInput, TokenExpired
 from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text

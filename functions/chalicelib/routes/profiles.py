@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.profiles import Profile, ProfileUpdate, PublicProfile, public_view
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

@@ -29,12 +29,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
-from chalicelib.views import public_views as views
 from chalicelib.domain.errors import NotFound
-from chalicelib.views.event_landing import landing_url
 from chalicelib.domain.events import Event
-from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 from chalicelib.settings import get_settings
+from chalicelib.views import public_views as views
+from chalicelib.views.event_landing import landing_url
+from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
 from drem_leaderboard.models import Race
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 from drem_web import i18n, render

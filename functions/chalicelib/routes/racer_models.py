@@ -10,13 +10,12 @@ from typing import Any
 
 from chalice import Blueprint, Response
 
-from chalicelib import logs
+from chalicelib import logs, services
 from chalicelib.auth.access import SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.model_scrutiny import ScrutineerRequest
 from chalicelib.domain.racer_models import ListQuery, UploadRequest
 from chalicelib.settings import get_settings
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

@@ -7,11 +7,11 @@ from collections.abc import Mapping
 from chalice import Blueprint, Response
 from pydantic import RootModel
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.numbers import lap_number
 from chalicelib.domain.races import CreateRaceInput, LapEdit
-from chalicelib import services
 from drem_leaderboard.commands import RaceCommand
 
 bp = Blueprint(__name__)

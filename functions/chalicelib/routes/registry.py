@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.model_registry import Evaluation, EvaluationInput
-from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -7,12 +7,12 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.results import EventResults, event_results
 from chalicelib.formats.results_pdf import render_document
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.stats import StatsFilter, compute, visible_events
 from chalicelib.views.stats_view import stats_page
-from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from chalice import Blueprint
 
+from chalicelib import services
 from chalicelib.auth.access import CAR, TIMER, route
 from chalicelib.auth.principals import Device
 from chalicelib.domain.timing import StripAnswer, StripPost
-from chalicelib import services
 
 bp = Blueprint(__name__)
 

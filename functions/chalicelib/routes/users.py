@@ -2,15 +2,25 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.domain.numbers import whole_number
-from chalicelib.domain.users import (MAX_PAGE, ConfirmSignUpForm, DeleteSelfForm, DirectoryUser, RegisteredUser,
-                                     RoleChange, SignUpForm, StaffRegistrationForm, UserPage)
-from chalicelib import services
+from chalicelib.domain.users import (
+    MAX_PAGE,
+    ConfirmSignUpForm,
+    DeleteSelfForm,
+    DirectoryUser,
+    RegisteredUser,
+    RoleChange,
+    SignUpForm,
+    StaffRegistrationForm,
+    UserPage,
+)
 
 bp = Blueprint(__name__)
 

@@ -12,7 +12,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.assignments import (AssignedModel, Assignment, AssignmentChanged, ModelProgress)
+from chalicelib.domain.assignments import AssignedModel, Assignment, AssignmentChanged, ModelProgress
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import NotFound
 from chalicelib.storage.aws_errors import call, error_code, translate_common

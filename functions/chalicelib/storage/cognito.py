@@ -6,8 +6,14 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import (AccountNotReady, DremError, InvalidCredentials, InvalidInput, NotFound,
-                                      TokenExpired)
+from chalicelib.domain.errors import (
+    AccountNotReady,
+    DremError,
+    InvalidCredentials,
+    InvalidInput,
+    NotFound,
+    TokenExpired,
+)
 from chalicelib.domain.identity import NewPasswordChallenge, Tokens, password_policy_text
 from chalicelib.storage.aws_errors import error_code, translate_common
 

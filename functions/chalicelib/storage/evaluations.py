@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from typing import Any
 
-
 from chalicelib.domain.model_registry import Evaluation
 from chalicelib.storage.aws_errors import call
 

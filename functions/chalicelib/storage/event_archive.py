@@ -157,9 +157,8 @@ class StackStorage:
 
         from chalicelib.domain.events import Event
         from chalicelib.domain.leaderboards import LeaderboardPublisher
-        from chalicelib.domain.profiles import ProfileService
+        from chalicelib.domain.profiles import ProfileService, ProfilesForBoards
         from chalicelib.domain.races import RaceService
-        from chalicelib.domain.profiles import ProfilesForBoards
         from chalicelib.storage.leaderboards import DynamoBoardStore
         from chalicelib.storage.profiles import DynamoProfileStore
         from chalicelib.storage.races import DynamoRaceStore

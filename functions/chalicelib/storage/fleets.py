@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import Any
 
-
 from chalicelib.domain.fleets import FleetRecord
 from chalicelib.storage.aws_errors import call
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-
 from chalicelib.domain.profiles import Profile
 from chalicelib.storage.aws_errors import call
 

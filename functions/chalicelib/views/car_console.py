@@ -8,8 +8,7 @@ from pydantic import BaseModel
 
 from chalicelib.auth.principals import User
 from chalicelib.domain.assignments import AssignmentService, CarModelStatus
-from chalicelib.domain.devices import (TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService,
-                                       DeviceView)
+from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.racer_models import ListQuery, ModelService, ModelStatus
 

@@ -23,9 +23,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def gather(state_dir: Path) -> dict:
-    from drem_local.stack import APP_HEALTH_PATH, HEALTH_PATH, http_get, pid_is_drem, read_stack_file
     from drem_local.durable.journal import read_all
     from drem_local.durable.state import JOURNAL_FILE, SNAPSHOT_DIR, VERSION_FILE
+    from drem_local.stack import APP_HEALTH_PATH, HEALTH_PATH, http_get, pid_is_drem, read_stack_file
 
     info = read_stack_file(state_dir) or {}
     urls = info.get("urls", {})

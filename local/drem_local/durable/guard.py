@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
-from collections.abc import Callable
 from xml.sax.saxutils import escape
 
 from drem_local.durable.sigv4 import Refusal, raw_target, verify

@@ -9,14 +9,12 @@ import io
 import json
 import logging
 import threading
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
-from collections.abc import Callable
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import (MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot,
-                                         service_of)
+from drem_local.durable.classify import MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot, service_of
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response

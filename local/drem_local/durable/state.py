@@ -5,10 +5,10 @@ import io
 import logging
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable
 
 from drem_local.durable.classify import PERSISTED
 from drem_local.durable.journal import Journal, JournalRecord

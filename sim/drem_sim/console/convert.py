@@ -89,8 +89,8 @@ def read_graph(pb_path: Path, metadata: dict[str, Any]) -> Any:
 
 def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Conversion:
     """Convert and verify; write `onnx_path` only for a conversion that passed."""
-    import openvino as ov
     import onnx
+    import openvino as ov
 
     from drem_sim.console.graph_to_onnx import UnsupportedGraph, openvino_to_onnx
 

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from drem_sim.learn.dataset import ActionScale
 from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, NETWORK_NAME, OUTPUT_NAME
+from drem_sim.learn.dataset import ActionScale
 
 ARCHIVE_NAME = re.compile(r"^[A-Za-z0-9_-]+\.tar\.gz$")
 METADATA_MEMBER = "model_metadata.json"

@@ -4,10 +4,10 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
-from collections.abc import Sequence
 
 import numpy as np
 

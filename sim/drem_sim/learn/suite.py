@@ -6,9 +6,9 @@ Averages over tracks flatter a model (a gentle track hides a tight one), so the 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable, Sequence
 
 from drem_sim.learn.evaluate import EvalMetrics, drive
 from drem_sim.learn.track_sets import TrackDirection

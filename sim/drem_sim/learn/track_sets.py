@@ -6,8 +6,8 @@ removes both of its directions; holding `name:reverse` out removes only that dir
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 REVERSE_SUFFIX = ":reverse"
 ALL = "all"

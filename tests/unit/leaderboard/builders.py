@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from drem_leaderboard import commands as c
-from drem_leaderboard.models import Lap, LapSource, Race, RaceConfig, RaceStatus, Racer, new_race
+from drem_leaderboard.models import Lap, LapSource, Race, RaceConfig, Racer, RaceStatus, new_race
 from drem_leaderboard.race_machine import apply
 
 T0 = 1_700_000_000_000  # server clock at race creation

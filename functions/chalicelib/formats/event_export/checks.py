@@ -25,13 +25,13 @@ from pydantic import BaseModel, ValidationError
 from chalicelib.auth.principals import Role
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
+from chalicelib.domain.profiles import anonymised_name
+from chalicelib.domain.racer_models import ModelStatus, model_key, upload_key
+from chalicelib.domain.races import RaceRecord
 from chalicelib.formats.event_export.records import EventBundle, InvalidExport, Item, archive_file
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
 from chalicelib.formats.model_archive.verdict import inspect_archive
-from chalicelib.domain.racer_models import ModelStatus, model_key, upload_key
-from chalicelib.domain.profiles import anonymised_name
 from chalicelib.views.public_views import OverlaySnapshot
-from chalicelib.domain.races import RaceRecord
 from drem_leaderboard.models import TERMINAL_STATUSES, Race, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 

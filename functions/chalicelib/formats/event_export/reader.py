@@ -15,10 +15,23 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from chalicelib.formats.event_export.checks import check_bundle
-from chalicelib.formats.event_export.records import (ALLOWED_PK, ARCHIVES_FILE, ATTRIBUTE_TYPES, EVENT_ID,
-                                                     EVENT_SCOPED_TABLES, FORMAT, FORMAT_VERSION, ITEM_FILES,
-                                                     MANIFEST, USERS_FILE, Account, ArchiveEntry, EventBundle,
-                                                     InvalidExport, Item)
+from chalicelib.formats.event_export.records import (
+    ALLOWED_PK,
+    ARCHIVES_FILE,
+    ATTRIBUTE_TYPES,
+    EVENT_ID,
+    EVENT_SCOPED_TABLES,
+    FORMAT,
+    FORMAT_VERSION,
+    ITEM_FILES,
+    MANIFEST,
+    USERS_FILE,
+    Account,
+    ArchiveEntry,
+    EventBundle,
+    InvalidExport,
+    Item,
+)
 from chalicelib.formats.event_export.writer import checksums
 from chalicelib.formats.member_names import RefusedMember, vet_folder_file
 

@@ -7,8 +7,17 @@ from pathlib import Path
 from typing import Any
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.formats.event_export.records import (ARCHIVES_FILE, FORMAT, FORMAT_VERSION, ITEM_FILES, MANIFEST,
-                                                     NOT_CARRIED, USERS_FILE, EventBundle, sorted_items)
+from chalicelib.formats.event_export.records import (
+    ARCHIVES_FILE,
+    FORMAT,
+    FORMAT_VERSION,
+    ITEM_FILES,
+    MANIFEST,
+    NOT_CARRIED,
+    USERS_FILE,
+    EventBundle,
+    sorted_items,
+)
 
 
 def render_files(bundle: EventBundle) -> dict[str, bytes]:

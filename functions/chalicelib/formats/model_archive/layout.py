@@ -9,8 +9,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from chalicelib.formats.model_archive.report import ModelKind, not_valid
-from chalicelib.formats.model_metadata import (ModelMetadata, ModelMetadataError, check_for_stock_car,
-                                              parse_model_metadata_json)
+from chalicelib.formats.model_metadata import (
+    ModelMetadata,
+    ModelMetadataError,
+    check_for_stock_car,
+    parse_model_metadata_json,
+)
 
 METADATA_MEMBER = "model_metadata.json"
 # DROA (deepracer-on-aws) also accepts metadata under agent/; we do too, but only when the root copy is absent.

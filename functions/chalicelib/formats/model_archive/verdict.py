@@ -14,8 +14,13 @@ extracts:
 """
 from __future__ import annotations
 
-from chalicelib.formats.model_archive.layout import (METADATA_MEMBERS, check_stock_car_metadata, metadata_member,
-                                                     model_file, read_metadata)
+from chalicelib.formats.model_archive.layout import (
+    METADATA_MEMBERS,
+    check_stock_car_metadata,
+    metadata_member,
+    model_file,
+    read_metadata,
+)
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
 from chalicelib.formats.model_archive.report import ArchiveProblem, ArchiveReport, ArchiveStatus
 from chalicelib.formats.model_archive.safe_tar import ArchiveSource, OpenOutput, SafeTarReader, TarFacts

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
-from chalicelib.views.overlay_links import OverlayLinkOptions, overlay_link
 from chalicelib.routes.console import event_form
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
-from chalicelib import services
 from chalicelib.settings import get_settings
+from chalicelib.views.overlay_links import OverlayLinkOptions, overlay_link
 from drem_web import render
 
 bp = Blueprint(__name__)

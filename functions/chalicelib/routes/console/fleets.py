@@ -6,17 +6,24 @@ from urllib.parse import quote
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.activation import ActivationCodeRequest
-from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
 from chalicelib.domain.devices import CommandRequest
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.fleets import FleetInput
-from chalicelib.routes.console.forms import (SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, redirect,
-                                             submitted)
-from chalicelib import services
+from chalicelib.routes.console.forms import (
+    SHOWN_ON_FORM,
+    checkbox,
+    error_status,
+    field_errors,
+    optional,
+    redirect,
+    submitted,
+)
 from chalicelib.settings import get_settings
+from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.assignments import Assignment
@@ -14,7 +15,6 @@ from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
 from chalicelib.domain.racer_models import ListQuery, ModelRecord, ModelStatus
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted, submitted_list
-from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -9,19 +9,19 @@ from urllib.parse import quote
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
 from chalicelib.domain.countries import COUNTRY_CHOICES
-from chalicelib.domain.racer_models import ListQuery, ModelStatus
+from chalicelib.domain.identity import password_policy_text
 from chalicelib.domain.passwords import PasswordChangeForm
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE, ProfileUpdate
+from chalicelib.domain.racer_models import ListQuery, ModelStatus
 from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
-from chalicelib.domain.identity import password_policy_text
-from chalicelib.http_errors import retry_after_headers
-from chalicelib import services
 from chalicelib.htmx import is_htmx
+from chalicelib.http_errors import retry_after_headers
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
 from drem_leaderboard.ranking import DEFAULT_HIGHLIGHT_COLOUR
 from drem_web import render

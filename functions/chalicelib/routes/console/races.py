@@ -9,15 +9,15 @@ from typing import Any
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain import audit
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.races import LapEdit
-from chalicelib.views.timekeeper_desk import clock_text
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, redirect, submitted
-from chalicelib import services
+from chalicelib.views.timekeeper_desk import clock_text
 from drem_web import render
 
 bp = Blueprint(__name__)

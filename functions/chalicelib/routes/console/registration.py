@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, REGISTRATION, route
 from chalicelib.auth.principals import User
+from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.users import RegisteredUser, StaffRegistrationForm
 from chalicelib.htmx import is_htmx
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
-from chalicelib.domain.countries import COUNTRY_CHOICES
-from chalicelib import services
 from drem_web import render
 
 bp = Blueprint(__name__)

@@ -7,12 +7,12 @@ import re
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.races import CreateRaceInput
-from chalicelib.views.timekeeper_desk import ScreenCommand, TimekeeperDesk, TimekeeperScreen
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, submitted
-from chalicelib import services
+from chalicelib.views.timekeeper_desk import ScreenCommand, TimekeeperDesk, TimekeeperScreen
 from drem_web import render
 
 bp = Blueprint(__name__)
