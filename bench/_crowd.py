@@ -4,9 +4,7 @@ every `interval` (uniform in [0.5, 1.5] x the pages' period). Unlike wrk, whose 
 connection keeps its own token, so after a change each spectator gets its own 200 as real browsers would.
 
 Runs in a child process (spawned) so it shares no interpreter lock with the browser driver; `run_crowd` returns its
-figures through a queue when `stop` is set. With an `active` event (bench/lan.py) the crowd polls only while it is
-set: its connections stay open while paused, and on resuming each spectator first waits a random part of a period,
-so the crowd comes back spread out, not as one burst.
+figures through a queue when `stop` is set.
 """
 from __future__ import annotations
 
@@ -20,15 +18,11 @@ _VERSION = re.compile(rb'data-version="([^"]+)"')
 
 
 async def _spectator(host: str, port: int, path: str, token: str, period_s: float, stop: Any,
-                     stats: dict[str, Any], rng: random.Random, active: asyncio.Event | None = None) -> None:
+                     stats: dict[str, Any], rng: random.Random) -> None:
     await asyncio.sleep(rng.uniform(0, period_s))  # arrive spread out, not as one burst
     reader, writer = await asyncio.open_connection(host, port)
     try:
         while not stop.is_set():
-            if active is not None and not active.is_set():
-                await active.wait()
-                await asyncio.sleep(rng.uniform(0, period_s))
-                continue
             request = (f"GET {path}&v={token} HTTP/1.1\r\nHost: {host}:{port}\r\nHX-Request: true\r\n"
                        "Accept: text/html\r\n\r\n").encode()
             started = time.perf_counter()
@@ -48,30 +42,14 @@ async def _spectator(host: str, port: int, path: str, token: str, period_s: floa
         writer.close()
 
 
-async def _follow(flag: Any, stop: Any, active: asyncio.Event) -> None:
-    """Mirror the cross-process `flag` into `active` (one poll every 20 ms, not one per spectator); on stop, set it
-    so paused spectators wake up and end."""
-    while not stop.is_set():
-        if flag.is_set():
-            active.set()
-        else:
-            active.clear()
-        await asyncio.sleep(0.02)
-    active.set()
-
-
 async def _crowd(host: str, port: int, fragments: list[tuple[str, str]], size: int, period_s: float,
-                 stop: Any, flag: Any = None) -> dict[str, Any]:
+                 stop: Any) -> dict[str, Any]:
     stats: dict[str, Any] = {"latencies_ms": [], "statuses": {}, "errors": []}
     rng = random.Random(size)
-    active = None if flag is None else asyncio.Event()
-    follower = None if flag is None else asyncio.create_task(_follow(flag, stop, active))
     started = time.perf_counter()
-    tasks = [asyncio.create_task(_spectator(host, port, *fragments[i % len(fragments)], period_s, stop, stats, rng,
-                                            active)) for i in range(size)]
+    tasks = [asyncio.create_task(_spectator(host, port, *fragments[i % len(fragments)], period_s, stop, stats, rng))
+             for i in range(size)]
     await asyncio.gather(*tasks)
-    if follower is not None:
-        await follower
     stats["seconds"] = time.perf_counter() - started
     return stats
 
@@ -87,9 +65,8 @@ class _ThreadsafeFlag:
 
 
 def run_crowd(host: str, port: int, fragments: list[tuple[str, str]], size: int, period_s: float, stop: Any,
-              results: Any, active: Any = None) -> None:
-    stats = asyncio.run(_crowd(host, port, fragments, size, period_s, _ThreadsafeFlag(stop),
-                               None if active is None else _ThreadsafeFlag(active)))
+              results: Any) -> None:
+    stats = asyncio.run(_crowd(host, port, fragments, size, period_s, _ThreadsafeFlag(stop)))
     latencies = sorted(stats["latencies_ms"])
     count = len(latencies)
     results.put({

@@ -1,10 +1,10 @@
 """The devices of one door of bench/lan.py: headless Chromium on the leaderboard and the overlay, a timer device
-posting strip crossings and a crowd of spectators (bench/_crowd.py), all against one app URL. bench/lan.py runs one
-on loopback and one inside the venue network namespace, both for the whole run, and drives them over stdin/stdout
-(one JSON line each way) in alternating blocks: the crowd polls only during its door's block.
+posting strip crossings and a crowd of spectators (bench/_crowd.py, polling all the time), all against one app URL.
+bench/lan.py runs one on loopback and one inside the venue network namespace, both for the whole run, and drives
+them over stdin/stdout (one JSON line each way): a command is one lap, given to both doors at once.
 
 Each lap is timed as bench/live_latency.py times it (POST sent -> first animation frame with the lap, per page, the
-page clock's offset calibrated per block), but posted at a chosen point of one page's poll cycle: `wait_ms` before
+page clock's offset calibrated per lap), but posted at a chosen point of one page's poll cycle: `wait_ms` before
 that page's next poll, read from the poll start times the page's htmx reports (`htmx:beforeRequest` on the live
 region). Most of a lap's latency is the wait for the next poll (0-500 ms, uniform when laps land at random); both
 doors get the same drawn waits, so a pair of laps differs only by what the doors cost. The wait actually achieved is
@@ -113,36 +113,25 @@ def main(spec: dict[str, Any]) -> int:
         lapper = live_latency.Lapper(url, race)
         fragments = [live_latency.live_path(page, PAGES[name]) for name, page in pages.items()]
         spawn = multiprocessing.get_context("spawn")
-        stop, active, queue = spawn.Event(), spawn.Event(), spawn.Queue()
+        stop, queue = spawn.Event(), spawn.Queue()
         crowd = spawn.Process(target=_crowd.run_crowd, args=(spec["host"], spec["port"], fragments, spec["crowd"],
-                                                             poll_ms / 1000, stop, queue, active), daemon=True)
+                                                             poll_ms / 1000, stop, queue), daemon=True)
         crowd.start()
-        active_s = 0.0
+        time.sleep(live_latency.WARM_UP_S)
         reply({"ready": True, "poll_ms": poll_ms})
         try:
             for line in sys.stdin:
                 command = json.loads(line)
                 if command["cmd"] == "stop":
                     break
-                offsets, bounds = {}, {}
-                for name, page in pages.items():
-                    offsets[name], bounds[name] = live_latency.clock_offset_ms(page)
-                resumed = time.monotonic()
-                active.set()
-                time.sleep(command["warm_up_s"])
-                try:
-                    laps = [lap(pages, offsets, lapper, lap_spec, poll_ms) for lap_spec in command["laps"]]
-                finally:
-                    active.clear()
-                    active_s += time.monotonic() - resumed
-                reply({"laps": laps, "clock_error_ms": max(bounds.values())})
+                offsets = {name: live_latency.clock_offset_ms(page)[0] for name, page in pages.items()}
+                reply(lap(pages, offsets, lapper, command["lap"], poll_ms))
         finally:
             stop.set()
             load = queue.get(timeout=60)
             crowd.join(30)
             browser.close()
-    reply({"crowd_polls": load["polls"], "crowd_rate": load["polls"] / active_s if active_s else 0.0,
-           "crowd_p99_ms": load["p99_ms"], "crowd_errors": load["errors"] + load["other"],
+    reply({"crowd_rate": load["rate"], "crowd_p99_ms": load["p99_ms"], "crowd_errors": load["errors"] + load["other"],
            "crowd_first_error": load["first_error"]})
     return 0
 
