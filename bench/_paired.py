@@ -13,13 +13,8 @@ Pair = tuple[float, float]  # (loopback, LAN)
 
 
 def median_of_ratios(pairs: Sequence[Pair]) -> float:
-    """Median of LAN / loopback over the pairs (one ratio per round)."""
+    """Median of LAN / loopback over the pairs (one ratio per round or lap)."""
     return statistics.median(lan / loopback for loopback, lan in pairs)
-
-
-def ratio_of_medians(pairs: Sequence[Pair]) -> float:
-    """LAN median / loopback median (the p50 figures side by side)."""
-    return statistics.median(lan for _, lan in pairs) / statistics.median(loopback for loopback, _ in pairs)
 
 
 def bootstrap_ci(pairs: Sequence[Pair], statistic: Callable[[Sequence[Pair]], float], *, resamples: int = 4000,

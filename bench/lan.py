@@ -24,12 +24,14 @@ figures are those of a laptop serving both at once; the ratio is what the goal j
   whole run, both crowds polling throughout; each round is one lap per door, both at once. Most of a latency is the
   wait for the page's next poll (0-500 ms): each lap is aimed at a drawn point of one page's poll cycle (pages
   alternating, the draws stratified over the cycle), and both doors get the same draw, so a pair differs only by
-  what the doors cost. Figure, per page: LAN p50 / loopback p50 over the `--laps` laps aimed at it.
+  what the doors cost. Judged, per page: the median over the `--laps` laps aimed at it of LAN latency / its
+  loopback twin's; the p50s and their ratio are printed beside (that ratio ignores the pairing: one lap that missed
+  a poll on one door only moves a p50 by up to 500 ms).
 - Storage: PutItem median through the durable server (journal + signature check) vs a plain moto_server (as
   bench/startup.py), in alternating blocks.
 - The signature check alone: microseconds per verified PutItem request, in process (no network, no moto).
 Goal (issue 12): serving the venue network, with the security layers, costs <= 10 % against loopback: capacity
-LAN/loopback >= 0.90 (both cases) and live p50 LAN/loopback <= 1.10 (both pages), each held by its whole 95 %
+LAN/loopback >= 0.90 (both cases) and live latency LAN/loopback <= 1.10 (both pages), each held by its whole 95 %
 interval (an interval that straddles the goal is "inconclusive", and so not met); PutItem durable/plain <= 1.4x.
 
     .venv/bin/python bench/lan.py [--quick] [--rounds 8] [--seconds 3] [--laps 10] [--spectators 100]
@@ -345,27 +347,31 @@ def report_live(live: list[dict[str, dict[str, Any]]], crowds: dict[str, dict[st
     """Prints the live-latency table; (name, figure, verdict) per page."""
     print(f"\nLive latency: {2 * args.laps} rounds of one lap per door, both doors at once, {args.spectators} "
           f"spectators per door; per page the {args.laps} laps aimed at its poll cycle (the same waits for both "
-          f"doors); figure = LAN p50 / loopback p50; paired diff = median of LAN - loopback; aim error = median "
+          f"doors); LAN/loopback = the median over laps of each lap's LAN latency / its loopback twin's (judged); "
+          f"p50 ratio = LAN p50 / loopback p50 (not judged: it ignores the pairing, so one lap that missed a poll on "
+          f"one door moves it by up to 500 ms); paired diff = median of LAN - loopback; aim error = median "
           f"|achieved - drawn wait|")
     print(f"{'':12s} {'loopback p50/p95':>16s} {'LAN p50/p95':>12s} {'LAN/loopback':>13s} {'95 % interval':>14s} "
-          f"{'paired diff':>12s} {'aim error':>10s}")
+          f"{'laps min-max':>13s} {'p50 ratio':>10s} {'paired diff':>12s} {'aim error':>10s}")
     results = []
     for page in PAGES:
         aimed = [lap for lap in live if lap["loopback"]["target"] == page]
         pairs = [(lap["loopback"]["latencies"][page], lap["lan"]["latencies"][page]) for lap in aimed]
-        estimate = _paired.ratio_of_medians(pairs)
-        low, high = _paired.bootstrap_ci(pairs, _paired.ratio_of_medians)
+        estimate = _paired.median_of_ratios(pairs)
+        low, high = _paired.bootstrap_ci(pairs, _paired.median_of_ratios)
         verdict = judge((low, high), GOALS["live"], higher_is_better=False)
+        spread = [lan / loopback for loopback, lan in pairs]
         loop, lan = [p[0] for p in pairs], [p[1] for p in pairs]
         diff = statistics.median(b - a for a, b in pairs)
         aim_errors = [abs(lap[door]["achieved_wait_ms"] - lap[door]["wait_ms"]) for lap in aimed for door in DOORS
                       if lap[door]["achieved_wait_ms"] is not None]
         p50s = (_stack.percentile(loop, 50), _stack.percentile(lan, 50))
         print(f"{page:12s} {p50s[0]:10.0f}/{_stack.percentile(loop, 95):<5.0f} {p50s[1]:6.0f}/"
-              f"{_stack.percentile(lan, 95):<5.0f} {estimate:12.3f}x {low:8.3f}-{high:.3f} {diff:+9.1f} ms "
-              f"{statistics.median(aim_errors):7.1f} ms  {verdict}")
+              f"{_stack.percentile(lan, 95):<5.0f} {estimate:12.3f}x {low:8.3f}-{high:.3f} {min(spread):7.2f}-"
+              f"{max(spread):.2f} {p50s[1] / p50s[0]:9.3f}x {diff:+9.1f} ms {statistics.median(aim_errors):7.1f} ms  "
+              f"{verdict}")
         name = "board" if page == "leaderboard" else page
-        results.append((f"{page} live p50", f"live_{name}={estimate:.3f}x[{low:.3f}-{high:.3f}](p50 "
+        results.append((f"{page} live latency", f"live_{name}={estimate:.3f}x[{low:.3f}-{high:.3f}](p50 "
                         f"{p50s[0]:.0f}:{p50s[1]:.0f}ms)", verdict))
     for door in DOORS:
         crowd = crowds[door]
@@ -422,8 +428,9 @@ def main(argv: list[str] | None = None) -> int:
     figures = " ".join(figure for _, figure, _ in results)
     print(f"RESULT lan: {figures} sigcheck={check_us:.0f}us ({args.rounds}x{args.seconds:.0f}s wrk rounds, "
           f"{args.laps} aimed laps per page; LAN/loopback [95% interval]) | goal the venue network with the security "
-          f"layers costs <=10%: LAN/loopback polls per app-server CPU-second >=0.90 and live p50 <=1.10, each over "
-          f"its whole 95% interval; putitem durable/plain <=1.4x | {'not met' if failing else 'met'}")
+          f"layers costs <=10%: LAN/loopback polls per app-server CPU-second >=0.90 and live latency (median of "
+          f"paired laps) <=1.10, each over its whole 95% interval; putitem durable/plain <=1.4x | "
+          f"{'not met' if failing else 'met'}")
     return 0
 
 
