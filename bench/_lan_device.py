@@ -49,7 +49,8 @@ def next_poll_wait(page: Any, offset_ms: float, wait_ms: float, poll_ms: int) ->
     polls = page.evaluate("() => window.__polls.slice(-6)")
     if not polls:
         raise SystemExit("the page has not polled yet")
-    gaps = [b - a for a, b in zip(polls, polls[1:]) if b - a < 1.5 * poll_ms]  # a dropped poll leaves a double gap
+    # A dropped poll leaves a double gap.
+    gaps = [b - a for a, b in zip(polls, polls[1:], strict=False) if b - a < 1.5 * poll_ms]
     period = statistics.median(gaps) if gaps else float(poll_ms)
     now_in_page = time.time() * 1000 + offset_ms
     next_poll = polls[-1] + period
