@@ -36,8 +36,8 @@ up: install
 demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
-# pytest-xdist workers for `make test`: one per core (CI has two). Tests that share a folder of the repository are
-# kept in one worker with xdist_group (tests/infra/conftest.py). TEST_WORKERS=0 runs them all in this process.
+# pytest-xdist workers for `make test`: one per core (CI has two). Each test file runs whole in one worker, and the
+# infra tests (they share functions/vendor/) in one (tests/conftest.py). TEST_WORKERS=0 runs all in this process.
 TEST_WORKERS ?= auto
 
 ## make test: install the test dependencies (Python, npm htmx, Debian chromium), lint, then run every test

@@ -69,11 +69,3 @@ def template(templates):
 def app_template(templates):
     return templates[1]
 
-
-def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist (`make test` runs two workers) every infra test runs in one worker: they share
-    functions/vendor/, which `drem build` replaces, so two workers building it at once would pull it from under each
-    other's synth."""
-    for item in items:
-        if "tests/infra/" in str(item.fspath):
-            item.add_marker(pytest.mark.xdist_group("infra"))
