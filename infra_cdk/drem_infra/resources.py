@@ -95,10 +95,6 @@ class CustomAttributeSpec:
     # Cognito custom attributes are String or Number; drem only needs strings.
     data_type: str = "String"
 
-    @property
-    def claim(self) -> str:
-        return f"custom:{self.name}"
-
 
 @dataclass(frozen=True)
 class UserPoolSpec:
