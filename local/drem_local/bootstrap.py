@@ -19,6 +19,7 @@ from drem_infra import resources
 from drem_infra.resources import BucketSpec, TableSpec
 from drem_local.storage_keys import StorageKeys, sign_every_call
 
+
 class StackDriftError(RuntimeError):
     """An existing resource has a shape that differs from `drem_infra.resources` (it will not be altered)."""
 
