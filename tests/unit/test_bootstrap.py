@@ -165,6 +165,15 @@ def test_generated_passwords_follow_the_policy_they_are_asked_of():
         assert any(c.isdigit() for c in password)
 
 
+def test_an_import_password_file_is_held_to_the_pool_policy():
+    from chalicelib.domain.event_transfer.passwords import password_problem
+    policy = resources.USER_POOL.password_policy
+    assert password_problem(policy.random_password()) is None
+    assert password_problem("Aa1!" * (policy.minimum_length // 4 - 1) + "Aa1") == \
+        f"is shorter than {policy.minimum_length} characters"
+    assert password_problem("a" * policy.minimum_length + "A1") == "has no symbol"
+
+
 def test_a_table_with_other_keys_is_reported_not_silently_used(clients):
     from drem_local.bootstrap import StackDriftError
     clients.dynamodb.create_table(
