@@ -79,9 +79,6 @@ class CredentialStore:
                                "`drem car activate --code CODE --api URL` first") from None
         return StoredCredential(**data)
 
-    def forget(self) -> None:
-        self.path.unlink(missing_ok=True)
-
 
 def _code_hash(code: str) -> str:
     # Codes are typed by people: the server ignores case, spaces and dashes, and so does the match here.

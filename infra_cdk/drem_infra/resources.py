@@ -7,6 +7,8 @@ into the Lambda bundle, so it must not import boto3 or aws_cdk.
 from __future__ import annotations
 
 import os
+import secrets
+import string
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -60,6 +62,10 @@ class BucketSpec:
     eventbridge: bool = False
 
 
+# Generated passwords use a few of the symbols Cognito counts as symbols: none is a quote, a backslash or a space.
+PASSWORD_SYMBOLS = "!#%*+-=?@^_"
+
+
 @dataclass(frozen=True)
 class PasswordPolicy:
     minimum_length: int = 8
@@ -69,6 +75,18 @@ class PasswordPolicy:
     require_symbols: bool = True
     temporary_password_validity_days: int = 2
 
+    def random_password(self, length: int = 16) -> str:
+        """A random password this policy accepts: one character of each required class, the rest from all of them."""
+        classes = [chars for chars, required in ((string.ascii_lowercase, self.require_lowercase),
+                                                 (string.ascii_uppercase, self.require_uppercase),
+                                                 (string.digits, self.require_digits),
+                                                 (PASSWORD_SYMBOLS, self.require_symbols)) if required]
+        alphabet = string.ascii_letters + string.digits + PASSWORD_SYMBOLS
+        chars = [secrets.choice(c) for c in classes]
+        chars += [secrets.choice(alphabet) for _ in range(max(length, self.minimum_length) - len(chars))]
+        secrets.SystemRandom().shuffle(chars)
+        return "".join(chars)
+
 
 @dataclass(frozen=True)
 class CustomAttributeSpec:
@@ -76,10 +94,6 @@ class CustomAttributeSpec:
     mutable: bool = True
     # Cognito custom attributes are String or Number; drem only needs strings.
     data_type: str = "String"
-
-    @property
-    def claim(self) -> str:
-        return f"custom:{self.name}"
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import secrets
-import string
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -20,8 +18,6 @@ from botocore.exceptions import ClientError
 from drem_infra import resources
 from drem_infra.resources import BucketSpec, TableSpec
 from drem_local.storage_keys import StorageKeys, sign_every_call
-
-_SYMBOLS = "!#%*+-=?@^_"
 
 
 class StackDriftError(RuntimeError):
@@ -145,15 +141,8 @@ def ensure_admin(clients: AwsClients, outputs: StackOutputs, username: str = "ad
 
 
 def generate_password(length: int = 20) -> str:
-    """A random password that meets `resources.USER_POOL.password_policy` (one of each required class)."""
-    policy = resources.USER_POOL.password_policy
-    length = max(length, policy.minimum_length, 4)
-    classes = [string.ascii_lowercase, string.ascii_uppercase, string.digits, _SYMBOLS]
-    chars = [secrets.choice(c) for c in classes]
-    alphabet = "".join(classes)
-    chars += [secrets.choice(alphabet) for _ in range(length - len(chars))]
-    secrets.SystemRandom().shuffle(chars)
-    return "".join(chars)
+    """A random password that meets `resources.USER_POOL.password_policy`."""
+    return resources.USER_POOL.password_policy.random_password(length)
 
 
 # --- DynamoDB -------------------------------------------------------------------------------------------------

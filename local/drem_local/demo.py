@@ -254,9 +254,6 @@ class Demo:
         return {"Leaderboard": f"{base}/leaderboard/{event}", "Overlay (track 1)": f"{base}/overlay/{event}?trackId=1",
                 "Commentator (staff sign-in)": f"{base}/commentator/{event}", "Console": f"{base}/console/races"}
 
-    def cars_alive(self) -> bool:
-        return all(car.process is not None and car.process.alive() for car in self.cars)
-
     def stop(self, timeout: float = 10.0) -> None:
         """Ctrl-C to each car (it stops driving and flushes its outbox), then SIGTERM/SIGKILL any that will not go."""
         running = [car.process for car in self.cars if car.process is not None and car.process.alive()]

@@ -155,6 +155,25 @@ def test_generated_passwords_meet_the_pool_policy():
         assert any(c.isdigit() for c in password) and any(not c.isalnum() for c in password)
 
 
+def test_generated_passwords_follow_the_policy_they_are_asked_of():
+    from drem_infra.resources import PasswordPolicy
+    longer_without_symbols = PasswordPolicy(minimum_length=30, require_symbols=False)
+    for _ in range(50):
+        password = longer_without_symbols.random_password(length=12)
+        assert len(password) == 30
+        assert any(c.islower() for c in password) and any(c.isupper() for c in password)
+        assert any(c.isdigit() for c in password)
+
+
+def test_an_import_password_file_is_held_to_the_pool_policy():
+    from chalicelib.domain.event_transfer.passwords import password_problem
+    policy = resources.USER_POOL.password_policy
+    assert password_problem(policy.random_password()) is None
+    assert password_problem("Aa1!" * (policy.minimum_length // 4 - 1) + "Aa1") == \
+        f"is shorter than {policy.minimum_length} characters"
+    assert password_problem("a" * policy.minimum_length + "A1") == "has no symbol"
+
+
 def test_a_table_with_other_keys_is_reported_not_silently_used(clients):
     from drem_local.bootstrap import StackDriftError
     clients.dynamodb.create_table(

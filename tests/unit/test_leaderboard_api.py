@@ -25,6 +25,9 @@ def test_conditional_get_answers_304_until_the_board_changes(desk: Desk, clock: 
     assert etag == f'"v{body["version"]}"'
     unchanged = desk.anonymous_get(f"/api/leaderboard/{eid}?track=1", headers={"If-None-Match": etag})
     assert unchanged.status_code == 304 and unchanged.body == b""
+    # A cache that holds several versions sends them all, weak ones marked W/ (RFC 9110 13.1.2).
+    among_others = desk.anonymous_get(f"/api/leaderboard/{eid}?track=1", headers={"If-None-Match": f'"v0", W/{etag}'})
+    assert among_others.status_code == 304
     since = desk.anonymous_get(f"/api/leaderboard/{eid}?track=1&since={body['version']}")
     assert since.status_code == 304 and since.body == b""
 

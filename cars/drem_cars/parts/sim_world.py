@@ -40,10 +40,6 @@ class SimWorld:
         self._lock = threading.Lock()
 
     @property
-    def sim_time_s(self) -> float:
-        return self.env.sim_time
-
-    @property
     def resets(self) -> int:
         return self.env.resets
 

@@ -17,7 +17,7 @@ from typing import Annotated, Any, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.domain.errors import Forbidden, InvalidInput, NotFound
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
 TRACK_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
@@ -224,10 +224,6 @@ class LeagueService:
         if not removed:
             raise NotFound(f"{racer} has no submission on {track}.", field="racer")
         return removed
-
-
-class BoardChanged(Conflict):
-    """Two pushes raced for the same board item; the store retries (the loser re-reads)."""
 
 
 def checked_track(track: str) -> str:

@@ -6,8 +6,6 @@ storage adapters stay the only code that talks to AWS.
 from __future__ import annotations
 
 import re
-import secrets
-import string
 from typing import Annotated, Protocol
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
@@ -24,7 +22,6 @@ _USERNAME_CHARS = re.compile(r"^[a-zA-Z0-9._-]+$")
 _CHARS_MESSAGE = "A username may contain only letters, digits, '.', '_' and '-'."
 # Deliberately simple: the directory sends a code to it, which is the real check.
 _EMAIL = re.compile(r"^[^@\s<>\"']+@[^@\s<>\"']+\.[^@\s<>\"']+$")
-_PASSWORD_SYMBOLS = "!#%*+-=?@^_"
 MAX_PAGE = 60
 
 
@@ -65,16 +62,6 @@ def check_password(password: str, field: str = "password") -> str:
     if missing:
         raise InvalidInput(f"This password is too weak. {password_policy_text()}", field=field)
     return password
-
-
-def temporary_password(length: int = 16) -> str:
-    """Random, meets the pool policy (one of each required class)."""
-    classes = [string.ascii_lowercase, string.ascii_uppercase, string.digits, _PASSWORD_SYMBOLS]
-    chars = [secrets.choice(c) for c in classes]
-    alphabet = "".join(classes)
-    chars += [secrets.choice(alphabet) for _ in range(length - len(chars))]
-    secrets.SystemRandom().shuffle(chars)
-    return "".join(chars)
 
 
 # The checks raise InvalidInput (not ValueError) so the 400 carries DREM's own wording for each rule.
@@ -295,7 +282,7 @@ class UserService:
         """Create the account, profile and racer group. Registering the same name and email again while the racer
         has never signed in finishes whatever is missing and shows a new temporary password (the answer of the
         first attempt may never have reached the desk)."""
-        password = temporary_password()
+        password = resources.USER_POOL.password_policy.random_password()
         resumed = False
         try:
             sub = self._directory.create_user(form.username, form.email, form.country_code, password)

@@ -11,6 +11,7 @@ from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.leaderboards import PublicView
+from chalicelib.routes.responses import etag_matches
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 
 bp = Blueprint(__name__)
@@ -22,8 +23,7 @@ def conditional(view: PublicView) -> Response:
     query: Mapping[str, str] = request.query_params or {}
     since = query.get("since")
     headers: dict[str, str | list[str]] = {"ETag": etag, "Cache-Control": "no-cache"}
-    offered = [tag.strip().removeprefix("W/") for tag in (request.headers.get("if-none-match") or "").split(",")]
-    if etag in offered or since == str(view.version):
+    if etag_matches(etag, request.headers.get("if-none-match")) or since == str(view.version):
         return Response(body="", status_code=304, headers=headers)
     return Response(body=view.body, status_code=200, headers={**headers, "Content-Type": "application/json"})
 

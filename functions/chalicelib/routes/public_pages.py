@@ -31,6 +31,7 @@ from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.events import Event
+from chalicelib.routes.responses import etag_matches
 from chalicelib.settings import get_settings
 from chalicelib.views import public_views as views
 from chalicelib.views.event_landing import landing_url
@@ -135,8 +136,7 @@ def unchanged(token: str, client_token: str, if_none_match: str | None) -> Respo
     etag = f'"live-{token}"'
     if client_token == token:
         return Response(body="", status_code=204, headers={"Cache-Control": "no-store"})
-    offered = [tag.strip().removeprefix("W/") for tag in (if_none_match or "").split(",")]
-    if etag in offered:
+    if etag_matches(etag, if_none_match):
         return Response(body="", status_code=304, headers={"ETag": etag, "Cache-Control": "no-cache"})
     return None
 

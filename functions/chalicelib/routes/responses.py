@@ -21,6 +21,12 @@ def redirect(location: str, *, cookies: list[str] | None = None) -> Response:
     return Response(body="", status_code=303, headers=headers)
 
 
+def etag_matches(etag: str, if_none_match: str | None) -> bool:
+    """Whether an `If-None-Match` header names `etag` (weak comparison: a `W/` prefix is ignored, RFC 9110 13.1.2)."""
+    offered = [tag.strip().removeprefix("W/") for tag in (if_none_match or "").split(",")]
+    return etag in offered
+
+
 def safe_next(path: str | None) -> str:
     """Only same-site paths: "/races" yes; "//evil", "/\\evil", "/\\t/evil", "https://…", or any of those
     percent-encoded, no (open redirects). Anything doubtful becomes "/"."""

@@ -10,12 +10,10 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.assignments import AssignedModel, Assignment, AssignmentChanged, ModelProgress
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import NotFound
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import call, write_if
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.events import DynamoEventStore
 
@@ -54,33 +52,20 @@ class DynamoAssignmentStore:
     def put(self, assignment: Assignment, *, expected_version: int) -> None:
         condition = ("attribute_not_exists(pk)" if expected_version == 0 else "version = :expected")
         values = {} if expected_version == 0 else {":expected": {"N": str(expected_version)}}
-        try:
-            self._client.put_item(TableName=self._table, Item=_item(assignment), ConditionExpression=condition,
-                                  **({"ExpressionAttributeValues": values} if values else {}))
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise AssignmentChanged(assignment.device_id) from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        if not write_if(self._client, "put_item", _SERVICE, TableName=self._table, Item=_item(assignment),
+                        ConditionExpression=condition, **({"ExpressionAttributeValues": values} if values else {})):
+            raise AssignmentChanged(assignment.device_id)
 
     def record_progress(self, device_id: str, model_id: str, progress: ModelProgress) -> bool:
         """Store the car's report; False when the model is no longer assigned (nothing written)."""
-        try:
-            self._client.update_item(
-                TableName=self._table, Key=assignment_key(device_id),
-                UpdateExpression="SET progress.#model = :progress ADD version :one",
-                ConditionExpression="attribute_exists(pk) AND contains(model_ids, :model)",
-                ExpressionAttributeNames={"#model": model_id},
-                ExpressionAttributeValues={":progress": {"S": progress.model_dump_json()}, ":one": {"N": "1"},
-                                           ":model": {"S": model_id}})
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                return False
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
-        return True
+        return write_if(
+            self._client, "update_item", _SERVICE,
+            TableName=self._table, Key=assignment_key(device_id),
+            UpdateExpression="SET progress.#model = :progress ADD version :one",
+            ConditionExpression="attribute_exists(pk) AND contains(model_ids, :model)",
+            ExpressionAttributeNames={"#model": model_id},
+            ExpressionAttributeValues={":progress": {"S": progress.model_dump_json()}, ":one": {"N": "1"},
+                                       ":model": {"S": model_id}})
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
         return call(self._client, operation, _SERVICE, **kwargs)

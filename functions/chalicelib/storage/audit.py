@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from chalicelib.domain.audit import AuditEntry
-from chalicelib.storage.aws_errors import call
+from chalicelib.storage.aws_errors import all_items, call
 
 _SERVICE = "The races table (audit trail)"
 AUDIT_PREFIX = "AUDIT#"
@@ -37,10 +37,5 @@ class DynamoAuditLog:
             "TableName": self._table, "ConsistentRead": True,
             "KeyConditionExpression": "pk = :pk AND begins_with(sk, :prefix)",
             "ExpressionAttributeValues": {":pk": {"S": f"EVENT#{event_id}"}, ":prefix": {"S": AUDIT_PREFIX}}}
-        entries = []
-        while True:
-            page = call(self._dynamodb, "query", _SERVICE, **kwargs)
-            entries.extend(AuditEntry.model_validate_json(item["doc"]["S"]) for item in page.get("Items", []))
-            if "LastEvaluatedKey" not in page:
-                return entries
-            kwargs["ExclusiveStartKey"] = page["LastEvaluatedKey"]
+        return [AuditEntry.model_validate_json(item["doc"]["S"])
+                for item in all_items(self._dynamodb, "query", _SERVICE, **kwargs)]

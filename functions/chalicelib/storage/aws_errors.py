@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import re
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
@@ -75,3 +76,33 @@ def call(client: Any, operation: str, service: str, *args: Any, **kwargs: Any) -
         return getattr(client, operation)(*args, **kwargs)
     except (ClientError, BotoCoreError) as exc:
         raise translate_common(exc, service, write=is_write(operation)) from exc
+
+
+def all_items(client: Any, operation: str, service: str, **kwargs: Any) -> Iterator[dict[str, Any]]:
+    """Every item of a DynamoDB `query` or `scan`, page after page (a page's LastEvaluatedKey is where the next one
+    starts). Lazy: a caller that stops early reads no further page."""
+    while True:
+        page = call(client, operation, service, **kwargs)
+        yield from page.get("Items", [])
+        if "LastEvaluatedKey" not in page:
+            return
+        kwargs = {**kwargs, "ExclusiveStartKey": page["LastEvaluatedKey"]}
+
+
+# A DynamoDB write whose condition did not hold: the single-item form, and a transaction one of whose conditions
+# failed (DynamoDB names the item in CancellationReasons; drem's callers only need "nothing was written").
+_CONDITION_FAILED = {"ConditionalCheckFailedException", "TransactionCanceledException"}
+
+
+def write_if(client: Any, operation: str, service: str, **kwargs: Any) -> bool:
+    """`client.operation(**kwargs)` for a conditional write: False when its condition failed (nothing was written),
+    True when it was written; any other AWS failure becomes the domain error `translate_common` picks."""
+    try:
+        getattr(client, operation)(**kwargs)
+    except ClientError as exc:
+        if error_code(exc) in _CONDITION_FAILED:
+            return False
+        raise translate_common(exc, service, write=True) from exc
+    except BotoCoreError as exc:
+        raise translate_common(exc, service, write=True) from exc
+    return True

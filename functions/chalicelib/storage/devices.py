@@ -13,17 +13,15 @@ from decimal import Decimal
 from typing import Any
 
 from boto3.dynamodb.types import TypeDeserializer, TypeSerializer
-from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.activation import ActivationExchange, ActivationRecord
 from chalicelib.domain.devices import Command, CommandAck, CommandStatus, DeviceRecord, StatusEntry, Telemetry
-from chalicelib.domain.errors import Conflict, DremError
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.domain.errors import Conflict
+from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The fleet table"
 _META = "META"
 _STATUS_KEY = {"pk": {"S": "STATUS"}, "sk": {"S": "ALL"}}
-_CONDITION_FAILED = "ConditionalCheckFailedException"
 _serializer, _deserializer = TypeSerializer(), TypeDeserializer()
 
 
@@ -56,10 +54,8 @@ class DynamoDeviceStore:
 
     def set_fleet(self, device_id: str, fleet_id: str | None) -> None:
         value = {"S": fleet_id} if fleet_id else {"NULL": True}
-        try:
-            self._call("update_item", Key=device_key(device_id), UpdateExpression="SET fleetId = :f",
-                       ConditionExpression="attribute_exists(pk)", ExpressionAttributeValues={":f": value})
-        except _ConditionFailed:
+        if not self._write_if("update_item", Key=device_key(device_id), UpdateExpression="SET fleetId = :f",
+                              ConditionExpression="attribute_exists(pk)", ExpressionAttributeValues={":f": value}):
             return  # deregistered meanwhile: nothing to move
         if not self._update_status_entry(device_id, "SET devices.#d.fleet_id = :f", {":f": value}):
             record = self.get_device(device_id)
@@ -67,12 +63,9 @@ class DynamoDeviceStore:
                 self.put_status_entry(StatusEntry.for_device(record))
 
     def replace_secret_hash(self, device_id: str, secret_hash: str) -> bool:
-        try:
-            self._call("update_item", Key=device_key(device_id), UpdateExpression="SET secretHash = :h",
-                       ConditionExpression="attribute_exists(pk)", ExpressionAttributeValues={":h": {"S": secret_hash}})
-        except _ConditionFailed:
-            return False
-        return True
+        return self._write_if("update_item", Key=device_key(device_id), UpdateExpression="SET secretHash = :h",
+                              ConditionExpression="attribute_exists(pk)",
+                              ExpressionAttributeValues={":h": {"S": secret_hash}})
 
     # --- activation codes ---
     def put_activation(self, record: ActivationRecord) -> None:
@@ -114,15 +107,8 @@ class DynamoDeviceStore:
                                  "UpdateExpression": "SET devices.#d = :e",
                                  "ExpressionAttributeNames": {"#d": device.device_id},
                                  "ExpressionAttributeValues": {":e": _attr(line.model_dump(mode="json"))}}}
-        try:
-            self._client.transact_write_items(TransactItems=[mark_code, register, board_line])
-        except ClientError as exc:
-            if error_code(exc) == "TransactionCanceledException":
-                return False
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
-        return True
+        return write_if(self._client, "transact_write_items", _SERVICE,
+                        TransactItems=[mark_code, register, board_line])
 
     # --- status board ---
     def status_board(self) -> dict[str, StatusEntry]:
@@ -145,34 +131,25 @@ class DynamoDeviceStore:
             {":now": {"N": str(now_ms)}, ":t": _attr(telemetry.model_dump(mode="json"))})
 
     def _update_status_entry(self, device_id: str, expression: str, values: dict[str, Any]) -> bool:
-        try:
-            self._call("update_item", Key=_STATUS_KEY, UpdateExpression=expression,
-                       ConditionExpression="attribute_exists(devices.#d)",
-                       ExpressionAttributeNames={"#d": device_id}, ExpressionAttributeValues=values)
-        except _ConditionFailed:
-            return False
-        return True
+        return self._write_if("update_item", Key=_STATUS_KEY, UpdateExpression=expression,
+                              ConditionExpression="attribute_exists(devices.#d)",
+                              ExpressionAttributeNames={"#d": device_id}, ExpressionAttributeValues=values)
 
     def _remove_status_entry(self, device_id: str) -> None:
-        try:
-            self._call("update_item", Key=_STATUS_KEY, UpdateExpression="REMOVE devices.#d",
+        self._write_if("update_item", Key=_STATUS_KEY, UpdateExpression="REMOVE devices.#d",
                        ConditionExpression="attribute_exists(devices.#d)", ExpressionAttributeNames={"#d": device_id})
-        except _ConditionFailed:
-            pass
 
     def _ensure_status_item(self) -> None:
         # SET devices.#d needs the `devices` map to exist; create it once, never overwriting a live board.
-        try:
-            self._call("put_item", Item={**_STATUS_KEY, "devices": {"M": {}}},
+        self._write_if("put_item", Item={**_STATUS_KEY, "devices": {"M": {}}},
                        ConditionExpression="attribute_not_exists(pk)")
-        except _ConditionFailed:
-            pass
 
     # --- commands ---
     def put_command(self, command: Command) -> None:
         item = {**command_key(command.device_id, command.command_id), "doc": {"S": command.model_dump_json()},
                 "status": {"S": command.status.value}}
-        self._call("put_item", Item=item, ConditionExpression="attribute_not_exists(pk)")
+        if not self._write_if("put_item", Item=item, ConditionExpression="attribute_not_exists(pk)"):
+            raise Conflict(f"Command {command.command_id} already exists.")
 
     def commands(self, device_id: str, *, pending_only: bool = False) -> list[Command]:
         kwargs: dict[str, Any] = {
@@ -182,13 +159,8 @@ class DynamoDeviceStore:
             kwargs["FilterExpression"] = "#s = :pending"
             kwargs["ExpressionAttributeNames"] = {"#s": "status"}
             kwargs["ExpressionAttributeValues"][":pending"] = {"S": CommandStatus.PENDING.value}
-        found, start = [], None
-        while True:
-            page = self._call("query", ConsistentRead=True, **kwargs, **({"ExclusiveStartKey": start} if start else {}))
-            found.extend(Command.model_validate_json(item["doc"]["S"]) for item in page.get("Items", []))
-            start = page.get("LastEvaluatedKey")
-            if not start:
-                return found
+        return [Command.model_validate_json(item["doc"]["S"]) for item in all_items(
+            self._client, "query", _SERVICE, TableName=self._table, ConsistentRead=True, **kwargs)]
 
     def ack_command(self, device_id: str, command_id: str, ack: CommandAck, now_ms: int) -> Command | None:
         key = command_key(device_id, command_id)
@@ -197,31 +169,20 @@ class DynamoDeviceStore:
             return None
         acked = Command.model_validate_json(item["doc"]["S"]).model_copy(
             update={"status": ack.result, "message": ack.message, "acked_at_ms": now_ms})
-        try:
-            # Only a pending command can be acknowledged, and only once.
-            self._call("put_item",
-                       Item={**key, "doc": {"S": acked.model_dump_json()}, "status": {"S": ack.result.value}},
-                       ConditionExpression="#s = :pending", ExpressionAttributeNames={"#s": "status"},
-                       ExpressionAttributeValues={":pending": {"S": CommandStatus.PENDING.value}})
-        except _ConditionFailed as exc:
-            raise Conflict(f"Command {command_id} was already acknowledged.") from exc
+        # Only a pending command can be acknowledged, and only once.
+        if not self._write_if("put_item",
+                              Item={**key, "doc": {"S": acked.model_dump_json()}, "status": {"S": ack.result.value}},
+                              ConditionExpression="#s = :pending", ExpressionAttributeNames={"#s": "status"},
+                              ExpressionAttributeValues={":pending": {"S": CommandStatus.PENDING.value}}):
+            raise Conflict(f"Command {command_id} was already acknowledged.")
         return acked
 
     # --- plumbing ---
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
-        try:
-            return getattr(self._client, operation)(TableName=self._table, **kwargs)
-        except ClientError as exc:
-            if error_code(exc) == _CONDITION_FAILED:
-                raise _ConditionFailed() from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        return call(self._client, operation, _SERVICE, TableName=self._table, **kwargs)
 
-
-class _ConditionFailed(DremError):
-    def __init__(self) -> None:
-        super().__init__("A conditional write did not apply.")
+    def _write_if(self, operation: str, **kwargs: Any) -> bool:
+        return write_if(self._client, operation, _SERVICE, TableName=self._table, **kwargs)
 
 
 def _device_item(device: DeviceRecord) -> dict[str, Any]:

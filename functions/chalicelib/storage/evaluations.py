@@ -6,12 +6,15 @@ evaluation of every version of that owner's models (what the registry plots), wi
 """
 from __future__ import annotations
 
+from itertools import islice
 from typing import Any
 
 from chalicelib.domain.model_registry import Evaluation
-from chalicelib.storage.aws_errors import call
+from chalicelib.storage.aws_errors import all_items, call
 
 _SERVICE = "The evaluation store"
+# A bound on what one owner's chart reads, whatever a runaway client recorded.
+_MOST_EVALUATIONS = 5000
 
 
 class DynamoEvaluationStore:
@@ -25,15 +28,9 @@ class DynamoEvaluationStore:
             "body": {"S": evaluation.model_dump_json()}})
 
     def for_owner(self, owner_sub: str) -> list[Evaluation]:
-        found: list[Evaluation] = []
-        request: dict[str, Any] = dict(TableName=self._table, KeyConditionExpression="pk = :pk",
-                                       ExpressionAttributeValues={":pk": {"S": f"EVALS#{owner_sub}"}})
-        while True:
-            reply = self._call("query", **request)
-            found.extend(Evaluation.model_validate_json(item["body"]["S"]) for item in reply.get("Items", []))
-            if "LastEvaluatedKey" not in reply or len(found) >= 5000:
-                return found
-            request["ExclusiveStartKey"] = reply["LastEvaluatedKey"]
+        items = all_items(self._client, "query", _SERVICE, TableName=self._table, KeyConditionExpression="pk = :pk",
+                          ExpressionAttributeValues={":pk": {"S": f"EVALS#{owner_sub}"}})
+        return [Evaluation.model_validate_json(item["body"]["S"]) for item in islice(items, _MOST_EVALUATIONS)]
 
     def _call(self, operation: str, **kwargs: Any) -> Any:
         return call(self._client, operation, _SERVICE, **kwargs)

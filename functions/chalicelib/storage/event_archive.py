@@ -18,7 +18,7 @@ from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.formats.event_export.records import Account, Item
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import all_items, error_code, translate_common, write_if
 from chalicelib.storage.users import COUNTRY_ATTRIBUTE, translate_account_error
 
 # Where `drem up` keeps the keys its storage server accepts (drem_local.storage_keys.KEYS_FILE).
@@ -108,26 +108,13 @@ class StackStorage:
         if sk_prefix:
             condition += " AND begins_with(sk, :prefix)"
             values[":prefix"] = {"S": sk_prefix}
-        items, start = [], None
-        while True:
-            page = self._db("query", table, KeyConditionExpression=condition, ExpressionAttributeValues=values,
-                            ConsistentRead=True, **({"ExclusiveStartKey": start} if start else {}))
-            items.extend(_to_json(i) for i in page.get("Items", []))
-            start = page.get("LastEvaluatedKey")
-            if not start:
-                return items
+        items = all_items(self._dynamodb, "query", f"The {table} table", TableName=self._table(table),
+                          KeyConditionExpression=condition, ExpressionAttributeValues=values, ConsistentRead=True)
+        return [_to_json(i) for i in items]
 
     def put_new_item(self, table: str, item: Item) -> bool:
-        try:
-            self._dynamodb.put_item(TableName=self._table(table), Item=_from_json(item),
-                                    ConditionExpression="attribute_not_exists(pk)")
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                return False
-            raise translate_common(exc, f"The {table} table") from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, f"The {table} table") from exc
-        return True
+        return write_if(self._dynamodb, "put_item", f"The {table} table", TableName=self._table(table),
+                        Item=_from_json(item), ConditionExpression="attribute_not_exists(pk)")
 
     # --- objects ----------------------------------------------------------------------------------------------------
 

@@ -11,7 +11,7 @@ from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import Conflict, NotFound
 from chalicelib.domain.events import Event
-from chalicelib.storage.aws_errors import error_code, translate_common
+from chalicelib.storage.aws_errors import all_items, translate_common, write_if
 
 _SERVICE = "The events table"
 _META = "META"
@@ -35,20 +35,9 @@ class DynamoEventStore:
 
     def list(self) -> list[Event]:
         # An occasional staff listing; the table holds only event items.
-        events, start = [], None
-        while True:
-            kwargs: dict[str, Any] = {"TableName": self._table, "FilterExpression": "sk = :meta",
-                                      "ExpressionAttributeValues": {":meta": {"S": _META}}}
-            if start:
-                kwargs["ExclusiveStartKey"] = start
-            try:
-                page = self._client.scan(**kwargs)
-            except (ClientError, BotoCoreError) as exc:
-                raise translate_common(exc, _SERVICE) from exc
-            events.extend(_event(item) for item in page.get("Items", []))
-            start = page.get("LastEvaluatedKey")
-            if not start:
-                return events
+        return [_event(item) for item in all_items(self._client, "scan", _SERVICE, TableName=self._table,
+                                                   FilterExpression="sk = :meta",
+                                                   ExpressionAttributeValues={":meta": {"S": _META}})]
 
     def create(self, event: Event) -> None:
         self._put(event, "attribute_not_exists(pk)", {}, Conflict("An event with this id already exists."))
@@ -58,15 +47,9 @@ class DynamoEventStore:
                   Conflict("Someone else changed this event meanwhile; reload it and try again."))
 
     def delete(self, event_id: str) -> None:
-        try:
-            self._client.delete_item(TableName=self._table, Key=event_key(event_id),
-                                     ConditionExpression="attribute_exists(pk)")
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise NotFound(f"There is no event {event_id}.") from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        if not write_if(self._client, "delete_item", _SERVICE, TableName=self._table, Key=event_key(event_id),
+                        ConditionExpression="attribute_exists(pk)"):
+            raise NotFound(f"There is no event {event_id}.")
 
     def _put(self, event: Event, condition: str, values: dict[str, Any], on_condition: Exception) -> None:
         item = {**event_key(event.event_id), "eventId": {"S": event.event_id},
@@ -74,14 +57,8 @@ class DynamoEventStore:
         kwargs: dict[str, Any] = {"TableName": self._table, "Item": item, "ConditionExpression": condition}
         if values:
             kwargs["ExpressionAttributeValues"] = values
-        try:
-            self._client.put_item(**kwargs)
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise on_condition from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        if not write_if(self._client, "put_item", _SERVICE, **kwargs):
+            raise on_condition
 
 
 class DynamoLiveRaceProbe:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from chalicelib.domain.fleets import FleetRecord
-from chalicelib.storage.aws_errors import call
+from chalicelib.storage.aws_errors import all_items, call
 
 _SERVICE = "The fleet table"
 
@@ -30,15 +30,10 @@ class DynamoFleetStore:
 
     def list_fleets(self) -> list[FleetRecord]:
         # An occasional staff listing over the (small) fleet table.
-        found, start = [], None
-        while True:
-            page = self._call("scan", FilterExpression="begins_with(pk, :f) AND sk = :meta",
-                              ExpressionAttributeValues={":f": {"S": "FLEET#"}, ":meta": {"S": "META"}},
-                              **({"ExclusiveStartKey": start} if start else {}))
-            found.extend(_fleet(item) for item in page.get("Items", []))
-            start = page.get("LastEvaluatedKey")
-            if not start:
-                return found
+        items = all_items(self._client, "scan", _SERVICE, TableName=self._table,
+                          FilterExpression="begins_with(pk, :f) AND sk = :meta",
+                          ExpressionAttributeValues={":f": {"S": "FLEET#"}, ":meta": {"S": "META"}})
+        return [_fleet(item) for item in items]
 
     def put_fleet(self, fleet: FleetRecord) -> None:
         self._call("put_item", Item={**fleet_key(fleet.fleet_id), "fleetId": {"S": fleet.fleet_id},

@@ -13,10 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.leaderboards import Materialised, PublicView, StaleBoard
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import call, write_if
 
 _SERVICE = "The leaderboards table"
 
@@ -61,14 +59,8 @@ class DynamoBoardStore:
         else:
             kwargs["ConditionExpression"] = "version = :expected"
             kwargs["ExpressionAttributeValues"] = {":expected": {"N": str(expected_version)}}
-        try:
-            self._client.put_item(**kwargs)
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise StaleBoard(sort_key) from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        if not write_if(self._client, "put_item", _SERVICE, **kwargs):
+            raise StaleBoard(sort_key)
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
         return call(self._client, operation, _SERVICE, **kwargs)

@@ -14,11 +14,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.errors import Conflict
 from chalicelib.domain.league import BoardEntry, Submission
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The league store"
 _BOARD_SK = "BOARD"
@@ -48,17 +46,11 @@ class DynamoLeagueStore:
             entries, version = self._board(submission.track)
             entries[submission.racer] = submission.entry()
             board_put = self._board_put(submission.track, entries, version)
-            try:
-                self._client.transact_write_items(TransactItems=[
+            if write_if(self._client, "transact_write_items", _SERVICE, TransactItems=[
                     {"Put": {"TableName": self._table, "Item": history,
                              "ConditionExpression": "attribute_not_exists(pk)"}},
-                    board_put])
+                    board_put]):
                 return
-            except ClientError as exc:
-                if error_code(exc) != "TransactionCanceledException":
-                    raise translate_common(exc, _SERVICE) from exc
-            except BotoCoreError as exc:
-                raise translate_common(exc, _SERVICE) from exc
         raise Conflict("The league board is busy; push again in a moment.")
 
     def submission(self, track: str, racer: str, submission_id: str) -> Submission | None:
@@ -74,12 +66,9 @@ class DynamoLeagueStore:
             if racer not in entries and not keys:
                 return 0
             entries.pop(racer, None)
-            try:
-                self._client.transact_write_items(TransactItems=[self._board_put(track, entries, version)])
+            if write_if(self._client, "transact_write_items", _SERVICE,
+                        TransactItems=[self._board_put(track, entries, version)]):
                 break
-            except ClientError as exc:
-                if error_code(exc) != "TransactionCanceledException":
-                    raise translate_common(exc, _SERVICE) from exc
         else:
             raise Conflict("The league board is busy; delete again in a moment.")
         for key in keys:
@@ -87,17 +76,11 @@ class DynamoLeagueStore:
         return max(len(keys), 1)
 
     def _history_keys(self, track: str, racer: str) -> list[dict[str, Any]]:
-        keys: list[dict[str, Any]] = []
-        request: dict[str, Any] = dict(
-            TableName=self._table, KeyConditionExpression="pk = :pk AND begins_with(sk, :prefix)",
-            ExpressionAttributeValues={":pk": _pk(track), ":prefix": {"S": f"RACER#{racer}#SUB#"}},
-            ProjectionExpression="pk, sk")
-        while True:
-            reply = self._call("query", **request)
-            keys.extend({"pk": item["pk"], "sk": item["sk"]} for item in reply.get("Items", []))
-            if "LastEvaluatedKey" not in reply:
-                return keys
-            request["ExclusiveStartKey"] = reply["LastEvaluatedKey"]
+        items = all_items(self._client, "query", _SERVICE,
+                          TableName=self._table, KeyConditionExpression="pk = :pk AND begins_with(sk, :prefix)",
+                          ExpressionAttributeValues={":pk": _pk(track), ":prefix": {"S": f"RACER#{racer}#SUB#"}},
+                          ProjectionExpression="pk, sk")
+        return [{"pk": item["pk"], "sk": item["sk"]} for item in items]
 
     def _board(self, track: str) -> tuple[dict[str, BoardEntry], int | None]:
         reply = self._call("get_item", TableName=self._table, ConsistentRead=True,

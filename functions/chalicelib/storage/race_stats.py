@@ -12,10 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.stats import EventDigest
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import call, write_if
 
 _SERVICE = "The races table"
 _SK = "STATS"
@@ -46,15 +44,9 @@ class DynamoStatsDigestStore:
         return found
 
     def put(self, digest: EventDigest, listed_at_ms: int) -> None:
-        try:
-            self._client.put_item(TableName=self._table,
-                                  Item={**_key(digest.event_id), "doc": {"S": digest.model_dump_json()},
-                                        "listedAtMs": {"N": str(listed_at_ms)}},
-                                  ConditionExpression="attribute_not_exists(pk) OR listedAtMs <= :listed",
-                                  ExpressionAttributeValues={":listed": {"N": str(listed_at_ms)}})
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                return  # a digest built from a later listing is already stored: it wins
-            raise translate_common(exc, _SERVICE, write=True) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE, write=True) from exc
+        # Not written when a digest built from a later listing is already stored: that one wins.
+        write_if(self._client, "put_item", _SERVICE, TableName=self._table,
+                 Item={**_key(digest.event_id), "doc": {"S": digest.model_dump_json()},
+                       "listedAtMs": {"N": str(listed_at_ms)}},
+                 ConditionExpression="attribute_not_exists(pk) OR listedAtMs <= :listed",
+                 ExpressionAttributeValues={":listed": {"N": str(listed_at_ms)}})

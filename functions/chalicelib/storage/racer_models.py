@@ -12,11 +12,9 @@ import base64
 import json
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.racer_models import ModelChanged, ModelPage, ModelRecord, ModelStatus
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The model store"
 _LISTING_PK = "MODELS"
@@ -51,18 +49,12 @@ class DynamoModelStore:
 
     def replace(self, record: ModelRecord, *, expected_status: ModelStatus) -> None:
         """Write `record` only if the stored status is still `expected_status` (raises ModelChanged otherwise)."""
-        try:
-            self._client.put_item(
-                TableName=self._table, Item=_to_item(record),
-                ConditionExpression="#status = :expected",
-                ExpressionAttributeNames={"#status": "status"},
-                ExpressionAttributeValues={":expected": {"S": expected_status.value}})
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise ModelChanged(record.model_id) from exc
-            raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        if not write_if(self._client, "put_item", _SERVICE,
+                        TableName=self._table, Item=_to_item(record),
+                        ConditionExpression="#status = :expected",
+                        ExpressionAttributeNames={"#status": "status"},
+                        ExpressionAttributeValues={":expected": {"S": expected_status.value}}):
+            raise ModelChanged(record.model_id)
 
     # -- reads -----------------------------------------------------------------------------------------------------
 
@@ -107,13 +99,8 @@ class DynamoModelStore:
             ExpressionAttributeNames={"#status": "status"},
             ExpressionAttributeValues={":pk": {"S": _owner_pk(owner_sub)}, ":model": {"S": "MODEL#"},
                                        ":available": {"S": ModelStatus.AVAILABLE.value}, ":md5": {"S": model_md5}})
-        found: list[ModelRecord] = []
-        while True:
-            reply = self._call("query", **query)
-            found.extend(_from_item(item) for item in reply.get("Items", []))
-            if "LastEvaluatedKey" not in reply:
-                return sorted(found, key=lambda record: record.model_id)
-            query["ExclusiveStartKey"] = reply["LastEvaluatedKey"]
+        found = [_from_item(item) for item in all_items(self._client, "query", _SERVICE, **query)]
+        return sorted(found, key=lambda record: record.model_id)
 
     # -- helpers ---------------------------------------------------------------------------------------------------
 

@@ -24,11 +24,9 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.errors import Conflict
 from chalicelib.domain.races import PublishIntent, RaceRecord, StaleRace
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The races table"
 
@@ -125,13 +123,13 @@ class DynamoRaceStore:
                                   "ExpressionAttributeValues": values}
         if filters:
             kwargs["FilterExpression"] = " AND ".join(filters)
-        return [_record(item) for item in self._pages("query", kwargs)]
+        return [_record(item) for item in all_items(self._client, "query", _SERVICE, **kwargs)]
 
     def list_racer(self, racer_sub: str) -> list[RaceRecord]:
         """Every race of one racer, all events (their own "my races" page; occasional, so a filtered Scan)."""
         kwargs = {"TableName": self._table, "FilterExpression": "racer_sub = :sub AND begins_with(sk, :prefix)",
                   "ExpressionAttributeValues": {":sub": _s(racer_sub), ":prefix": _s("RACE#")}}
-        return [_record(item) for item in self._pages("scan", kwargs)]
+        return [_record(item) for item in all_items(self._client, "scan", _SERVICE, **kwargs)]
 
     def get_outcome(self, device_id: str, key: str) -> str | None:
         item = self._call("get_item", TableName=self._table, Key=outcome_key(device_id, key),
@@ -145,23 +143,17 @@ class DynamoRaceStore:
         race = record.race
         pointer = {**live_key(race.event_id, race.track_id), "race_id": _s(race.race_id),
                    "racer": _s(race.racer.username)}
-        try:
-            self._client.transact_write_items(TransactItems=[
-                {"Put": {"TableName": self._table, "Item": _race_item(record),
-                         "ConditionExpression": "attribute_not_exists(pk)"}},
-                {"Put": {"TableName": self._table, "Item": pointer,
-                         "ConditionExpression": "attribute_not_exists(pk)"}},
-                _intent_put(PublishIntent.of(race), self._table),
-            ])
-        except ClientError as exc:
-            if error_code(exc) == "TransactionCanceledException":
-                racer = self.live_racer(race.event_id, race.track_id)
-                raise Conflict(f"Track {race.track_id} already has a live race"
-                               f"{f' ({racer})' if racer else ''}; submit or discard it first.",
-                               field="track_id") from exc
-            raise translate_common(exc, _SERVICE, write=True) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE, write=True) from exc
+        created = write_if(self._client, "transact_write_items", _SERVICE, TransactItems=[
+            {"Put": {"TableName": self._table, "Item": _race_item(record),
+                     "ConditionExpression": "attribute_not_exists(pk)"}},
+            {"Put": {"TableName": self._table, "Item": pointer,
+                     "ConditionExpression": "attribute_not_exists(pk)"}},
+            _intent_put(PublishIntent.of(race), self._table),
+        ])
+        if not created:
+            racer = self.live_racer(race.event_id, race.track_id)
+            raise Conflict(f"Track {race.track_id} already has a live race"
+                           f"{f' ({racer})' if racer else ''}; submit or discard it first.", field="track_id")
 
     def save(self, record: RaceRecord, expected_version: int) -> None:
         """Save a changed race (conditional on its version) together with its publish intent."""
@@ -200,17 +192,11 @@ class DynamoRaceStore:
                                   "ConditionExpression": "version = :expected",
                                   "ExpressionAttributeValues": {":expected": _n(expected_version)}}})
             items.append(_intent_put(PublishIntent.of(record.race), self._table))
-        try:
-            self._client.transact_write_items(TransactItems=items)
-        except ClientError as exc:
-            if error_code(exc) != "TransactionCanceledException":
-                raise translate_common(exc, _SERVICE, write=True) from exc
-            if self.get_outcome(device_id, key) is not None:
-                return False
-            raise StaleRace(record.race.race_id if record else key) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE, write=True) from exc
-        return True
+        if write_if(self._client, "transact_write_items", _SERVICE, TransactItems=items):
+            return True
+        if self.get_outcome(device_id, key) is not None:
+            return False
+        raise StaleRace(record.race.race_id if record else key)
 
     def delete(self, record: RaceRecord) -> None:
         """Delete a finished race together with a publish intent for its racer's row (which it no longer counts in)."""
@@ -228,43 +214,21 @@ class DynamoRaceStore:
         kwargs = {"TableName": self._table, "ConsistentRead": True, "KeyConditionExpression": "pk = :pk",
                   "ExpressionAttributeValues": {":pk": _s(PUBLISH_PK)}}
         cutoff = _wall_ms() - older_than_ms
-        return [_intent(item) for item in self._pages("query", kwargs)
+        return [_intent(item) for item in all_items(self._client, "query", _SERVICE, **kwargs)
                 if older_than_ms <= 0 or int(item.get("at_ms", {"N": "0"})["N"]) <= cutoff]
 
     def complete_publish(self, intent: PublishIntent) -> None:
         """Drop the intent once its board row is rebuilt; a newer write's intent (another token) stays."""
-        try:
-            self._client.delete_item(TableName=self._table,
-                                     Key=intent_key(intent.event_id, intent.track_id, intent.racer_sub),
-                                     ConditionExpression="#token = :token",
-                                     ExpressionAttributeNames={"#token": "token"},
-                                     ExpressionAttributeValues={":token": _s(intent.token)})
-        except ClientError as exc:
-            if error_code(exc) != "ConditionalCheckFailedException":
-                raise translate_common(exc, _SERVICE) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE) from exc
+        write_if(self._client, "delete_item", _SERVICE, TableName=self._table,
+                 Key=intent_key(intent.event_id, intent.track_id, intent.racer_sub),
+                 ConditionExpression="#token = :token", ExpressionAttributeNames={"#token": "token"},
+                 ExpressionAttributeValues={":token": _s(intent.token)})
 
     # --- plumbing ------------------------------------------------------------------------------------------------
 
     def _transact(self, items: list[dict[str, Any]], race_id: str) -> None:
-        try:
-            self._client.transact_write_items(TransactItems=items)
-        except ClientError as exc:
-            if error_code(exc) == "TransactionCanceledException":
-                raise StaleRace(race_id) from exc
-            raise translate_common(exc, _SERVICE, write=True) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE, write=True) from exc
+        if not write_if(self._client, "transact_write_items", _SERVICE, TransactItems=items):
+            raise StaleRace(race_id)
 
     def _call(self, operation: str, **kwargs: Any) -> dict[str, Any]:
         return call(self._client, operation, _SERVICE, **kwargs)
-
-    def _pages(self, operation: str, kwargs: dict[str, Any]) -> list[dict[str, Any]]:
-        items, start = [], None
-        while True:
-            page = self._call(operation, **kwargs, **({"ExclusiveStartKey": start} if start else {}))
-            items.extend(page.get("Items", []))
-            start = page.get("LastEvaluatedKey")
-            if not start:
-                return items

@@ -30,7 +30,8 @@ class DatasetError(ValueError):
 
 @dataclass(frozen=True)
 class ActionScale:
-    """Maps real actions (degrees, m/s) to the network's [-1, 1] outputs and back."""
+    """Maps real actions (degrees, m/s) to the network's [-1, 1] outputs; the ranges go into model_metadata.json,
+    from which the car (and the pilot) map the outputs back."""
 
     steering_low: float = -MAX_STEERING_DEG
     steering_high: float = MAX_STEERING_DEG
@@ -43,11 +44,6 @@ class ActionScale:
             _to_unit(speed, self.speed_low, self.speed_high),
         ], axis=-1).astype(np.float32)
 
-    def denormalise(self, unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        unit = np.clip(unit, -1.0, 1.0)
-        return (_from_unit(unit[..., 0], self.steering_low, self.steering_high),
-                _from_unit(unit[..., 1], self.speed_low, self.speed_high))
-
     @classmethod
     def from_speeds(cls, speeds: np.ndarray) -> ActionScale:
         low, high = float(np.min(speeds)), float(np.max(speeds))
@@ -59,10 +55,6 @@ class ActionScale:
 
 def _to_unit(value: np.ndarray, low: float, high: float) -> np.ndarray:
     return np.clip(2.0 * (np.asarray(value, dtype=np.float64) - low) / (high - low) - 1.0, -1.0, 1.0)
-
-
-def _from_unit(unit: np.ndarray, low: float, high: float) -> np.ndarray:
-    return low + (np.asarray(unit, dtype=np.float64) + 1.0) * 0.5 * (high - low)
 
 
 @dataclass

@@ -5,10 +5,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from chalicelib.domain.errors import Conflict, InvalidInput
-from chalicelib.domain.event_transfer.passwords import password_problem, temporary_password
+from chalicelib.domain.event_transfer.passwords import password_problem
 from chalicelib.domain.event_transfer.ports import ImportJournal, StackReader, StackWriter
 from chalicelib.formats.event_export.records import EVENT_ID, Account, EventBundle, Item
 from chalicelib.formats.event_export.remap import remap
+from drem_infra import resources
 
 RACER_ROLE = "racer"  # the role every created account gets; staff roles need grant_roles
 
@@ -55,7 +56,7 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
     leftovers = target.partition("races", pk)
     interrupted = journal.intended() if journal is not None else {}
     passwords = {k.casefold(): v for k, v in (passwords or {}).items()}
-    generate = generate or temporary_password
+    generate = generate or resources.USER_POOL.password_policy.random_password
     actions: list[AccountAction] = []
     for account in bundle.accounts:
         existing = target.find_account(account.username)  # type: ignore[union-attr]

@@ -1,29 +1,20 @@
-"""Passwords of the accounts an import creates: generated ones, the pool's policy, and the `--password-file`."""
+"""Passwords of the accounts an import creates: the pool's policy (generated ones come from it too,
+`PasswordPolicy.random_password`), and the `--password-file`."""
 from __future__ import annotations
 
 import json
-import secrets
-import string
 
 from chalicelib.domain.errors import InvalidInput
-
-_SYMBOLS = "!#%*+-=?@^_"
-
-
-def temporary_password(length: int = 16) -> str:
-    """Meets the pool's policy: at least 8 characters with lower, upper, digit and symbol."""
-    classes = [string.ascii_lowercase, string.ascii_uppercase, string.digits, _SYMBOLS]
-    chars = [secrets.choice(c) for c in classes] + [secrets.choice("".join(classes)) for _ in range(length - 4)]
-    secrets.SystemRandom().shuffle(chars)
-    return "".join(chars)
+from drem_infra import resources
 
 
 def password_problem(password: str) -> str | None:
-    checks = [(len(password) >= 8, "is shorter than 8 characters"),
-              (any(c.islower() for c in password), "has no lower-case letter"),
-              (any(c.isupper() for c in password), "has no upper-case letter"),
-              (any(c.isdigit() for c in password), "has no digit"),
-              (any(not c.isalnum() for c in password), "has no symbol")]
+    policy = resources.USER_POOL.password_policy
+    checks = [(len(password) >= policy.minimum_length, f"is shorter than {policy.minimum_length} characters"),
+              (not policy.require_lowercase or any(c.islower() for c in password), "has no lower-case letter"),
+              (not policy.require_uppercase or any(c.isupper() for c in password), "has no upper-case letter"),
+              (not policy.require_digits or any(c.isdigit() for c in password), "has no digit"),
+              (not policy.require_symbols or any(not c.isalnum() for c in password), "has no symbol")]
     return next((problem for ok, problem in checks if not ok), None)
 
 
