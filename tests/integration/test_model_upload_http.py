@@ -61,7 +61,7 @@ def test_cli_upload_prints_the_verdict(live_stack, tmp_path: Path, capsys: pytes
                               "--password", live_stack.admin_password, "upload", str(archive)])
     assert command.run(args) == 0
     printed = capsys.readouterr().out
-    assert "cli_model" in printed and "AVAILABLE" in printed
+    assert "cli_model" in printed and "Ready to race" in printed  # the label, not the enum value
 
 
 def test_wrong_password_is_refused(live_stack) -> None:
