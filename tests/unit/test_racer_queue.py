@@ -172,6 +172,18 @@ def test_ready_race_pops_the_head_onto_their_car_and_preloads_the_next_model_on_
     assert 'data-state="loaded"' in panel and "loaded on car-2" in text_of(panel)
 
 
+def test_a_race_started_by_hand_on_the_head_s_car_moves_their_model_to_a_free_car(console):
+    track = _track(console, "car-1", "car-2", racers=("alice", "bob", "walk-in"))
+    track.add("alice")
+    assert track.car_models("car-1") == [track.models["alice"]["model_id"]]
+
+    # A walk-in races first, on car-1, from the race form: alice's model goes to car-2 while that race runs.
+    ready = console.post(f"{track.base}/races", {"racer_username": "walk-in", "car": track.cars["car-1"]}, htmx=True)
+    assert ready.status_code == 200, ready.body
+    assert track.car_models("car-2") == [track.models["alice"]["model_id"]]
+    assert "assigned to car-2" in text_of(track.panel())
+
+
 def test_with_no_free_car_the_panel_says_so(console):
     track = _track(console, "car-1")
     track.add("alice")
@@ -180,6 +192,21 @@ def test_with_no_free_car_the_panel_says_so(console):
     panel = track.panel()
     assert 'data-state="no car"' in panel and "No free car in this track's fleet" in html.unescape(text_of(panel))
     assert track.car_models("car-1") == [track.models["alice"]["model_id"]]  # the racing car keeps its model
+
+
+def test_with_one_car_the_next_racer_gets_it_once_the_race_is_over(console):
+    track = _track(console, "car-1")
+    track.add("alice")
+    track.press("start", "alice")
+    track.add("bob")  # car-1 is racing: no free car for bob yet
+    state = console.web.get(f"{track.base}/state").body.decode()
+    race_id = state.split('data-race-id="', 1)[1].split('"', 1)[0]
+    for kind in ("end", "submit"):
+        console.post(f"{track.base}/commands", {"kind": kind, "race_id": race_id}, htmx=True)
+
+    assert track.press("start", "bob").status_code == 200
+    assert "Car: car-1" in text_of(console.web.get(f"{track.base}/state").body.decode())
+    assert track.car_models("car-1")[0] == track.models["bob"]["model_id"]  # first: the one the car drives
 
 
 def test_a_refused_race_leaves_the_head_in_the_queue(console):

@@ -97,10 +97,9 @@ class OnDeck:
                    raced_by_proxy: bool = False, override_max_runs: bool = False) -> dict[str, Any]:
         """Create the race for the queue's head on the car holding their model, take them off the queue, and give
         the next racer's model to a free car. The race is created first: if it is refused, the queue is untouched."""
-        head = self._queue.queue(event_id, track_id).head
-        if head is None or head.entry_id != entry_id:
-            raise Conflict("Who is next changed meanwhile (another screen edited the queue); check On deck and start "
-                           "again.", field="entry_id")
+        _require_head(self._queue.queue(event_id, track_id), entry_id)
+        # The car the model went to may have been racing then (one car), or given other models since: check again.
+        head = _require_head(self.preload_head(principal, event_id, track_id), entry_id)
         race = self._races.create_race(principal, event_id, CreateRaceInput(
             track_id=track_id, racer_username=head.racer_username, car=head.car, raced_by_proxy=raced_by_proxy,
             override_max_runs=override_max_runs))
@@ -117,6 +116,14 @@ class OnDeck:
                 raise
             # One of the car's other models was withdrawn since it was given: the racer's model alone, then.
             self._assignments.assign(principal, current.device_id, [entry.model_id])
+
+
+def _require_head(queue: RacerQueue, entry_id: str) -> QueueEntry:
+    head = queue.head
+    if head is None or head.entry_id != entry_id:
+        raise Conflict("Who is next changed meanwhile (another screen edited the queue); check On deck and start "
+                       "again.", field="entry_id")
+    return head
 
 
 def _model_ids(assignment: Assignment) -> list[str]:
