@@ -44,7 +44,7 @@ class QueuePanel(BaseModel):
 def queue_panel(on_deck: OnDeck, event_id: str, track_id: str) -> QueuePanel:
     queue = on_deck.queue(event_id, track_id)
     cars = {car.device_id: car for car in on_deck.fleet_cars(event_id, track_id)} if queue.entries else {}
-    with_car = [cars[e.car] for e in queue.entries if e.car in cars]
+    with_car = [cars[e.car] for e in queue.entries[:1] if e.car in cars]
     held = on_deck.assignments_of(with_car)
     racing = on_deck.racing_car(event_id, track_id)
     rows = [_row(index, entry, cars.get(entry.car or ""), held.get(entry.car or ""), racing)
@@ -55,7 +55,8 @@ def queue_panel(on_deck: OnDeck, event_id: str, track_id: str) -> QueuePanel:
 
 def _row(index: int, entry: QueueEntry, car: DeviceView | None, assignment: Assignment | None,
          racing: str | None) -> QueueRow:
-    preload, text = preload_state(entry, car, assignment, racing)
+    # Only the head's model is kept on a car; a racer moved down keeps their old car on record until they are next.
+    preload, text = preload_state(entry, car, assignment, racing) if index == 0 else ("", "")
     return QueueRow(entry_id=entry.entry_id, position=index + 1, racer=entry.racer_username,
                     model_name=entry.model_name, on_deck=index < ON_DECK, is_head=index == 0,
                     car_label=car.hostname if car else None, preload=preload, preload_text=text)
