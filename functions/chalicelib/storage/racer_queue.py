@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from botocore.exceptions import BotoCoreError, ClientError
-
 from chalicelib.domain.racer_queue import QueueChanged, RacerQueue
-from chalicelib.storage.aws_errors import call, error_code, translate_common
+from chalicelib.storage.aws_errors import call, write_if
 
 _SERVICE = "The races table"
 
@@ -32,11 +30,6 @@ class DynamoQueueStore:
             "N": str(expected_version)}}}
         item = {**queue_key(queue.event_id, queue.track_id), "doc": {"S": queue.model_dump_json()},
                 "version": {"N": str(queue.version)}}
-        try:
-            self._client.put_item(TableName=self._table, Item=item, ConditionExpression=condition, **values)
-        except ClientError as exc:
-            if error_code(exc) == "ConditionalCheckFailedException":
-                raise QueueChanged(queue.track_id) from exc
-            raise translate_common(exc, _SERVICE, write=True) from exc
-        except BotoCoreError as exc:
-            raise translate_common(exc, _SERVICE, write=True) from exc
+        if not write_if(self._client, "put_item", _SERVICE, TableName=self._table, Item=item,
+                        ConditionExpression=condition, **values):
+            raise QueueChanged(queue.track_id)
