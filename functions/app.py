@@ -36,6 +36,7 @@ from chalicelib.routes.console import events as console_events
 from chalicelib.routes.console import fleets as console_fleets
 from chalicelib.routes.console import models as console_models
 from chalicelib.routes.console import racer as console_racer
+from chalicelib.routes.console import racer_queue as console_racer_queue
 from chalicelib.routes.console import races as console_races
 from chalicelib.routes.console import registration as console_registration
 from chalicelib.routes.console import timekeeper as console_timekeeper
@@ -54,7 +55,8 @@ app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models,
                          assignments, races, timing, leaderboards, api_docs, public_pages, commentator, console_events,
                          console_fleets, console_timekeeper, console_races, console_racer, console_registration,
-                         console_users, console_models, league, registry, results, labels, stats, event_landing, ping):
+                         console_users, console_models, console_racer_queue, league, registry, results, labels,
+                         stats, event_landing, ping):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

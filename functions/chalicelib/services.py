@@ -24,9 +24,11 @@ from chalicelib.domain.league import LeagueService
 from chalicelib.domain.model_conversion import ConsoleConverter
 from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
 from chalicelib.domain.model_scrutiny import ScrutineerService
+from chalicelib.domain.on_deck import OnDeck
 from chalicelib.domain.passwords import PasswordService
 from chalicelib.domain.profiles import Profile, ProfileService, ProfilesForBoards
-from chalicelib.domain.racer_models import ModelService
+from chalicelib.domain.racer_models import ModelRecord, ModelService, ModelStatus
+from chalicelib.domain.racer_queue import RacerQueueService
 from chalicelib.domain.races import RaceService
 from chalicelib.domain.stats import StatsDigests
 from chalicelib.domain.timing import TimingService
@@ -47,6 +49,7 @@ from chalicelib.storage.passwords import CognitoPasswordChanger
 from chalicelib.storage.profiles import DynamoProfileStore
 from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
+from chalicelib.storage.racer_queue import DynamoQueueStore
 from chalicelib.storage.races import DynamoRaceStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
@@ -228,3 +231,30 @@ def assignment_service(settings: Settings | None = None) -> AssignmentService:
 def league_service(settings: Settings | None = None) -> LeagueService:
     settings = settings or get_settings()
     return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))
+
+
+# --- the racer queue (on deck) --------------------------------------------------------------------------------------
+
+class RacersModels:
+    """The queue's model lookup: a racer's AVAILABLE models (the ones a car may be given)."""
+
+    def __init__(self, models: ModelService) -> None:
+        self._models = models
+
+    def available_models_of(self, owner_sub: str) -> list[ModelRecord]:
+        found, token = [], None
+        while True:
+            page = self._models.store.list_owner(owner_sub, limit=100, next_token=token)
+            found += [m for m in page.models if m.status is ModelStatus.AVAILABLE and m.s3_key is not None]
+            token = page.next_token
+            if not token:
+                return found
+
+
+def racer_queue_service() -> RacerQueueService:
+    return RacerQueueService(DynamoQueueStore(clients.dynamodb(), get_settings().table("races")), race_service(),
+                             user_directory(), RacersModels(model_service()), now_ms)
+
+
+def on_deck() -> OnDeck:
+    return OnDeck(racer_queue_service(), race_service(), race_store(), device_service(), assignment_service())

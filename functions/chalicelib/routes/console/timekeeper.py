@@ -12,6 +12,7 @@ from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.races import CreateRaceInput
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, submitted
+from chalicelib.views.on_deck_panel import queue_panel
 from chalicelib.views.timekeeper_desk import ScreenCommand, TimekeeperDesk, TimekeeperScreen
 from drem_web import render
 
@@ -54,7 +55,8 @@ def racer_options(principal: User, query: RacerSearch) -> Response:
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}", allow=TIMEKEEPERS)
 def timekeeper_page(principal: User, event_id: str, track_id: str) -> Response:
-    return render.page("console/timekeeper", screen=desk().screen(event_id, track_id), errors={}, setup={})
+    return render.page("console/timekeeper", screen=desk().screen(event_id, track_id), errors={}, setup={},
+                       queue=queue_panel(services.on_deck(), event_id, track_id), queue_errors={}, queue_values={})
 
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}/state", allow=TIMEKEEPERS)
@@ -74,6 +76,7 @@ def start_race(principal: User, event_id: str, track_id: str) -> Response:
         errors = field_errors(exc, rename=lambda name: "racer_username" if name == "username" else name,
                               missing_object_field="racer_username")  # a racer nobody registered
         return _state(desk().screen(event_id, track_id), errors, values, error_status(exc))
+    services.on_deck().preload_head(principal, event_id, track_id)  # the car just taken may have held the next model
     return _state(screen)
 
 

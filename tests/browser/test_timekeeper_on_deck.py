@@ -1,0 +1,120 @@
+"""The timekeeper's On-deck panel in a real browser: an operator lines racers up with their models, readies the
+head's race in one click (the race panel follows on its own), and watches the next racer's model go to the free car
+and load there while the race runs (the car's reports and heartbeat, sent through the JSON API as the car agent does).
+Screenshots at the big screen's and a phone's size land in test-artifacts/ (copied to docs/screenshots/)."""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+from typing import Any
+
+import pytest
+import requests
+
+from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.unit.models_helpers import onnx_archive
+
+pytestmark = pytest.mark.browser
+
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+BIG_SCREEN = {"width": 1920, "height": 1080}
+PHONE = {"width": 390, "height": 844}
+RACERS = ("deck-ann", "deck-ben", "deck-cy", "deck-dee")
+
+
+def _upload_model(url: str, token: str, filename: str, archive: bytes) -> dict:
+    ticket = call(url, "POST", "/api/models", token=token, body={"filename": filename}, expect=201)
+    upload = ticket["upload"]
+    posted = requests.post(upload["url"], data=upload["fields"], files={"file": (filename, archive)}, timeout=15)
+    assert posted.status_code in (200, 204), posted.text
+    return call(url, "POST", f"/api/models/{ticket['model']['model_id']}/complete", token=token, expect=200)["model"]
+
+
+def _car(url: str, token: str, fleet_id: str, hostname: str) -> str:
+    code = call(url, "POST", "/api/devices/activation-codes", token=token, expect=201,
+                body={"fleet_id": fleet_id, "hostname": hostname, "device_kind": "car"})["code"]
+    credential = call(url, "POST", "/api/devices/activate", expect=201,
+                      body={"code": code, "hostname": hostname, "device_kind": "car"})["credential"]
+    call(url, "POST", "/api/devices/self/heartbeat", device=credential, body={"battery_pct": 90})
+    return credential
+
+
+def _add(page: Any, racer: str, model: str) -> None:
+    page.fill("#queue_racer", racer)
+    page.fill("#queue_model", model)
+    page.get_by_role("button", name="Add to queue").click()
+
+
+def _on_deck(page: Any) -> list[str]:
+    return [name.strip() for name in page.locator("[data-testid=on-deck-row] .tk-deck-racer").all_inner_texts()]
+
+
+def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(live_stack, app_url, chromium, page):
+    create_user(live_stack, "deck-op", "operator")
+    archives: dict[str, bytes] = {}
+    for index, racer in enumerate(RACERS):
+        create_user(live_stack, racer, "racer")
+        archives[racer] = onnx_archive(0.05 * (index + 1))
+        _upload_model(app_url, access_token(live_stack, racer), f"{racer}-fast.tar.gz", archives[racer])
+    token = access_token(live_stack, "deck-op")
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "On-deck fleet"}, expect=201)
+    cars = {hostname: _car(app_url, token, fleet["fleet_id"], hostname) for hostname in ("car-a", "car-b")}
+    event = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "On-deck Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-07-01", "country_code": "SE",
+        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"],
+                                                         "leaderboard_title": "Main track"}]})
+    timekeeper = f"{app_url}/console/timekeeper/{event['event_id']}/1"
+
+    page.set_viewport_size(BIG_SCREEN)
+    sign_in(page, app_url, "deck-op")
+    page.goto(timekeeper)
+    assert "Nobody in line" in page.get_by_test_id("queue-panel").inner_text()
+
+    _add(page, "deck-ann", "deck-ben-fast")  # someone else's model: refused next to the field, nothing lost
+    error = page.locator("#queue_model-error")
+    error.wait_for()
+    assert "deck-ann has no model ready to race named 'deck-ben-fast'" in error.inner_text()
+    assert page.input_value("#queue_racer") == "deck-ann"
+
+    for racer in RACERS:
+        _add(page, racer, f"{racer}-fast")
+        page.locator(f"[data-testid=queue-panel] strong:text-is('{racer}')").wait_for()
+    assert _on_deck(page) == ["deck-ann", "deck-ben", "deck-cy"]
+    assert "deck-dee" in page.get_by_test_id("queue-later").inner_text()
+    page.get_by_role("button", name="Move deck-cy up").click()
+    page.wait_for_function("() => [...document.querySelectorAll('[data-testid=on-deck-row] .tk-deck-racer')]"
+                           ".map(e => e.textContent).join() === 'deck-ann,deck-cy,deck-ben'")
+    assert "assigned to car-a" in page.get_by_test_id("preload").inner_text()
+
+    page.get_by_test_id("start-head").click()  # "Ready race for deck-ann on car-a"
+    page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'deck-ann'")
+    assert "car-a" in page.get_by_test_id("race-panel").inner_text()
+    page.keyboard.press("Space")  # start the clock
+    page.wait_for_function("() => document.querySelector('[data-testid=race-status]').textContent === 'Running'")
+    page.wait_for_function("() => document.querySelector('[data-testid=on-deck-row] .tk-deck-racer')"
+                           "?.textContent === 'deck-cy'")
+    preload = page.get_by_test_id("preload")
+    assert "assigned to car-b" in preload.inner_text()
+
+    # car-b, the free car, fetches deck-cy's model and loads it while deck-ann races on car-a.
+    assignment = call(app_url, "GET", "/api/devices/self/assignment", device=cars["car-b"])
+    model_id = assignment["models"][0]["model_id"]
+    assert assignment["models"][0]["name"] == "deck-cy-fast"
+    call(app_url, "POST", "/api/devices/self/assignment/status", device=cars["car-b"],
+         body={"model_id": model_id, "status": "downloading"})
+    page.wait_for_function("() => document.querySelector('[data-testid=preload]').dataset.state === 'loading'")
+    call(app_url, "POST", "/api/devices/self/heartbeat", device=cars["car-b"], body={
+        "battery_pct": 88, "model": {"name": "deck-cy-fast", "md5": hashlib.md5(archives["deck-cy"]).hexdigest()}})
+    page.wait_for_function("() => document.querySelector('[data-testid=preload]').dataset.state === 'loaded'")
+    assert "loaded on car-b" in preload.inner_text()
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "timekeeper-queue-1920x1080.png"))
+    phone = chromium.new_context(viewport=PHONE)
+    small = phone.new_page()
+    sign_in(small, app_url, "deck-op")
+    small.goto(timekeeper)
+    small.get_by_test_id("on-deck").wait_for()
+    assert small.evaluate("() => document.documentElement.scrollWidth") <= PHONE["width"]  # no sideways scrolling
+    small.screenshot(path=str(ARTIFACTS / "timekeeper-queue-390x844.png"), full_page=True)
+    phone.close()
