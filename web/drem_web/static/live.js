@@ -1,5 +1,5 @@
 // drem live pages: clocks tick locally between polls, and a new or improved board row is highlighted and scrolled
-// into view. The server re-syncs the clocks whenever the race changes (each swapped fragment carries fresh readings).
+// into view (after the race summary the server holds on screen, if any). The server re-syncs the clocks whenever the race changes (each swapped fragment carries fresh readings).
 // A fragment may have been built (and cached on the server) a while before this poll got it: its clocks carry the
 // server time they were read at (data-clock-at) and the response the server time it was sent (X-Drem-Server-Ms), so a
 // running clock starts from its reading plus the difference. Each clock element is anchored once, when it arrives.
@@ -61,7 +61,9 @@
   }
   function markChangedRows() {
     var board = document.querySelector("[data-board]");
-    if (!board) { return; }
+    // While a race summary holds the screen the rows are hidden: compare them once they are back, so the new result
+    // is highlighted (and its page shown) when people can see it.
+    if (!board || board.querySelector("[data-race-summary]")) { return; }
     var times = boardTimes(board);
     var now = Date.now();
     var first = null;
