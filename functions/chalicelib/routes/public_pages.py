@@ -2,10 +2,10 @@
 (`/overlay/{event}`), plus the fragment routes their live regions poll every 500 ms.
 
 A page renders its live region once; the region then polls `…/live?…&v={token}`, where the token names every
-materialised item version (and overlay phase) it was built from. The fragment route reads the same items as
-`GET /api/leaderboard|overlay/{event}` (through the process's poll cache) and answers **204 No Content** while the
-token is current: htmx 2 leaves the DOM alone on 204, so an unchanged poll costs no rendering and no flicker. An
-`If-None-Match` with the fragment's ETag gets a 304 the same way (for clients that cache).
+materialised item version (and overlay phase, or a held race summary) it was built from. The fragment route reads the
+same items as `GET /api/leaderboard|overlay/{event}` (through the process's poll cache) and answers **204 No Content**
+while the token is current: htmx 2 leaves the DOM alone on 204, so an unchanged poll costs no rendering and no
+flicker. An `If-None-Match` with the fragment's ETag gets a 304 the same way (for clients that cache).
 
 A changed token is rendered once per (fragment, event, options, token) and the same HTML is served to every poller
 (`domain/render_cache.LIVE_FRAGMENTS`); the overlay's race is read once per overlay version (`LIVE_RACES`). The only

@@ -9,6 +9,7 @@
   var clocks = [];
   var previousTimes = null;
   var highlightUntil = {};
+  var summarised = {};  // racers whose race summary held the screen: highlighted when the rows come back
   // Big-screen paging: when the rows do not fit the screen, show them a page at a time (every racer appears).
   var DEFAULT_PAGE_MS = 8000;
   var pageIndex = 0;
@@ -56,26 +57,33 @@
 
   function boardTimes(board) {
     var times = {};
-    board.querySelectorAll("[data-racer]").forEach(function (row) { times[row.dataset.racer] = row.dataset.time; });
+    board.querySelectorAll(".board-row[data-racer]").forEach(function (row) { times[row.dataset.racer] = row.dataset.time; });
     return times;
   }
   function markChangedRows() {
     var board = document.querySelector("[data-board]");
     // While a race summary holds the screen the rows are hidden: compare them once they are back, so the new result
-    // is highlighted (and its page shown) when people can see it.
-    if (!board || board.querySelector("[data-race-summary]")) { return; }
+    // (and the summarised racer's row) is highlighted, and its page shown, when people can see it.
+    if (!board) { return; }
+    var summaries = board.querySelectorAll("[data-race-summary]");
+    if (summaries.length) {
+      summaries.forEach(function (summary) { summarised[summary.dataset.racer] = true; });
+      return;
+    }
     var times = boardTimes(board);
     var now = Date.now();
     var first = null;
-    board.querySelectorAll("[data-racer]").forEach(function (row) {
+    board.querySelectorAll(".board-row[data-racer]").forEach(function (row) {
       var racer = row.dataset.racer;
-      if (previousTimes !== null && row.dataset.time && previousTimes[racer] !== row.dataset.time) {
+      var changed = previousTimes !== null && row.dataset.time && previousTimes[racer] !== row.dataset.time;
+      if (changed || summarised[racer]) {
         highlightUntil[racer] = now + HIGHLIGHT_MS;
         first = first || row;
       }
       if ((highlightUntil[racer] || 0) > now) { row.classList.add("is-new"); }
     });
     previousTimes = times;
+    summarised = {};
     if (first && board.dataset.scroll === "true") {
       var rowsPerPage = layoutPages(board);
       if (rowsPerPage) {  // dwell on the page with the new result
