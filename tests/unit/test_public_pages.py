@@ -346,3 +346,17 @@ def test_a_new_race_ends_the_summary_early_and_shows_the_now_racing_bar(desk: De
     assert "race-summary" not in html and '<ol class="board-rows">' in html
     footer = re.search(r'data-testid="race-footer".*?</div>', html, re.S).group(0)
     assert "Now racing" in footer and "lea" in footer
+
+
+def test_on_the_combined_board_one_track_s_summary_leaves_the_other_track_s_race_bar(desk: Desk,
+                                                                                      clock: FakeClock) -> None:
+    scenario = Scenario(desk, clock).add_racers("vera", "lea").add_event(
+        tracks=[{"track_id": "1"}, {"track_id": "2"}])
+    scenario.add_race("lea", (9_500,), track="2")  # lea is racing on track 2
+    scenario.submitted_race("vera", (9_100,), track="1")  # vera's race on track 1 has just been submitted
+
+    html = html_get(desk, f"/leaderboard/{scenario.event_id}?track=combined").body.decode()
+    summary = re.search(r'data-testid="race-summary".*?</article>', html, re.S).group(0)
+    assert 'data-racer="vera"' in summary and "Track 1" in summary  # two tracks: the summary says whose it is
+    footer = re.search(r'data-testid="race-footer".*?</div>', html, re.S).group(0)
+    assert "Now racing" in footer and "lea" in footer
