@@ -28,6 +28,7 @@ class RacerProfile(BaseModel):
     username: str | None = None
     country_code: str | None = Field(default=None, max_length=8)
     highlight_colour: str | None = None
+    avatar_url: str | None = Field(default=None, description="the racer's public identicon; None: no avatar chosen")
 
 
 class LeaderboardEntry(BaseModel):
@@ -37,6 +38,7 @@ class LeaderboardEntry(BaseModel):
     username: str
     country_code: str | None = None
     highlight_colour: str = DEFAULT_HIGHLIGHT_COLOUR
+    avatar_url: str | None = None
     raced_by_proxy: bool = False
     track_id: str
     time_ms: int | None = Field(description="the ranked figure; None shows as DNF")
@@ -142,6 +144,7 @@ def _entries(
             username=_display_name(summary, profiles),
             country_code=profile.country_code,
             highlight_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR,
+            avatar_url=profile.avatar_url,
             raced_by_proxy=summary.raced_by_proxy,
             track_id=summary.track_id,
             time_ms=time_ms,

@@ -260,3 +260,103 @@ def test_commentator_sees_stats_lap_table_and_chart(desk: Desk, clock: FakeClock
     chart = re.search(r'<svg class="lap-chart".*?</svg>', html, re.S).group(0)
     assert chart.count('<rect class="bar') == 3 and 'stroke-dasharray="8 6"' in chart
     assert "Event best 0:09.000" in chart
+
+
+# --- avatars and the race summary on the big screen ----------------------------------------------------------------
+
+
+def submitted(desk: Desk, clock: FakeClock, racer: str = "vera", laps: tuple[int, ...] = (10_000, 9_876)) -> str:
+    """The event id after `racer`'s race with `laps` was ended and submitted."""
+    eid, rid = racing(desk, clock, racer, laps=laps)
+    desk.ok(desk.command(eid, rid, "end"))
+    desk.ok(desk.command(eid, rid, "submit"))
+    return eid
+
+
+def test_every_row_shows_the_racer_s_avatar_or_their_initial(desk: Desk, clock: FakeClock) -> None:
+    eid = submitted(desk, clock, "vera")
+    desk.token("lea", "racer")
+    lea = desk.ok(desk.create_race(eid, "lea"), 201)["race_id"]
+    desk.ok(desk.command(eid, lea, "start"))
+    clock.advance(11_000)
+    desk.ok(desk.command(eid, lea, "capture_lap"))
+    desk.ok(desk.command(eid, lea, "end"))
+    desk.ok(desk.command(eid, lea, "submit"))
+    # vera keeps the generated pattern, lea turns her avatar off: the board follows their profiles
+    desk.tokens["vera"] = desk.users.sign_in("vera")["AccessToken"]
+    desk.ok(desk.call("PUT", "/api/me/profile", {"highlight_colour": "#FF0000"}, as_user="vera"))
+    desk.ok(desk.call("PUT", "/api/me/profile", {"avatar": "none", "highlight_colour": "#FF8200"}, as_user="lea"))
+
+    html = html_get(desk, f"/leaderboard/{eid}?summary_seconds=0").body.decode()
+    rows = dict(re.findall(r'<li class="board-row[^"]*" data-racer="(\w+)".*?(<span class="avatar.*?</span>)', html,
+                           re.S))
+    assert set(rows) == {"vera", "lea"}
+    vera_avatar = re.search(r'<img src="([^"]+)"', rows["vera"]).group(1)
+    assert vera_avatar == "/api/profiles/vera/avatar.svg?c=ff0000"
+    image = desk.client.http.get(vera_avatar.split("?")[0])
+    assert image.status_code == 200 and image.headers["Content-Type"] == "image/svg+xml"  # the identicon is served
+    assert "<img" not in rows["lea"] and 'class="avatar-initial">L<' in rows["lea"]  # no avatar chosen: her initial
+
+
+def test_a_submitted_race_s_summary_holds_the_screen_then_the_rows_return(desk: Desk, clock: FakeClock) -> None:
+    eid = submitted(desk, clock, "vera", laps=(10_000, 9_876))
+    html = html_get(desk, f"/leaderboard/{eid}?summary_seconds=15").body.decode()
+    summary = re.search(r'data-testid="race-summary".*?</article>', html, re.S)
+    assert summary, html
+    assert 'data-racer="vera"' in summary.group(0) and "Just finished" in summary.group(0)
+    assert re.search(r'data-testid="summary-position">P1<', summary.group(0))
+    assert re.search(r'data-testid="summary-best">0:09.876<', summary.group(0))
+    assert re.search(r'data-testid="summary-laps">2<', summary.group(0))
+    assert re.search(r'data-testid="summary-gap">Leader<', summary.group(0))
+    assert '<ol class="board-rows" hidden>' in html  # the rows wait under the summary
+
+    poll = live_region_url(html, "board-live")
+    assert "summary_seconds=15" in poll
+    assert html_get(desk, poll, {"HX-Request": "true"}).status_code == 204  # held: nothing new to render
+    clock.advance(14_000)
+    assert html_get(desk, poll, {"HX-Request": "true"}).status_code == 204
+    clock.advance(1_500)  # the hold is over: the token changes, so the poll renders the rows again
+    after = html_get(desk, poll, {"HX-Request": "true"})
+    assert after.status_code == 200
+    fragment = after.body.decode()
+    assert "race-summary" not in fragment and '<ol class="board-rows">' in fragment and 'data-racer="vera"' in fragment
+    assert html_get(desk, live_region_url(fragment, "board-live"), {"HX-Request": "true"}).status_code == 204
+
+
+def test_summary_seconds_zero_turns_the_summary_off_and_bad_values_get_a_clear_message(desk: Desk,
+                                                                                       clock: FakeClock) -> None:
+    eid = submitted(desk, clock)
+    assert "race-summary" not in html_get(desk, f"/leaderboard/{eid}?summary_seconds=0").body.decode()
+    assert "race-summary" in html_get(desk, f"/leaderboard/{eid}").body.decode()  # on by default
+    bad = html_get(desk, f"/leaderboard/{eid}?summary_seconds=-1")
+    assert bad.status_code == 400 and "summary_seconds" in bad.body.decode()
+
+
+def test_a_new_race_ends_the_summary_early_and_shows_the_now_racing_bar(desk: Desk, clock: FakeClock) -> None:
+    eid = submitted(desk, clock, "vera")
+    poll = live_region_url(html_get(desk, f"/leaderboard/{eid}?summary_seconds=60").body.decode(), "board-live")
+    clock.advance(3_000)
+    desk.users.create("lea", ("racer",))
+    lea = desk.ok(desk.create_race(eid, "lea"), 201)["race_id"]
+    desk.ok(desk.command(eid, lea, "start"))
+
+    fragment = html_get(desk, poll, {"HX-Request": "true"})
+    assert fragment.status_code == 200
+    html = fragment.body.decode()
+    assert "race-summary" not in html and '<ol class="board-rows">' in html
+    footer = re.search(r'data-testid="race-footer".*?</div>', html, re.S).group(0)
+    assert "Now racing" in footer and "lea" in footer
+
+
+def test_on_the_combined_board_one_track_s_summary_leaves_the_other_track_s_race_bar(desk: Desk,
+                                                                                      clock: FakeClock) -> None:
+    scenario = Scenario(desk, clock).add_racers("vera", "lea").add_event(
+        tracks=[{"track_id": "1"}, {"track_id": "2"}])
+    scenario.add_race("lea", (9_500,), track="2")  # lea is racing on track 2
+    scenario.submitted_race("vera", (9_100,), track="1")  # vera's race on track 1 has just been submitted
+
+    html = html_get(desk, f"/leaderboard/{scenario.event_id}?track=combined").body.decode()
+    summary = re.search(r'data-testid="race-summary".*?</article>', html, re.S).group(0)
+    assert 'data-racer="vera"' in summary and "Track 1" in summary  # two tracks: the summary says whose it is
+    footer = re.search(r'data-testid="race-footer".*?</div>', html, re.S).group(0)
+    assert "Now racing" in footer and "lea" in footer

@@ -51,6 +51,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "fastest of the event",
         "fastest_lap_of_race": "fastest of this race",
         "sponsored_by": "Sponsored by",
+        "no_valid_lap": "No valid lap",
+        "in_the_lead": "Leader",
     },
     "de": {
         "leaderboard": "Bestenliste",
@@ -92,6 +94,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "schnellste der Veranstaltung",
         "fastest_lap_of_race": "schnellste dieses Rennens",
         "sponsored_by": "Gesponsert von",
+        "no_valid_lap": "Keine gültige Runde",
+        "in_the_lead": "Führend",
     },
     "es": {
         "leaderboard": "Clasificación",
@@ -133,6 +137,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "la más rápida del evento",
         "fastest_lap_of_race": "la más rápida de esta carrera",
         "sponsored_by": "Patrocinado por",
+        "no_valid_lap": "Ninguna vuelta válida",
+        "in_the_lead": "Líder",
     },
     "fr": {
         "leaderboard": "Classement",
@@ -174,6 +180,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "le plus rapide de l’événement",
         "fastest_lap_of_race": "le plus rapide de cette course",
         "sponsored_by": "Sponsorisé par",
+        "no_valid_lap": "Aucun tour valide",
+        "in_the_lead": "En tête",
     },
     "ja": {
         "leaderboard": "リーダーボード",
@@ -215,6 +223,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "イベント最速",
         "fastest_lap_of_race": "このレース最速",
         "sponsored_by": "スポンサー",
+        "no_valid_lap": "有効なラップなし",
+        "in_the_lead": "トップ",
     },
     "sv": {
         "leaderboard": "Topplista",
@@ -256,6 +266,8 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "fastest_lap_of_event": "snabbast under eventet",
         "fastest_lap_of_race": "snabbast i detta lopp",
         "sponsored_by": "Sponsrat av",
+        "no_valid_lap": "Inget giltigt varv",
+        "in_the_lead": "Ledare",
     },
 }
 

@@ -179,4 +179,4 @@ class ProfilesForBoards:
         if public is None:
             return RacerProfile(username=fallback_username)
         return RacerProfile(username=public.username, country_code=public.country_code,
-                            highlight_colour=public.highlight_colour)
+                            highlight_colour=public.highlight_colour, avatar_url=public.avatar_url)

@@ -2,10 +2,10 @@
 (`/overlay/{event}`), plus the fragment routes their live regions poll every 500 ms.
 
 A page renders its live region once; the region then polls `…/live?…&v={token}`, where the token names every
-materialised item version (and overlay phase) it was built from. The fragment route reads the same items as
-`GET /api/leaderboard|overlay/{event}` (through the process's poll cache) and answers **204 No Content** while the
-token is current: htmx 2 leaves the DOM alone on 204, so an unchanged poll costs no rendering and no flicker. An
-`If-None-Match` with the fragment's ETag gets a 304 the same way (for clients that cache).
+materialised item version (and overlay phase, or a held race summary) it was built from. The fragment route reads the
+same items as `GET /api/leaderboard|overlay/{event}` (through the process's poll cache) and answers **204 No Content**
+while the token is current: htmx 2 leaves the DOM alone on 204, so an unchanged poll costs no rendering and no
+flicker. An `If-None-Match` with the fragment's ETag gets a 304 the same way (for clients that cache).
 
 A changed token is rendered once per (fragment, event, options, token) and the same HTML is served to every poller
 (`domain/render_cache.LIVE_FRAGMENTS`); the overlay's race is read once per overlay version (`LIVE_RACES`). The only
@@ -61,6 +61,8 @@ class LeaderboardQuery(PageOptions):
     scroll: bool = True
     qr: Literal["header", "footer", "none"] = "footer"
     page_seconds: int = Field(default=8, ge=2, le=60, description="big screen: seconds each page of rows is shown")
+    summary_seconds: int = Field(default=views.DEFAULT_SUMMARY_SECONDS, ge=0, le=120,
+                                 description="big screen: seconds a submitted race's summary is held; 0 = off")
     tracks: str = Field(default="", max_length=300, description="live fragment: tracks whose race footer to show")
 
     @field_validator("tracks")
@@ -177,18 +179,23 @@ def leaderboard_live(event_id: str, track: str, query: LeaderboardQuery, footer_
                      now_ms: int) -> tuple[str, Callable[[], dict[str, Any]]]:
     """(version token, a function building the template context of the leaderboard's live region)."""
     items = read_live(event_id, track, footer_tracks)
-    token = views.version_token(items.board.version, *(o.version for o in items.overlays))
+    # A held summary is part of the token: its end (or a new race) changes the token, so the next poll renders.
+    held = [o for o in items.overlays if views.summary_held(o, now_ms, query.summary_seconds * 1000)]
+    token = views.version_token(items.board.version, *(o.version for o in items.overlays),
+                                *(f"s{o.track_id}" for o in held))
 
     def context() -> dict[str, Any]:
         t = i18n.translator(query.lang)
         footers = [f for o in items.overlays if (f := views.race_footer(
             o, now_ms, t, views.entry_for(items.board, o.username), show_flags=query.flag)) is not None]
+        summaries = [views.race_summary(o, items.board, t, show_flags=query.flag) for o in held]
         poll = live_url(f"/leaderboard/{quote(event_id, safe='')}/live", {
             "track": track, "format": query.format, "flag": query.flag, "scroll": query.scroll, "lang": query.lang,
-            "tracks": ",".join(footer_tracks), "page_seconds": query.page_seconds, "v": token})
+            "tracks": ",".join(footer_tracks), "page_seconds": query.page_seconds,
+            "summary_seconds": query.summary_seconds, "v": token})
         return {"rows": views.board_rows(items.board, query.format, t, show_flags=query.flag), "footers": footers,
-                "poll_url": poll, "token": token, "scroll": query.scroll, "t": t, "clock_at": now_ms,
-                "page_ms": query.page_seconds * 1000}
+                "summaries": summaries, "poll_url": poll, "token": token, "scroll": query.scroll, "t": t,
+                "clock_at": now_ms, "page_ms": query.page_seconds * 1000}
 
     return token, context
 

@@ -14,6 +14,7 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from functools import lru_cache
 from typing import Literal
+from urllib.parse import quote
 
 from pydantic import BaseModel, ConfigDict
 
@@ -26,6 +27,7 @@ OverlayPhase = Literal["racing", "post_race", "standings"]
 
 DEFAULT_CHROMA = "#00ff00"
 POST_RACE_HIGHLIGHT_MS = 30_000
+DEFAULT_SUMMARY_SECONDS = 12  # DREM's leaderboard holds its race-summary footer for 12 s after a new entry
 OVERLAY_TOP = 4
 LIVE_STATUSES = frozenset({"READY", "RUNNING", "PAUSED"})
 FINISHED_STATUSES = frozenset({"OVER", "SUBMITTED"})
@@ -175,6 +177,8 @@ class BoardRowView(BaseModel):
     time_ms: int | None
     gap: str
     laps: int
+    avatar: str = ""
+    initial: str = ""
     highlighted: bool = False
 
 
@@ -205,8 +209,22 @@ def board_rows(board: BoardSnapshot, fmt: BoardFormat | None, t: Callable[[str],
             country_code=(entry.country_code or "").upper() if flag_emoji(entry.country_code) else "",
             colour=safe_colour(entry.highlight_colour, DEFAULT_HIGHLIGHT_COLOUR.lower()),
             proxy=entry.raced_by_proxy, time=lap_time(figure, t("dnf")), time_ms=figure, gap=gap_time(gap),
-            laps=entry.laps))
+            laps=entry.laps, avatar=avatar_src(entry), initial=initial(entry.username)))
     return rows
+
+
+def avatar_src(entry: LeaderboardEntry | None) -> str:
+    """The racer's identicon URL ("" when they chose none). Built from the shown name (URL-quoted) rather than copied
+    from the item; the colour in the query makes a changed highlight colour fetch a fresh image."""
+    if entry is None or not entry.avatar_url:
+        return ""
+    colour = safe_colour(entry.highlight_colour, DEFAULT_HIGHLIGHT_COLOUR.lower())
+    return f"/api/profiles/{quote(entry.username, safe='')}/avatar.svg?c={colour[1:]}"
+
+
+def initial(name: str) -> str:
+    """What stands in for a missing avatar: the name's first letter or digit, upper-cased."""
+    return next((c.upper() for c in name if c.isalnum()), "?")
 
 
 class RaceFooterView(BaseModel):
@@ -249,6 +267,48 @@ def race_footer(overlay: OverlaySnapshot, now_ms: int, t: Callable[[str], str],
 
 def entry_for(board: BoardSnapshot, username: str) -> LeaderboardEntry | None:
     return next((e for e in board.entries if e.username == username), None)
+
+
+# --- the race summary the big screen holds after each race -----------------------------------------------------------
+
+
+class RaceSummaryView(BaseModel):
+    """The just-submitted race of one track, shown in place of the rows for `summary_seconds`."""
+    track_id: str
+    racer: str
+    avatar: str
+    initial: str
+    flag: str
+    country_code: str
+    colour: str
+    proxy: bool
+    position: str
+    best_label: str
+    best: str
+    laps: int
+    gap: str
+
+
+def summary_held(overlay: OverlaySnapshot, now_ms: int, hold_ms: int) -> bool:
+    """True while a race submitted `now_ms - as_of_ms` ago is still within the hold. Only a submitted race: its result
+    is on the board, so the position is real. A new race on the track makes the overlay live and ends the hold."""
+    return overlay.status == "SUBMITTED" and 0 <= now_ms - overlay.as_of_ms < hold_ms
+
+
+def race_summary(overlay: OverlaySnapshot, board: BoardSnapshot, t: Callable[[str], str], *,
+                 show_flags: bool = True) -> RaceSummaryView:
+    entry = entry_for(board, overlay.username)
+    average = overlay.ranking_method == "BEST_AVERAGE_LAP_TIME_X_LAP"
+    best_ms = overlay.fastest_average_ms if average else overlay.fastest_lap_ms
+    flag = flag_emoji(entry.country_code) if entry and show_flags else ""
+    leading = overlay.position == 1
+    return RaceSummaryView(
+        track_id=overlay.track_id, racer=overlay.username, avatar=avatar_src(entry), initial=initial(overlay.username),
+        flag=flag, country_code=(entry.country_code or "").upper() if entry and flag else "",
+        colour=safe_colour(entry.highlight_colour if entry else None, DEFAULT_HIGHLIGHT_COLOUR.lower()),
+        proxy=overlay.raced_by_proxy, position=f"P{overlay.position}" if overlay.position else "–",
+        best_label=t("best_average" if average else "best_lap"), best=lap_time(best_ms, t("no_valid_lap")),
+        laps=overlay.valid_laps, gap=t("in_the_lead") if leading else (gap_time(overlay.gap_to_leader_ms) or "–"))
 
 
 # --- F1 lap colours --------------------------------------------------------------------------------------------------

@@ -1,5 +1,5 @@
 // drem live pages: clocks tick locally between polls, and a new or improved board row is highlighted and scrolled
-// into view. The server re-syncs the clocks whenever the race changes (each swapped fragment carries fresh readings).
+// into view (after the race summary the server holds on screen, if any). The server re-syncs the clocks whenever the race changes (each swapped fragment carries fresh readings).
 // A fragment may have been built (and cached on the server) a while before this poll got it: its clocks carry the
 // server time they were read at (data-clock-at) and the response the server time it was sent (X-Drem-Server-Ms), so a
 // running clock starts from its reading plus the difference. Each clock element is anchored once, when it arrives.
@@ -9,6 +9,7 @@
   var clocks = [];
   var previousTimes = null;
   var highlightUntil = {};
+  var summarised = {};  // racers whose race summary held the screen: highlighted when the rows come back
   // Big-screen paging: when the rows do not fit the screen, show them a page at a time (every racer appears).
   var DEFAULT_PAGE_MS = 8000;
   var pageIndex = 0;
@@ -56,24 +57,33 @@
 
   function boardTimes(board) {
     var times = {};
-    board.querySelectorAll("[data-racer]").forEach(function (row) { times[row.dataset.racer] = row.dataset.time; });
+    board.querySelectorAll(".board-row[data-racer]").forEach(function (row) { times[row.dataset.racer] = row.dataset.time; });
     return times;
   }
   function markChangedRows() {
     var board = document.querySelector("[data-board]");
+    // While a race summary holds the screen the rows are hidden: compare them once they are back, so the new result
+    // (and the summarised racer's row) is highlighted, and its page shown, when people can see it.
     if (!board) { return; }
+    var summaries = board.querySelectorAll("[data-race-summary]");
+    if (summaries.length) {
+      summaries.forEach(function (summary) { summarised[summary.dataset.racer] = true; });
+      return;
+    }
     var times = boardTimes(board);
     var now = Date.now();
     var first = null;
-    board.querySelectorAll("[data-racer]").forEach(function (row) {
+    board.querySelectorAll(".board-row[data-racer]").forEach(function (row) {
       var racer = row.dataset.racer;
-      if (previousTimes !== null && row.dataset.time && previousTimes[racer] !== row.dataset.time) {
+      var changed = previousTimes !== null && row.dataset.time && previousTimes[racer] !== row.dataset.time;
+      if (changed || summarised[racer]) {
         highlightUntil[racer] = now + HIGHLIGHT_MS;
         first = first || row;
       }
       if ((highlightUntil[racer] || 0) > now) { row.classList.add("is-new"); }
     });
     previousTimes = times;
+    summarised = {};
     if (first && board.dataset.scroll === "true") {
       var rowsPerPage = layoutPages(board);
       if (rowsPerPage) {  // dwell on the page with the new result
