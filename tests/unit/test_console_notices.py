@@ -89,7 +89,7 @@ def test_role_changes_and_disabling_say_so_in_the_users_row(client: Any, users: 
     admin.get("/console/users")
 
     role = post(admin, "/console/users/kim/role", {"role": "operator"}, htmx=True)
-    assert role.status_code == 200 and _notice(role.body.decode()) == "kim&#39;s role is now operator."
+    assert role.status_code == 200 and _notice(role.body.decode()) == "kim&#39;s role is now Operator."
     disabled = post(admin, "/console/users/kim/disable", htmx=True)
     assert _notice(disabled.body.decode()) == "kim is disabled and cannot sign in."
     enabled = post(admin, "/console/users/kim/enable", htmx=True)

@@ -10,7 +10,7 @@ from chalicelib.auth.access import ADMIN, route
 from chalicelib.auth.principals import USER_ROLES, User
 from chalicelib.domain.users import DirectoryUser, RoleChange
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
-from drem_web import render
+from drem_web import labels, render
 
 bp = Blueprint(__name__)
 
@@ -42,7 +42,7 @@ def change_role(principal: User, username: str) -> Response:
     change = submitted(bp.current_request, "role")
     return _act(username, lambda: services.user_service().change_role(principal, username,
                                                                        RoleChange.model_validate(change)),
-                done=f"{username}'s role is now {change.get('role', '')}.")
+                done=f"{username}'s role is now {labels.label(change.get('role', ''))}.")
 
 
 @route(bp, "/console/users/{username}/disable", methods=["POST"], allow={ADMIN})
