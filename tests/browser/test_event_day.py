@@ -294,14 +294,14 @@ def test_a_name_with_a_dash_is_accepted_at_the_desk_and_at_self_sign_up(chromium
     desk.goto(app_url + "/console/registration")
     desk.fill("#username", "kim-b")
     desk.fill("#email", "kim-b@example.test")
-    desk.select_option("#country_code", label="Sweden (SE)")
+    desk.fill("#country_code", "Sweden (SE)")
     desk.get_by_role("button", name="Create racer").click()
     assert desk.get_by_test_id("registered-username").inner_text() == "kim-b"
     racer = context.browser.new_context(viewport=PHONE).new_page()
     racer.goto(app_url + "/signup")
     racer.fill("#username", "kim-c")
     racer.fill("#email", "kim-c@example.test")
-    racer.select_option("#country_code", label="Sweden (SE)")
+    racer.fill("#country_code", "sweden")
     racer.fill("#password", PASSWORD)
     racer.get_by_role("button", name="Sign up").click()
     # A local stack confirms self sign-ups itself (no email can arrive offline): the racer may sign in at once.

@@ -43,14 +43,15 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     page.goto(app_url + "/console/fleets")
     page.fill("#name", "Track 1 cars")
     page.get_by_role("button", name="Create fleet").click()
-    page.wait_for_url(app_url + "/console/fleets")
+    page.wait_for_url(app_url + "/console/fleets?done=fleet-created")
+    assert page.get_by_test_id("notice").inner_text() == "Fleet created."
     assert "Track 1 cars" in page.inner_text("[data-testid=fleets-table]")
 
     # An event with two tracks; a mistake first, shown next to its field.
     page.goto(app_url + "/console/events/new")
     assert page.input_value("#date") == date.today().isoformat()  # a new event starts on today's date
     page.fill("#date", "2026-06-01")
-    page.select_option("#country_code", label="Sweden (SE)")  # names, found as they are typed
+    page.fill("#country_code", "Sweden (SE)")  # the label the picker's list offers
     page.fill("#track-1-title", "Main track")
     page.select_option("#track-1-fleet_id", label="Track 1 cars")
     page.check("#track-2-use")
@@ -58,10 +59,11 @@ def test_operator_sets_up_an_event_activates_a_car_and_gives_it_the_racers_model
     page.get_by_role("button", name="Create event").click()
     assert page.locator("#name-error").is_visible()  # the name is missing
     assert page.input_value("#track-2-title") == "Side track"  # nothing typed is lost
-    assert page.input_value("#country_code") == "SE"
+    assert page.input_value("#country_code") == "Sweden (SE)"
     page.fill("#name", "Journey Summit")
     page.get_by_role("button", name="Create event").click()
-    page.wait_for_url(app_url + "/console/events")
+    page.wait_for_url(app_url + "/console/events?done=event-created")
+    assert page.get_by_test_id("notice").inner_text() == "Event created."
     row = page.locator("tr", has_text="Journey Summit")
     assert "Main track" in row.inner_text() and "Side track" in row.inner_text()
     assert row.get_by_role("link", name="Leaderboard").get_attribute("href").startswith("/leaderboard/")

@@ -26,12 +26,13 @@ def test_sign_up_shows_each_refusal_next_to_its_field_and_keeps_what_was_typed(a
                                       "password": "Fast-Lap-2026"})
     assert reply.status_code == 400
     assert field_error(reply, "username") == "A username has 2 to 20 characters."
-    assert 'value="ann@example.test"' in body(reply) and '<option value="SE" selected>' in body(reply)
+    assert 'value="ann@example.test"' in body(reply) and 'value="Sweden (SE)"' in body(reply)
 
     reply = post(visitor, "/signup", {"username": "ann", "email": "ann@example.test", "country_code": "",
                                       "password": "Fast-Lap-2026"})
     assert reply.status_code == 400
-    assert "is not an ISO 3166-1 alpha-2 country code" in field_error(reply, "country_code")
+    assert field_error(reply, "country_code") == ("Choose a country: type its name or its two-letter code, "
+                                                  "e.g. Sweden or SE.")
 
 
 def test_sign_up_is_confirmed_at_once_locally_and_no_code_is_accepted(app: Any, aws_clients: Any,
@@ -147,7 +148,7 @@ def test_my_races_starts_empty_and_another_racers_race_is_not_shown(app: Any, us
 
 def test_nav_shows_a_racer_only_their_own_screens(app: Any, users: Any) -> None:
     racer = signed_in(app, users, "kai", "racer")
-    nav = body(racer.get("/")).split('data-testid="nav-links">')[1].split("</ul>")[0]
+    nav = body(racer.get("/")).split('data-testid="nav-links">')[1].split("</nav>")[0]
     assert [link for link in ("/console/my-models", "/console/my-races", "/console/profile") if link in nav]
     for staff in ("/console/users", "/console/models\"", "/console/registration", "/console/events"):
         assert staff not in nav

@@ -39,7 +39,7 @@ def bind_request(*, htmx: bool = False, **request_globals: Any) -> None:
 
 
 def _context(ctx: dict[str, Any]) -> dict[str, Any]:
-    merged = {"principal": None, "csrf_token": ""}
+    merged = {"principal": None, "csrf_token": "", "flash": ""}
     merged.update(getattr(_local, "globals", None) or {})
     merged.update(ctx)
     return merged

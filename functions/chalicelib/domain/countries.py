@@ -23,6 +23,45 @@ COUNTRY_CHOICES: tuple[tuple[str, str], ...] = tuple(
     (code, f"{name} ({code})") for code, name in sorted(COUNTRY_NAMES.items(), key=lambda item: item[1].casefold()))
 
 
+def _names_of(country: Any) -> set[str]:
+    return {str(name) for name in (country.name, getattr(country, "common_name", None),
+                                   getattr(country, "official_name", None)) if name}
+
+
+# What a person may type in a country picker, casefolded → code: the code, every name pycountry knows ("Bolivia",
+# "Bolivia, Plurinational State of") and the picker's own label ("Sweden (SE)").
+_TYPED: dict[str, str] = {
+    typed.casefold(): c.alpha_2
+    for c in pycountry.countries
+    for typed in (c.alpha_2, f"{_short_name(c)} ({c.alpha_2})", *_names_of(c))
+}
+
+
+def country_label(code: str | None) -> str:
+    """"Sweden (SE)" for a known code; anything else (what someone typed and got refused) comes back unchanged."""
+    value = code or ""
+    name = COUNTRY_NAMES.get(value.upper())
+    return f"{name} ({value.upper()})" if name else value
+
+
+def country_code_from_text(text: str, *, field: str = "country_code") -> str:
+    """The alpha-2 code of what was typed in a country picker: a code ("se"), a name ("sweden") or a label ("Sweden
+    (SE)"), ignoring case and spaces around it. Anything else is InvalidInput naming the field: no guessing."""
+    code = _TYPED.get(" ".join(text.split()).casefold())
+    if code is None:
+        raise InvalidInput(unknown_country_message(text), field=field)
+    return code
+
+
+def unknown_country_message(text: str) -> str:
+    """What a country picker says when what was typed names no country."""
+    typed = " ".join(text.split())
+    if not typed:
+        return "Choose a country: type its name or its two-letter code, e.g. Sweden or SE."
+    return f"No country is called {typed!r}: type its name or its two-letter code (e.g. Sweden or SE) and pick it " \
+           "from the list."
+
+
 def country_name(code: str | None) -> str:
     return COUNTRY_NAMES.get((code or "").upper(), code or "")
 

@@ -11,6 +11,7 @@ from typing import Literal, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Role, User
+from chalicelib.domain.countries import normalise_country_code
 from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.views.avatars import identicon_svg
@@ -50,6 +51,13 @@ class ProfileUpdate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     highlight_colour: str | None = Field(default=None, max_length=16)
     avatar: AvatarChoice | None = None
+    # Shown next to the racer's name on boards and overlays; the account's sign-up country stays as it was.
+    country_code: str | None = Field(default=None, max_length=64)
+
+    @field_validator("country_code")
+    @classmethod
+    def _iso_country(cls, value: str | None) -> str | None:
+        return None if value is None else normalise_country_code(value)
 
     @field_validator("highlight_colour")
     @classmethod

@@ -11,6 +11,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from chalicelib.domain.countries import country_code_from_text, unknown_country_message
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.events import DEFAULT_LINKS, Event, EventInput, EventType
 from drem_leaderboard.models import RaceConfig, RankingMethod, TrackType
@@ -77,7 +78,9 @@ def posted_form(fields: dict[str, str]) -> EventFormView:
 
 
 def event_input(fields: dict[str, str]) -> EventInput:
-    """Raises pydantic.ValidationError or InvalidInput naming the field; `rename_for(fields)` maps the names."""
+    """Raises pydantic.ValidationError or InvalidInput naming the field; `rename_for(fields)` maps the names.
+    The country picker may hold a name or a label ("Sweden (SE)"): the model gets the code, or the text to refuse
+    along with the other fields (`rename_for` words that refusal as the picker's)."""
     config = {name: fields[name].strip() for name in CONFIG_FIELDS if fields.get(name, "").strip()}
     if not fields.get("resets_per_lap", "").strip():
         config["resets_per_lap"] = None
@@ -94,7 +97,8 @@ def event_input(fields: dict[str, str]) -> EventInput:
             del track["leaderboard_footer"]
     return EventInput.model_validate({
         "name": fields.get("name", ""), "event_type": fields.get("event_type", ""), "date": fields.get("date", ""),
-        "country_code": fields.get("country_code", ""), "sponsor": fields.get("sponsor", ""), "race_config": config,
+        "country_code": _country_code(fields.get("country_code", "")), "sponsor": fields.get("sponsor", ""),
+        "race_config": config,
         "tracks": tracks, "landing_page_links": _parse_links(fields.get("landing_page_links", "")),
         "stats_visibility": fields.get("stats_visibility", "").strip() or "public"})
 
@@ -114,6 +118,20 @@ def rename_for(fields: dict[str, str]):  # noqa: ANN201 - a small closure
         return parts[0]
 
     return rename
+
+
+def _country_code(typed: str) -> str:
+    try:
+        return country_code_from_text(typed)
+    except InvalidInput:
+        return typed
+
+
+def country_message(errors: dict[str, str], fields: dict[str, str]) -> dict[str, str]:
+    """The event model words a bad code for the API; on the form it is the picker's text that named no country."""
+    if "country_code" in errors:
+        errors["country_code"] = unknown_country_message(fields.get("country_code", ""))
+    return errors
 
 
 def _config_values(config: RaceConfig) -> dict[str, str]:

@@ -10,6 +10,7 @@ from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.routes.console import event_form
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
+from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
 from chalicelib.views.overlay_links import OverlayLinkOptions, overlay_link
 from drem_web import render
@@ -21,7 +22,8 @@ EVENT_EDITORS = {ADMIN, OPERATOR}
 
 @route(bp, "/console/events", allow=EVENT_EDITORS)
 def events_page(principal: User) -> Response:
-    return render.page("console/events", events=services.event_service().list_events())
+    return render.page("console/events", events=services.event_service().list_events(),
+                       flash=done_notice(bp.current_request))
 
 
 @route(bp, "/console/events/{event_id}/overlay", allow=EVENT_EDITORS, query=OverlayLinkOptions)
@@ -45,7 +47,7 @@ def create_event(principal: User) -> Response:
         services.event_service().create_event(principal, event_form.event_input(values))
     except SHOWN_ON_FORM as exc:
         return _form_page(None, event_form.posted_form(values), _event_errors(exc, values), error_status(exc))
-    return redirect("/console/events")
+    return redirect("/console/events", done="event-created")
 
 
 @route(bp, "/console/events/{event_id}/edit", allow=EVENT_EDITORS)
@@ -60,7 +62,7 @@ def update_event(principal: User, event_id: str) -> Response:
         services.event_service().update_event(principal, event_id, event_form.event_input(values))
     except SHOWN_ON_FORM as exc:
         return _form_page(event_id, event_form.posted_form(values), _event_errors(exc, values), error_status(exc))
-    return redirect("/console/events")
+    return redirect("/console/events", done="event-saved")
 
 
 @route(bp, "/console/events/{event_id}/delete", allow=EVENT_EDITORS)
@@ -77,11 +79,11 @@ def delete_event(principal: User, event_id: str) -> Response:
         return render.page("console/event_delete", status=error_status(exc),
                            event=services.event_service().get_event(event_id),
                            errors=field_errors(exc, rename=lambda _name: "form"))
-    return redirect("/console/events")
+    return redirect("/console/events", done="event-deleted")
 
 
 def _event_errors(exc: Exception, values: dict[str, str]) -> dict[str, str]:
-    return field_errors(exc, rename=event_form.rename_for(values))
+    return event_form.country_message(field_errors(exc, rename=event_form.rename_for(values)), values)
 
 
 def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],

@@ -22,6 +22,7 @@ from chalicelib.routes.console.forms import (
     redirect,
     submitted,
 )
+from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
 from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
 from drem_web import render
@@ -43,12 +44,13 @@ def create_fleet(principal: User) -> Response:
         services.fleet_service().create_fleet(principal, FleetInput.model_validate(values))
     except SHOWN_ON_FORM as exc:
         return _fleets_page(field_errors(exc), values, error_status(exc))
-    return redirect("/console/fleets")
+    return redirect("/console/fleets", done="fleet-created")
 
 
 @route(bp, "/console/cars", allow=DEVICE_STAFF)
 def cars_page(principal: User) -> Response:
-    return _cars_page(principal, {}, notice=_sent_notice(bp.current_request.query_params or {}))
+    request = bp.current_request
+    return _cars_page(principal, {}, notice=_sent_notice(request.query_params or {}) or done_notice(request))
 
 
 @route(bp, "/console/cars/live", allow=DEVICE_STAFF)
@@ -87,7 +89,8 @@ def car_command(principal: User, device_id: str) -> Response:
 @route(bp, "/console/cars/{device_id}/fleet", methods=["POST"], allow=DEVICE_STAFF)
 def move_car(principal: User, device_id: str) -> Response:
     fleet_id = optional(submitted(bp.current_request, "fleet_id").get("fleet_id"))
-    return _car_action(principal, device_id, lambda: services.device_service().move_to_fleet(device_id, fleet_id))
+    return _car_action(principal, device_id, lambda: services.device_service().move_to_fleet(device_id, fleet_id),
+                       done="car-moved")
 
 
 @route(bp, "/console/cars/{device_id}/models", methods=["POST"], allow=DEVICE_STAFF)
@@ -101,15 +104,17 @@ def assign_model(principal: User, device_id: str) -> Response:
                                                                   if m and m not in current]
         return service.assign(principal, device_id, wanted)
 
-    return _car_action(principal, device_id, assign)
+    return _car_action(principal, device_id, assign, done="car-models")
 
 
 @route(bp, "/console/cars/{device_id}/deregister", methods=["POST"], allow={ADMIN})
 def deregister_car(principal: User, device_id: str) -> Response:
-    return _car_action(principal, device_id, lambda: services.device_service().deregister(device_id))
+    return _car_action(principal, device_id, lambda: services.device_service().deregister(device_id),
+                       done="car-deregistered")
 
 
-def _car_action(principal: User, device_id: str, action, sent: str = "") -> Response:  # noqa: ANN001 - a thunk
+def _car_action(principal: User, device_id: str, action, sent: str = "",  # noqa: ANN001 - a thunk
+                done: str = "") -> Response:
     """Run one car's action; a refusal is shown in that car's row (errors keyed `{device_id}-{field}`)."""
     try:
         action()
@@ -117,12 +122,12 @@ def _car_action(principal: User, device_id: str, action, sent: str = "") -> Resp
         errors = {f"{device_id}-{name}": message for name, message in field_errors(exc).items()}
         return _cars_page(principal, errors, error_status(exc))
     query = f"?sent={quote(sent)}&device={quote(device_id)}" if sent else ""
-    return redirect(f"/console/cars{query}#car-{device_id}")
+    return redirect(f"/console/cars{query}#car-{device_id}", done=done)
 
 
 def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 200) -> Response:
     return render.page("console/fleets", status=status, fleets=services.fleet_service().list_fleets(), errors=errors,
-                       values=values)
+                       values=values, flash=done_notice(bp.current_request) if status == 200 else "")
 
 
 def _sent_notice(query: dict[str, str]) -> str:

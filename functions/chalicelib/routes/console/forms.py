@@ -24,6 +24,7 @@ from chalice.app import Request
 from pydantic import ValidationError
 
 from chalicelib.auth.access import form_fields
+from chalicelib.domain.countries import country_code_from_text
 from chalicelib.domain.errors import DremError, NotFound
 from chalicelib.http_errors import status_for
 from chalicelib.routes import responses
@@ -80,8 +81,22 @@ def error_status(exc: Exception) -> int:
     return status_for(exc)
 
 
-def redirect(location: str) -> Response:
-    """After a successful post: 303 for a plain browser, HX-Redirect for htmx (which would swap a 303's body)."""
+def with_country_code(values: dict[str, str], name: str = "country_code", *, required: bool = True) -> dict[str, str]:
+    """A copy of `values` with the country picker's text ("Sweden (SE)", "sweden", "se") replaced by its code, for
+    the strict domain model; InvalidInput naming the field for anything else. `values` keeps what was typed (shown
+    again with the error). An optional picker left empty is dropped (no change)."""
+    typed = values.get(name, "")
+    if not required and not typed.strip():
+        return {key: value for key, value in values.items() if key != name}
+    return {**values, name: country_code_from_text(typed, field=name)}
+
+
+def redirect(location: str, done: str = "") -> Response:
+    """After a successful post: 303 for a plain browser, HX-Redirect for htmx (which would swap a 303's body).
+    `done` names what was done (a key of `console.notices.DONE`): the page shows its success message."""
+    if done:
+        path, _, anchor = location.partition("#")
+        location = f"{path}{'&' if '?' in path else '?'}done={done}" + (f"#{anchor}" if anchor else "")
     response = responses.redirect(location)
     response.headers["HX-Redirect"] = location
     return response

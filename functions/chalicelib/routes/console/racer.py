@@ -22,7 +22,15 @@ from chalicelib.domain.racer_models import ListQuery, ModelStatus
 from chalicelib.domain.users import ConfirmSignUpForm, SignUpForm
 from chalicelib.htmx import is_htmx
 from chalicelib.http_errors import retry_after_headers
-from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
+from chalicelib.routes.console.forms import (
+    SHOWN_ON_FORM,
+    error_status,
+    field_errors,
+    redirect,
+    submitted,
+    with_country_code,
+)
+from chalicelib.routes.console.notices import done_notice
 from drem_leaderboard.ranking import DEFAULT_HIGHLIGHT_COLOUR
 from drem_web import render
 
@@ -43,7 +51,7 @@ def signup_page(principal: Principal) -> Response:
 def signup(principal: Principal) -> Response:
     values = submitted(bp.current_request, *_SIGN_UP_FIELDS)
     try:
-        body = SignUpForm.model_validate(values)
+        body = SignUpForm.model_validate(with_country_code(values))
         result = guarded_sign_up(lambda: services.user_service().sign_up(body), client_address(bp.current_request))
     except SHOWN_ON_FORM as exc:
         return _signup_form(values, field_errors(exc, "username"), error_status(exc), retry_after_headers(exc))
@@ -97,11 +105,12 @@ def profile_page(principal: User) -> Response:
 @route(bp, "/console/profile", methods=["POST"], allow=SIGNED_IN)
 def update_profile(principal: User) -> Response:
     service = services.profile_service()
+    values = submitted(bp.current_request, "highlight_colour", "avatar", "country_code")
     try:
-        saved = service.update_own(principal, ProfileUpdate.model_validate(
-            submitted(bp.current_request, "highlight_colour", "avatar")))
+        saved = service.update_own(principal, ProfileUpdate.model_validate(with_country_code(values, required=False)))
     except SHOWN_ON_FORM as exc:
-        return _profile_form(service.own(principal), field_errors(exc, "highlight_colour"), error_status(exc))
+        return _profile_form(service.own(principal), field_errors(exc, "highlight_colour"), error_status(exc),
+                             typed_country=values.get("country_code", ""))
     return _profile_form(services.shown_on_boards(saved), notice="Your profile is saved; the leaderboards show it now.")
 
 
@@ -111,7 +120,7 @@ def update_profile(principal: User) -> Response:
 def my_models(principal: User) -> Response:
     service = services.model_service()
     return render.page("console/my_models", models=_own_models(service, principal),
-                       max_bytes=service.max_upload_bytes)
+                       max_bytes=service.max_upload_bytes, flash=done_notice(bp.current_request))
 
 
 @route(bp, "/console/my-models/rows", allow=SIGNED_IN)
@@ -129,7 +138,7 @@ def delete_my_model(principal: User, model_id: str) -> Response:
     deleted = services.model_service().delete(_only_own(principal), model_id)
     if is_htmx(bp.current_request):
         return render.fragment("console/my_model_deleted", model=deleted)
-    return redirect("/console/my-models")
+    return redirect("/console/my-models", done="model-deleted")
 
 
 # --- my races -----------------------------------------------------------------------------------------------------
@@ -173,7 +182,9 @@ def _password_form(errors: dict[str, str] | None = None, status: int = 200, noti
                        policy=password_policy_text())
 
 
-def _profile_form(profile, errors: dict[str, str] | None = None, status: int = 200, notice: str = "") -> Response:
+def _profile_form(profile, errors: dict[str, str] | None = None, status: int = 200, notice: str = "",
+                  typed_country: str = "") -> Response:
     return render.page("console/profile", status=status, profile=profile, palette=HIGHLIGHT_PALETTE, notice=notice,
+                       country=typed_country or profile.country_code or "", countries=COUNTRY_CHOICES,
                        # Before the first save the boards show the default colour: the form says so by selecting it.
                        shown_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR, errors=errors or {})

@@ -17,6 +17,7 @@ from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.races import LapEdit
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, redirect, submitted
+from chalicelib.routes.console.notices import done_notice
 from chalicelib.views.timekeeper_desk import clock_text
 from drem_web import render
 
@@ -38,7 +39,7 @@ def races_page(principal: User, query: RaceFilter) -> Response:
     races = services.race_service().list_races(event.event_id, query.track or None) if event else []
     return render.page("console/races", events=events, event=event, track=query.track,
                        races=[_race_row(r) for r in reversed(races)],
-                       audit=_audit_rows(event.event_id) if event else [])
+                       audit=_audit_rows(event.event_id) if event else [], flash=done_notice(bp.current_request))
 
 
 @route(bp, "/console/races/{event_id}/{race_id}", allow=RACE_ADMINS)
@@ -57,7 +58,7 @@ def edit_lap(principal: User, event_id: str, race_id: str, lap_id: str) -> Respo
         errors = field_errors(exc, rename=lambda name: "time_s" if name == "time_ms" else name)
         return _edit_page(principal, event_id, race_id, {f"lap-{lap_id}-{name}": message
                                                          for name, message in errors.items()}, error_status(exc))
-    return redirect(f"/console/races/{event_id}/{race_id}")
+    return redirect(f"/console/races/{event_id}/{race_id}", done="lap-saved")
 
 
 @route(bp, "/console/races/{event_id}/{race_id}/delete", allow=RACE_ADMINS)
@@ -75,7 +76,7 @@ def delete_race(principal: User, event_id: str, race_id: str) -> Response:
         return render.page("console/race_delete", status=error_status(exc),
                            race=services.race_service().get_race(principal, event_id, race_id),
                            errors=field_errors(exc, rename=lambda _name: "form"))
-    return redirect(f"/console/races?event_id={event_id}")
+    return redirect(f"/console/races?event_id={event_id}", done="race-deleted")
 
 
 def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, str], status: int = 200) -> Response:
@@ -83,7 +84,8 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
     laps = [{**lap, "seconds": f"{Decimal(lap['time_ms']) / 1000:.3f}", "time": clock_text(lap["time_ms"])}
             for lap in race["laps"]]
     return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors,
-                       created=_when(race["created_at_ms"]), audit=_audit_rows(event_id, race_id))
+                       created=_when(race["created_at_ms"]), audit=_audit_rows(event_id, race_id),
+                       flash=done_notice(bp.current_request) if status == 200 else "")
 
 
 def _audit_rows(event_id: str, race_id: str | None = None) -> list[dict[str, str]]:

@@ -10,7 +10,7 @@ from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.users import RegisteredUser, StaffRegistrationForm
 from chalicelib.htmx import is_htmx
-from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
+from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted, with_country_code
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -28,7 +28,8 @@ def registration_page(principal: User) -> Response:
 def register_racer(principal: User) -> Response:
     values = submitted(bp.current_request, *_FIELDS)
     try:
-        registered = services.user_service().register_racer(StaffRegistrationForm.model_validate(values))
+        form = StaffRegistrationForm.model_validate(with_country_code(values))
+        registered = services.user_service().register_racer(form)
     except SHOWN_ON_FORM as exc:
         return _desk(values, field_errors(exc, "username"), error_status(exc))
     # The next racer at an event usually comes from the same country: keep it, clear the rest.

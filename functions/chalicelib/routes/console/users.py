@@ -10,7 +10,7 @@ from chalicelib.auth.access import ADMIN, route
 from chalicelib.auth.principals import USER_ROLES, User
 from chalicelib.domain.users import DirectoryUser, RoleChange
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
-from drem_web import render
+from drem_web import labels, render
 
 bp = Blueprint(__name__)
 
@@ -39,28 +39,32 @@ def user_rows(principal: User) -> Response:
 
 @route(bp, "/console/users/{username}/role", methods=["POST"], allow={ADMIN})
 def change_role(principal: User, username: str) -> Response:
-    return _act(username, lambda: services.user_service().change_role(
-        principal, username, RoleChange.model_validate(submitted(bp.current_request, "role"))))
+    change = submitted(bp.current_request, "role")
+    return _act(username, lambda: services.user_service().change_role(principal, username,
+                                                                       RoleChange.model_validate(change)),
+                done=f"{username}'s role is now {labels.label(change.get('role', ''))}.")
 
 
 @route(bp, "/console/users/{username}/disable", methods=["POST"], allow={ADMIN})
 def disable_user(principal: User, username: str) -> Response:
-    return _act(username, lambda: services.user_service().set_enabled(principal, username, False))
+    return _act(username, lambda: services.user_service().set_enabled(principal, username, False),
+                done=f"{username} is disabled and cannot sign in.")
 
 
 @route(bp, "/console/users/{username}/enable", methods=["POST"], allow={ADMIN})
 def enable_user(principal: User, username: str) -> Response:
-    return _act(username, lambda: services.user_service().set_enabled(principal, username, True))
+    return _act(username, lambda: services.user_service().set_enabled(principal, username, True),
+                done=f"{username} is enabled and can sign in again.")
 
 
-def _act(username: str, action) -> Response:
-    """Run the service call; answer with the user's refreshed row (and the refusal, if any, in the row)."""
+def _act(username: str, action, done: str) -> Response:  # noqa: ANN001 - a thunk
+    """Run the service call; answer with the user's refreshed row and, in it, what was done or the refusal."""
     try:
         action()
     except SHOWN_ON_FORM as exc:
         return render.fragment("console/user_row", status=error_status(exc), row=_row(username),
                                roles=ROLE_CHOICES, row_error=field_errors(exc, "role").popitem()[1])
-    return render.fragment("console/user_row", row=_row(username), roles=ROLE_CHOICES, row_error="")
+    return render.fragment("console/user_row", row=_row(username), roles=ROLE_CHOICES, row_error="", row_notice=done)
 
 
 def _search_error(exc: Exception) -> dict[str, str]:
