@@ -268,7 +268,8 @@ def test_every_track_has_its_links_and_the_overlay_link_builder_explains_its_opt
     nav = page.get_by_test_id("nav-links").inner_text()
     assert "League" in nav and "Model registry" not in nav  # one name per registry, the league in the bar
     page.goto(app_url + "/console/events")
-    side = page.get_by_test_id("track-links-2")
+    # This event's row: other tests' events on the shared stack have a track 2 too.
+    side = page.locator(f'tr[data-event-id="{event_day["event_id"]}"]').get_by_test_id("track-links-2")
     assert side.get_by_role("link", name="Timekeeper").get_attribute("href").endswith(f"{event_day['event_id']}/2")
     side.get_by_role("link", name="Overlay").click()
     page.get_by_label("Chroma key background").check()
