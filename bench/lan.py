@@ -382,7 +382,9 @@ def report_live(live: list[dict[str, dict[str, Any]]], crowds: dict[str, dict[st
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--rounds", type=int, default=8, help="spectator rounds (each: both cases, both doors)")
+    parser.add_argument("--rounds", type=int, default=12,
+                        help="spectator rounds (each: both cases, both doors; 8 left a 95 %% interval straddling "
+                             "the goal)")
     parser.add_argument("--seconds", type=float, default=3, help="wrk seconds per case and round")
     parser.add_argument("--laps", type=int, default=10, help="aimed laps per page and door (a lap per round)")
     parser.add_argument("--spectators", type=int, default=100, help="crowd polling the live fragments, per door")
