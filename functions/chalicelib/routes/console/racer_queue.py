@@ -5,6 +5,8 @@ The panel's list polls itself (every 2 s) so the pre-load state follows the car;
 polled list so nothing typed is swapped away."""
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from chalice import Blueprint, Response
 
 from chalicelib import services
@@ -42,32 +44,31 @@ def add_to_queue(principal: User, event_id: str, track_id: str) -> Response:
 
 @route(bp, BASE + "/move", methods=["POST"], allow=QUEUE_STAFF)
 def move_in_queue(principal: User, event_id: str, track_id: str) -> Response:
-    try:
-        services.on_deck().move(principal, event_id, track_id, MoveInQueue.model_validate(_button()))
-    except SHOWN_ON_FORM as exc:
-        return _list(event_id, track_id, field_errors(exc, rename=_form_name, missing_object_field="form"),
-                     error_status(exc))
-    return _list(event_id, track_id)
+    return _changed(event_id, track_id, lambda: services.on_deck().move(
+        principal, event_id, track_id, MoveInQueue.model_validate(_button())))
 
 
 @route(bp, BASE + "/remove", methods=["POST"], allow=QUEUE_STAFF)
 def remove_from_queue(principal: User, event_id: str, track_id: str) -> Response:
-    try:
-        services.on_deck().remove(principal, event_id, track_id, QueueEntryRef.model_validate(_button()).entry_id)
-    except SHOWN_ON_FORM as exc:
-        return _list(event_id, track_id, field_errors(exc, rename=_form_name, missing_object_field="form"),
-                     error_status(exc))
-    return _list(event_id, track_id)
+    return _changed(event_id, track_id, lambda: services.on_deck().remove(
+        principal, event_id, track_id, QueueEntryRef.model_validate(_button()).entry_id))
 
 
 @route(bp, BASE + "/start", methods=["POST"], allow=QUEUE_STAFF)
 def start_head(principal: User, event_id: str, track_id: str) -> Response:
+    return _changed(event_id, track_id, lambda: services.on_deck().start_head(
+        principal, event_id, track_id, QueueEntryRef.model_validate(_button()).entry_id), headers=RACE_STARTED)
+
+
+def _changed(event_id: str, track_id: str, change: Callable[[], object],
+             headers: dict[str, str] | None = None) -> Response:
+    """Apply one change from a queue row's button; the queue again, with the message beside the row if refused."""
     try:
-        services.on_deck().start_head(principal, event_id, track_id, QueueEntryRef.model_validate(_button()).entry_id)
+        change()
     except SHOWN_ON_FORM as exc:
         return _list(event_id, track_id, field_errors(exc, rename=_form_name, missing_object_field="form"),
                      error_status(exc))
-    return _list(event_id, track_id, headers=RACE_STARTED)
+    return _list(event_id, track_id, headers=headers)
 
 
 def _button() -> dict[str, str]:
