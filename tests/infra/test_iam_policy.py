@@ -24,6 +24,8 @@ PRESIGNED = {"generate_presigned_post": ("s3", "PutObject"), "generate_presigned
 # How an S3 operation is authorised (HeadObject is GetObject; CopyObject reads and writes).
 S3_AUTHORISED_AS = {"HeadObject": ("GetObject",), "CopyObject": ("GetObject", "PutObject")}
 DYNAMODB_AUTHORISED_AS = {"TransactWriteItems": ("PutItem", "UpdateItem", "DeleteItem", "ConditionCheckItem")}
+# aws_errors' helpers that make one fixed call for the adapter that calls them (the others take the operation name).
+HELPER_OPERATIONS = {"batch_items": "batch_get_item"}
 
 
 def adapter_calls() -> dict[str, set[str]]:
@@ -52,6 +54,8 @@ def _operation_names(tree: ast.AST):
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and isinstance(node.value, str):
             yield node.value
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in HELPER_OPERATIONS:
+            yield HELPER_OPERATIONS[node.func.id]
         elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
             receiver = ast.unparse(node.func.value)
             if any(word in receiver for word in ("client", "cognito", "dynamodb", "s3")):

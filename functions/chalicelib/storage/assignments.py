@@ -13,13 +13,12 @@ from typing import Any
 from chalicelib.domain.assignments import AssignedModel, Assignment, AssignmentChanged, ModelProgress
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import NotFound
-from chalicelib.storage.aws_errors import call, write_if
+from chalicelib.storage.aws_errors import batch_items, call, write_if
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.events import DynamoEventStore
 
 _SERVICE = "The fleet table"
 _SK = "ASSIGNMENT"
-_BATCH = 100
 
 
 def assignment_key(device_id: str) -> dict[str, Any]:
@@ -37,16 +36,10 @@ class DynamoAssignmentStore:
 
     def get_many(self, device_ids: list[str]) -> dict[str, Assignment]:
         found: dict[str, Assignment] = {}
-        unique = list(dict.fromkeys(device_ids))
-        for start in range(0, len(unique), _BATCH):
-            request = {self._table: {"Keys": [assignment_key(d) for d in unique[start:start + _BATCH]],
-                                     "ConsistentRead": True}}
-            while request:
-                reply = self._call("batch_get_item", RequestItems=request)
-                for item in reply.get("Responses", {}).get(self._table, []):
-                    assignment = _assignment(item)
-                    found[assignment.device_id] = assignment
-                request = reply.get("UnprocessedKeys") or {}
+        keys = [assignment_key(device_id) for device_id in dict.fromkeys(device_ids)]
+        for item in batch_items(self._client, self._table, keys, _SERVICE, ConsistentRead=True):
+            assignment = _assignment(item)
+            found[assignment.device_id] = assignment
         return found
 
     def put(self, assignment: Assignment, *, expected_version: int) -> None:

@@ -89,6 +89,25 @@ def all_items(client: Any, operation: str, service: str, **kwargs: Any) -> Itera
         kwargs = {**kwargs, "ExclusiveStartKey": page["LastEvaluatedKey"]}
 
 
+_BATCH_KEYS = 100  # BatchGetItem's limit per call
+_BATCH_ATTEMPTS = 5  # DynamoDB may leave keys unprocessed under load; ask again this many times at most
+
+
+def batch_items(client: Any, table: str, keys: list[dict[str, Any]], service: str,
+                **options: Any) -> Iterator[dict[str, Any]]:
+    """The items stored under `keys` in `table` (missing ones are left out), read with BatchGetItem, 100 keys a
+    call, asking again for the keys a call left unprocessed. `options` go with every request (ConsistentRead,
+    ProjectionExpression)."""
+    for start in range(0, len(keys), _BATCH_KEYS):
+        request: dict[str, Any] = {table: {"Keys": keys[start:start + _BATCH_KEYS], **options}}
+        for _attempt in range(_BATCH_ATTEMPTS):
+            reply = call(client, "batch_get_item", service, RequestItems=request)
+            yield from reply.get("Responses", {}).get(table, [])
+            request = reply.get("UnprocessedKeys") or {}
+            if not request:
+                break
+
+
 # A DynamoDB write whose condition did not hold: the single-item form, and a transaction one of whose conditions
 # failed (DynamoDB names the item in CancellationReasons; drem's callers only need "nothing was written").
 _CONDITION_FAILED = {"ConditionalCheckFailedException", "TransactionCanceledException"}

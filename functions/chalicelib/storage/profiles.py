@@ -6,11 +6,9 @@ from collections.abc import Iterable
 from typing import Any
 
 from chalicelib.domain.profiles import Profile
-from chalicelib.storage.aws_errors import call
+from chalicelib.storage.aws_errors import batch_items, call
 
 _SERVICE = "The profile store"
-_BATCH = 100
-_BATCH_ATTEMPTS = 5
 _FIELDS = ("username", "country_code", "highlight_colour", "avatar", "updated_at")
 
 
@@ -41,16 +39,9 @@ class DynamoProfileStore:
         """Many profiles in BatchGetItem calls of 100 keys (printed results name hundreds of racers at once)."""
         keys = [_profile_key(sub) for sub in dict.fromkeys(subs)]
         found: dict[str, Profile] = {}
-        for start in range(0, len(keys), _BATCH):
-            request: dict[str, Any] = {self._table: {"Keys": keys[start:start + _BATCH], "ConsistentRead": True}}
-            for _attempt in range(_BATCH_ATTEMPTS):  # DynamoDB may leave keys unprocessed under load
-                reply = self._call("batch_get_item", RequestItems=request)
-                for item in reply.get("Responses", {}).get(self._table, []):
-                    sub = item["pk"]["S"].removeprefix("USER#")
-                    found[sub] = _profile(sub, item)
-                request = reply.get("UnprocessedKeys") or {}
-                if not request:
-                    break
+        for item in batch_items(self._client, self._table, keys, _SERVICE, ConsistentRead=True):
+            sub = item["pk"]["S"].removeprefix("USER#")
+            found[sub] = _profile(sub, item)
         return found
 
     def put(self, profile: Profile) -> None:

@@ -13,11 +13,10 @@ from collections.abc import Sequence
 from typing import Any
 
 from chalicelib.domain.stats import EventDigest
-from chalicelib.storage.aws_errors import call, write_if
+from chalicelib.storage.aws_errors import batch_items, write_if
 
 _SERVICE = "The races table"
 _SK = "STATS"
-_BATCH = 100  # BatchGetItem's limit
 
 
 def _key(event_id: str) -> dict[str, Any]:
@@ -31,16 +30,11 @@ class DynamoStatsDigestStore:
 
     def digests(self, event_ids: Sequence[str]) -> dict[str, EventDigest]:
         found: dict[str, EventDigest] = {}
-        wanted = list(dict.fromkeys(event_ids))
-        for start in range(0, len(wanted), _BATCH):
-            request: dict[str, Any] = {self._table: {"Keys": [_key(e) for e in wanted[start:start + _BATCH]],
-                                                     "ConsistentRead": True, "ProjectionExpression": "doc"}}
-            while request:
-                reply = call(self._client, "batch_get_item", _SERVICE, RequestItems=request)
-                for item in reply.get("Responses", {}).get(self._table, []):
-                    digest = EventDigest.model_validate_json(item["doc"]["S"])
-                    found[digest.event_id] = digest
-                request = reply.get("UnprocessedKeys") or {}
+        keys = [_key(event_id) for event_id in dict.fromkeys(event_ids)]
+        for item in batch_items(self._client, self._table, keys, _SERVICE, ConsistentRead=True,
+                                ProjectionExpression="doc"):
+            digest = EventDigest.model_validate_json(item["doc"]["S"])
+            found[digest.event_id] = digest
         return found
 
     def put(self, digest: EventDigest, listed_at_ms: int) -> None:
