@@ -36,14 +36,14 @@ up: install
 demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
-# pytest-xdist workers for `make test`: one per core (CI has two). Each test file runs whole in one worker, and the
-# infra tests (they share functions/vendor/) in one (tests/conftest.py). TEST_WORKERS=0 runs all in this process.
+# pytest-xdist workers for `make test`: one per core (CI has two). Each test file runs whole in one worker
+# (--dist loadfile); the infra tests take turns on functions/ (tests/infra/conftest.py). TEST_WORKERS=0: one process.
 TEST_WORKERS ?= auto
 
 ## make test: install the test dependencies (Python, npm htmx, Debian chromium), lint, then run every test
 test: install-test
 	$(MAKE) --no-print-directory lint
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 ## make lint: ruff (style and likely bugs) and mypy (types; strict for leaderboard/ and chalicelib/domain/), as
 ## configured in pyproject.toml. mypy keeps its cache in .mypy_cache/, so a second run takes seconds.

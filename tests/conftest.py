@@ -38,12 +38,3 @@ def tracks_dir() -> Path:
         pytest.fail(f"shared DeepRacer tracks not found at {TRACKS_DIR}")
     return TRACKS_DIR
 
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under pytest-xdist (`make test` runs one worker per core, `--dist loadgroup`) a test file runs whole in one
-    worker, so its module-scoped stacks start once, not once per scattered test; and every infra test runs in the
-    same worker, because they share functions/vendor/, which `drem build` replaces under the others' synth."""
-    for item in items:
-        path = Path(str(item.fspath)).resolve()
-        group = "infra" if "infra" in path.relative_to(REPO_ROOT / "tests").parts[:1] else str(path)
-        item.add_marker(pytest.mark.xdist_group(group))

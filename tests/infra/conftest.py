@@ -2,9 +2,13 @@
 wheels of requirements/lambda.txt into functions/vendor/ (the only step that downloads; packaging and synth don't)."""
 from __future__ import annotations
 
+import fcntl
 import os
 import subprocess
 import sys
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -20,11 +24,28 @@ BEFORE_SYNTH: dict = {}
 PUBLIC_URL = "https://drem.example.org"
 
 
+# One lock and one "built" mark per test run, shared by the pytest-xdist workers (`make test` runs one per core):
+# functions/ is one folder, so `drem build` (which replaces functions/vendor/) runs once, and no worker packages or
+# synthesises the app while another is writing there.
+_RUN = Path(tempfile.gettempdir()) / f"drem-infra-tests-{os.environ.get('PYTEST_XDIST_TESTRUNUID', os.getpid())}"
+
+
+@contextmanager
+def functions_dir_exclusively() -> Iterator[Path]:
+    _RUN.mkdir(exist_ok=True)
+    with open(_RUN / "lock", "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield FUNCTIONS_DIR
+
+
 @pytest.fixture(scope="session")
 def lambda_build() -> Path:
-    drem = Path(sys.executable).with_name("drem")
-    build = subprocess.run([str(drem), "build"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
-    assert build.returncode == 0, f"drem build failed:\n{build.stdout}\n{build.stderr}"
+    with functions_dir_exclusively():
+        if not (_RUN / "built").exists():
+            drem = Path(sys.executable).with_name("drem")
+            build = subprocess.run([str(drem), "build"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+            assert build.returncode == 0, f"drem build failed:\n{build.stdout}\n{build.stderr}"
+            (_RUN / "built").touch()
     return FUNCTIONS_DIR
 
 
@@ -52,7 +73,8 @@ def templates(tmp_path_factory, lambda_build):
         app = cdk.App(outdir=str(work / "cdk.out"))
         storage_only = DremStack(app, "drem-storage", stage=STAGE)
         with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL)
-        app.synth()
+        with functions_dir_exclusively():  # the Chalice construct packages functions/ (its .chalice/ cache too)
+            app.synth()
         return Template.from_stack(storage_only), Template.from_stack(with_app)
     finally:
         os.chdir(cwd)

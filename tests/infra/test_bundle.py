@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.infra.conftest import functions_dir_exclusively
+
 pytestmark = pytest.mark.infra
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -52,10 +54,11 @@ def _modules_in(names: list[str], top_levels: tuple[str, ...]) -> list[str]:
 @pytest.fixture(scope="module")
 def bundle(tmp_path_factory, lambda_build):
     work = tmp_path_factory.mktemp("bundle")
-    package = subprocess.run([str(Path(sys.executable).with_name("chalice")), "package", str(work / "out")],
-                             cwd=FUNCTIONS_DIR, capture_output=True, text=True, timeout=300,
-                             env={**os.environ, "AWS_DEFAULT_REGION": os.environ.get("AWS_DEFAULT_REGION",
-                                                                                     "us-east-1")})
+    with functions_dir_exclusively():  # `chalice package` writes functions/.chalice/ (another worker may synth)
+        package = subprocess.run([str(Path(sys.executable).with_name("chalice")), "package", str(work / "out")],
+                                 cwd=FUNCTIONS_DIR, capture_output=True, text=True, timeout=300,
+                                 env={**os.environ, "AWS_DEFAULT_REGION": os.environ.get("AWS_DEFAULT_REGION",
+                                                                                         "us-east-1")})
     assert package.returncode == 0, f"chalice package failed:\n{package.stdout}\n{package.stderr}"
     unzipped = work / "unzipped"
     with zipfile.ZipFile(work / "out" / "deployment.zip") as archive:
