@@ -79,6 +79,9 @@ def test_every_row_shows_an_avatar_readable_on_the_big_screen(chromium: Any, boa
     page = context.new_page()
     page.goto(f"{app_url}/leaderboard/{board['event_id']}?summary_seconds=0")
     page.locator(".board-row").first.wait_for()
+    # Images load after the rows appear: wait until the browser has finished with every avatar (loaded or failed).
+    page.wait_for_function("() => [...document.querySelectorAll('.board-row [data-testid=avatar] img')]"
+                           ".every(img => img.complete)")
     avatars = page.evaluate("""() => [...document.querySelectorAll('.board-row')].map(row => {
         const avatar = row.querySelector('[data-testid=avatar]'), img = avatar && avatar.querySelector('img');
         const box = avatar ? avatar.getBoundingClientRect() : {width: 0, height: 0};
