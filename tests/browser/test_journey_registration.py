@@ -72,7 +72,8 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
     # The form is reset for the next racer, the cursor back in the username, the country kept.
     assert page.input_value("#username") == "" and page.input_value("#email") == ""
     assert page.input_value("#country_code") == "Germany (DE)"
-    assert page.evaluate("document.activeElement.id") == "username"
+    # htmx applies autofocus once it has settled the swapped form: wait for it, then it must be the username.
+    page.wait_for_function("document.activeElement && document.activeElement.id === 'username'", timeout=5_000)
 
     # A taken name is refused next to the field, nothing typed is lost.
     page.keyboard.type(first)
