@@ -5,6 +5,11 @@ checked against the code in tests/infra/test_iam_policy.py."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +17,7 @@ from drem_infra import live_pages
 
 pytestmark = pytest.mark.infra
 
+REPO_ROOT = Path(__file__).resolve().parents[2]
 CACHING_DISABLED = "4135ea2d-6df8-44a3-9df3-4b5a84be39ad"  # AWS managed cache policy CachingDisabled
 
 
@@ -185,3 +191,43 @@ def test_the_image_installs_only_hashed_wheels_and_runs_the_live_server(staged_i
     assert 'CMD ["python", "-m", "drem_live", "--host", "0.0.0.0", "--port", "8080"]' in dockerfile
     assert "USER 10001" in dockerfile
 
+
+
+def test_the_images_packages_import_and_render_the_live_routes(staged_image_context, tmp_path):
+    """The Dockerfile's steps without Docker: its lock installed as it installs it (hashed wheels only, no resolving),
+    its COPY lines laid out under a stand-in /app, its PYTHONPATH; the live routes then import and render."""
+    context, _ = staged_image_context
+    root = tmp_path / "image"
+    inside = lambda path: root / path.lstrip("/")  # noqa: E731 - the image's absolute paths under the stand-in root
+    uv = REPO_ROOT / ".tools" / "bin" / "uv"
+    venv = tmp_path / "venv"
+    subprocess.run([str(uv), "venv", "--quiet", "--python", sys.executable, str(venv)], check=True, timeout=120)
+    install = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(venv / "bin" / "python"),
+                              "--require-hashes", "--no-deps", "--only-binary", ":all:",
+                              "-r", str(context / "requirements" / "live.txt")],
+                             capture_output=True, text=True, timeout=600)
+    assert install.returncode == 0, install.stderr
+    pythonpath = ""
+    for line in (context / live_pages.DOCKERFILE).read_text().splitlines():
+        if line.startswith("COPY ") and "requirements/" not in line:
+            *sources, destination = line.split()[1:]
+            for source in sources:
+                target = inside(destination) / Path(source).name if destination.endswith("/") else inside(destination)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                copy = shutil.copytree if (context / source).is_dir() else shutil.copy
+                copy(context / source, target)
+        elif line.startswith("ENV PYTHONPATH="):
+            pythonpath = os.pathsep.join(str(inside(p)) for p in line.split("=", 1)[1].split(":"))
+
+    probe = ("import aiohttp, boto3\n"
+             "from chalicelib.routes import public_pages\n"
+             "from drem_web import render\n"
+             "html = render.fragment('leaderboard_live', rows=[], footers=[], summaries=[], poll_url='/x', token='1',"
+             " scroll=True, t=lambda s: s, clock_at=0, page_ms=8000).body\n"
+             "assert html.lstrip().startswith('<section'), html\n"
+             "print(public_pages.__file__)\n")
+    run = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=120, env={"PATH": "/usr/bin:/bin", "PYTHONPATH": pythonpath,
+                                           "AWS_DEFAULT_REGION": "us-east-1"})
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().startswith(str(root / "app" / "functions" / "chalicelib"))
