@@ -150,26 +150,33 @@ LIVE_READERS = (FUNCTIONS_DIR / "chalicelib" / "routes" / "public_pages.py",
                 *sorted((FUNCTIONS_DIR.parent / "live" / "drem_live").rglob("*.py")))
 
 
+def _storage_classes(tree: ast.Module) -> dict[str, str]:
+    """{adapter class name: its chalicelib.storage module} as a module imports them."""
+    return {alias.name: node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+            and (node.module or "").startswith("chalicelib.storage.") for alias in node.names}
+
+
+def _adapters_built(scope: ast.AST, classes: dict[str, str]) -> set[tuple[str, str]]:
+    """{(storage module, table logical name)} for every adapter built in `scope` on `….table("<logical>")`."""
+    built = set()
+    for node in ast.walk(scope):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in classes:
+            tables = {a.args[0].value for a in ast.walk(node) if isinstance(a, ast.Call)
+                      and isinstance(a.func, ast.Attribute) and a.func.attr == "table"
+                      and a.args and isinstance(a.args[0], ast.Constant)}
+            built |= {(classes[node.func.id], t) for t in tables}
+    return built
+
+
 def _services_tables() -> dict[str, set[tuple[str, str]]]:
     """{services function: {(storage module, table logical name)}} from chalicelib/services.py, following calls to
     other services functions (e.g. a service built on race_store())."""
     tree = ast.parse((FUNCTIONS_DIR / "chalicelib" / "services.py").read_text())
-    modules = {alias.name: node.module for node in tree.body if isinstance(node, ast.ImportFrom)
-               and (node.module or "").startswith("chalicelib.storage.") for alias in node.names}
-    direct: dict[str, set[tuple[str, str]]] = {}
-    calls: dict[str, set[str]] = {}
-    for function in (n for n in tree.body if isinstance(n, ast.FunctionDef)):
-        direct[function.name], calls[function.name] = set(), set()
-        for node in ast.walk(function):
-            if not isinstance(node, ast.Call):
-                continue
-            if isinstance(node.func, ast.Name) and node.func.id in modules:
-                tables = {a.args[0].value for a in ast.walk(node) if isinstance(a, ast.Call)
-                          and isinstance(a.func, ast.Attribute) and a.func.attr == "table"
-                          and a.args and isinstance(a.args[0], ast.Constant)}
-                direct[function.name] |= {(modules[node.func.id], t) for t in tables}
-            elif isinstance(node.func, ast.Name):
-                calls[function.name].add(node.func.id)
+    classes = _storage_classes(tree)
+    functions = [n for n in tree.body if isinstance(n, ast.FunctionDef)]
+    direct = {f.name: _adapters_built(f, classes) for f in functions}
+    calls = {f.name: {n.func.id for n in ast.walk(f) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+             for f in functions}
 
     def resolve(name: str, seen: frozenset[str] = frozenset()) -> set[tuple[str, str]]:
         found = set(direct.get(name, ()))
@@ -181,16 +188,19 @@ def _services_tables() -> dict[str, set[tuple[str, str]]]:
 
 
 def live_reads() -> dict[str, set[str]]:
-    """{table logical name: {dynamodb:Action}}: the read operations of the storage adapters behind every
-    `services.x()` the live readers call, limited to the reads the live server may make at all."""
+    """{table logical name: {dynamodb:Action}}: the read operations of the storage adapters the live readers use
+    (behind each `services.x()` they call, or built by themselves), limited to the reads the live server may make."""
     services_tables = _services_tables()
     session = botocore.session.get_session()
     operations = {xform_name(op): op for op in session.get_service_model("dynamodb").operation_names}
     reads: dict[str, set[str]] = {}
     for path in LIVE_READERS:
-        used = {node.attr for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Attribute)
+        tree = ast.parse(path.read_text())
+        used = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)
                 and isinstance(node.value, ast.Name) and node.value.id == "services"}
-        for module, table in {pair for name in used for pair in services_tables.get(name, ())}:
+        adapters = {pair for name in used for pair in services_tables.get(name, ())}
+        adapters |= _adapters_built(tree, _storage_classes(tree))
+        for module, table in adapters:
             source = FUNCTIONS_DIR / (module.replace(".", "/") + ".py")
             actions = {f"dynamodb:{operations[n]}" for n in _operation_names(ast.parse(source.read_text()))
                        if n in operations}
