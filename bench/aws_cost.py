@@ -13,8 +13,9 @@ Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the 
 The message sizes are measured, not guessed: a 50-racer board and a racing overlay are built by the real publisher,
 rendered by the live-region routes (chalicelib.routes.public_pages) and gzipped one message at a time as the live
 server does. The request model is pure arithmetic over the profile (tests/unit/test_aws_cost.py checks it counts what
-the profile implies). Free tiers are ignored; fixed infrastructure is charged for the whole 24-hour day that holds the
-event (the stack stays deployed).
+the profile implies). Free tiers are ignored, tiered prices use their first tier (the 2,000-spectator profile stays
+inside it; far larger crowds are overestimated), and fixed infrastructure is charged for the whole 24-hour day that
+holds the event (the stack stays deployed).
 
 List prices, us-east-1 (CloudFront: United States edge), read on 2026-11-24 through the search tool:
 - API Gateway REST $3.50 per million (first 333 M/month): docs.aws.amazon.com/whitepapers/latest/
