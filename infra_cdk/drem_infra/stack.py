@@ -29,6 +29,7 @@ from aws_cdk import aws_s3 as s3
 from constructs import Construct
 
 from drem_infra import permissions, resources
+from drem_infra.live_pages import LivePages
 from drem_infra.resources import BucketSpec, TableSpec
 
 # How long the functions' logs are kept (CloudWatch keeps them forever, and bills for them, unless told otherwise).
@@ -64,6 +65,11 @@ class DremStack(cdk.Stack):
         self.user_pool, self.user_pool_client = self._user_pool()
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
         self.distribution = self._distribution(certificate_arn) if self.app is not None else None
+        # The live pages' push server (Fargate behind an ALB) at /live/* of the same distribution (same origin).
+        self.live = (LivePages(self, "Live", stage=stage, environment=self.app_environment(), tables=self.tables)
+                     if self.distribution is not None else None)
+        if self.live is not None and self.distribution is not None:
+            self.live.serve_through(self.distribution)
         self._outputs()
 
     # --- storage ------------------------------------------------------------------------------------------------
@@ -166,6 +172,8 @@ class DremStack(cdk.Stack):
         )
         if self.public_url:
             env["DREM_PUBLIC_URL"] = self.public_url
+        # The live pages' EventSource base: empty means the page's own origin (CloudFront routes /live/* to them).
+        env["DREM_LIVE_URL"] = ""
         return env
 
     def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
