@@ -10,8 +10,9 @@ from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, field_validator
 
+from chalicelib import base_path
 from drem_infra import resources
 
 
@@ -25,6 +26,8 @@ class Settings(BaseModel):
     # Set only locally (the durable moto server); None means real AWS endpoints.
     endpoint_url: str | None = None
     public_url: str = "http://127.0.0.1:8000"
+    # The path prefix the site is served under when no proxy header or API Gateway stage says so (chalicelib.base_path).
+    base_path: str = ""
     state_dir: Path = Path(".drem")
     # Local stacks: the installation's token signing key (the only key local tokens may be signed with). None on AWS,
     # where Cognito's published JWKS is trusted.
@@ -43,10 +46,21 @@ class Settings(BaseModel):
             "user_pool_client_id": env.get("DREM_USER_POOL_CLIENT_ID") or None,
             "endpoint_url": endpoint_url,
             "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
+            "base_path": env.get("DREM_BASE_PATH") or "",
             "state_dir": state_dir,
             "token_key_file": token_key_file,
         }
         return cls.model_validate(values)
+
+    @field_validator("base_path")
+    @classmethod
+    def _plain_base_path(cls, value: str) -> str:
+        if not value:
+            return ""
+        normalised = base_path.normalise(value)
+        if normalised is None:
+            raise ValueError(f"DREM_BASE_PATH must be a plain path such as /drem, not {value!r}")
+        return normalised
 
     @property
     def cookie_secure(self) -> bool:
