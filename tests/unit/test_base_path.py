@@ -1,0 +1,54 @@
+"""The base path of a request (chalicelib.base_path): which source wins, and that a forged header can only ever be
+a plain path (no other site, no way out of an attribute)."""
+from __future__ import annotations
+
+import pytest
+
+from chalicelib import base_path
+from chalicelib.settings import Settings
+
+EXECUTE_API = "a1b2c3d4e5.execute-api.eu-west-1.amazonaws.com"
+
+
+def stage_context(stage: str = "api", host: str = EXECUTE_API, path: str = "/api/console/events") -> dict:
+    # The parts of API Gateway's REST proxy requestContext that say where the request was addressed.
+    return {"stage": stage, "domainName": host, "path": path, "resourcePath": "/console/events"}
+
+
+@pytest.mark.parametrize(("header", "expected"), [
+    ("/drem", "/drem"),
+    ("/drem/", "/drem"),             # Spring's ForwardedHeaderFilter drops the trailing slash too
+    ("/", ""),                       # CloudFront's origin: the site is at the root
+    ("/events/drem-2026", "/events/drem-2026"),
+    ("/outer, /inner", "/inner"),    # a list: the value of the nearest proxy (ProxyFix x_prefix=1)
+])
+def test_the_proxy_header_names_the_base_path(header, expected):
+    assert base_path.for_request({"x-forwarded-prefix": header}, stage_context(), "/configured") == expected
+
+
+@pytest.mark.parametrize("forged", [
+    "https://evil.example", "//evil.example", "/\\evil.example", "/drem/../..", "/./drem", 'drem',
+    '/drem"><script>alert(1)</script>', "/drem x", "/drem?next=//evil", "/drem#x", "/%2e%2e", "/dr\tem",
+    "/" + "a" * 250,
+])
+def test_a_header_that_is_not_a_plain_path_is_ignored(forged):
+    assert base_path.for_request({"x-forwarded-prefix": forged}, None, "/configured") == "/configured"
+    assert base_path.for_request({"x-forwarded-prefix": forged}, stage_context(), "") == "/api"
+
+
+def test_the_stage_counts_only_on_the_execute_api_host_with_the_stage_in_the_path():
+    assert base_path.for_request({}, stage_context(), "") == "/api"
+    assert base_path.for_request({}, stage_context(stage="prod", path="/prod"), "") == "/prod"
+    # A custom domain (or CloudFront without its header) maps the stage away: the browser never saw it.
+    assert base_path.for_request({}, stage_context(host="drem.example.org", path="/console/events"), "") == ""
+    assert base_path.for_request({}, stage_context(path="/console/events"), "") == ""
+    # chalice local's context has neither stage nor domain name.
+    assert base_path.for_request({}, {"path": "/console/events", "resourcePath": "/console/events"}, "") == ""
+
+
+def test_the_setting_applies_when_nothing_in_the_request_says_otherwise():
+    assert base_path.for_request({}, None, "/drem") == "/drem"
+    assert Settings.from_env({"DREM_BASE_PATH": "/drem/"}).base_path == "/drem"
+    assert Settings.from_env({}).base_path == ""
+    with pytest.raises(ValueError, match="DREM_BASE_PATH"):
+        Settings.from_env({"DREM_BASE_PATH": "https://example.org/drem"})
