@@ -9,6 +9,7 @@ import os
 from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
@@ -25,6 +26,8 @@ class Settings(BaseModel):
     user_pool_client_id: str | None = None
     # Set only locally (the durable moto server); None means real AWS endpoints.
     endpoint_url: str | None = None
+    # The address people use, with the sub-path the site lives under if any (https://example.org/drem): every
+    # absolute link (QR codes, landing and overlay addresses, activation commands) starts with it.
     public_url: str = "http://127.0.0.1:8000"
     # The path prefix the site is served under when no proxy header or API Gateway stage says so (chalicelib.base_path).
     base_path: str = ""
@@ -50,7 +53,11 @@ class Settings(BaseModel):
             "state_dir": state_dir,
             "token_key_file": token_key_file,
         }
-        return cls.model_validate(values)
+        settings = cls.model_validate(values)
+        if settings.base_path and urlsplit(settings.public_url).path in ("", "/"):
+            # Absolute links (QR codes, landing and overlay addresses, activation commands) need the sub-path too.
+            settings = settings.model_copy(update={"public_url": settings.public_url.rstrip("/") + settings.base_path})
+        return settings
 
     @field_validator("base_path")
     @classmethod

@@ -52,3 +52,12 @@ def test_the_setting_applies_when_nothing_in_the_request_says_otherwise():
     assert Settings.from_env({}).base_path == ""
     with pytest.raises(ValueError, match="DREM_BASE_PATH"):
         Settings.from_env({"DREM_BASE_PATH": "https://example.org/drem"})
+
+
+def test_absolute_links_carry_the_configured_sub_path():
+    # DREM_PUBLIC_URL may name the sub-path itself, or leave it to DREM_BASE_PATH; either way QR codes get both.
+    joined = Settings.from_env({"DREM_PUBLIC_URL": "https://example.org/", "DREM_BASE_PATH": "/drem"})
+    assert joined.public_url == "https://example.org/drem"
+    named = Settings.from_env({"DREM_PUBLIC_URL": "https://example.org/drem", "DREM_BASE_PATH": "/drem"})
+    assert named.public_url == "https://example.org/drem"
+    assert Settings.from_env({"DREM_PUBLIC_URL": "https://example.org"}).public_url == "https://example.org"

@@ -117,3 +117,21 @@ def test_a_live_fragment_is_cached_per_base_path(chalice_app, client, racing_eve
     for door in (api_gateway_stage(chalice_app), reverse_proxy(chalice_app)):
         reply = Crawler(door).request("GET", door.prefix + live, htmx=True)
         assert reply.status == 200 and f'hx-get="{door.prefix}{live}' in reply.body, reply.body[:400]
+
+
+def test_the_qr_code_of_a_board_behind_the_proxy_opens_the_landing_page_under_the_sub_path(
+        chalice_app, racing_event, monkeypatch):
+    from chalicelib.settings import get_settings
+
+    # The organiser names the public address and the sub-path the proxy serves drem under (docs/operations.md).
+    monkeypatch.setenv("DREM_PUBLIC_URL", "https://events.example.org")
+    monkeypatch.setenv("DREM_BASE_PATH", "/drem")
+    get_settings.cache_clear()
+    door = reverse_proxy(chalice_app)
+    board = Crawler(door).request("GET", f"/drem/leaderboard/{racing_event}?qr=footer")
+    assert board.status == 200
+    shown = board.body.split('<span class="qr-url">')[1].split("</span>")[0]
+    assert shown.startswith(f"https://events.example.org/drem/event/{racing_event}")
+    landing = Crawler(door).request("GET", shown.removeprefix("https://events.example.org"))
+    assert landing.status == 200 and "Summit Stockholm 2026" in landing.body
+    get_settings.cache_clear()
