@@ -61,3 +61,23 @@ def test_absolute_links_carry_the_configured_sub_path():
     named = Settings.from_env({"DREM_PUBLIC_URL": "https://example.org/drem", "DREM_BASE_PATH": "/drem"})
     assert named.public_url == "https://example.org/drem"
     assert Settings.from_env({"DREM_PUBLIC_URL": "https://example.org"}).public_url == "https://example.org"
+
+
+def test_url_puts_only_the_apps_own_paths_under_the_base_path():
+    from markupsafe import Markup
+
+    from drem_web import render
+
+    render.bind_request(base_path="/drem")
+    try:
+        assert render.url("/console/events?event_id=a&b") == "/drem/console/events?event_id=a&b"
+        assert render.url("/") == "/drem/"
+        for elsewhere in ("https://example.org/x", "//cdn.example.org/x", "data:image/png;base64,AA", "?track=2", ""):
+            assert render.url(elsewhere) == elsewhere
+        escaped = render.url(Markup("/leaderboard/e?a=1&amp;b=2"))  # concatenated escaped parts stay escaped once
+        assert isinstance(escaped, Markup) and escaped == "/drem/leaderboard/e?a=1&amp;b=2"
+        page = render.environment().from_string("<a href=\"{{ url('/x?a=' ~ v) }}\">").render(v="1&b=<2>")
+        assert page == '<a href="/drem/x?a=1&amp;b=&lt;2&gt;">'
+    finally:
+        render.bind_request()
+    assert render.url("/console/events") == "/console/events"  # outside a request: the root

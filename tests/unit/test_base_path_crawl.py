@@ -63,6 +63,8 @@ def test_admin_pages_work_under_the_prefix(door_name, chalice_app, users, racing
     created = admin.request("POST", f"{prefix}/console/fleets", form={"name": "Track 1 cars", "csrf_token": csrf},
                             htmx=True)
     assert fleets.status == 200 and created.status == 303, created.body[:300]
+    # Both answers hold URLs under this request's base path: a shared cache must not hand them to another prefix.
+    assert all("X-Forwarded-Prefix" in (reply.header("vary") or "") for reply in (fleets, created))
     assert created.header("hx-redirect") == created.header("location") == f"{prefix}/console/fleets?done=fleet-created"
 
     admin.crawl([f"{prefix}/", f"{prefix}/leaderboard/{racing_event}", f"{prefix}/overlay/{racing_event}",
