@@ -138,7 +138,8 @@ class Crawler:
     door: FrontDoor
     cookies: dict[str, str] = field(default_factory=dict)
     found: list[FoundUrl] = field(default_factory=list)
-    answers: dict[str, int] = field(default_factory=dict)
+    answers: dict[str, int] = field(default_factory=dict)  # GET URL → status
+    posted: dict[str, int] = field(default_factory=dict)   # POST URL → status (asked without a CSRF token)
     base_metas: set[str] = field(default_factory=set)
 
     def request(self, method: str, url: str, *, form: Mapping[str, str] | None = None, htmx: bool = False) -> Reply:
@@ -196,11 +197,11 @@ class Crawler:
                 return
             item = queue.popleft()
             url = item.url
-            if not url.startswith("/") or url.startswith("//") or url in self.answers:
+            if not url.startswith("/") or url.startswith("//") or url in (self.posted if item.posted else self.answers):
                 continue
-            assert len(self.answers) < max_requests, "the crawl did not end: more URLs than expected"
+            assert len(self.answers) + len(self.posted) < max_requests, "the crawl did not end: more URLs than expected"
             if item.posted:
-                self.answers[url] = self._post_without_token(url)
+                self.posted[url] = self._post_without_token(url)
                 continue
             fragment = item.kind.startswith(("hx-", "data-"))  # htmx and the scripts ask for fragments
             self.answers[url] = self.request("GET", url, htmx=fragment).status

@@ -39,8 +39,9 @@ def assert_every_url_under(crawler: Crawler, prefix: str) -> None:
     wrong = sorted({f"{found.kind}={found.url} (on {found.found_on})" for found in crawler.found
                     if not found.url.startswith(ELSEWHERE) and not found.url.startswith(prefix + "/")})
     assert wrong == [], f"URLs outside {prefix}/:\n" + "\n".join(wrong)
-    broken = sorted(f"{url} → {status}" for url, status in crawler.answers.items()
-                    if status in (404, 405) or status >= 500)
+    broken = sorted(f"{method} {url} → {status}" for method, answers in (("GET", crawler.answers),
+                                                                         ("POST", crawler.posted))
+                    for url, status in answers.items() if status in (404, 405) or status >= 500)
     assert broken == [], "URLs that do not answer:\n" + "\n".join(broken)
     assert crawler.door.outside_prefix == [], "requests that left the prefix"
     assert crawler.base_metas == {prefix}, "scripts read the base path from <meta name=drem-base>"
@@ -77,7 +78,7 @@ def test_admin_pages_work_under_the_prefix(door_name, chalice_app, users, racing
     assert any(url.startswith(f"{prefix}/leaderboard/{racing_event}/live") for url in visited), "the board's poll URL"
     assert any(url.startswith(f"{prefix}/overlay/{racing_event}/live") for url in visited), "the overlay's poll URL"
     assert any(url.startswith(f"{prefix}/static/") for url in visited), "stylesheets and scripts"
-    assert len(visited) > 60, f"the crawl reached only {len(visited)} URLs"
+    assert len(visited) > 60 and len(admin.posted) > 10, f"the crawl reached only {len(visited)} URLs"
 
 
 @pytest.mark.parametrize("door_name", list(DOORS))
