@@ -7,7 +7,8 @@ In order, the first that applies:
    the one the nearest proxy set; like Spring's ForwardedHeaderFilter a trailing "/" is dropped.
 2. On API Gateway, the stage ("/api") when the request came to the execute-api host itself: API Gateway strips the
    stage before the app sees the path, and names it in the request context (`stage`, `domainName`, and `path`, which
-   still starts with it; chalice keeps that context as `Request.context`, chalice/app.py `Request.__init__`).
+   still starts with it; chalice keeps that context as `Request.context`, chalice 1.34.0 chalice/app.py
+   `Request.__init__`: `self.context = event_dict['requestContext']`).
 3. The `DREM_BASE_PATH` setting.
 4. "" (the site at the root).
 
