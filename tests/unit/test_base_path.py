@@ -81,3 +81,16 @@ def test_url_puts_only_the_apps_own_paths_under_the_base_path():
     finally:
         render.bind_request()
     assert render.url("/console/events") == "/console/events"  # outside a request: the root
+
+
+def test_every_url_attribute_of_every_template_goes_through_url():
+    """The crawl reaches the pages a nav shows; this catches a raw "/..." in any template, reached or not."""
+    import re
+
+    from drem_web.render import TEMPLATES_DIR
+
+    attribute = re.compile(r'(?<![\w-])(href|src|action|hx-(?:get|post|put|patch|delete)|data-[a-z-]*url)="([^"]*)"')
+    raw = [f"{path.relative_to(TEMPLATES_DIR)}: {name}={value}" for path in sorted(TEMPLATES_DIR.rglob("*.html"))
+           for name, value in attribute.findall(path.read_text())
+           if not value.startswith(("{{ url(", "#", "?", "https://", "mailto:"))]  # "?…": relative to the page
+    assert raw == []
