@@ -68,6 +68,10 @@ def deployed(app_template, cloud_assembly, durable_server_factory):
     account = client("sts").get_caller_identity()["Account"]
     emulated_deploy.bootstrap(client("ssm"), client("s3"), account, REGION)
     published = emulated_deploy.publish_assets(client("s3"), cloud_assembly, "drem-app", account, REGION)
+    return _deploy(server, client, template, published)
+
+
+def _deploy(server: Any, client: Any, template: dict[str, Any], published: dict[str, Path]) -> Deployed:
     provided = emulated_deploy.provide_cognito(client("cognito-idp"), template["Resources"], REGION)
     subset = emulated_deploy.deployable_subset(template, provided, emulated_deploy.moto_supported_types())
     cloudformation = client("cloudformation")
@@ -293,3 +297,24 @@ def test_the_packaged_api_signs_in_records_a_race_and_shows_the_board(deployed, 
     races_table = deployed.outputs["RacesTableName"]
     items = deployed.client("dynamodb").scan(TableName=races_table)["Items"]
     assert any(race["race_id"] in json.dumps(item) for item in items)
+
+
+def test_destroy_keeps_the_data_and_the_next_deploy_of_the_stage_does_not_collide(deployed):
+    """`make destroy` then `make deploy` of the same stage (this runs after the race above, in file order)."""
+    cloudformation, dynamodb = deployed.client("cloudformation"), deployed.client("dynamodb")
+    tables = {spec.logical: deployed.outputs[f"{spec.logical.capitalize()}TableName"] for spec in resources.TABLES}
+    races_before = dynamodb.scan(TableName=tables["races"])["Count"]
+
+    cloudformation.delete_stack(StackName=STACK)
+    assert [s for s in cloudformation.list_stacks()["StackSummaries"]
+            if s["StackName"] == STACK and s["StackStatus"] != "DELETE_COMPLETE"] == []
+    # Retained: every table still there with its data, and the functions gone.
+    assert dynamodb.scan(TableName=tables["races"])["Count"] == races_before > 0
+    assert sorted(set(dynamodb.list_tables()["TableNames"]) & set(tables.values())) == sorted(tables.values())
+    functions = {f["FunctionName"] for f in deployed.client("lambda").list_functions()["Functions"]}
+    assert not functions & {deployed.physical["APIHandler"], deployed.physical["UploadComplete"]}
+
+    again = _deploy(deployed.server, deployed.client, deployed.template, deployed.published)
+    new_tables = {spec.logical: again.outputs[f"{spec.logical.capitalize()}TableName"] for spec in resources.TABLES}
+    assert set(new_tables.values()).isdisjoint(tables.values())
+    assert all(dynamodb.scan(TableName=name)["Count"] == 0 for name in new_tables.values())
