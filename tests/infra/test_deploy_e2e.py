@@ -318,3 +318,9 @@ def test_destroy_keeps_the_data_and_the_next_deploy_of_the_stage_does_not_collid
     new_tables = {spec.logical: again.outputs[f"{spec.logical.capitalize()}TableName"] for spec in resources.TABLES}
     assert set(new_tables.values()).isdisjoint(tables.values())
     assert all(dynamodb.scan(TableName=name)["Count"] == 0 for name in new_tables.values())
+    # Buckets too: S3 names are global, so a fixed one would collide with the retained bucket.
+    buckets = [deployed.outputs[f"{spec.logical.capitalize()}BucketName"] for spec in resources.BUCKETS]
+    new_buckets = [again.outputs[f"{spec.logical.capitalize()}BucketName"] for spec in resources.BUCKETS]
+    assert set(buckets).isdisjoint(new_buckets)
+    for name in buckets + new_buckets:
+        deployed.client("s3").head_bucket(Bucket=name)
