@@ -1,7 +1,9 @@
 """End to end: the real app's synthesised template deployed into moto's CloudFormation (on drem's own storage server),
 as far as moto goes, then the Lambda bundle that deploy uploaded driven with API Gateway proxy events against the
 resources that stack created: the first admin (made by `drem aws admin`) signs in, registers a racer, creates an
-event, runs and submits a race with a lap, and the public board shows the racer.
+event, runs and submits a race with a lap, and the public board shows the racer; a model archive posted with the
+upload form is routed by the stack's EventBridge rule to the upload function, which judges it; then the stack is
+destroyed (retained data stays) and deployed again without colliding.
 
 How each deploy step is stood in for, and what moto cannot create, is in tests/infra/emulated_deploy.py; the test
 prints the resources left out and checks that none of them is one the app needs.
@@ -23,6 +25,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 import pytest
+import requests
 
 from drem_infra import resources
 from tests.infra import emulated_deploy
@@ -222,24 +225,40 @@ class ApiGateway:
 
 
 @pytest.fixture(scope="module")
-def api(deployed, tmp_path_factory):
+def lambda_code(deployed, tmp_path_factory) -> tuple[Path, Path]:
+    """The bundle both functions run (unzipped from the object the stack's functions were created from), and the
+    directory of the Lambda runtime's own packages."""
     work = tmp_path_factory.mktemp("e2e-lambda")
-    handler = deployed.physical["APIHandler"]
-    configuration = deployed.client("lambda").get_function_configuration(FunctionName=handler)
-    code_key = deployed.template["Resources"]["APIHandler"]["Properties"]["CodeUri"]["Key"]
+    [code_key] = {deployed.template["Resources"][lid]["Properties"]["CodeUri"]["Key"]
+                  for lid in deployed.subset.translated}
     with zipfile.ZipFile(deployed.published[code_key]) as archive:
         archive.extractall(work / "bundle")
+    return work / "bundle", runtime_dir(work)
+
+
+def _start(deployed, lambda_code: tuple[Path, Path], logical_id: str, log_dir: Path) -> LambdaFunction:
     from drem_local.token_key import key_path
 
+    configuration = deployed.client("lambda").get_function_configuration(FunctionName=deployed.physical[logical_id])
     # AWS would give the function its role's credentials and Cognito's JWKS; here the storage server stands in for
     # AWS, so the function gets its endpoint and keys, and trusts the tokens signed with its key (drem's local mode).
     extra = {"AWS_REGION": REGION, "AWS_DEFAULT_REGION": REGION, "AWS_ENDPOINT_URL": deployed.server.url,
-             **deployed.server.keys.environment(), "DREM_STATE_DIR": str(work / "state"),
+             **deployed.server.keys.environment(), "DREM_STATE_DIR": str(log_dir / "state"),
              resources.TOKEN_SIGNING_KEY_ENV: str(key_path(deployed.server.state_dir))}
-    function = LambdaFunction(work / "bundle", runtime_dir(work), configuration, extra, work / "function.log")
+    return LambdaFunction(*lambda_code, configuration, extra, log_dir / f"{logical_id}.log")
+
+
+@pytest.fixture(scope="module")
+def api(deployed, lambda_code, tmp_path_factory):
+    function = _start(deployed, lambda_code, "APIHandler", tmp_path_factory.mktemp("api-handler"))
     definition = deployed.template["Resources"]["RestAPI"]["Properties"]["DefinitionBody"]
     yield ApiGateway(function, definition, api_id="e2etest01")
     function.close()
+
+
+@pytest.fixture(scope="module")
+def admin_password(deployed, tmp_path_factory) -> str:
+    return _first_admin(deployed, tmp_path_factory.mktemp("drem-aws"))
 
 
 def _first_admin(deployed, tmp_path: Path) -> str:
@@ -259,8 +278,8 @@ def _first_admin(deployed, tmp_path: Path) -> str:
     return created.split("shown only now; change it after signing in): ")[1].split()[0]
 
 
-def test_the_packaged_api_signs_in_records_a_race_and_shows_the_board(deployed, api, tmp_path):
-    password = _first_admin(deployed, tmp_path)
+def test_the_packaged_api_signs_in_records_a_race_and_shows_the_board(deployed, api, admin_password):
+    password = admin_password
 
     status, headers, grant = api.request("POST", "/api/auth/token", {"username": "admin", "password": password})
     assert status == 200, grant
@@ -298,6 +317,59 @@ def test_the_packaged_api_signs_in_records_a_race_and_shows_the_board(deployed, 
     items = deployed.client("dynamodb").scan(TableName=races_table)["Items"]
     assert any(race["race_id"] in json.dumps(item) for item in items)
 
+
+def test_a_model_upload_is_routed_by_the_stacks_rule_to_the_upload_function_and_judged(
+        deployed, api, admin_password, lambda_code, tmp_path):
+    from tests.unit.models_helpers import onnx_archive
+
+    _, _, grant = api.request("POST", "/api/auth/token", {"username": "admin", "password": admin_password})
+    admin = {"Authorization": f"Bearer {grant['access_token']}"}
+    status, _, ticket = api.request("POST", "/api/models", {"filename": "e2e-model.tar.gz"}, admin)
+    assert status == 201, ticket
+    # The browser posts the archive with the presigned form; locally the form names the app's /_storage gateway of
+    # the storage server (chalicelib.storage.clients.s3_presigner), which the public URL stands for here.
+    upload = ticket["upload"]
+    posted = requests.post(upload["url"].replace(PUBLIC_URL, deployed.server.url), data=upload["fields"],
+                           files={"file": ("e2e-model.tar.gz", onnx_archive())}, timeout=30)
+    assert posted.status_code in (200, 204), posted.text
+    bucket, key = deployed.outputs["ModelsBucketName"], upload["fields"]["key"]
+    size = deployed.client("s3").head_object(Bucket=bucket, Key=key)["ContentLength"]
+
+    # What S3 sends EventBridge for the new object (AWS docs, "Amazon S3 event notifications with EventBridge",
+    # Object Created), checked against the rule the stack created, which targets the upload function.
+    events = deployed.client("events")
+    rule = events.describe_rule(Name=deployed.physical[deployed.resource_ids("AWS::Events::Rule")[0]])
+    [target] = events.list_targets_by_rule(Rule=rule["Name"])["Targets"]
+    upload_function = deployed.client("lambda").get_function_configuration(
+        FunctionName=deployed.physical["UploadComplete"])
+    assert target["Arn"] == upload_function["FunctionArn"]
+    event = {"version": "0", "id": str(uuid.uuid4()), "detail-type": "Object Created", "source": "aws.s3",
+             "account": "123456789012", "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+             "region": REGION, "resources": [f"arn:aws:s3:::{bucket}"],
+             "detail": {"version": "0", "bucket": {"name": bucket},
+                        "object": {"key": key, "size": size, "etag": "0", "sequencer": "0"},
+                        "request-id": "E2E", "requester": "123456789012", "source-ip-address": "198.51.100.7",
+                        "reason": "PostObject"}}
+    # moto serves no TestEventPattern; its own matcher (moto/events/models.py EventPattern, which routes PutEvents to
+    # rules) decides instead, in this process.
+    from moto.events.models import EventPattern
+    assert EventPattern.load(rule["EventPattern"]).matches_event(event)
+    assert not EventPattern.load(rule["EventPattern"]).matches_event(
+        {**event, "detail": {**event["detail"], "object": {**event["detail"]["object"], "key": "models/x.tar.gz"}}})
+
+    function = _start(deployed, lambda_code, "UploadComplete", tmp_path)
+    try:
+        judged = function.invoke(event)
+    finally:
+        function.close()
+    model_id = ticket["model"]["model_id"]
+    assert judged == {"model_id": model_id, "status": "AVAILABLE"}, function.log_tail()
+    status, _, model = api.request("GET", f"/api/models/{model_id}", headers=admin)
+    assert status == 200 and model["model"]["status"] == "AVAILABLE", model
+    # The upload was moved out of uploads/ into the models the cars download.
+    listed = deployed.client("s3").list_objects_v2(Bucket=bucket)
+    keys = [o["Key"] for o in listed.get("Contents", [])]
+    assert key not in keys and any(k.startswith("models/") and model_id in k for k in keys), keys
 
 def test_destroy_keeps_the_data_and_the_next_deploy_of_the_stage_does_not_collide(deployed):
     """`make destroy` then `make deploy` of the same stage (this runs after the race above, in file order)."""
