@@ -25,8 +25,10 @@ What a real deploy does, and what stands in for each step here:
 from __future__ import annotations
 
 import copy
+import io
 import json
 import re
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -89,13 +91,28 @@ def publish_assets(s3: Any, cloud_assembly: Path, stack_artifact: str, account: 
     published = {}
     for asset in manifest["files"].values():
         source = cloud_assembly / asset["source"]["path"]
-        assert asset["source"].get("packaging", "file") == "file" and source.is_file(), f"unexpected asset {asset}"
+        packaging = asset["source"].get("packaging", "file")
+        if packaging == "zip":  # a directory asset: cdk-assets uploads it zipped
+            assert source.is_dir(), f"unexpected asset {asset}"
+            data = _zipped(source)
+        else:
+            assert packaging == "file" and source.is_file(), f"unexpected asset {asset}"
+            data = source.read_bytes()
         for destination in asset["destinations"].values():
             bucket = destination["bucketName"].replace("${AWS::AccountId}", account).replace("${AWS::Region}", region)
-            with source.open("rb") as body:
-                s3.put_object(Bucket=bucket, Key=destination["objectKey"], Body=body)
+            s3.put_object(Bucket=bucket, Key=destination["objectKey"], Body=data)
             published[destination["objectKey"]] = source
+    # Container images (manifest["dockerImages"]) are not built: moto runs no containers, and a service using one
+    # is either skipped (unsupported type) or created without ever pulling it.
     return published
+
+
+def _zipped(directory: Path) -> bytes:
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        for path in sorted(p for p in directory.rglob("*") if p.is_file()):
+            archive.write(path, path.relative_to(directory).as_posix())
+    return buffer.getvalue()
 
 
 # --- step 3: the SAM transform of a function -------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import pytest
 import requests
+from botocore.exceptions import ClientError
 
 from drem_infra import resources
 from tests.infra import emulated_deploy
@@ -377,7 +378,14 @@ def test_destroy_keeps_the_data_and_the_next_deploy_of_the_stage_does_not_collid
     tables = {spec.logical: deployed.outputs[f"{spec.logical.capitalize()}TableName"] for spec in resources.TABLES}
     races_before = dynamodb.scan(TableName=tables["races"])["Count"]
 
-    cloudformation.delete_stack(StackName=STACK)
+    try:
+        cloudformation.delete_stack(StackName=STACK)
+    except ClientError as exc:
+        # moto deletes in passes, not in CloudFormation's reverse dependency order, and gives up on a VPC whose
+        # dependants it cannot delete (moto/cloudformation/parsing.py ResourceMap.delete re-raises the last error);
+        # moto/cloudformation/models.py delete_stack has already removed the stack, as a finished delete would.
+        assert exc.response["Error"]["Code"] == "DependencyViolation" and "vpc" in str(exc), exc
+        print(f"\nmoto left networking behind on delete: {exc}")
     assert [s for s in cloudformation.list_stacks()["StackSummaries"]
             if s["StackName"] == STACK and s["StackStatus"] != "DELETE_COMPLETE"] == []
     # Retained: every table still there with its data, and the functions gone.
