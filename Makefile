@@ -125,6 +125,8 @@ DEPLOYED := .drem-aws/$(STAGE).json
 CDK_OUTPUTS := .drem-aws/$(STAGE).cdk-outputs.json
 CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c certificate_arn=$(CERTIFICATE_ARN),) \
 	$(if $(LIVE_MAX_TASKS),-c live_max_tasks=$(LIVE_MAX_TASKS),)
+# SES_FROM=drem@example.org SES_IDENTITY_ARN=arn:aws:ses:...: Cognito emails through SES (docs/deploy.md, Email).
+CDK_CONTEXT += $(if $(SES_FROM)$(SES_IDENTITY_ARN),-c ses_from='$(SES_FROM)' -c ses_identity_arn=$(SES_IDENTITY_ARN),)
 
 $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund

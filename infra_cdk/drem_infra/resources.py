@@ -101,9 +101,10 @@ class UserPoolSpec:
     groups: tuple[str, ...] = ("admin", "operator", "commentator", "registration", "racer")
     custom_attributes: tuple[CustomAttributeSpec, ...] = (CustomAttributeSpec("countryCode"),)
     password_policy: PasswordPolicy = field(default_factory=PasswordPolicy)
+    # Exactly the flows the storage adapters call (InitiateAuth USER_PASSWORD_AUTH and REFRESH_TOKEN_AUTH);
+    # tests/infra/test_user_pool.py derives them from the code.
     explicit_auth_flows: tuple[str, ...] = (
         "ALLOW_USER_PASSWORD_AUTH",
-        "ALLOW_ADMIN_USER_PASSWORD_AUTH",
         "ALLOW_REFRESH_TOKEN_AUTH",
     )
     # Browsers and the CLI are public clients: a secret could not be kept.

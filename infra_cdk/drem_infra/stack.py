@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,6 +42,13 @@ API_BURST_LIMIT = 400
 # The header the app reads its base path from (chalicelib.base_path.FORWARDED_PREFIX_HEADER).
 FORWARDED_PREFIX_HEADER = "X-Forwarded-Prefix"
 # The app's security headers (chalicelib.security_headers) on the one answer API Gateway gives by itself.
+# `make deploy SES_FROM=... SES_IDENTITY_ARN=...`: an SES identity (an address or its domain) verified in SES.
+_SES_IDENTITY_ARN = re.compile(r"^arn:aws[a-z-]*:ses:[a-z0-9-]+:\d{12}:identity/[^\s/]+$")
+_EMAIL_ADDRESS = re.compile(r"^(?:[^<>]*<)?[^@\s<>]+@[^@\s<>]+\.[^@\s<>]+>?$")
+# Shown by `cdk deploy` (so by `make deploy`) when racers sign up themselves and Cognito's own sender is used.
+DEFAULT_SENDER_WARNING = (
+    "Self sign-up emails a confirmation code, and Cognito's default sender allows only about 50 emails a day: "
+    "set SES_FROM and SES_IDENTITY_ARN to send through Amazon SES (docs/deploy.md, Email).")
 NOT_FOUND_HEADERS = {"Content-Security-Policy": "default-src 'none'; frame-ancestors 'none'",
                      "X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
                      "Referrer-Policy": "same-origin", "Strict-Transport-Security": "max-age=31536000"}
@@ -57,9 +65,11 @@ class DremStack(cdk.Stack):
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str,
                  functions_dir: Path | None = None, public_url: str | None = None,
-                 domain_name: str | None = None, certificate_arn: str | None = None, **kwargs) -> None:
+                 domain_name: str | None = None, certificate_arn: str | None = None,
+                 ses_from: str | None = None, ses_identity_arn: str | None = None, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
+        self.ses_from, self.ses_identity_arn = ses_from, ses_identity_arn
         self.domain_name = domain_name
         self.public_url = public_url or (f"https://{domain_name}" if domain_name else None)
         self.tables = {spec.logical: self._table(spec) for spec in resources.TABLES}
@@ -144,6 +154,7 @@ class DremStack(cdk.Stack):
             account_recovery=cognito.AccountRecovery.EMAIL_ONLY,
             removal_policy=cdk.RemovalPolicy.RETAIN,
         )
+        self._email_sender(pool, spec.self_sign_up)
         client = pool.add_client(
             "WebClient",
             user_pool_client_name=resources.client_name(self.stage),
@@ -163,6 +174,25 @@ class DremStack(cdk.Stack):
             cognito.CfnUserPoolGroup(self, f"{group.capitalize()}Group", user_pool_id=pool.user_pool_id,
                                      group_name=group)
         return pool, client
+
+    def _email_sender(self, pool: cognito.UserPool, self_sign_up: bool) -> None:
+        """Through Amazon SES when given a verified identity (DEVELOPER: Cognito sends with the account's SES quota,
+        through its service-linked role); otherwise Cognito's default sender, with a warning if racers sign up."""
+        if not self.ses_from and not self.ses_identity_arn:
+            if self_sign_up:
+                cdk.Annotations.of(pool).add_warning_v2("drem:email-default-sender", DEFAULT_SENDER_WARNING)
+            return
+        if not self.ses_from or not self.ses_identity_arn:
+            raise ValueError("SES_FROM and SES_IDENTITY_ARN go together: the sender address and the ARN of its "
+                             "verified SES identity (arn:aws:ses:REGION:ACCOUNT:identity/ADDRESS-OR-DOMAIN)")
+        if not _EMAIL_ADDRESS.match(self.ses_from):
+            raise ValueError(f"SES_FROM={self.ses_from!r} is not an email address (drem@example.org, or "
+                             "'drem <drem@example.org>')")
+        if not _SES_IDENTITY_ARN.match(self.ses_identity_arn):
+            raise ValueError(f"SES_IDENTITY_ARN={self.ses_identity_arn!r} is not an SES identity ARN "
+                             "(arn:aws:ses:REGION:ACCOUNT:identity/ADDRESS-OR-DOMAIN)")
+        pool.node.default_child.add_property_override("EmailConfiguration", {
+            "EmailSendingAccount": "DEVELOPER", "From": self.ses_from, "SourceArn": self.ses_identity_arn})
 
     # --- application --------------------------------------------------------------------------------------------
 

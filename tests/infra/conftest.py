@@ -20,6 +20,8 @@ FUNCTIONS_DIR = REPO_ROOT / "functions"
 STAGE = "test"
 # The app module the session had imported before the synth (tests/infra/test_cdk_synth.py checks it is untouched).
 BEFORE_SYNTH: dict = {}
+# Where the synth wrote its cloud assembly (cdk.out: templates and asset manifests, the Lambda bundle among them).
+SYNTH_OUTDIR: dict[str, Path] = {}
 # What `make deploy` passes on its second deploy (CloudFront's domain, or the custom domain).
 PUBLIC_URL = "https://drem.example.org"
 
@@ -71,6 +73,7 @@ def templates(tmp_path_factory, lambda_build):
     os.environ.update(OFFLINE)
     try:
         app = cdk.App(outdir=str(work / "cdk.out"))
+        SYNTH_OUTDIR["app"] = work / "cdk.out"
         storage_only = DremStack(app, "drem-storage", stage=STAGE)
         with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL)
         with functions_dir_exclusively():  # the Chalice construct packages functions/ (its .chalice/ cache too)
@@ -80,6 +83,12 @@ def templates(tmp_path_factory, lambda_build):
         os.chdir(cwd)
         os.environ.clear()
         os.environ.update(saved_env)
+
+
+@pytest.fixture(scope="session")
+def cloud_assembly(templates) -> Path:
+    """The synth's cdk.out: what `cdk deploy` uploads (asset manifests, the Lambda bundle) and deploys."""
+    return SYNTH_OUTDIR["app"]
 
 
 @pytest.fixture(scope="session")

@@ -54,8 +54,8 @@ def test_desk_creates_a_racer_shows_the_password_once_and_resets_the_form(app: A
     assert "Account kim-1 is ready." in text(reply) and len(password) == 16
     assert 'name="username" type="text" value=""' in body(reply) and "autofocus" in body(reply)
     assert 'value="Germany (DE)"' in body(reply)  # the country stays for the next racer
-    reply = users.clients.cognito.admin_initiate_auth(
-        UserPoolId=stack.user_pool_id, ClientId=stack.user_pool_client_id, AuthFlow="ADMIN_USER_PASSWORD_AUTH",
+    reply = users.clients.cognito.initiate_auth(  # the flow the app client allows (the app's own sign-in)
+        ClientId=stack.user_pool_client_id, AuthFlow="USER_PASSWORD_AUTH",
         AuthParameters={"USERNAME": "kim-1", "PASSWORD": password})
     assert reply["ChallengeName"] == "NEW_PASSWORD_REQUIRED"  # the racer must choose their own
     groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="kim-1")
