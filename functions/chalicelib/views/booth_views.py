@@ -1,0 +1,44 @@
+"""What the learning booth's pages show: the racer's runs, jobs, model versions and the tracks to drive."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from chalicelib.auth.principals import Principal
+from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_tracks import TrackInfo, TrackService
+from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
+from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
+
+
+@dataclass(frozen=True)
+class BoothView:
+    everyone: bool
+    tracks: list[TrackInfo]
+    runs: list[RunRecord]
+    jobs: list[JobView]
+    versions: list[ModelRecord]
+    active_model_id: str | None
+    aggregates: list[dict[str, Any]]
+    trainable: int  # finished manual runs of the caller
+
+
+def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService, *,
+               everyone: bool) -> BoothView:
+    everyone = everyone and bool(principal.roles & MODEL_STAFF)
+    query = ListRunsQuery(everyone=everyone)
+    mine = runs.list_runs(principal, query)
+    owner = principal.sub or ""
+    models = training.models.store.list_owner(owner, limit=100, next_token=None).models
+    versions = sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
+                      key=lambda m: m.name, reverse=True)
+    trainable = sum(1 for r in mine if r.owner_sub == owner and r.mode is RunMode.MANUAL
+                    and r.status is RunStatus.FINALISED)
+    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
+                     jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
+                     active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
+                     trainable=trainable)
+
+
+def jobs_view(principal: Principal, training: TrainingService, *, everyone: bool = False) -> list[JobView]:
+    return training.list_jobs(principal, everyone=everyone)[:20]
