@@ -82,7 +82,10 @@ def test_a_live_drive_becomes_a_finalised_run_only_its_driver_and_staff_see(alic
     lines = requests.get(controls_link, timeout=10).text.splitlines()
     assert len(lines) == 40 and json.loads(lines[0])["frame"] == "frames/000000.png"
     page = client.http.get(f"/booth/runs/{run['run_id']}", headers={"Authorization": alice.headers["Authorization"]})
-    assert 'data-testid="run-topdown"' in page.body.decode() and "40 (" in page.body.decode()
+    html = page.body.decode()
+    assert 'data-testid="run-topdown"' in html and "40 (" in html
+    steering = html[html.index('data-testid="plot-steering"'):]
+    assert "<polyline" in steering[:steering.index("</svg>")]  # the controls over time, drawn
 
 
 def test_uploaded_artifacts_are_checked_and_finalising_computes_the_metrics(alice: ModelsApi) -> None:

@@ -204,6 +204,17 @@ class RunService:
         record = self.get(principal, run_id)
         return self.files.presign_download(record.prefix + _readable_key(name), expires_s=300)
 
+    def controls(self, principal: Principal, run_id: str) -> list[dict[str, Any]]:
+        """The run's recorded controls (for its inspection page); empty until they are uploaded and finalised."""
+        record = self.get(principal, run_id)
+        if record.status is not RunStatus.FINALISED:
+            return []
+        download = self.files.download_bounded(record.prefix + "controls.jsonl", limit=MAX_CONTROLS_BYTES)
+        if download is None or download.too_large:
+            return []
+        with download.body:
+            return parse_controls(download.body.read())
+
     # -- uploading and finalising ------------------------------------------------------------------------------------
 
     def put_artifact(self, principal: Principal, run_id: str, name: str, data: bytes) -> str:

@@ -56,7 +56,9 @@ def booth_drive(principal: User, track_id: str) -> Response:
 @route(bp, "/booth/runs/{run_id}", allow=SIGNED_IN)
 def booth_run(principal: User, run_id: str) -> Response:
     """One run: top-down picture, metrics, controls and links to its artifacts"""
-    return render.page("booth_run", run=services.run_service().get(principal, run_id))
+    runs = services.run_service()
+    inspection = booth_views.run_inspection(runs.get(principal, run_id), runs.controls(principal, run_id))
+    return render.page("booth_run", run=inspection.run, inspection=inspection)
 
 
 @route(bp, "/booth/versions/{model_id}/active", methods=["POST"], allow=SIGNED_IN)

@@ -4,11 +4,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from markupsafe import Markup
+
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
+from chalicelib.views import svg_plots
+
+PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
 
 
 @dataclass(frozen=True)
@@ -42,3 +47,26 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
 
 def jobs_view(principal: Principal, training: TrainingService, *, everyone: bool = False) -> list[JobView]:
     return training.list_jobs(principal, everyone=everyone)[:20]
+
+
+@dataclass(frozen=True)
+class RunInspection:
+    run: RunRecord
+    steering_plot: Markup
+    speed_plot: Markup
+
+
+def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
+    """The run with its controls over time: steering (+ = left) and commanded speed, off-track moments marked."""
+    step = max(1, -(-len(rows) // PLOT_POINTS))
+    picked = rows[::step]
+    labels = [f"{r['t_ms'] / 1000:.0f}s" if index % 10 == 0 else "" for index, r in enumerate(picked)]
+    steering = svg_plots.Series("steering °", [(i, r["steering_angle"]) for i, r in enumerate(picked)])
+    speed = svg_plots.Series("speed m/s", [(i, r["speed"]) for i, r in enumerate(picked)])
+    off = svg_plots.Series("off track", [(i, r["speed"]) for i, r in enumerate(picked) if r["offtrack"]])
+    return RunInspection(
+        run=run,
+        steering_plot=svg_plots.line_chart([steering], labels, title="Steering over the run", y_label="degrees",
+                                           testid="plot-steering"),
+        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels, title="Speed over the run",
+                                        y_label="m/s", testid="plot-speed"))
