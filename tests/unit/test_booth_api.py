@@ -125,7 +125,7 @@ def test_metrics_count_only_clean_laps() -> None:
 
 
 def test_training_jobs_queue_in_order_and_a_trained_archive_becomes_the_next_version(
-        alice: ModelsApi, bob: ModelsApi, client: Any) -> None:
+        alice: ModelsApi, bob: ModelsApi, operator: ModelsApi, client: Any) -> None:
     from chalicelib import services
 
     alice_run, bob_run = drive(alice, steps=10), drive(bob, steps=10)
@@ -157,6 +157,13 @@ def test_training_jobs_queue_in_order_and_a_trained_archive_becomes_the_next_ver
     assert alice.call("POST", f"/api/models/{model.model_id}/active").status_code == 200
     page = client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
     assert 'data-version="v0001"' in page and 'data-testid="active-version"' in page
+    # Staff see each driver's active version and reach the console's assign-to-car flow filtered to that racer.
+    staff = client.http.get("/booth?everyone=true", headers={"Authorization": operator.headers["Authorization"]})
+    html = staff.body.decode()
+    row = html[html.index('data-racer="alice"'):]
+    assert "v0001" in row[:row.index("</tr>")] and 'href="/console/models?racer=alice"' in row[:row.index("</tr>")]
+    console = client.http.get("/console/models?racer=alice", headers={"Authorization": operator.headers["Authorization"]})
+    assert console.status_code == 200 and "v0001" in console.body.decode()
 
 
 def test_a_worker_that_died_leaves_its_job_queued_again(alice: ModelsApi) -> None:

@@ -26,6 +26,7 @@ class BoothView:
     active_model_id: str | None
     aggregates: list[dict[str, Any]]
     trainable: int  # finished manual runs of the caller
+    active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
 
 
 def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService, *,
@@ -42,7 +43,17 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
                      jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable)
+                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [])
+
+
+def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
+    found = []
+    for sub, username in sorted({(r.owner_sub, r.owner_username) for r in runs}, key=lambda o: o[1]):
+        model_id = training.active_of(sub)
+        model = training.models.store.get(sub, model_id) if model_id else None
+        if model is not None and model.status is ModelStatus.AVAILABLE:
+            found.append((username, model))
+    return found
 
 
 def jobs_view(principal: Principal, training: TrainingService, *, everyone: bool = False) -> list[JobView]:
