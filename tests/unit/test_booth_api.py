@@ -162,7 +162,8 @@ def test_training_jobs_queue_in_order_and_a_trained_archive_becomes_the_next_ver
     html = staff.body.decode()
     row = html[html.index('data-racer="alice"'):]
     assert "v0001" in row[:row.index("</tr>")] and 'href="/console/models?racer=alice"' in row[:row.index("</tr>")]
-    console = client.http.get("/console/models?racer=alice", headers={"Authorization": operator.headers["Authorization"]})
+    console = client.http.get("/console/models?racer=alice",
+                              headers={"Authorization": operator.headers["Authorization"]})
     assert console.status_code == 200 and "v0001" in console.body.decode()
 
 
