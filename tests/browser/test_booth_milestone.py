@@ -20,7 +20,6 @@ ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 @pytest.fixture(scope="module")
 def booth_trainer(live_stack):
     """The trainer exactly as `drem up` starts it (drem_local.stack.start_trainer), on the session's stack."""
-    pytest.importorskip("torch", reason="training needs the train extra, which the dev lock installs")
     trainer = local_stack.start_trainer(live_stack.running.config, live_stack.env)
     yield trainer
     trainer.stop()

@@ -25,7 +25,6 @@ def drive_and_queue(api: ModelsApi, steps: int = 60, epochs: int = 1) -> tuple[s
 
 
 def test_a_job_becomes_v0001_scrutineered_raced_and_evaluated(alice: ModelsApi, client: Any) -> None:
-    pytest.importorskip("torch", reason="the train extra is part of the dev lock; this test needs it")
     _, job_id = drive_and_queue(alice)
     said: list[str] = []
     trainer = Trainer(said.append)
