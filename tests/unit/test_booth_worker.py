@@ -31,6 +31,7 @@ def test_a_job_becomes_v0001_scrutineered_raced_and_evaluated(alice: ModelsApi, 
     assert trainer.work_once() is True
     job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
     assert job["status"] == "DONE", (job, said)
+    assert job["progress"] == 1.0 and job["stage"] == ""
     assert job["model_name"] == "v0001" and job["loss"] is not None and job["epoch"] == 1
     model = alice.call("GET", f"/api/models/{job['model_id']}").json_body["model"]
     assert model["status"] == "AVAILABLE" and model["training_algorithm"] in ("behaviour_cloning", "clipped_ppo")

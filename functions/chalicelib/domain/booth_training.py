@@ -55,6 +55,7 @@ class TrainingJob(BaseModel):
     started_at: str | None = None
     finished_at: str | None = None
     progress: float = 0.0
+    stage: str = ""  # what the worker is doing now, in words (downloading the runs, training, scrutineering …)
     epoch: int = 0
     loss: float | None = None
     model_id: str | None = None
@@ -168,7 +169,8 @@ class TrainingService:
         requeued = []
         for job in self.store.all_jobs():
             if job.status is JobStatus.RUNNING:
-                again = job.model_copy(update={"status": JobStatus.QUEUED, "progress": 0.0, "epoch": 0, "loss": None})
+                again = job.model_copy(update={"status": JobStatus.QUEUED, "progress": 0.0, "epoch": 0, "loss": None,
+                                               "stage": ""})
                 try:
                     self.store.replace_job(again, expected_status=JobStatus.RUNNING.value)
                     requeued.append(again)
@@ -176,14 +178,16 @@ class TrainingService:
                     continue
         return requeued
 
-    def report(self, job: TrainingJob, *, progress: float, epoch: int, loss: float | None) -> TrainingJob:
+    def report(self, job: TrainingJob, *, progress: float, epoch: int, loss: float | None,
+               stage: str = "training") -> TrainingJob:
         updated = job.model_copy(update={"progress": round(max(0.0, min(1.0, progress)), 4), "epoch": epoch,
-                                         "loss": None if loss is None else round(loss, 6)})
+                                         "loss": None if loss is None else round(loss, 6), "stage": stage})
         self.store.replace_job(updated, expected_status=JobStatus.RUNNING.value)
         return updated
 
     def finish(self, job: TrainingJob, model: ModelRecord, autonomous_run_id: str | None = None) -> TrainingJob:
-        done = job.model_copy(update={"status": JobStatus.DONE, "progress": 1.0, "finished_at": self._clock(),
+        done = job.model_copy(update={"status": JobStatus.DONE, "progress": 1.0, "stage": "",
+                                      "finished_at": self._clock(),
                                       "model_id": model.model_id, "model_name": model.name,
                                       "autonomous_run_id": autonomous_run_id})
         self.store.replace_job(done, expected_status=JobStatus.RUNNING.value)

@@ -149,6 +149,7 @@ class Trainer:
         from drem_sim.runs import download_run
 
         bucket = get_settings().bucket("runs")
+        job = self.training.report(job, progress=0.0, epoch=0, loss=None, stage="downloading the runs")
         run_dirs = []
         for run_id in job.run_ids:
             record = self.runs.store.get_run(run_id)
@@ -160,20 +161,25 @@ class Trainer:
         config = TrainConfig(epochs=job.epochs, seed=0, batch_size=32, num_threads=1)
         trained = train_to_archive(run_dirs, folder / "model", name, config, progress=cast(TextIO, progress),
                                    extra_lineage={"booth_job": job.job_id})
-        job = progress.job
+        job = self.training.report(progress.job, progress=0.9, epoch=progress.job.epoch, loss=progress.job.loss,
+                                   stage="checking the model like an upload")
         model = self.services.model_service().submit_archive(job.owner_sub, job.owner_username, name,
                                                             trained.archive.read_bytes())
         if model.status.value != "AVAILABLE":
             raise RuntimeError(f"the trained model was not accepted: {model.reason}")
         racer = User(sub=job.owner_sub, username=job.owner_username, groups=frozenset({"racer"}))
+        job = self.training.report(job, progress=0.93, epoch=job.epoch, loss=job.loss,
+                                   stage=f"scrutineering {name}")
         try:
             self.services.scrutineer_service().scrutineer(racer, model.model_id, ScrutineerRequest(laps=1))
         except Exception as error:  # noqa: BLE001 - the version stays usable; scrutineering can be asked for again
             self.say(f"trainer: scrutineering {name} failed: {_reason(error)}")
         run = self.runs.create(racer, NewRun(track_id=job.track_id, mode=RunMode.AUTONOMOUS, model_id=model.model_id),
                                job_id=job.job_id)
+        job = self.training.report(job, progress=0.96, epoch=job.epoch, loss=job.loss,
+                                   stage=f"{name} drives {job.track_id} on its own")
         self.drive(run)
-        self.training.finish(self.training.store.get_job(job.job_id) or job, model, autonomous_run_id=run.run_id)
+        self.training.finish(job, model, autonomous_run_id=run.run_id)
         return model, run.run_id
 
     # -- autonomous runs ---------------------------------------------------------------------------------------------
