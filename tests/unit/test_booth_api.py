@@ -190,3 +190,17 @@ def test_an_autonomous_run_needs_an_available_model_of_ones_own(alice: ModelsApi
     queued = alice.call("POST", "/api/runs", {"track_id": "drem_oval", "mode": "autonomous",
                                               "model_id": model["model_id"], "laps": 2})
     assert queued.status_code == 201 and queued.json_body["run"]["status"] == "QUEUED"
+
+
+def test_a_live_drive_refuses_bad_controls_and_unknown_tracks_and_loses_nothing(alice: ModelsApi) -> None:
+    assert alice.call("POST", "/api/drive", {"track_id": "nowhere"}).status_code == 404
+    started = alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).json_body
+    path = f"/api/runs/{started['run_id']}/drive"
+    for bad in ({"steering": 5}, {"throttle": "full"}, {"steering": 0, "brake": 1}):
+        reply = alice.call("POST", path, bad)
+        assert reply.status_code == 400, (bad, reply.json_body)
+    assert alice.call("POST", path, {"throttle": 1}).json_body["frames"] == 1  # the bad ones stepped nothing
+    again = alice.call("POST", "/api/drive", {"track_id": "drem_oval"})  # one car per racer: the first is saved
+    assert again.status_code == 201
+    first = alice.call("GET", f"/api/runs/{started['run_id']}").json_body["run"]
+    assert first["status"] == "FINALISED" and first["metrics"]["frames"] == 1
