@@ -70,9 +70,13 @@ def racer_a_model_evaluation(world: World, caller: str) -> Call:
 
 
 def racer_a_run(world: World, caller: str) -> Call:
-    """A run of racer A on the booth's oval (created, not yet driven): racer B must not reach it."""
-    run = world.ok("POST", "/api/runs", "racer_a", {"track_id": "drem_oval", "mode": "manual"})
-    return Call({"run_id": run["run"]["run_id"], "name": "controls.jsonl"})
+    """A run of racer A on the booth's oval (created, not yet driven): racer B must not reach it. One open run is
+    reused (a racer may hold only a few open runs at a time)."""
+    runs = world.ok("GET", "/api/runs", "racer_a")["runs"]
+    open_runs = [r for r in runs if r["status"] == "RECORDING"]
+    run = open_runs[0] if open_runs else world.ok("POST", "/api/runs", "racer_a",
+                                                  {"track_id": "drem_oval", "mode": "manual"})["run"]
+    return Call({"run_id": run["run_id"], "name": "controls.jsonl"})
 
 
 def racer_a_live_drive(world: World, caller: str) -> Call:

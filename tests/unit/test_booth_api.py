@@ -204,3 +204,14 @@ def test_a_live_drive_refuses_bad_controls_and_unknown_tracks_and_loses_nothing(
     assert again.status_code == 201
     first = alice.call("GET", f"/api/runs/{started['run_id']}").json_body["run"]
     assert first["status"] == "FINALISED" and first["metrics"]["frames"] == 1
+
+
+def test_a_racer_may_hold_only_a_few_open_runs(alice: ModelsApi, bob: ModelsApi) -> None:
+    from chalicelib.domain.booth_runs import MAX_OPEN_RUNS
+
+    for _ in range(MAX_OPEN_RUNS):
+        assert alice.call("POST", "/api/runs", {"track_id": "drem_oval"}).status_code == 201
+    refused = alice.call("POST", "/api/runs", {"track_id": "drem_oval"})
+    assert refused.status_code == 429 and "not finished yet" in refused.json_body["error"]["message"]
+    assert alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).status_code == 429
+    assert bob.call("POST", "/api/runs", {"track_id": "drem_oval"}).status_code == 201  # a limit per racer

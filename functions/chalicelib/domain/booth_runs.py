@@ -15,7 +15,7 @@ import math
 import re
 import secrets
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from enum import StrEnum
 from typing import Any, Protocol
 
@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from chalicelib.auth.principals import Principal
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN, TrackService
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, PayloadTooLarge
+from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, PayloadTooLarge, RateLimited
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.domain.racer_models import MODEL_STAFF, DownloadLike, ModelService, ModelStatus, utc_now
 
@@ -32,6 +32,10 @@ MAX_CONTROLS_BYTES = 16 * 1024 * 1024
 MAX_ARTIFACT_BYTES = 1024 * 1024  # one frame or the controls of a long run; frames are ~10 KB
 MAX_ROWS = 50_000  # an hour at 15 Hz
 MAX_AUTONOMOUS_LAPS = 5
+# Runs a racer may have open (RECORDING or QUEUED) that were started within OPEN_WINDOW_S: each open run is storage
+# and, when autonomous, the worker's time. Older open runs (a drive lost to a restart) no longer count.
+MAX_OPEN_RUNS = 10
+OPEN_WINDOW_S = 3600
 FRAME_ARTIFACT = re.compile(r"^frame-(\d{6})\.png$")
 UPLOADABLE = ("controls.jsonl",)
 READABLE = ("controls.jsonl", "metadata.json", "topdown.png")
@@ -178,6 +182,7 @@ class RunService:
                                field="model_id")
             model_name = model.name
         now, run_id = self._clock(), self._new_id()
+        self._require_room(owner_sub, now)
         record = RunRecord(run_id=run_id, owner_sub=owner_sub, owner_username=username, track_id=track_id,
                            mode=request.mode, created_at=now, prefix=f"runs/{track_id}/{now[:10]}/{run_id}/",
                            status=RunStatus.RECORDING if request.mode is RunMode.MANUAL else RunStatus.QUEUED,
@@ -185,6 +190,15 @@ class RunService:
                            job_id=job_id)
         self.store.create_run(record)
         return record
+
+    def _require_room(self, owner_sub: str, now: str) -> None:
+        since = (datetime.fromisoformat(now.replace("Z", "+00:00")) - timedelta(seconds=OPEN_WINDOW_S)).isoformat()
+        since = since.replace("+00:00", "Z")
+        open_runs = [r for r in self.store.runs_of(owner_sub)
+                     if r.status in (RunStatus.RECORDING, RunStatus.QUEUED) and r.created_at >= since]
+        if len(open_runs) >= MAX_OPEN_RUNS:
+            raise RateLimited(f"You have {len(open_runs)} runs started in the last hour that are not finished yet: "
+                              "finish (or finalise) one before starting another.", field="track_id")
 
     def list_runs(self, principal: Principal, query: ListRunsQuery) -> list[RunRecord]:
         if query.everyone and principal.roles & MODEL_STAFF:
