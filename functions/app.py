@@ -10,6 +10,8 @@ from chalicelib.routes import (
     accounts,
     api_docs,
     assignments,
+    booth,
+    booth_pages,
     commentator,
     devices,
     event_landing,
@@ -56,7 +58,7 @@ for blueprint_module in (pages, health, login, accounts, users, profiles, events
                          assignments, races, timing, leaderboards, api_docs, public_pages, commentator, console_events,
                          console_fleets, console_timekeeper, console_races, console_racer, console_registration,
                          console_users, console_models, console_racer_queue, league, registry, results, labels,
-                         stats, event_landing, ping):
+                         stats, event_landing, booth, booth_pages, ping):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

@@ -15,6 +15,10 @@ from typing import Any
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignments import AssignmentService
+from chalicelib.domain.booth_drive import DriveService, LiveDrives
+from chalicelib.domain.booth_runs import RunService
+from chalicelib.domain.booth_tracks import TrackService
+from chalicelib.domain.booth_training import TrainingService
 from chalicelib.domain.devices import DeviceService
 from chalicelib.domain.errors import ServiceUnavailable
 from chalicelib.domain.events import EventService
@@ -37,6 +41,7 @@ from chalicelib.settings import Settings, get_settings
 from chalicelib.storage import clients, health
 from chalicelib.storage.assignments import DynamoAssignmentStore, FleetCarDirectory
 from chalicelib.storage.audit import DynamoAuditLog
+from chalicelib.storage.booth import DynamoBoothStore
 from chalicelib.storage.cognito import CognitoIdentityProvider
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.evaluations import DynamoEvaluationStore
@@ -258,3 +263,30 @@ def racer_queue_service() -> RacerQueueService:
 
 def on_deck() -> OnDeck:
     return OnDeck(racer_queue_service(), race_service(), race_store(), device_service(), assignment_service())
+
+
+# --- the learning booth ---------------------------------------------------------------------------------------------
+
+# Live manual drives are held by the app process (chalicelib.domain.booth_drive): one table for the process.
+LIVE_DRIVES = LiveDrives()
+
+
+def track_service() -> TrackService:
+    return TrackService()
+
+
+def run_service(settings: Settings | None = None) -> RunService:
+    settings = settings or get_settings()
+    files = S3ModelFiles(clients.s3(), settings.bucket("runs"), clients.s3_presigner())
+    return RunService(DynamoBoothStore(clients.dynamodb(), settings.table("booth")), files, track_service(),
+                      model_service(settings))
+
+
+def training_service(settings: Settings | None = None) -> TrainingService:
+    settings = settings or get_settings()
+    return TrainingService(DynamoBoothStore(clients.dynamodb(), settings.table("booth")), run_service(settings),
+                           model_service(settings))
+
+
+def drive_service() -> DriveService:
+    return DriveService(LIVE_DRIVES, run_service())

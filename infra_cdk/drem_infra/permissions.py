@@ -25,11 +25,14 @@ TABLE_ACTIONS: tuple[str, ...] = (
 # role, so the role itself needs PutObject/GetObject. HeadObject is authorised as GetObject; CopyObject needs both.
 BUCKET_OBJECT_ACTIONS: dict[str, tuple[str, ...]] = {
     "models": ("s3:DeleteObject", "s3:GetObject", "s3:PutObject"),
+    # The learning booth's run artifacts (frames, controls, metadata, top-down picture): written, read, linked.
+    "runs": ("s3:GetObject", "s3:PutObject"),
 }
 # ListBucket lets HeadObject/GetObject of a missing key answer 404 (NoSuchKey) instead of 403, which the upload
 # completion relies on to say "the file never arrived".
 BUCKET_ACTIONS: dict[str, tuple[str, ...]] = {
     "models": ("s3:ListBucket",),
+    "runs": ("s3:ListBucket",),  # a run finalised before its controls arrived says so (404), not AccessDenied
 }
 
 # The Cognito admin API the app calls with its role. The user-facing calls (InitiateAuth, SignUp, ConfirmSignUp,

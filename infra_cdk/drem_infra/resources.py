@@ -128,6 +128,10 @@ TABLES: tuple[TableSpec, ...] = (
     TableSpec("league"),
     # Per-user "tokens issued before this are revoked" records and the pending new-password sign-in steps.
     TableSpec("sessions"),
+    # The learning booth (docs/learning.md): runs (`RUN#{runId}`), training jobs (`JOB#{jobId}`) and each racer's
+    # active model version (`ACTIVE#{sub}`). gsi1 lists one racer's runs or jobs (`RUNS#{sub}` / `JOBS#{sub}`, by
+    # creation time); gsi2 lists everyone's (`RUNS` / `JOBS`), for staff and for the training queue.
+    TableSpec("booth", gsis=(GsiSpec("gsi1", "gsi1pk", "gsi1sk"), GsiSpec("gsi2", "gsi2pk", "gsi2sk"))),
 )
 
 BUCKETS: tuple[BucketSpec, ...] = (

@@ -52,6 +52,7 @@ class StackConfig:
     app_bind: str | None = None
     announce: str | None = None
     public_url: str | None = None  # a TLS proxy's URL in front of the app, when there is one
+    trainer: bool = False  # also run the learning booth's worker (drem_local.workers.trainer); `drem up` does
 
     @property
     def storage_url(self) -> str:
@@ -291,6 +292,12 @@ def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -
     return process
 
 
+def start_trainer(config: StackConfig, env: dict[str, str]) -> ManagedProcess:
+    """The learning booth's worker: the app's environment, its own log; it is ready when it polls (no port)."""
+    return spawn("booth trainer", [sys.executable, "-m", "drem_local.workers.trainer"],
+                 config.log_dir / "trainer.log", env=env)
+
+
 def _child_env() -> dict[str, str]:
     env = {name: value for name, value in os.environ.items() if name not in _SHELL_AWS_VARIABLES}
     env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
@@ -316,6 +323,7 @@ class RunningStack:
     admin: Any
     env: dict[str, str]
     timings: dict[str, float] = field(default_factory=dict)
+    trainer: ManagedProcess | None = None
 
     def restart_storage(self, timeout: float = 30.0) -> None:
         """Start the storage server again on the same state dir and port (it recovers from its journal)."""
@@ -326,12 +334,18 @@ class RunningStack:
         self.app = start_app(self.config, self.env, timeout)
         self._record_pids()
 
+    def restart_trainer(self, timeout: float = 30.0) -> None:
+        self.trainer = start_trainer(self.config, self.env)
+        self._record_pids()
+
     def _record_pids(self) -> None:
         write_stack_file(self.config, self.outputs, self.admin.username, storage_pid=self.storage.pid,
-                         app_pid=self.app.pid)
+                         app_pid=self.app.pid, trainer_pid=self.trainer.pid if self.trainer else None)
 
     def stop(self) -> tuple[int | None, int | None]:
-        """App first (it may still be writing), then storage, which snapshots on SIGTERM."""
+        """The trainer and the app first (they may still be writing), then storage, which snapshots on SIGTERM."""
+        if self.trainer is not None:
+            self.trainer.stop()
         app_code = self.app.stop()
         storage_code = self.storage.stop(timeout=30.0)
         stack_file = self.config.state_dir / STACK_FILE
@@ -360,22 +374,24 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
         env = app_environment(config, outputs)
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
         app = start_app(config, env, timeout)
+        trainer = start_trainer(config, env) if config.trainer else None
     except BaseException:
         if app is not None:
             app.stop(5)
         storage.stop(30)
         raise
-    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid)
+    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid,
+                     trainer_pid=trainer.pid if trainer else None)
     ready = time.perf_counter()
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
                "app_s": ready - bootstrapped, "total_s": ready - started}
-    return RunningStack(config, storage, app, outputs, admin, env, timings)
+    return RunningStack(config, storage, app, outputs, admin, env, timings, trainer)
 
 
 # --- stack.json -----------------------------------------------------------------------------------------------
 
 def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, storage_pid: int,
-                     app_pid: int | None) -> None:
+                     app_pid: int | None, trainer_pid: int | None = None) -> None:
     _write_json(config.state_dir / STACK_FILE, {
         "outputs": json.loads(outputs.to_json()),
         "admin_username": admin_username,
@@ -383,7 +399,7 @@ def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, 
         "app_host": config.app_host,
         "ports": {"app": config.app_port, "storage": config.storage_port},
         "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url},
-        "pids": {"storage": storage_pid, "app": app_pid, "drem_up": os.getpid()},
+        "pids": {"storage": storage_pid, "app": app_pid, "trainer": trainer_pid, "drem_up": os.getpid()},
         "started_at": time.time(),
         "stopped_at": None,
     })

@@ -45,6 +45,9 @@ class Supervisor:
             self._revive("storage", lambda: self.stack.storage, self.stack.restart_storage)
         if not self.stack.app.alive():
             self._revive("app", lambda: self.stack.app, self.stack.restart_app)
+        trainer = self.stack.trainer
+        if trainer is not None and not trainer.alive():  # a job it was training is queued again when it starts
+            self._revive("trainer", lambda: self.stack.trainer or trainer, self.stack.restart_trainer)
 
     def _revive(self, role: str, current: Callable[[], ManagedProcess], restart: Callable[[], None]) -> None:
         failed_restart: str | None = None  # why the last restart attempt failed (its own log lines included)

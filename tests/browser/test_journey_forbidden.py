@@ -36,7 +36,7 @@ def test_a_racer_gets_not_allowed_on_every_staff_page_and_from_the_api(app_url, 
     nav = page.get_by_test_id("nav-links").inner_text().split("\n")
     # Group titles show upper-case (CSS); a racer has no Registration, Race control or Admin group.
     assert [line.strip() for line in nav if line.strip()] == ["RACER", "My models", "My races", "My model versions",
-                                                              "Profile", "RESULTS", "League"]
+                                                              "Learning booth", "Profile", "RESULTS", "League"]
 
     for path in STAFF_PAGES:
         response = page.goto(app_url + path)

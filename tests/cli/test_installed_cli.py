@@ -79,12 +79,18 @@ def test_up_serves_and_stops_cleanly_on_ctrl_c(outside: Path, tmp_path: Path) ->
                 break
         assert "drem is running" in "".join(seen), "".join(seen)
         assert requests.get(f"http://127.0.0.1:{app_port}/api/ping", timeout=5).status_code == 200
+        # The learning booth's trainer is one of drem up's children, shown by drem status.
+        status = ok(drem("status", "--state-dir", str(tmp_path / "state"), cwd=outside))
+        assert "The learning booth's trainer is running" in status, status
+        trainer_pid = json.loads(ok(drem("status", "--state-dir", str(tmp_path / "state"), "--json",
+                                         cwd=outside)))["processes"]["trainer"]["pid"]
     finally:
         process.send_signal(signal.SIGINT)
         out, _ = process.communicate(timeout=60)
     out = "".join(seen) + out
     assert process.returncode == 0, out
     assert "Traceback" not in out and "stopped cleanly" in out, out
+    assert not local_stack.pid_is_drem(trainer_pid)  # stopped with the rest
 
 
 def test_status_reports_the_running_stack(live_stack, outside: Path) -> None:

@@ -120,7 +120,7 @@ def test_grants_are_scoped_to_the_stacks_own_resources(role_statements, app_temp
     bucket_grants = str([s["Resource"] for s in role_statements if any(a.startswith("s3:") for a in _actions(s))])
     for spec in resources.BUCKETS:
         logical_id = next(b for b in buckets if b.startswith(f"{spec.logical.capitalize()}Bucket"))
-        # Only buckets the adapters use: the runs bucket is written by the simulator with its own credentials.
+        # Only buckets the adapters use (the models bucket, and the runs bucket since the learning booth).
         assert (logical_id in bucket_grants) == (spec.logical in permissions.BUCKET_OBJECT_ACTIONS), spec.logical
 
 

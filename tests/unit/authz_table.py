@@ -69,6 +69,35 @@ def racer_a_model_evaluation(world: World, caller: str) -> Call:
     return Call(racer_a_model(world, caller).params, body)
 
 
+def racer_a_run(world: World, caller: str) -> Call:
+    """A run of racer A on the booth's oval (created, not yet driven): racer B must not reach it. One open run is
+    reused (a racer may hold only a few open runs at a time)."""
+    runs = world.ok("GET", "/api/runs", "racer_a")["runs"]
+    open_runs = [r for r in runs if r["status"] == "RECORDING"]
+    run = open_runs[0] if open_runs else world.ok("POST", "/api/runs", "racer_a",
+                                                  {"track_id": "drem_oval", "mode": "manual"})["run"]
+    return Call({"run_id": run["run_id"], "name": "controls.jsonl"})
+
+
+def racer_a_live_drive(world: World, caller: str) -> Call:
+    """Racer A driving the oval live: only racer A steers (or finishes) it; staff see the run but never drive it."""
+    started = world.ok("POST", "/api/drive", "racer_a", {"track_id": "drem_oval"})
+    return Call({"run_id": started["run_id"]}, {"steering": 0.0, "throttle": 0.5})
+
+
+def racer_a_training_job(world: World, caller: str) -> Call:
+    """A training job of racer A, queued on one short drive of theirs (a racer has one job in the queue at a time, so
+    a job already waiting is reused)."""
+    waiting = [j for j in world.ok("GET", "/api/training-jobs", "racer_a")["jobs"] if j["status"] == "QUEUED"]
+    if waiting:
+        return Call({"job_id": waiting[0]["job_id"]})
+    started = world.ok("POST", "/api/drive", "racer_a", {"track_id": "drem_oval"})
+    world.ok("POST", f"/api/runs/{started['run_id']}/drive", "racer_a", {"throttle": 0.5})
+    world.ok("POST", f"/api/runs/{started['run_id']}/drive/finish", "racer_a")
+    job = world.ok("POST", "/api/training-jobs", "racer_a", {"run_ids": [started["run_id"]]})
+    return Call({"job_id": job["job"]["job_id"]})
+
+
 def car_x_command(world: World, caller: str) -> Call:
     """A command queued for car X: only car X may acknowledge it (car Y simply does not find it)."""
     command = world.ok("POST", f"/api/devices/{world.device_ids['car_x']}/commands", "admin",
@@ -320,4 +349,28 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/api/models/{model_id}/evaluations"): Case(allow("racer_a", "operator", "admin"),
                                                           racer_a_model_evaluation),
     ("GET", "/api/models/{model_id}/evaluations"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    # the learning booth: tracks are public; a racer drives, uploads and trains on their own runs only; admins and
+    # operators see every racer's runs and jobs (a live drive is steered by its driver alone)
+    ("GET", "/api/tracks"): PUBLIC,
+    ("GET", "/api/tracks/{track_id}"): PUBLIC,
+    ("POST", "/api/runs"): SIGNED_IN,
+    ("GET", "/api/runs"): SIGNED_IN,
+    ("GET", "/api/metrics/runs"): SIGNED_IN,
+    ("GET", "/api/runs/{run_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
+    ("PUT", "/api/runs/{run_id}/artifacts/{name}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
+    ("GET", "/api/runs/{run_id}/artifacts/{name}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
+    ("POST", "/api/runs/{run_id}/finalise"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
+    ("POST", "/api/drive"): SIGNED_IN,
+    ("POST", "/api/runs/{run_id}/drive"): Case(allow("racer_a"), racer_a_live_drive),
+    ("POST", "/api/runs/{run_id}/drive/finish"): Case(allow("racer_a"), racer_a_live_drive),
+    ("POST", "/api/training-jobs"): SIGNED_IN,
+    ("GET", "/api/training-jobs"): SIGNED_IN,
+    ("GET", "/api/training-jobs/{job_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_training_job),
+    ("POST", "/api/models/{model_id}/active"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("GET", "/booth"): SIGNED_IN,
+    ("GET", "/booth/jobs"): SIGNED_IN,
+    ("POST", "/booth/train"): SIGNED_IN,
+    ("GET", "/booth/drive/{track_id}"): SIGNED_IN,
+    ("GET", "/booth/runs/{run_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
+    ("POST", "/booth/versions/{model_id}/active"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
 }

@@ -13,7 +13,7 @@ from tests.unit.racer_console_helpers import body, signed_in
 
 pytestmark = pytest.mark.unit
 
-RACER_LINKS = ["My models", "My races", "My model versions", "Profile"]
+RACER_LINKS = ["My models", "My races", "My model versions", "Learning booth", "Profile"]
 RACE_CONTROL_LINKS = ["Events", "Fleets", "Cars", "Models", "Timekeeper", "Races"]
 
 

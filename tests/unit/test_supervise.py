@@ -26,6 +26,7 @@ class FakeStack:
         self.storage, self.app = storage, app
         self.restart_storage = lambda: restart_storage(self)
         self.restart_app = lambda: None
+        self.trainer: ManagedProcess | None = None
 
 
 def _alive(log: Path) -> ManagedProcess:
@@ -86,3 +87,21 @@ def test_a_restart_that_fails_to_start_counts_as_a_crash_and_its_reason_is_shown
         app.kill_hard()
     assert "moto version mismatch" in str(gave_up.value)
     assert any("did not come back" in line for line in said)
+
+
+def test_a_crashed_booth_trainer_is_restarted_like_the_app(tmp_path):
+    said: list[str] = []
+    stack = FakeStack(_alive(tmp_path / "storage.log"), _alive(tmp_path / "app.log"), lambda stack: None)
+    stack.trainer = _crashing("booth trainer", tmp_path / "trainer.log", "torch went away")
+
+    def restart_trainer() -> None:
+        stack.trainer = _alive(tmp_path / "trainer.log")
+
+    stack.restart_trainer = restart_trainer
+    try:
+        Supervisor(stack, said.append, RestartPolicy(max_crashes=3), sleep=lambda s: None).check()
+        assert stack.trainer.alive()
+        assert "the booth trainer stopped unexpectedly (exit code 7)" in said[0] and "running again" in said[1]
+    finally:
+        for child in (stack.storage, stack.app, stack.trainer):
+            child.kill_hard()

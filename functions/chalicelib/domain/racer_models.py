@@ -478,6 +478,17 @@ class ModelService:
                            status=ModelStatus.UPLOADED, uploaded_at=now, updated_at=now,
                            upload_key=upload_key(owner_sub, model_id))
 
+    def submit_archive(self, owner_sub: str, username: str, name: str, data: bytes) -> ModelRecord:
+        """A model made for a racer on the server (the booth's trainer): stored as their upload and judged by exactly
+        the same validation as one they uploaded themselves."""
+        if len(data) > self.max_upload_bytes:
+            raise InvalidInput(f"the archive is {_size(len(data))}; uploads are limited to "
+                               f"{_size(self.max_upload_bytes)}", field="archive")
+        record = self._new_record(owner_sub, username, model_name_from_filename(f"{name}.tar.gz"), self._new_id())
+        self.store.create(record)
+        self.files.put(record.upload_key, data)
+        return self._finish(record)
+
     # -- samples ---------------------------------------------------------------------------------------------------
 
     def seed_sample(self, archive: Path) -> ModelRecord:

@@ -46,6 +46,7 @@ NAV_LINKS: tuple[NavLink, ...] = (
     NavLink("My races", "/console/my-races", SIGNED_IN, "your races and laps", group=RACER),
     NavLink("My model versions", "/models/registry", SIGNED_IN, "your model versions, evaluations and plots",
             group=RACER),
+    NavLink("Learning booth", "/booth", SIGNED_IN, "drive a track, train your model, race it", group=RACER),
     NavLink("Profile", "/console/profile", SIGNED_IN, "highlight colour, avatar, password", group=RACER),
     NavLink("Registration desk", "/console/registration", as_allow({ADMIN, REGISTRATION}), "create racer accounts",
             group=DESK),

@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     network.add_argument("--public-url", metavar="URL", default=None,
                          help="the URL people use when a TLS proxy sits in front of the app (e.g. https://drem.lan); "
                               "https here makes the session cookies Secure")
+    parser.add_argument("--no-trainer", action="store_true",
+                        help="do not start the learning booth's training worker (docs/learning.md)")
     parser.add_argument("--demo", action="store_true",
                         help="also run a demo: sample models, demo racers, sim cars and a race director that races "
                              "them, so the leaderboard and overlay fill live (see docs/cars.md)")
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from drem_local.stack import StackConfig, StackError, lan_config, start_stack
 
     config = StackConfig(state_dir=args.state_dir, app_port=args.port, storage_port=args.storage_port,
-                         public_url=args.public_url)
+                         public_url=args.public_url, trainer=not args.no_trainer)
     if args.lan or args.host:
         try:
             config = lan_config(config, args.host, args.public_url)

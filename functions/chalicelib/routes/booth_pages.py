@@ -1,0 +1,70 @@
+"""The learning booth's pages: drive a track, train on your runs, watch the job, inspect a run.
+
+Who may call: every page needs a signed-in user and shows the caller's own runs, jobs and versions; admins and
+operators get every racer's runs and jobs with `/booth?everyone=true`. A run's inspection page is the owner's or model
+staff's (another racer's run answers 403, via RunService.get).
+"""
+from __future__ import annotations
+
+from chalice import Blueprint, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from chalicelib import services
+from chalicelib.auth.access import SIGNED_IN, route
+from chalicelib.auth.principals import User
+from chalicelib.domain.booth_runs import ListRunsQuery
+from chalicelib.views import booth_views
+from drem_web import render
+
+bp = Blueprint(__name__)
+
+
+class TrainForm(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+    epochs: int = Field(default=8, ge=1, le=30)
+
+
+@route(bp, "/booth", allow=SIGNED_IN, query=ListRunsQuery)
+def booth(principal: User, query: ListRunsQuery) -> Response:
+    """The booth: tracks to drive, your runs, training jobs and model versions"""
+    view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
+                                  services.track_service(), everyone=query.everyone)
+    return render.page("booth", view=view)
+
+
+@route(bp, "/booth/jobs", allow=SIGNED_IN, query=ListRunsQuery)
+def booth_jobs(principal: User, query: ListRunsQuery) -> Response:
+    """Your training jobs (htmx fragment, polled while one is queued or running)"""
+    jobs = booth_views.jobs_view(principal, services.training_service(), everyone=query.everyone)
+    return render.fragment("booth_jobs", jobs=jobs)
+
+
+@route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)
+def booth_train(principal: User, body: TrainForm) -> Response:
+    """Queue a training job on all your finished manual runs (htmx; answers the jobs fragment)"""
+    training = services.training_service()
+    training.train_on_my_runs(principal, epochs=body.epochs)
+    return render.fragment("booth_jobs", jobs=booth_views.jobs_view(principal, training))
+
+
+@route(bp, "/booth/drive/{track_id}", allow=SIGNED_IN)
+def booth_drive(principal: User, track_id: str) -> Response:
+    """Drive a track in the browser (keyboard, gamepad, touch); the run lands in your runs"""
+    return render.page("booth_drive", track=services.track_service().get(track_id))
+
+
+@route(bp, "/booth/runs/{run_id}", allow=SIGNED_IN)
+def booth_run(principal: User, run_id: str) -> Response:
+    """One run: top-down picture, metrics, controls and links to its artifacts"""
+    runs = services.run_service()
+    inspection = booth_views.run_inspection(runs.get(principal, run_id), runs.controls(principal, run_id))
+    return render.page("booth_run", run=inspection.run, inspection=inspection)
+
+
+@route(bp, "/booth/versions/{model_id}/active", methods=["POST"], allow=SIGNED_IN)
+def booth_make_active(principal: User, model_id: str) -> Response:
+    """Mark one of your versions active (htmx; answers the booth page)"""
+    services.training_service().set_active(principal, model_id)
+    view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
+                                  services.track_service(), everyone=False)
+    return render.page("booth", view=view)

@@ -1,0 +1,83 @@
+"""What the learning booth's pages show: the racer's runs, jobs, model versions and the tracks to drive."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from markupsafe import Markup
+
+from chalicelib.auth.principals import Principal
+from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_tracks import TrackInfo, TrackService
+from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
+from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
+from chalicelib.views import svg_plots
+
+PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
+
+
+@dataclass(frozen=True)
+class BoothView:
+    everyone: bool
+    tracks: list[TrackInfo]
+    runs: list[RunRecord]
+    jobs: list[JobView]
+    versions: list[ModelRecord]
+    active_model_id: str | None
+    aggregates: list[dict[str, Any]]
+    trainable: int  # finished manual runs of the caller
+    active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
+
+
+def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService, *,
+               everyone: bool) -> BoothView:
+    everyone = everyone and bool(principal.roles & MODEL_STAFF)
+    query = ListRunsQuery(everyone=everyone)
+    mine = runs.list_runs(principal, query)
+    owner = principal.sub or ""
+    models = training.models.store.list_owner(owner, limit=100, next_token=None).models
+    versions = sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
+                      key=lambda m: m.name, reverse=True)
+    trainable = sum(1 for r in mine if r.owner_sub == owner and r.mode is RunMode.MANUAL
+                    and r.status is RunStatus.FINALISED)
+    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
+                     jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
+                     active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
+                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [])
+
+
+def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
+    found = []
+    for sub, username in sorted({(r.owner_sub, r.owner_username) for r in runs}, key=lambda o: o[1]):
+        model_id = training.active_of(sub)
+        model = training.models.store.get(sub, model_id) if model_id else None
+        if model is not None and model.status is ModelStatus.AVAILABLE:
+            found.append((username, model))
+    return found
+
+
+def jobs_view(principal: Principal, training: TrainingService, *, everyone: bool = False) -> list[JobView]:
+    return training.list_jobs(principal, everyone=everyone)[:20]
+
+
+@dataclass(frozen=True)
+class RunInspection:
+    run: RunRecord
+    steering_plot: Markup
+    speed_plot: Markup
+
+
+def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
+    """The run with its controls over time: steering (+ = left) and commanded speed, off-track moments marked."""
+    step = max(1, -(-len(rows) // PLOT_POINTS))
+    picked = rows[::step]
+    labels = [f"{r['t_ms'] / 1000:.0f}s" if index % 10 == 0 else "" for index, r in enumerate(picked)]
+    steering = svg_plots.Series("steering °", [(i, r["steering_angle"]) for i, r in enumerate(picked)])
+    speed = svg_plots.Series("speed m/s", [(i, r["speed"]) for i, r in enumerate(picked)])
+    off = svg_plots.Series("off track", [(i, r["speed"]) for i, r in enumerate(picked) if r["offtrack"]])
+    return RunInspection(
+        run=run,
+        steering_plot=svg_plots.line_chart([steering], labels, title="Steering over the run", y_label="degrees",
+                                           testid="plot-steering"),
+        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels, title="Speed over the run",
+                                        y_label="m/s", testid="plot-speed"))

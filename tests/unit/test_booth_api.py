@@ -1,0 +1,217 @@
+"""The learning booth's API: tracks, runs (live drive and uploaded artifacts), metrics, training jobs, versions, and
+who sees what (a racer only their own runs and jobs, admins and operators everyone's)."""
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from chalicelib.domain.booth_runs import compute_metrics, parse_controls
+from chalicelib.domain.errors import InvalidInput
+from tests.unit.models_helpers import ModelsApi, bearer, onnx_archive
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture
+def bob(client: Any, users: Any) -> ModelsApi:
+    return ModelsApi(client, bearer(users.access_token("bob", ("racer",))))
+
+
+@pytest.fixture
+def operator(client: Any, users: Any) -> ModelsApi:
+    return ModelsApi(client, bearer(users.access_token("olga", ("operator",))))
+
+
+def row(index: int, *, lap: int = 0, progress: float = 0.0, steering: float = 0.0, offtrack: bool = False) -> dict:
+    return {"index": index, "t_ms": index * 1000 // 15, "steering_angle": steering, "speed": 1.5,
+            "progress": progress, "x": 0.1 * index, "y": 0.0, "heading": 0.0, "lap": lap, "offtrack": offtrack}
+
+
+def controls(rows: list[dict]) -> bytes:
+    return "".join(json.dumps(r) + "\n" for r in rows).encode()
+
+
+def png() -> bytes:
+    return cv2.imencode(".png", np.full((120, 160), 38, np.uint8))[1].tobytes()
+
+
+def drive(api: ModelsApi, track: str = "drem_oval", steps: int = 30) -> dict[str, Any]:
+    started = api.call("POST", "/api/drive", {"track_id": track})
+    assert started.status_code == 201, started.json_body
+    run_id = started.json_body["run_id"]
+    assert started.json_body["frame"].startswith("data:image/png;base64,")
+    for _ in range(steps):
+        step = api.call("POST", f"/api/runs/{run_id}/drive", {"steering": 0.0, "throttle": 0.6})
+        assert step.status_code == 200, step.json_body
+    finished = api.call("POST", f"/api/runs/{run_id}/drive/finish")
+    assert finished.status_code == 200, finished.json_body
+    return finished.json_body["run"]
+
+
+def test_tracks_are_the_simulators_closed_loops(client: Any) -> None:
+    tracks = client.http.get("/api/tracks").json_body["tracks"]
+    assert "drem_oval" in {t["track_id"] for t in tracks}
+    assert "Straight_track" not in {t["track_id"] for t in tracks}  # an open route cannot be raced
+    oval = client.http.get("/api/tracks/drem_oval").json_body["track"]
+    assert oval["length_m"] > 5 and len(oval["centerline"]) >= 3
+    missing = client.http.get("/api/tracks/nowhere", headers={"Accept": "application/json"})
+    assert missing.status_code == 404 and "GET /api/tracks" in missing.json_body["error"]["message"]
+
+
+def test_a_live_drive_becomes_a_finalised_run_only_its_driver_and_staff_see(alice: ModelsApi, bob: ModelsApi,
+                                                                            operator: ModelsApi, client: Any) -> None:
+    run = drive(alice, steps=40)
+    assert run["status"] == "FINALISED" and run["mode"] == "manual"
+    assert run["metrics"]["frames"] == 40 and run["metrics"]["mean_speed"] > 0.5
+    assert [r["run_id"] for r in alice.call("GET", "/api/runs").json_body["runs"]] == [run["run_id"]]
+    assert bob.call("GET", "/api/runs").json_body["runs"] == []
+    assert bob.call("GET", f"/api/runs/{run['run_id']}").status_code == 403
+    assert bob.call("POST", f"/api/runs/{run['run_id']}/drive", {"throttle": 1}).status_code in (403, 404)
+    assert [r["run_id"] for r in operator.call("GET", "/api/runs?everyone=true").json_body["runs"]] == [run["run_id"]]
+    picture = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/topdown.png")
+    assert picture.status_code == 302
+    import requests
+
+    fetched = requests.get(picture.headers["Location"], timeout=10)
+    assert fetched.status_code == 200 and fetched.content.startswith(b"\x89PNG")
+    controls_link = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/controls.jsonl").headers["Location"]
+    lines = requests.get(controls_link, timeout=10).text.splitlines()
+    assert len(lines) == 40 and json.loads(lines[0])["frame"] == "frames/000000.png"
+    page = client.http.get(f"/booth/runs/{run['run_id']}", headers={"Authorization": alice.headers["Authorization"]})
+    html = page.body.decode()
+    assert 'data-testid="run-topdown"' in html and "40 (" in html
+    steering = html[html.index('data-testid="plot-steering"'):]
+    assert "<polyline" in steering[:steering.index("</svg>")]  # the controls over time, drawn
+
+
+def test_uploaded_artifacts_are_checked_and_finalising_computes_the_metrics(alice: ModelsApi) -> None:
+    created = alice.call("POST", "/api/runs", {"track_id": "drem_oval", "mode": "manual"})
+    assert created.status_code == 201, created.json_body
+    run_id = created.json_body["run"]["run_id"]
+    put = alice.client.http.put
+    headers = {**alice.headers, "Content-Type": "application/octet-stream"}
+    bad = put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=b'{"t_ms": "soon"}\n')
+    assert bad.status_code == 200  # stored as bytes; judged when finalised
+    refused = alice.call("POST", f"/api/runs/{run_id}/finalise")
+    assert refused.status_code == 400 and "line 1" in refused.json_body["error"]["message"]
+    assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=b"GIF89a").status_code == 400
+    assert put(f"/api/runs/{run_id}/artifacts/..%2Fescape", headers=headers, body=b"x").status_code == 400
+    assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=png()).status_code == 200
+    rows = [row(i, progress=i * 2.0, steering=(5.0 if i % 2 else -5.0)) for i in range(50)]
+    rows += [row(50, lap=1, progress=0.5), row(51, lap=1, progress=3.0, offtrack=True), row(52, lap=1, progress=1.0)]
+    assert put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=controls(rows)).status_code == 200
+    run = alice.call("POST", f"/api/runs/{run_id}/finalise").json_body["run"]
+    metrics = run["metrics"]
+    assert (metrics["laps_completed"], metrics["offtrack_count"], metrics["attempts"]) == (1, 1, 3)
+    assert metrics["completion_pct"] == pytest.approx((100 + 3.0 + 1.0) / 3, abs=0.01)
+    assert metrics["stability_deg"] == pytest.approx(10.0, abs=0.3)
+    assert metrics["lap_times_s"] == [round(50 * 1000 // 15 / 1000, 3)]
+    late = put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=controls(rows))
+    assert late.status_code == 409  # a finalised run's artifacts no longer change
+
+
+def test_metrics_count_only_clean_laps() -> None:
+    rows = [row(i, progress=min(99.0, i * 5.0), offtrack=i == 10) for i in range(30)] + [row(30, lap=1)]
+    metrics = compute_metrics(parse_controls(controls(rows)))
+    assert metrics.laps_completed == 0 and metrics.offtrack_count == 1 and metrics.attempts == 2
+    with pytest.raises(InvalidInput, match="no rows"):
+        parse_controls(b"\n\n")
+    with pytest.raises(InvalidInput, match="x must be a number"):
+        parse_controls(controls([{**row(0), "x": float("nan")}]))
+
+
+def test_training_jobs_queue_in_order_and_a_trained_archive_becomes_the_next_version(
+        alice: ModelsApi, bob: ModelsApi, operator: ModelsApi, client: Any) -> None:
+    from chalicelib import services
+
+    alice_run, bob_run = drive(alice, steps=10), drive(bob, steps=10)
+    stolen = alice.call("POST", "/api/training-jobs", {"run_ids": [bob_run["run_id"]]})
+    assert stolen.status_code == 403  # another racer's run: not visible, never trained on
+    job = alice.call("POST", "/api/training-jobs", {"run_ids": [alice_run["run_id"]], "epochs": 2})
+    assert job.status_code == 201, job.json_body
+    assert job.json_body["job"]["status"] == "QUEUED" and job.json_body["job"]["queue_position"] == 1
+    assert alice.call("POST", "/api/training-jobs", {"run_ids": [alice_run["run_id"]]}).status_code == 409
+    bob_job = bob.call("POST", "/api/training-jobs", {"run_ids": [bob_run["run_id"]]}).json_body["job"]
+    assert bob_job["queue_position"] == 2
+    assert bob.call("GET", f"/api/training-jobs/{job.json_body['job']['job_id']}").status_code == 403
+
+    training = services.training_service()
+    claimed = training.claim_next()
+    assert claimed is not None and claimed.owner_username == "alice"
+    assert bob.call("GET", f"/api/training-jobs/{bob_job['job_id']}").json_body["job"]["queue_position"] == 1
+    claimed = training.report(claimed, progress=0.5, epoch=1, loss=0.25)
+    shown = alice.call("GET", f"/api/training-jobs/{claimed.job_id}").json_body["job"]
+    assert (shown["status"], shown["progress"], shown["loss"]) == ("RUNNING", 0.5, 0.25)
+    assert training.next_version_name(claimed.owner_sub) == "v0001"
+    model = services.model_service().submit_archive(claimed.owner_sub, "alice", "v0001", onnx_archive(0.3))
+    assert model.status.value == "AVAILABLE" and model.name == "v0001"
+    training.finish(claimed, model)
+    assert training.next_version_name(claimed.owner_sub) == "v0002"
+    done = alice.call("GET", f"/api/training-jobs/{claimed.job_id}").json_body["job"]
+    assert (done["status"], done["model_name"]) == ("DONE", "v0001")
+    assert bob.call("POST", f"/api/models/{model.model_id}/active").status_code == 403
+    assert alice.call("POST", f"/api/models/{model.model_id}/active").status_code == 200
+    page = client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
+    assert 'data-version="v0001"' in page and 'data-testid="active-version"' in page
+    # Staff see each driver's active version and reach the console's assign-to-car flow filtered to that racer.
+    staff = client.http.get("/booth?everyone=true", headers={"Authorization": operator.headers["Authorization"]})
+    html = staff.body.decode()
+    row = html[html.index('data-racer="alice"'):]
+    assert "v0001" in row[:row.index("</tr>")] and 'href="/console/models?racer=alice"' in row[:row.index("</tr>")]
+    console = client.http.get("/console/models?racer=alice",
+                              headers={"Authorization": operator.headers["Authorization"]})
+    assert console.status_code == 200 and "v0001" in console.body.decode()
+
+
+def test_a_worker_that_died_leaves_its_job_queued_again(alice: ModelsApi) -> None:
+    from chalicelib import services
+
+    run = drive(alice, steps=5)
+    alice.call("POST", "/api/training-jobs", {"run_ids": [run["run_id"]]})
+    training = services.training_service()
+    claimed = training.claim_next()
+    assert claimed is not None and training.claim_next() is None
+    assert [j.job_id for j in training.requeue_interrupted()] == [claimed.job_id]
+    again = training.claim_next()
+    assert again is not None and again.job_id == claimed.job_id
+
+
+def test_an_autonomous_run_needs_an_available_model_of_ones_own(alice: ModelsApi, bob: ModelsApi) -> None:
+    model = alice.upload_and_complete("mine.tar.gz", onnx_archive(0.1))
+    refused = bob.call("POST", "/api/runs", {"track_id": "drem_oval", "mode": "autonomous",
+                                             "model_id": model["model_id"]})
+    assert refused.status_code == 403
+    missing_model = alice.call("POST", "/api/runs", {"track_id": "drem_oval", "mode": "autonomous"})
+    assert missing_model.status_code == 400
+    queued = alice.call("POST", "/api/runs", {"track_id": "drem_oval", "mode": "autonomous",
+                                              "model_id": model["model_id"], "laps": 2})
+    assert queued.status_code == 201 and queued.json_body["run"]["status"] == "QUEUED"
+
+
+def test_a_live_drive_refuses_bad_controls_and_unknown_tracks_and_loses_nothing(alice: ModelsApi) -> None:
+    assert alice.call("POST", "/api/drive", {"track_id": "nowhere"}).status_code == 404
+    started = alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).json_body
+    path = f"/api/runs/{started['run_id']}/drive"
+    for bad in ({"steering": 5}, {"throttle": "full"}, {"steering": 0, "brake": 1}):
+        reply = alice.call("POST", path, bad)
+        assert reply.status_code == 400, (bad, reply.json_body)
+    assert alice.call("POST", path, {"throttle": 1}).json_body["frames"] == 1  # the bad ones stepped nothing
+    again = alice.call("POST", "/api/drive", {"track_id": "drem_oval"})  # one car per racer: the first is saved
+    assert again.status_code == 201
+    first = alice.call("GET", f"/api/runs/{started['run_id']}").json_body["run"]
+    assert first["status"] == "FINALISED" and first["metrics"]["frames"] == 1
+
+
+def test_a_racer_may_hold_only_a_few_open_runs(alice: ModelsApi, bob: ModelsApi) -> None:
+    from chalicelib.domain.booth_runs import MAX_OPEN_RUNS
+
+    for _ in range(MAX_OPEN_RUNS):
+        assert alice.call("POST", "/api/runs", {"track_id": "drem_oval"}).status_code == 201
+    refused = alice.call("POST", "/api/runs", {"track_id": "drem_oval"})
+    assert refused.status_code == 429 and "not finished yet" in refused.json_body["error"]["message"]
+    assert alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).status_code == 429
+    assert bob.call("POST", "/api/runs", {"track_id": "drem_oval"}).status_code == 201  # a limit per racer

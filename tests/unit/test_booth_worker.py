@@ -1,0 +1,73 @@
+"""The booth worker, in process on the test stack: a queued job becomes the racer's next version (validated and
+scrutineered like an upload), which then drives an autonomous run whose metrics reach the registry; without torch
+the job fails with a reason a person can act on."""
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from drem_local.workers.trainer import NO_TORCH, JobProgress, Trainer
+from tests.unit.models_helpers import ModelsApi
+
+pytestmark = pytest.mark.unit
+
+
+def drive_and_queue(api: ModelsApi, steps: int = 60, epochs: int = 1) -> tuple[str, str]:
+    started = api.call("POST", "/api/drive", {"track_id": "drem_oval"}).json_body
+    for index in range(steps):
+        api.call("POST", f"/api/runs/{started['run_id']}/drive",
+                 {"throttle": 0.5, "steering": 0.3 if index % 20 < 10 else -0.3})
+    assert api.call("POST", f"/api/runs/{started['run_id']}/drive/finish").status_code == 200
+    job = api.call("POST", "/api/training-jobs", {"run_ids": [started["run_id"]], "epochs": epochs})
+    assert job.status_code == 201, job.json_body
+    return started["run_id"], job.json_body["job"]["job_id"]
+
+
+def test_a_job_becomes_v0001_scrutineered_raced_and_evaluated(alice: ModelsApi, client: Any) -> None:
+    _, job_id = drive_and_queue(alice)
+    said: list[str] = []
+    trainer = Trainer(said.append)
+    assert trainer.work_once() is True
+    job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
+    assert job["status"] == "DONE", (job, said)
+    assert job["progress"] == 1.0 and job["stage"] == ""
+    assert job["model_name"] == "v0001" and job["loss"] is not None and job["epoch"] == 1
+    model = alice.call("GET", f"/api/models/{job['model_id']}").json_body["model"]
+    assert model["status"] == "AVAILABLE" and model["training_algorithm"] in ("behaviour_cloning", "clipped_ppo")
+    assert model["scrutineer_result"] is not None
+    run = alice.call("GET", f"/api/runs/{job['autonomous_run_id']}").json_body["run"]
+    assert (run["mode"], run["status"], run["model_name"]) == ("autonomous", "FINALISED", "v0001")
+    assert run["metrics"]["frames"] > 0 and run["metrics"]["attempts"] >= 1
+    evaluations = alice.call("GET", f"/api/models/{job['model_id']}/evaluations").json_body["evaluations"]
+    assert [(e["track"], e["source"]) for e in evaluations] == [("drem_oval", "booth")]
+    assert evaluations[0]["completion_pct"] == run["metrics"]["completion_pct"]
+    assert trainer.work_once() is False  # nothing else queued
+
+
+def test_without_torch_the_job_fails_saying_what_to_install(alice: ModelsApi) -> None:
+    _, job_id = drive_and_queue(alice, steps=5)
+    trainer = Trainer(lambda line: None)
+    trainer.can_train = False
+    trainer.work_once()
+    job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
+    assert job["status"] == "FAILED" and job["reason"] == NO_TORCH and "train extra" in NO_TORCH
+
+
+class Reports:
+    def __init__(self) -> None:
+        self.seen: list[tuple[float, int, float | None]] = []
+
+    def report(self, job: Any, *, progress: float, epoch: int, loss: float | None) -> Any:
+        self.seen.append((round(progress, 3), epoch, loss))
+        return job
+
+
+def test_the_progress_bar_becomes_progress_epoch_and_loss() -> None:
+    reports, now = Reports(), [0.0]
+    stream = JobProgress(reports, job=None, clock=lambda: now[0])
+    now[0] = 1.0
+    stream.write("\repoch 1/2 [##########..........] loss 0.5000    3.0s")
+    stream.write("\repoch 1/2 [###########.........] loss 0.4900    3.1s")  # too soon after the last: not sent
+    stream.write("\repoch 1/2 train 0.4500 val 0.5100    6.0s\n")  # an epoch's end is always sent
+    assert reports.seen == [(0.225, 1, 0.5), (0.45, 1, 0.45)]
