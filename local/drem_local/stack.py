@@ -1,4 +1,5 @@
-"""Start, watch and stop the local stack: the durable moto server, the bootstrap, and the app server.
+"""Start, watch and stop the local stack: the durable moto server, the bootstrap, the app server and the
+scrutineering worker (drem_local.workers.scrutineer: background test drives of uploaded models).
 
 Shared by `drem up`, `drem status`, the integration-test fixtures and `bench/startup.py`, so all of them run the
 stack the same way. Child processes get their own session (a Ctrl-C reaches only `drem up`, which then stops them
@@ -291,6 +292,12 @@ def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -
     return process
 
 
+def start_scrutineer(config: StackConfig, env: dict[str, str]) -> ManagedProcess:
+    """The scrutineering worker: it has no port; it takes jobs from the queue in storage (drem status shows it)."""
+    return spawn("scrutineering worker", [sys.executable, "-m", "drem_local.workers.scrutineer"],
+                 config.log_dir / "scrutineer.log", env=env)
+
+
 def _child_env() -> dict[str, str]:
     env = {name: value for name, value in os.environ.items() if name not in _SHELL_AWS_VARIABLES}
     env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
@@ -316,6 +323,7 @@ class RunningStack:
     admin: Any
     env: dict[str, str]
     timings: dict[str, float] = field(default_factory=dict)
+    scrutineer: ManagedProcess | None = None
 
     def restart_storage(self, timeout: float = 30.0) -> None:
         """Start the storage server again on the same state dir and port (it recovers from its journal)."""
@@ -326,12 +334,18 @@ class RunningStack:
         self.app = start_app(self.config, self.env, timeout)
         self._record_pids()
 
+    def restart_scrutineer(self, timeout: float = 30.0) -> None:
+        self.scrutineer = start_scrutineer(self.config, self.env)
+        self._record_pids()
+
     def _record_pids(self) -> None:
         write_stack_file(self.config, self.outputs, self.admin.username, storage_pid=self.storage.pid,
-                         app_pid=self.app.pid)
+                         app_pid=self.app.pid, scrutineer_pid=self.scrutineer.pid if self.scrutineer else None)
 
     def stop(self) -> tuple[int | None, int | None]:
-        """App first (it may still be writing), then storage, which snapshots on SIGTERM."""
+        """The worker and the app first (they may still be writing), then storage, which snapshots on SIGTERM."""
+        if self.scrutineer is not None:
+            self.scrutineer.stop()
         app_code = self.app.stop()
         storage_code = self.storage.stop(timeout=30.0)
         stack_file = self.config.state_dir / STACK_FILE
@@ -365,17 +379,19 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
             app.stop(5)
         storage.stop(30)
         raise
-    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid)
     ready = time.perf_counter()
+    scrutineer = start_scrutineer(config, env)
+    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid,
+                     scrutineer_pid=scrutineer.pid)
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
                "app_s": ready - bootstrapped, "total_s": ready - started}
-    return RunningStack(config, storage, app, outputs, admin, env, timings)
+    return RunningStack(config, storage, app, outputs, admin, env, timings, scrutineer)
 
 
 # --- stack.json -----------------------------------------------------------------------------------------------
 
 def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, storage_pid: int,
-                     app_pid: int | None) -> None:
+                     app_pid: int | None, scrutineer_pid: int | None = None) -> None:
     _write_json(config.state_dir / STACK_FILE, {
         "outputs": json.loads(outputs.to_json()),
         "admin_username": admin_username,
@@ -383,7 +399,7 @@ def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, 
         "app_host": config.app_host,
         "ports": {"app": config.app_port, "storage": config.storage_port},
         "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url},
-        "pids": {"storage": storage_pid, "app": app_pid, "drem_up": os.getpid()},
+        "pids": {"storage": storage_pid, "app": app_pid, "scrutineer": scrutineer_pid, "drem_up": os.getpid()},
         "started_at": time.time(),
         "stopped_at": None,
     })

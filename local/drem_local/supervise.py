@@ -1,4 +1,5 @@
-"""Keep `drem up`'s children running: a storage or app server that dies is started again, with backoff.
+"""Keep `drem up`'s children running: a storage or app server (or the scrutineering worker) that dies is started
+again, with backoff.
 
 The storage server recovers everything acknowledged from its journal on start, and the app holds no state of its own
 (left-over board publishes are finished by its sweeper), so restarting either is safe at any moment. Each crash and
@@ -45,6 +46,9 @@ class Supervisor:
             self._revive("storage", lambda: self.stack.storage, self.stack.restart_storage)
         if not self.stack.app.alive():
             self._revive("app", lambda: self.stack.app, self.stack.restart_app)
+        worker = self.stack.scrutineer
+        if worker is not None and not worker.alive():  # its job's lease expires; the new one drives it again
+            self._revive("scrutineer", lambda: self.stack.scrutineer or worker, self.stack.restart_scrutineer)
 
     def _revive(self, role: str, current: Callable[[], ManagedProcess], restart: Callable[[], None]) -> None:
         failed_restart: str | None = None  # why the last restart attempt failed (its own log lines included)

@@ -45,7 +45,7 @@ def gather(state_dir: Path) -> dict:
         "admin_username": info.get("admin_username"),
         "urls": urls,
         "processes": {name: {"pid": pids.get(name), "alive": pid_is_drem(pids.get(name))}
-                      for name in ("storage", "app")},
+                      for name in ("storage", "app", "scrutineer")},
     })
     manifest = state_dir / SNAPSHOT_DIR / "manifest.json"
     if manifest.exists():
@@ -79,6 +79,12 @@ def describe(facts: dict) -> str:
         lines.append(f"App process {app['pid']} is alive but {urls.get('app')}/healthz does not answer.")
     else:
         lines.append("The app is not running. Start everything with `drem up`.")
+    worker = facts["processes"]["scrutineer"]
+    if worker["alive"]:
+        lines.append(f"The scrutineering worker is running (pid {worker['pid']}): it test-drives uploaded models "
+                     "in the background (log: scrutineer.log).")
+    elif facts["app_answering"]:
+        lines.append("The scrutineering worker is not running: uploaded models wait in its queue until it is.")
     lines.append(f"Data lives in {facts['state_dir']}: snapshots {_human(facts['snapshot_bytes'])}, "
                  f"journal {_human(health['journal_bytes'] if health else facts['journal_bytes'])} "
                  f"(moto {facts['moto_version'] or 'unknown'}).")

@@ -104,6 +104,13 @@ def _cars() -> list:
 
 # --- scrutineering (owner or model staff: the service decides, another racer's model answers 403) ----------------
 
+@route(bp, "/console/models/{model_id}/scrutiny", allow=SIGNED_IN)
+def model_scrutiny(principal: User, model_id: str) -> Response:
+    """The scrutineering box alone: the page polls it while the background drive is queued or driving."""
+    return render.fragment("console/model_scrutiny", model=services.model_service().get(principal, model_id),
+                           track_types=TRACK_TYPES)
+
+
 @route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
 def scrutineer_model(principal: User, model_id: str) -> Response:
     values = submitted(bp.current_request, "track_type", "event_id", "laps")
