@@ -114,6 +114,17 @@ class ScrutineerService:
         with download.body:
             return download.body.read()
 
+    def doubts(self, model_ids: list[str]) -> list[str]:
+        """Why each of these models may not drive on a car (failed, not yet or never scrutineered), to ask staff
+        before sending them: a warning, never a refusal. Ids that are no AVAILABLE model are the sender's to refuse."""
+        found = []
+        for model_id in model_ids:
+            try:
+                found.append(self.models.available_model(model_id))
+            except (NotFound, Conflict):
+                continue
+        return [doubt for doubt in map(scrutiny_doubt, found) if doubt]
+
     def model_files(self, record: ModelRecord, folder: Path) -> None:
         """model_metadata.json from the archive; model.onnx from the archive or, for console models, the conversion."""
         files = self.models.files
@@ -147,6 +158,21 @@ class ScrutineerService:
                     raise Conflict(f"Model '{record.name}' changed while it was scrutineered.") from None
                 record = latest
         raise Conflict(f"Model '{record.name}' changed while it was scrutineered.")
+
+
+def scrutiny_doubt(model: ModelRecord) -> str | None:
+    """One line on a model that did not pass scrutineering (None when it passed)."""
+    status, who = model.scrutineer_status, f"{model.owner_username} – {model.name}"
+    result = model.scrutineer_result
+    if status == "passed":
+        return None
+    if status == "failed":
+        return f"{who}: failed scrutineering ({result.message if result else 'no details'})"
+    if status in ("queued", "driving"):
+        return f"{who}: not scrutineered yet (its test drive is {status})"
+    if status == "cannot_scrutineer":
+        return f"{who}: could not be scrutineered ({model.scrutineer_status_reason})"
+    return f"{who}: not scrutineered"
 
 
 # --- in the background ------------------------------------------------------------------------------------------
