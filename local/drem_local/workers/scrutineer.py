@@ -30,6 +30,7 @@ from drem_local.app_source import use_app_source
 DRIVE_MODULE = "drem_local.workers.scrutineer_drive"
 NICENESS = 10  # below the app server (0): the live pages win every contest for the CPU
 GiB = 1024 ** 3
+_PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,9 @@ class BoundedClipDrive:
             self.stop()
             process.communicate()
             return DriveOutcome(failure=f"the drive took longer than {limits.wall_seconds:.0f} s and was stopped")
+        except BaseException:  # SIGTERM while it drives: the drive stops with the worker
+            self.stop()
+            raise
         finally:
             self.process = None
         if process.returncode != 0:
@@ -90,8 +94,13 @@ class BoundedClipDrive:
 
 def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: runs in the child before exec
     def apply() -> None:
+        import ctypes
         import resource
 
+        try:  # the drive dies with its worker (a kill -9 of the worker must not leave a drive running unwatched)
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        except (OSError, AttributeError):
+            pass
         os.nice(limits.niceness)
         resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
         resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
@@ -112,8 +121,9 @@ def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> s
     return f"the simulator failed (exit {returncode}): {last[:200]}".rstrip(": ")
 
 
-class _Stop(Exception):
-    pass
+class _Stop(BaseException):
+    """SIGTERM/SIGINT. A BaseException, like KeyboardInterrupt: botocore retries whatever `Exception` breaks a
+    request, so an Exception raised while the worker waits on storage would be swallowed and the worker never stop."""
 
 
 def _raise_stop(_signum: int, _frame: object) -> None:
@@ -141,8 +151,6 @@ def serve(poll_s: float, once: bool = False) -> int:
         while True:
             try:
                 job = worker.run_one()
-            except _Stop:
-                raise
             except Exception as error:  # storage briefly away (restarting): wait and take the queue again
                 logs.log(logging.WARNING, "scrutineering worker could not take a job", error=repr(error)[:300])
                 job = None
