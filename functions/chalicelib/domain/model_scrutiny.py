@@ -168,8 +168,10 @@ def scrutiny_doubt(model: ModelRecord) -> str | None:
         return None
     if status == "failed":
         return f"{who}: failed scrutineering ({result.message if result else 'no details'})"
-    if status in ("queued", "driving"):
-        return f"{who}: not scrutineered yet (its test drive is {status})"
+    if status == "queued":
+        return f"{who}: not scrutineered yet (its test drive is queued)"
+    if status == "driving":
+        return f"{who}: not scrutineered yet (it is being test-driven now)"
     if status == "cannot_scrutineer":
         return f"{who}: could not be scrutineered ({model.scrutineer_status_reason})"
     return f"{who}: not scrutineered"

@@ -126,5 +126,5 @@ def scrutineer_model(principal: User, model_id: str) -> Response:
     except SHOWN_ON_FORM as exc:
         model = services.model_service().get(principal, model_id)
         error, status = " ".join(field_errors(exc, "model_id").values()), error_status(exc)
-    return render.fragment("console/model_scrutiny", status=status, model=model, error=error,
+    return render.fragment("console/model_scrutiny", status=status, model=model, scrutiny_error=error,
                            track_types=TRACK_TYPES)
