@@ -5,10 +5,11 @@
 It reads the same environment as the app (tables, buckets, storage endpoint) and takes one job at a time from the
 queue (chalicelib.domain.scrutineer_queue). The drive itself runs in a child process (drem_local.workers.
 scrutineer_drive) bounded like the console-model converter: a wall-clock limit, a CPU-time limit and an address-space
-limit, one onnxruntime/OpenMP thread, and a lowered priority (nice), so a rush of uploads queues up here instead of
-competing with the live pages for the CPU. A racer's graph that loops, balloons or crashes costs that child only and
-the model says "could not scrutineer" with the reason. On SIGTERM the running drive is stopped and its job goes back
-to the queue; after kill -9 the job's lease expires and another start of the worker drives it again.
+limit, one onnxruntime/OpenMP thread, and the lowest priority (nice, and SCHED_IDLE on Linux), so a rush of uploads
+queues up here instead of competing with the live pages for the CPU. A racer's graph that loops, balloons or crashes
+costs that child only and the model says "could not scrutineer" with the reason. On SIGTERM the running drive is
+stopped and its job goes back to the queue; after kill -9 the job's lease expires and another start of the worker
+drives it again.
 """
 from __future__ import annotations
 
@@ -102,10 +103,21 @@ def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: run
         except (OSError, AttributeError):
             pass
         os.nice(limits.niceness)
+        lowest_priority()
         resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
         resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     return apply
+
+
+def lowest_priority() -> None:
+    """SCHED_IDLE where Linux offers it: the process runs only on CPU time nothing else wants, and any other task that
+    wakes up (the app server answering a spectator) takes the CPU from it at once. `nice` alone still leaves a niced
+    task its small share and a wait for the scheduler's wake-up granularity."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass  # not Linux (or not allowed): the nice value stands
 
 
 def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> str:
@@ -142,6 +154,7 @@ def serve(poll_s: float, once: bool = False) -> int:
     from chalicelib import logs
 
     os.nice(NICENESS)
+    lowest_priority()
     drive = BoundedClipDrive()
     worker = background_scrutineer(drive)
     signal.signal(signal.SIGTERM, _raise_stop)
