@@ -9,6 +9,7 @@ Tests replace the clock with `monkeypatch.setattr(services, "now_ms", ...)`: eve
 """
 from __future__ import annotations
 
+import importlib.util
 import time
 from datetime import UTC, datetime
 from typing import Any
@@ -230,8 +231,12 @@ def scrutineer_queue(settings: Settings | None = None) -> ScrutineerQueue:
     return ScrutineerQueue(DynamoJobStore(clients.dynamodb(), settings.table("models")), now_ms)
 
 
-def scrutiny_enqueuer(settings: Settings | None = None) -> ScrutinyEnqueuer:
-    """New AVAILABLE models are queued for a background drive on the upcoming events' track types."""
+def scrutiny_enqueuer(settings: Settings | None = None) -> ScrutinyEnqueuer | None:
+    """New AVAILABLE models are queued for a background drive on the upcoming events' track types, where a worker
+    can drive them: the simulator is installed (the local stack). The Lambda bundle has none, so on AWS nothing is
+    queued and models stay "not scrutineered" instead of "queued" for ever."""
+    if importlib.util.find_spec("drem_sim") is None:
+        return None
     settings = settings or get_settings()
     events = DynamoEventStore(clients.dynamodb(), settings.table("events"))
     today = lambda: datetime.fromtimestamp(now_ms() / 1000, UTC).date()  # noqa: E731 - read at call time
