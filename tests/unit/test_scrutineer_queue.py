@@ -167,3 +167,26 @@ def test_several_tracks_show_the_worst_verdict_and_name_every_drive(stack: Any, 
     result = services.model_service().get(ALICE, model.model_id).scrutineer_result
     assert result is not None and result.verdict == "failed" and result.track_type == "ATOZ_SPEEDWAY"
     assert "also driven: REINVENT_2018: passed" in result.message
+
+
+class Interrupted(BaseException):
+    """What SIGTERM raises in the worker (drem_local.workers.scrutineer._Stop) while a drive runs."""
+
+
+def test_a_drive_interrupted_by_sigterm_goes_back_to_the_queue_at_once(stack: Any, aws_clients: Any,
+                                                                       clock: FakeClock) -> None:
+    model = upload(stack, aws_clients)
+
+    def stopped_mid_drive(folder: Path, track_types: list[str], laps: int) -> DriveOutcome:
+        assert services.model_service().get(ALICE, model.model_id).scrutineer_status == "driving"
+        raise Interrupted()
+
+    interrupted = worker(stopped_mid_drive)
+    with pytest.raises(Interrupted):
+        interrupted.run_one()
+    interrupted.give_back()
+
+    assert services.model_service().get(ALICE, model.model_id).scrutineer_status == "queued"
+    drive = FakeDrive(DriveOutcome(reports=[passed()], clip=GIF))
+    assert worker(drive).run_one() is not None, "taken again without waiting for the lease"
+    assert services.model_service().get(ALICE, model.model_id).scrutineer_status == "passed"
