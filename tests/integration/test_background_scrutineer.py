@@ -4,6 +4,9 @@ a top-down GIF that only its owner and model staff may fetch."""
 from __future__ import annotations
 
 import io
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -73,3 +76,41 @@ def access_token_admin(live_stack) -> str:
         AuthFlow="USER_PASSWORD_AUTH", ClientId=live_stack.outputs.user_pool_client_id,
         AuthParameters={"USERNAME": live_stack.admin_username, "PASSWORD": live_stack.admin_password})
     return reply["AuthenticationResult"]["AccessToken"]
+
+
+def _worker(live_stack, lease_s: float) -> subprocess.Popen:
+    env = {**live_stack.env, "DREM_SCRUTINEER_LEASE_S": str(lease_s)}
+    return subprocess.Popen([sys.executable, "-m", "drem_local.workers.scrutineer", "--poll-s", "0.2"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def test_a_worker_killed_mid_drive_leaves_a_job_the_next_worker_drives(live_stack) -> None:
+    url = live_stack.url
+    create_user(live_stack, "scr-kill", "racer")
+    token = access_token(live_stack, "scr-kill")
+    running = live_stack.running
+    running.scrutineer.stop()  # this test's own workers, with a short lease, take the queue meanwhile
+    first = second = None
+    try:
+        model = _upload(url, token, "scr-kill.tar.gz", SAMPLE.read_bytes())
+        model_id = model["model_id"]
+        first = _worker(live_stack, lease_s=6)
+        deadline = time.monotonic() + 60
+        while call(url, "GET", f"/api/models/{model_id}", token=token)["model"]["scrutineer_status"] != "driving":
+            assert time.monotonic() < deadline, "the first worker never started driving"
+            time.sleep(0.1)
+        first.send_signal(signal.SIGKILL)  # a crash mid-drive: nothing is given back
+        first.wait(10)
+        assert call(url, "GET", f"/api/models/{model_id}", token=token)["model"]["scrutineer_status"] == "driving"
+
+        second = _worker(live_stack, lease_s=6)
+        done = wait_until_scrutineered(url, token, model_id, timeout=120)
+        assert done["scrutineer_status"] == "passed" and done["scrutineer_clip"], done
+        second.send_signal(signal.SIGTERM)
+        assert second.wait(20) == 0  # stops cleanly when asked
+    finally:
+        for worker in (first, second):
+            if worker is not None and worker.poll() is None:
+                worker.kill()
+                worker.wait(10)
+        running.restart_scrutineer()
