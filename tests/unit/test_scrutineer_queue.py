@@ -190,3 +190,20 @@ def test_a_drive_interrupted_by_sigterm_goes_back_to_the_queue_at_once(stack: An
     drive = FakeDrive(DriveOutcome(reports=[passed()], clip=GIF))
     assert worker(drive).run_one() is not None, "taken again without waiting for the lease"
     assert services.model_service().get(ALICE, model.model_id).scrutineer_status == "passed"
+
+
+def test_driving_it_by_hand_takes_its_place_in_the_queue(stack: Any, aws_clients: Any, clock: FakeClock) -> None:
+    from types import SimpleNamespace
+
+    from chalicelib.domain.model_scrutiny import ScrutineerRequest, ScrutineerService
+
+    model = upload(stack, aws_clients)
+    report = SimpleNamespace(verdict="failed", message="0/1 laps completed on reinvent_base", track="reinvent_base",
+                             track_type="REINVENT_2018", laps=1, laps_completed=0, best_lap_time_s=None,
+                             mean_lap_time_s=None, offtrack_count=1)
+    by_hand = ScrutineerService(services.model_service(), tracks=None, drive=lambda folder, track, laps: report,
+                                queue=services.scrutineer_queue())  # type: ignore[arg-type]
+
+    driven = by_hand.scrutineer(ALICE, model.model_id, ScrutineerRequest(laps=1))
+    assert driven.scrutineer_status == "failed" and driven.scrutineer_state is None
+    assert services.scrutineer_queue().state_of(model.model_id) is None, "no second, background drive"
