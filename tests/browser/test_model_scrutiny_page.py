@@ -1,6 +1,7 @@
 """Background scrutineering in a real browser: a racer uploads a model on My models and, without reloading, watches it
-go from queued to passed with its figures and a top-down clip; an operator who sends a model that has not passed
-to a car is asked first and may send it anyway. Screenshots at 1920x1080 and 390x844 land in docs/screenshots/."""
+go from queued to its verdict with its figures and a top-down clip; an operator who sends a model that has not
+passed to a car is asked first and may send it anyway. Screenshots at 1920x1080 and 390x844 land in test-artifacts/
+(copied to docs/screenshots/)."""
 from __future__ import annotations
 
 import re
@@ -15,7 +16,7 @@ pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
-SCREENSHOTS = ROOT / "docs" / "screenshots"
+SCREENSHOTS = ROOT / "test-artifacts"  # the reviewed copies live in docs/screenshots/
 
 
 def _upload(url: str, token: str, filename: str, archive: bytes) -> dict:
