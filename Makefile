@@ -83,6 +83,9 @@ lock: | $(UV)
 	@# Lambda's python3.11 runs on Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels only.
 	$(UV) pip compile --quiet --generate-hashes --python-version 3.11 --python-platform x86_64-manylinux_2_17 \
 		$(if $(UPGRADE),--upgrade,) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
+	@# The live-page server's container (live/Dockerfile): python:3.11-slim-bookworm on Fargate X86_64.
+	$(UV) pip compile --quiet --generate-hashes --python-version 3.11 --python-platform x86_64-manylinux_2_28 \
+		$(if $(UPGRADE),--upgrade,) requirements/live.in --constraint $(RUNTIME_LOCK) -o requirements/live.txt
 
 node_modules/.package-lock.json: package.json package-lock.json
 	npm ci --no-audit --no-fund
@@ -120,7 +123,8 @@ CDK := infra_cdk/node_modules/.bin/cdk
 CDK_RUN := cd infra_cdk && JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION=20 node_modules/.bin/cdk
 DEPLOYED := .drem-aws/$(STAGE).json
 CDK_OUTPUTS := .drem-aws/$(STAGE).cdk-outputs.json
-CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c certificate_arn=$(CERTIFICATE_ARN),)
+CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c certificate_arn=$(CERTIFICATE_ARN),) \
+	$(if $(LIVE_MAX_TASKS),-c live_max_tasks=$(LIVE_MAX_TASKS),)
 
 $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund

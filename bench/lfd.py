@@ -29,7 +29,10 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 GOAL_PCT, GOAL_RATIO, GOAL_SECONDS, MAX_DEMO_LAPS = 80.0, 1.15, 600.0, 10
-DEFAULT_HOLD_OUT = "reInvent2019_track,2024_reinvent_champ_ccw"  # a long gentle one and a narrow tight one
+# Held out, both directions: reInvent2019_track (23 m, wide, gentle bends), 2024_reinvent_champ_ccw (25.1 m: the
+# longest of the shipped loops but for 2022_summit_speedway's 25.2 m, and narrow, 0.76 m) and drem_chicane (the
+# tightest bend shipped, 0.54 m radius, narrow). Every other closed track trains.
+DEFAULT_HOLD_OUT = "reInvent2019_track,2024_reinvent_champ_ccw,drem_chicane"
 REDUCED = {"train_tracks": "reinvent_base,drem_chicane", "hold_out": "reInvent2019_track", "demo_laps": 1,
            "dagger_rounds": 1, "epochs": 3, "round_epochs": 1, "eval_laps": 3}
 
@@ -77,19 +80,24 @@ def main() -> int:
           f"epochs {args.epochs}+{args.round_epochs}/round; "
           f"augment {args.augment}", flush=True)
 
-    started = time.monotonic()
+    print(f"load         {_load()} (1, 5, 15 min) at the start", flush=True)
+    started, cpu_started = time.monotonic(), time.process_time()
     config = DaggerConfig(train_tracks=kept, eval_tracks=(), rounds=args.dagger_rounds, demo_laps=args.demo_laps,
                           demo_noise_deg=args.noise, dagger_laps=args.dagger_laps, first_epochs=args.epochs,
                           round_epochs=args.round_epochs, eval_laps=0, seed=args.seed)
     train = TrainConfig(seed=args.seed, num_threads=2, augmentation=Augmentation.from_names(args.augment.split(",")))
     reports = run_dagger(config, work, "lfd-bench", train, progress=io.StringIO())
     pipeline_seconds = time.monotonic() - started
+    # CPU seconds of all this process's threads: on a loaded shared machine the wall time mostly measures the
+    # others; CPU / 2 is what two quiet cores could at best bring the pipeline down to (torch runs 2 threads).
+    pipeline_cpu = time.process_time() - cpu_started
     train_seconds = sum(r.train_seconds for r in reports)
     for r in reports:
         print(f"round {r.round}: {r.frames} frames, train loss {r.final_train_loss:.4f}, "
               f"{r.train_seconds:.0f}s training")
     print(f"pipeline     {pipeline_seconds:.0f}s (training {train_seconds:.0f}s, recording and DAgger driving "
-          f"{pipeline_seconds - train_seconds:.0f}s)", flush=True)
+          f"{pipeline_seconds - train_seconds:.0f}s); load {_load()} at its end; CPU {pipeline_cpu:.0f}s "
+          f"(>= {pipeline_cpu / 2:.0f}s wall on 2 quiet cores)", flush=True)
 
     models = evaluate_archive(work / "lfd-bench.tar.gz", held, args.eval_laps, args.seed)
     print(f"{'held-out track':<30} {'model laps':>10} {'done %':>7} {'progress':>9} {'off':>4} {'model lap':>10} "
@@ -97,8 +105,9 @@ def main() -> int:
     worst_pct, worst_ratio = 100.0, 0.0
     for direction, model in zip(held, models, strict=True):
         teacher = Demonstrator(direction.load())
+        # As many attempts as the model's, so both means hold the same share of standing-start laps.
         demo = drive(RaceEnv(direction.load(), EnvConfig(observe=False)), lambda _o, p, t=teacher: t.act(p),
-                     3, args.seed, "demonstrator", direction.label)
+                     args.eval_laps, args.seed, "demonstrator", direction.label)
         ratio = (model.mean_lap_time_s / demo.mean_lap_time_s
                  if model.mean_lap_time_s and demo.mean_lap_time_s else float("inf"))
         worst_pct, worst_ratio = min(worst_pct, model.laps_completed_pct), max(worst_ratio, ratio)
@@ -108,14 +117,20 @@ def main() -> int:
               f"{model.completion_pct:>8.1f}% {model.offtrack_count:>4} {model_lap:>10} {demo_lap:>9} {ratio:>5.2f}x")
     print(f"total        {time.monotonic() - started:.0f}s")
     goal_config = (not args.reduced and args.demo_laps <= MAX_DEMO_LAPS and args.eval_laps >= 10
-                   and args.train_tracks == "all" and both)
+                   and args.train_tracks == "all" and both
+                   and {d.name for d in held} >= set(DEFAULT_HOLD_OUT.split(",")))  # the long and the tight one
     met = (goal_config and worst_pct >= GOAL_PCT and worst_ratio <= GOAL_RATIO
            and pipeline_seconds <= GOAL_SECONDS)
     label = "lfd" if goal_config else "lfd (reduced configuration: cannot meet the goal)"
     print(f"RESULT {label}: worst_heldout_completed={worst_pct:.0f}% worst_laptime_ratio={worst_ratio:.2f}x "
-          f"pipeline={pipeline_seconds:.0f}s held_out={len(held)} | goal >=80% each, <=1.15x, <=600s | "
-          f"{'met' if met else 'not met'}")
+          f"pipeline={pipeline_seconds:.0f}s pipeline_cpu={pipeline_cpu:.0f}s held_out={len(held)} load={_load()} "
+          f"| goal >=80% each, <=1.15x, <=600s | {'met' if met else 'not met'}")
     return 0 if met else 1
+
+
+def _load() -> str:
+    """The machine's load averages: a shared machine's training time means little without them."""
+    return "/".join(f"{value:.1f}" for value in os.getloadavg())
 
 
 if __name__ == "__main__":

@@ -100,8 +100,9 @@ def _error_response(exc: Exception, request: Request | None) -> Response:
                                 "message": message, "field": field, "fields": fields, "requestId": request_id}
         return Response(body={"error": body}, status_code=status, headers=headers)
     if status == 401 and request is not None and request.method == "GET" and not is_htmx(request):
+        # `next` is the app's own path; the sign-in form sends the browser back to it under the base path.
         login = f"/login?next={quote(logs.request_path(request), safe='/')}"
-        return Response(body="", status_code=303, headers={"Location": login})
+        return Response(body="", status_code=303, headers={"Location": render.url(login)})
     return render.page("error", status=status, title=_TITLES.get(status, "Error"), message=message,
                        status_code=status, request_id=request_id)
 

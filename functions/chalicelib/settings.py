@@ -9,9 +9,11 @@ import os
 from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
+from urllib.parse import urlsplit
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, field_validator
 
+from chalicelib import base_path
 from drem_infra import resources
 
 
@@ -24,7 +26,11 @@ class Settings(BaseModel):
     user_pool_client_id: str | None = None
     # Set only locally (the durable moto server); None means real AWS endpoints.
     endpoint_url: str | None = None
+    # The address people use, with the sub-path the site lives under if any (https://example.org/drem): every
+    # absolute link (QR codes, landing and overlay addresses, activation commands) starts with it.
     public_url: str = "http://127.0.0.1:8000"
+    # The path prefix the site is served under when no proxy header or API Gateway stage says so (chalicelib.base_path).
+    base_path: str = ""
     state_dir: Path = Path(".drem")
     # Local stacks: the installation's token signing key (the only key local tokens may be signed with). None on AWS,
     # where Cognito's published JWKS is trusted.
@@ -43,10 +49,25 @@ class Settings(BaseModel):
             "user_pool_client_id": env.get("DREM_USER_POOL_CLIENT_ID") or None,
             "endpoint_url": endpoint_url,
             "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
+            "base_path": env.get("DREM_BASE_PATH") or "",
             "state_dir": state_dir,
             "token_key_file": token_key_file,
         }
-        return cls.model_validate(values)
+        settings = cls.model_validate(values)
+        if settings.base_path and urlsplit(settings.public_url).path in ("", "/"):
+            # Absolute links (QR codes, landing and overlay addresses, activation commands) need the sub-path too.
+            settings = settings.model_copy(update={"public_url": settings.public_url.rstrip("/") + settings.base_path})
+        return settings
+
+    @field_validator("base_path")
+    @classmethod
+    def _plain_base_path(cls, value: str) -> str:
+        if not value:
+            return ""
+        normalised = base_path.normalise(value)
+        if normalised is None:
+            raise ValueError(f"DREM_BASE_PATH must be a plain path such as /drem, not {value!r}")
+        return normalised
 
     @property
     def cookie_secure(self) -> bool:

@@ -56,3 +56,14 @@ COGNITO_CALLS_WITHOUT_IAM: frozenset[str] = frozenset({
 
 # Lambda writes its logs through these, into log groups the stack creates (with retention) and names.
 LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
+
+# The live-page server's task role (drem_infra.live_pages): it renders the live regions from the materialised boards
+# and overlays (leaderboards), the event (events) and the race behind an overlay (races), and only reads. Per table
+# logical name; tests/infra/test_iam_policy.py derives the same set from the live routes' reads and fails on any drift.
+LIVE_TABLE_ACTIONS: dict[str, tuple[str, ...]] = {
+    "events": ("dynamodb:GetItem",),
+    "leaderboards": ("dynamodb:GetItem",),
+    "races": ("dynamodb:GetItem", "dynamodb:Query"),
+}
+# The read calls the live server may make at all (its contract: GetItem/Query/BatchGetItem through the adapters).
+LIVE_READ_ACTIONS: frozenset[str] = frozenset({"dynamodb:GetItem", "dynamodb:Query", "dynamodb:BatchGetItem"})

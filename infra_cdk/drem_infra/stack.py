@@ -29,6 +29,7 @@ from aws_cdk import aws_s3 as s3
 from constructs import Construct
 
 from drem_infra import permissions, resources
+from drem_infra.live_pages import LivePages
 from drem_infra.resources import BucketSpec, TableSpec
 
 # How long the functions' logs are kept (CloudWatch keeps them forever, and bills for them, unless told otherwise).
@@ -37,6 +38,8 @@ LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 # (10,000 rps), so a runaway client cannot take the account's whole API quota.
 API_RATE_LIMIT_RPS = 200
 API_BURST_LIMIT = 400
+# The header the app reads its base path from (chalicelib.base_path.FORWARDED_PREFIX_HEADER).
+FORWARDED_PREFIX_HEADER = "X-Forwarded-Prefix"
 # The app's security headers (chalicelib.security_headers) on the one answer API Gateway gives by itself.
 NOT_FOUND_HEADERS = {"Content-Security-Policy": "default-src 'none'; frame-ancestors 'none'",
                      "X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
@@ -45,7 +48,7 @@ NOT_FOUND_HEADERS = {"Content-Security-Policy": "default-src 'none'; frame-ances
 
 class DremStack(cdk.Stack):
     """Tables, buckets and the user pool; with `functions_dir`, also the Chalice app wired to them, behind a
-    CloudFront distribution (the public URL: links are root-relative, and CloudFront maps / to the API's stage).
+    CloudFront distribution (the public URL: CloudFront maps / to the API's stage and tells the app its base path).
 
     `public_url` is the URL people use (QR codes, activation commands, Secure cookies). CloudFront's own domain is
     only known after the first deploy, and the functions cannot reference the distribution that fronts their own
@@ -64,6 +67,11 @@ class DremStack(cdk.Stack):
         self.user_pool, self.user_pool_client = self._user_pool()
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
         self.distribution = self._distribution(certificate_arn) if self.app is not None else None
+        # The live pages' push server (Fargate behind an ALB) at /live/* of the same distribution (same origin).
+        self.live = (LivePages(self, "Live", stage=stage, environment=self.app_environment(), tables=self.tables)
+                     if self.distribution is not None else None)
+        if self.live is not None and self.distribution is not None:
+            self.live.serve_through(self.distribution)
         self._outputs()
 
     # --- storage ------------------------------------------------------------------------------------------------
@@ -166,6 +174,8 @@ class DremStack(cdk.Stack):
         )
         if self.public_url:
             env["DREM_PUBLIC_URL"] = self.public_url
+        # The live pages' EventSource base: empty means the page's own origin (CloudFront routes /live/* to them).
+        env["DREM_LIVE_URL"] = ""
         return env
 
     def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
@@ -173,7 +183,10 @@ class DremStack(cdk.Stack):
         cookies, query strings and headers, but not the viewer's Host, which API Gateway must see as its own)."""
         assert self.app is not None  # a distribution is made only with the app
         api_domain = f"{self.app.get_resource('RestAPI').ref}.execute-api.{self.region}.{self.url_suffix}"
-        api = origins.HttpOrigin(api_domain, origin_path="/api",
+        # The site is at CloudFront's root: X-Forwarded-Prefix "/" tells the app not to put the stage ("/api") in its
+        # links (chalicelib.base_path). CloudFront overwrites a viewer's header of that name with this one
+        # (CloudFront Developer Guide, "Add custom headers to origin requests").
+        api = origins.HttpOrigin(api_domain, origin_path="/api", custom_headers={FORWARDED_PREFIX_HEADER: "/"},
                                  protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)
         certificate = (acm.Certificate.from_certificate_arn(self, "Certificate", certificate_arn)
                        if certificate_arn else None)

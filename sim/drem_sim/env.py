@@ -80,7 +80,8 @@ class RaceEnv:
         self._length = self.track.length
         self._half_wheel = spec.axle_track / 2
         self._wheel_key: tuple[float, ...] | None = None
-        self._wheel_cache: list[tuple[float, float]] = []
+        self._wheel_cache: list[tuple[float, float]] = []  # the wheels located so far for `_wheel_key`'s pose
+        self._wheel_points: list[tuple[float, float]] = []
         self._new_episode(0.0)
 
     # ---- episode --------------------------------------------------------------------------
@@ -173,22 +174,43 @@ class RaceEnv:
         """(signed offset, half width) of each wheel contact point. The answer depends only on the pose and the
         segment hint, so it is kept for that key: the last substep's on-track check and the params of the same
         decision ask for the same pose."""
+        index = 0
+        while self._wheel_offset(index) is not None:
+            index += 1
+        return self._wheel_cache
+
+    def _current_wheel_cache(self) -> list[tuple[float, float]]:
         physics = self.physics
         key = (physics.x, physics.y, physics.heading, self._hint)
-        if key == self._wheel_key:
-            return self._wheel_cache
-        out = []
-        for wx, wy in self.physics.wheel_points():
-            _, _, offset, half = self.track.locate(wx, wy, self._hint, back=4, ahead=2)
-            out.append((offset, half))
-        self._wheel_key, self._wheel_cache = key, out
-        return out
+        if key != self._wheel_key:
+            self._wheel_key, self._wheel_cache = key, []
+            self._wheel_points = physics.wheel_points()
+        return self._wheel_cache
+
+    def _wheel_offset(self, index: int) -> tuple[float, float] | None:
+        """Wheel `index`'s (offset, half width) for the current pose, located once (None past the last wheel)."""
+        cache = self._current_wheel_cache()
+        if index < len(cache):
+            return cache[index]
+        if index >= len(self._wheel_points):
+            return None
+        wx, wy = self._wheel_points[index]
+        _, _, offset, half = self.track.locate(wx, wy, self._hint, back=4, ahead=2)
+        cache.append((offset, half))
+        return offset, half
 
     def _any_wheel_on_track(self) -> bool:
         # Wheels are at most ~0.25 m from the front point: well inside the borders, skip the exact check.
         if abs(self._offset) < self._half - 0.3:
             return True
-        return any(abs(offset) <= half for offset, half in self._wheel_offsets())
+        # Stop at the first wheel on the track: locating the others would not change the answer (the params
+        # of the decision's last substep locate the rest when they ask).
+        index = 0
+        while (wheel := self._wheel_offset(index)) is not None:
+            if abs(wheel[0]) <= wheel[1]:
+                return True
+            index += 1
+        return False
 
     # ---- outputs --------------------------------------------------------------------------
     def _observe(self) -> np.ndarray | None:

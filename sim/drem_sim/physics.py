@@ -48,6 +48,7 @@ class CarPhysics:
         self._body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
         self.space.add(self._body)
         self._x = self._y = self._angle = 0.0
+        self._cos, self._sin = 1.0, 0.0  # of self._angle, kept with it: the front and wheel points ask every step
         self._max_steer = math.radians(self.spec.max_steering_deg)
         self._steer_step = math.radians(self.spec.steering_rate_deg_s) * dt
         self.reset(0.0, 0.0, 0.0)
@@ -59,6 +60,7 @@ class CarPhysics:
         self._body.angle = heading
         position = self._body.position  # read back: the pose is exactly what pymunk stores
         self._x, self._y, self._angle = position.x, position.y, self._body.angle
+        self._cos, self._sin = math.cos(self._angle), math.sin(self._angle)
         self.vx = speed * math.cos(heading)
         self.vy = speed * math.sin(heading)
         self.steer = 0.0
@@ -89,23 +91,21 @@ class CarPhysics:
     @property
     def speed(self) -> float:
         """Measured speed along the car's heading, m/s."""
-        c, s = math.cos(self._angle), math.sin(self._angle)
-        return self.vx * c + self.vy * s
+        return self.vx * self._cos + self.vy * self._sin
 
     def point_ahead(self, forward: float, left: float = 0.0) -> tuple[float, float]:
         """World position of a point fixed on the car (body frame, metres)."""
-        c, s = math.cos(self._angle), math.sin(self._angle)
+        c, s = self._cos, self._sin
         return self._x + forward * c - left * s, self._y + forward * s + left * c
 
     def front_point(self) -> tuple[float, float]:
         return self.point_ahead(self.spec.front_point_x)
 
     def wheel_points(self) -> list[tuple[float, float]]:
-        """The four wheel contact points: `point_ahead`'s arithmetic with cos/sin taken once, not four times."""
+        """The four wheel contact points: `point_ahead`'s arithmetic with the pose's cos/sin, taken once per pose."""
         sp = self.spec
         half = sp.axle_track / 2
-        angle = self._angle
-        c, s = math.cos(angle), math.sin(angle)
+        c, s = self._cos, self._sin
         px, py = self._x, self._y
         return [(px + fx * c - side * s, py + fx * s + side * c)
                 for fx in (sp.front_axle_x, sp.rear_axle_x) for side in (half, -half)]
@@ -118,8 +118,7 @@ class CarPhysics:
     def step(self) -> None:
         sp, dt = self.spec, self.dt
         self.steer += max(-self._steer_step, min(self._steer_step, self.steer_cmd - self.steer))
-        heading = self._angle
-        c, s = math.cos(heading), math.sin(heading)
+        c, s = self._cos, self._sin
         v_long = self.vx * c + self.vy * s
         grip = sp.friction * GRAVITY
         accel = (self.speed_cmd - v_long) / dt
@@ -143,6 +142,7 @@ class CarPhysics:
         # The body turned; the tyres now fight the sideways part of the old velocity.
         heading = self._angle
         c, s = math.cos(heading), math.sin(heading)
+        self._cos, self._sin = c, s
         v_long = self.vx * c + self.vy * s + accel * dt
         v_lat = -self.vx * s + self.vy * c
         lateral_budget = math.sqrt(max(0.0, grip * grip - accel * accel)) * dt

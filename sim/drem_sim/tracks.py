@@ -247,8 +247,15 @@ class Track:
                 best = (i, t, dist if dx * ry - dy * rx >= 0 else -dist, 0.5 * (w0 + (w1 - w0) * t))
         return best
 
+    @cached_property
+    def _arc_rows(self) -> tuple[list[float], list[float]]:
+        """Arc length at each waypoint and each segment's length as Python floats (indexing numpy per step costs
+        more than the arithmetic)."""
+        return [float(v) for v in self.cumulative], [float(v) for v in self._segments[2]]
+
     def arc_length(self, segment: int, along: float) -> float:
-        return float(self.cumulative[segment]) + along * float(self._segments[2][segment])
+        starts, lengths = self._arc_rows
+        return starts[segment] + along * lengths[segment]
 
     def on_track(self, points: Any) -> np.ndarray:
         return self.project(points).on_track

@@ -108,4 +108,12 @@ def test_the_sample_model_races_a_sim_car_onto_the_public_leaderboard(live_stack
     assert car.world.resets == 0, "the sample model kept the car on the track"
     # A lap of re:Invent 2018 (~17.6 m) at the model's 1.4-2.2 m/s actions takes several seconds of sim time.
     assert 5_000 < row["fastest_lap_ms"] < 20_000, row
-    assert row["fastest_lap_ms"] == min(lap["time_ms"] for lap in race["laps"])
+    # The car drove on at 10x real time until it was stopped, so more laps may have landed after the first board
+    # read: once the car is still, the board settles on the race's own fastest lap.
+    fastest = min(lap["time_ms"] for lap in race["laps"])
+
+    def board_shows_fastest() -> dict | None:
+        settled = board_row()
+        return settled if settled and settled["fastest_lap_ms"] == fastest else None
+
+    wait_until(board_shows_fastest, 10, f"the board shows the race's fastest lap ({fastest} ms)", poll_s=0.2)

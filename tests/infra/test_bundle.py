@@ -21,7 +21,8 @@ FUNCTIONS_DIR = REPO_ROOT / "functions"
 HTMX_SOURCE = REPO_ROOT / "web" / "drem_web" / "static" / "vendor" / "htmx.min.js"
 # What the AWS Lambda Python runtime ships besides the standard library.
 LAMBDA_RUNTIME_PACKAGES = ("boto3", "botocore", "s3transfer", "jmespath", "dateutil", "urllib3", "six")
-NEVER_IN_BUNDLE = ("moto/", "aws_cdk/", "boto3/", "botocore/", "drem_infra/stack.py", "drem_local/", "tests/")
+NEVER_IN_BUNDLE = ("moto/", "aws_cdk/", "boto3/", "botocore/", "drem_infra/stack.py", "drem_infra/live_pages.py",
+                   "drem_local/", "tests/")
 
 IMPORT_EVERYTHING = textwrap.dedent("""
     import importlib, json, sys, traceback

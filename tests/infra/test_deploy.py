@@ -42,6 +42,19 @@ def test_cloudfront_maps_the_site_root_to_the_api_stage_and_caches_only_static_f
     assert static["CachePolicyId"] != caching_disabled
 
 
+def test_cloudfront_tells_the_app_the_site_is_at_its_root_so_links_do_not_carry_the_stage(app_template):
+    from chalicelib import base_path
+
+    origin = _distribution(app_template)["Origins"][0]
+    headers = {h["HeaderName"]: h["HeaderValue"] for h in origin["OriginCustomHeaders"]}
+    assert headers == {base_path.FORWARDED_PREFIX_HEADER: "/"}
+    # What the app makes of it: the request reaches the execute-api host with the stage, yet the links start at "/".
+    context = {"stage": "api", "domainName": "abc123.execute-api.eu-west-1.amazonaws.com", "path": "/api/console"}
+    lowered = {name.lower(): value for name, value in headers.items()}
+    assert base_path.for_request(lowered, context, "") == ""
+    assert base_path.for_request({}, context, "") == "/api"  # the same request without CloudFront's header
+
+
 def test_the_app_is_told_its_public_url_so_cookies_are_secure_and_qr_codes_point_there(app_template):
     functions = app_template.find_resources("AWS::Serverless::Function").values()
     assert {f["Properties"]["Environment"]["Variables"].get("DREM_PUBLIC_URL") for f in functions} == {PUBLIC_URL}

@@ -139,3 +139,104 @@ def test_the_api_stage_is_throttled(app_template):
     api = next(iter(app_template.find_resources("AWS::Serverless::Api").values()))["Properties"]
     settings = api["MethodSettings"][0]
     assert settings["ThrottlingRateLimit"] > 0 and settings["ThrottlingBurstLimit"] >= settings["ThrottlingRateLimit"]
+
+
+# --- the live-page server's task role ---------------------------------------------------------------------------
+
+FUNCTIONS_DIR = STORAGE_DIR.parents[1]
+# Where the live regions read their data: the routes the live server renders the same HTML as, and the server itself
+# (live/drem_live/, once it exists: its own reads join the derivation, so a new one without a grant fails here).
+LIVE_READERS = (FUNCTIONS_DIR / "chalicelib" / "routes" / "public_pages.py",
+                *sorted((FUNCTIONS_DIR.parent / "live" / "drem_live").rglob("*.py")))
+
+
+def _storage_classes(tree: ast.Module) -> dict[str, str]:
+    """{adapter class name: its chalicelib.storage module} as a module imports them."""
+    return {alias.name: node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+            and (node.module or "").startswith("chalicelib.storage.") for alias in node.names}
+
+
+def _adapters_built(scope: ast.AST, classes: dict[str, str]) -> set[tuple[str, str]]:
+    """{(storage module, table logical name)} for every adapter built in `scope` on `….table("<logical>")`."""
+    built = set()
+    for node in ast.walk(scope):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in classes:
+            tables = {a.args[0].value for a in ast.walk(node) if isinstance(a, ast.Call)
+                      and isinstance(a.func, ast.Attribute) and a.func.attr == "table"
+                      and a.args and isinstance(a.args[0], ast.Constant)}
+            built |= {(classes[node.func.id], t) for t in tables}
+    return built
+
+
+def _services_tables() -> dict[str, set[tuple[str, str]]]:
+    """{services function: {(storage module, table logical name)}} from chalicelib/services.py, following calls to
+    other services functions (e.g. a service built on race_store())."""
+    tree = ast.parse((FUNCTIONS_DIR / "chalicelib" / "services.py").read_text())
+    classes = _storage_classes(tree)
+    functions = [n for n in tree.body if isinstance(n, ast.FunctionDef)]
+    direct = {f.name: _adapters_built(f, classes) for f in functions}
+    calls = {f.name: {n.func.id for n in ast.walk(f) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+             for f in functions}
+
+    def resolve(name: str, seen: frozenset[str] = frozenset()) -> set[tuple[str, str]]:
+        found = set(direct.get(name, ()))
+        for callee in calls.get(name, set()) - seen - {name}:
+            found |= resolve(callee, seen | {name})
+        return found
+
+    return {name: resolve(name) for name in direct}
+
+
+def live_reads() -> dict[str, set[str]]:
+    """{table logical name: {dynamodb:Action}}: the read operations of the storage adapters the live readers use
+    (behind each `services.x()` they call, or built by themselves), limited to the reads the live server may make."""
+    services_tables = _services_tables()
+    session = botocore.session.get_session()
+    operations = {xform_name(op): op for op in session.get_service_model("dynamodb").operation_names}
+    reads: dict[str, set[str]] = {}
+    for path in LIVE_READERS:
+        tree = ast.parse(path.read_text())
+        used = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name) and node.value.id == "services"}
+        adapters = {pair for name in used for pair in services_tables.get(name, ())}
+        adapters |= _adapters_built(tree, _storage_classes(tree))
+        for module, table in adapters:
+            source = FUNCTIONS_DIR / (module.replace(".", "/") + ".py")
+            actions = {f"dynamodb:{operations[n]}" for n in _operation_names(ast.parse(source.read_text()))
+                       if n in operations}
+            reads.setdefault(table, set()).update(actions & permissions.LIVE_READ_ACTIONS)
+    return reads
+
+
+@pytest.fixture(scope="module")
+def task_role_statements(app_template) -> list[dict]:
+    [task] = app_template.find_resources("AWS::ECS::TaskDefinition").values()
+    role_id = task["Properties"]["TaskRoleArn"]["Fn::GetAtt"][0]
+    role = app_template.find_resources("AWS::IAM::Role")[role_id]["Properties"]
+    inline = [p["PolicyDocument"] for p in role.get("Policies", [])]
+    attached = [p["Properties"]["PolicyDocument"] for p in app_template.find_resources("AWS::IAM::Policy").values()
+                if {"Ref": role_id} in p["Properties"].get("Roles", [])]
+    return [s for doc in inline + attached for s in doc["Statement"]]
+
+
+def test_the_live_derivation_finds_the_boards_events_and_races():
+    reads = live_reads()
+    # Spot checks that the derivation works (finding nothing would make the next test vacuous).
+    assert "dynamodb:GetItem" in reads["leaderboards"] and "dynamodb:GetItem" in reads["events"]
+    assert reads["races"] >= {"dynamodb:GetItem"}
+
+
+def test_the_live_task_role_reads_exactly_the_tables_the_live_pages_read(task_role_statements, app_template):
+    tables = app_template.find_resources("AWS::DynamoDB::Table")
+    logical = {table_id: spec.logical for table_id in tables for spec in resources.TABLES
+               if table_id.startswith(f"{spec.logical.capitalize()}Table")}
+    granted: dict[str, set[str]] = {}
+    for statement in task_role_statements:
+        assert statement["Effect"] == "Allow"
+        for resource in statement["Resource"] if isinstance(statement["Resource"], list) else [statement["Resource"]]:
+            # Only whole-table ARNs of the stack's own tables: no wildcard, no other service.
+            assert isinstance(resource, dict) and resource["Fn::GetAtt"][1] == "Arn", resource
+            granted.setdefault(logical[resource["Fn::GetAtt"][0]], set()).update(_actions(statement))
+
+    assert granted == live_reads()
+    assert all(a in permissions.LIVE_READ_ACTIONS for actions in granted.values() for a in actions), "reads only"

@@ -1,7 +1,10 @@
-"""The env's shortcuts (pose integrated in Python with Chipmunk's arithmetic, wheel points from one cos/sin,
-wheel offsets kept per pose) change nothing: the same actions give bit-identical trajectories, params and camera
-frames as the plain formulation on a real pymunk Space."""
+"""The env's shortcuts (pose integrated in Python with Chipmunk's arithmetic, wheel points from the pose's kept
+cos/sin, wheel offsets kept per pose, the on-track check stopping at the first wheel on the track) change nothing:
+the same actions give bit-identical trajectories, params and camera frames as the plain formulation on a real
+pymunk Space."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
@@ -25,9 +28,15 @@ class PlainEnv(RaceEnv):
     def _wheel_offsets(self) -> list[tuple[float, float]]:
         sp, physics = self.physics.spec, self.physics
         half = sp.axle_track / 2
-        points = [CarPhysics.point_ahead(physics, fx, side) for fx in (sp.front_axle_x, sp.rear_axle_x)
-                  for side in (half, -half)]
+        c, s = math.cos(physics.heading), math.sin(physics.heading)  # afresh, not the pose's kept cos/sin
+        points = [(physics.x + fx * c - side * s, physics.y + fx * s + side * c)
+                  for fx in (sp.front_axle_x, sp.rear_axle_x) for side in (half, -half)]
         return [self.track.locate(wx, wy, self._hint, back=4, ahead=2)[2:] for wx, wy in points]
+
+    def _any_wheel_on_track(self) -> bool:
+        if abs(self._offset) < self._half - 0.3:
+            return True
+        return any(abs(offset) <= half for offset, half in self._wheel_offsets())
 
 
 @pytest.mark.parametrize("track_name", ["reinvent_base", "2024_reinvent_champ_ccw"])

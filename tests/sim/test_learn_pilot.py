@@ -66,3 +66,25 @@ def test_continuous_metadata_without_bounds_is_refused() -> None:
     with pytest.raises(ArchiveError, match="speed.low"):
         OnnxPilot({"action_space_type": "continuous", "action_space": {"steering_angle": {"low": -30, "high": 30}}},
                   _constant_policy([0.0, 0.0]))
+
+
+def test_reused_frame_buffer_gives_what_a_plain_session_run_gives_and_keeps_earlier_outputs() -> None:
+    """The pilot feeds onnxruntime through one reused buffer (IOBinding): every frame still gets its own answer,
+    and an output already handed out is not overwritten by the next decision."""
+    from pathlib import Path
+
+    from drem_sim.env import RaceEnv
+
+    sample = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
+    pilot = OnnxPilot.from_archive(sample)
+    env = RaceEnv("reinvent_base")
+    frame, _ = env.reset(seed=0)
+    outputs, frames = [], []
+    for _ in range(40):
+        frames.append(frame)
+        outputs.append(pilot.raw_output(frame))
+        frame = env.step({"steering_angle": 25.0, "speed": 1.5})[0]
+    for kept, seen in zip(outputs, frames, strict=True):
+        plain = pilot.session.run([pilot.output_name], {pilot.input_name: seen.astype(np.float32)[None, ..., None]})
+        assert np.array_equal(kept, plain[0].reshape(-1))
+    assert len({tuple(o) for o in outputs}) > 10  # the frames really differed, so a stale buffer would show

@@ -108,6 +108,7 @@ def stack(aws_clients: Any, monkeypatch: pytest.MonkeyPatch, installation_key_fi
         monkeypatch.setenv(name, value)
     monkeypatch.setenv(TOKEN_SIGNING_KEY_ENV, str(installation_key_file))
     monkeypatch.delenv("DREM_PUBLIC_URL", raising=False)
+    monkeypatch.delenv("DREM_BASE_PATH", raising=False)
     _reset_app_caches()
     return outputs
 

@@ -47,7 +47,7 @@ from chalice import Blueprint, Chalice, Response
 from chalice.app import Request
 from pydantic import BaseModel, ValidationError
 
-from chalicelib import http_errors, logs
+from chalicelib import base_path, http_errors, logs
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.cookies import CSRF_COOKIE, request_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, Role
@@ -266,7 +266,8 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         _issue_csrf_token(scope, None, settings.cookie_secure)
     _local.scope = scope
     htmx = is_htmx(request)
-    render.bind_request(htmx=htmx, principal=ANONYMOUS, csrf_token=scope.csrf_token)
+    base = base_path.for_request(request.headers, request.context, settings.base_path)
+    render.bind_request(htmx=htmx, principal=ANONYMOUS, csrf_token=scope.csrf_token, base_path=base)
     try:
         caller = resolve_caller(request.headers, cookies)
         scope.principal, scope.via = caller.principal, caller.via
@@ -275,7 +276,7 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         secret = double_submit.session_secret(cookies) if caller.via == "cookie" and caller.principal.is_user else None
         if browser and secret and not double_submit.fits(scope.csrf_token, secret):
             _issue_csrf_token(scope, secret, settings.cookie_secure)  # pages of this session get a bound token
-        render.bind_request(htmx=htmx, principal=caller.principal, csrf_token=scope.csrf_token)
+        render.bind_request(htmx=htmx, principal=caller.principal, csrf_token=scope.csrf_token, base_path=base)
         declared.decide(caller.principal)
         checks_csrf = docs is None or docs.csrf
         if checks_csrf and request.method in double_submit.STATE_CHANGING_METHODS and caller.via != "header":
@@ -291,7 +292,17 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         # The response is rendered by now; nothing of this caller may leak into the thread's next request.
         _local.scope = None
         render.bind_request()
-    return _with_cookies(response, scope.set_cookies)
+    return _varying_on_base_path(_with_cookies(response, scope.set_cookies))
+
+
+def _varying_on_base_path(response: Response) -> Response:
+    """Pages and redirects hold URLs under the request's base path: a shared cache must key them by it."""
+    headers = response.headers
+    content_type = str(headers.get("Content-Type") or "")
+    if content_type.startswith("text/html") or "Location" in headers or "HX-Redirect" in headers:
+        vary = str(headers.get("Vary") or "")
+        headers["Vary"] = f"{vary}, {base_path.FORWARDED_PREFIX_HEADER}" if vary else base_path.FORWARDED_PREFIX_HEADER
+    return response
 
 
 def _issue_csrf_token(scope: RequestScope, secret: str | None, secure: bool) -> None:

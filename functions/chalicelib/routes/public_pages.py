@@ -154,7 +154,9 @@ def live_fragment(name: str, options: tuple[Any, ...], token: str, client_token:
     reply = unchanged(token, client_token, bp.current_request.headers.get("if-none-match"))
     if reply is not None:
         return reply
-    body = LIVE_FRAGMENTS.get((name, *options, token), lambda: render.fragment(name, **context()).body)
+    # The fragment's poll URL sits under the request's base path: the same board reached at / and at /api differs.
+    key = (name, render.base_path(), *options, token)
+    body = LIVE_FRAGMENTS.get(key, lambda: render.fragment(name, **context()).body)
     return Response(body=body, status_code=200, headers={
         "Content-Type": render.HTML, **fragment_headers(token), SERVER_TIME_HEADER: str(services.now_ms())})
 

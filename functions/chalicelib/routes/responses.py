@@ -6,6 +6,8 @@ from urllib.parse import unquote, urlsplit
 
 from chalice import Response
 
+from drem_web import render
+
 # A same-site path: "/" then RFC 3986 path/query characters only. No whitespace or control characters (browsers
 # strip tabs and newlines, so "/\t/evil" becomes "//evil"), no backslash (browsers read "/\evil" as "//evil").
 _SAFE_PATH = re.compile(r"/[A-Za-z0-9\-._~!$&'()*+,;=:@/%?#]*")
@@ -14,8 +16,10 @@ _DECODE_ROUNDS = 3
 
 
 def redirect(location: str, *, cookies: list[str] | None = None) -> Response:
+    """The one way the app redirects: `location` is the app's own path ("/console/events"); the browser is sent to it
+    under the request's base path (render.url)."""
     # 303: after a form POST the browser follows with a GET, so a reload never re-submits the form.
-    headers: dict = {"Location": location}
+    headers: dict = {"Location": render.url(location)}
     if cookies:
         headers["Set-Cookie"] = list(cookies)
     return Response(body="", status_code=303, headers=headers)

@@ -88,7 +88,7 @@ class VersionedCache(Generic[Value]):
             self._entries.clear()
 
 
-# The live pages' fragment HTML, keyed by (fragment, event, options, version token).
+# The live pages' fragment HTML, keyed by (fragment, base path, event, options, version token).
 LIVE_FRAGMENTS: VersionedCache[str] = VersionedCache(FRAGMENT_ENTRIES)
 # The race behind an overlay, keyed by (event, track, race id, overlay version): every race change republishes the
 # overlay with a new version after storing the race, so a (consistent) read made after seeing version v is at least

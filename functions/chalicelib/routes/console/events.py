@@ -31,8 +31,11 @@ def overlay_link_page(principal: User, event_id: str, query: OverlayLinkOptions)
     """Build the OBS browser-source address of a track's overlay: each option explained, the link to paste"""
     event = services.event_service().get_event(event_id)
     event.track(query.track)  # NotFound for a track the event does not have
-    link = overlay_link(get_settings().public_url, event_id, query)
-    return render.page("console/overlay_link", event=event, options=query, link=link, path=link.split("/", 3)[-1])
+    public_url = get_settings().public_url.rstrip("/")
+    link = overlay_link(public_url, event_id, query)
+    # The preview opens the same overlay on the address this page was reached at (the template adds the base path).
+    return render.page("console/overlay_link", event=event, options=query, link=link,
+                       path=link.removeprefix(public_url))
 
 
 @route(bp, "/console/events/new", allow=EVENT_EDITORS)

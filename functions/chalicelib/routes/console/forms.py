@@ -98,7 +98,7 @@ def redirect(location: str, done: str = "") -> Response:
         path, _, anchor = location.partition("#")
         location = f"{path}{'&' if '?' in path else '?'}done={done}" + (f"#{anchor}" if anchor else "")
     response = responses.redirect(location)
-    response.headers["HX-Redirect"] = location
+    response.headers["HX-Redirect"] = response.headers["Location"]  # the same URL, under the base path
     return response
 
 

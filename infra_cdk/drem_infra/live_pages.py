@@ -1,0 +1,199 @@
+"""The live pages on AWS: the live-page server (`python -m drem_live`, live/Dockerfile) on ECS Fargate behind an
+Application Load Balancer, served through the app's CloudFront distribution at `/live/*`.
+
+Spectators hold one Server-Sent-Events stream each; the server reads the materialised boards and overlays once per
+channel and pushes each change to every viewer, so a spectator costs data transfer, not requests (bench/aws_cost.py).
+
+- Network: a VPC with public subnets only and no NAT gateway (a NAT costs more a day than the whole live design); the
+  task gets a public IP to reach DynamoDB and ECR. Only CloudFront reaches the load balancer: its security group admits
+  the CloudFront origin-facing managed prefix list, looked up at deploy time (synth stays offline), and the task's
+  security group admits only the load balancer.
+- CloudFront `/live/*`: CachingDisabled (every stream and JSON read goes to the server; no request collapsing), with
+  an origin request policy forwarding all viewer headers (so the viewer's `Accept-Encoding` reaches the server, which
+  gzips each message once for everyone), the query string, and no cookies (public pages; session cookies stay with
+  the app). See `serve_through` for why this combination and not a cache policy with compression.
+- Timeouts: the server sends a heartbeat every 15 s (HEARTBEAT_SECONDS), so CloudFront's origin read timeout (the gap
+  it tolerates between two packets), its keep-alive, and the load balancer's idle timeout all outlast a missed one.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import aws_cdk as cdk
+from aws_cdk import aws_cloudfront as cloudfront
+from aws_cdk import aws_cloudfront_origins as origins
+from aws_cdk import aws_cloudwatch as cloudwatch
+from aws_cdk import aws_dynamodb as dynamodb
+from aws_cdk import aws_ec2 as ec2
+from aws_cdk import aws_ecr_assets as ecr_assets
+from aws_cdk import aws_ecs as ecs
+from aws_cdk import aws_elasticloadbalancingv2 as elbv2
+from aws_cdk import aws_iam as iam
+from aws_cdk import aws_logs as logs
+from aws_cdk import custom_resources as cr
+from constructs import Construct
+
+from drem_infra import permissions
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DOCKERFILE = "live/Dockerfile"
+# What the image build may see: an allow-list over the repository (Docker ignore syntax), so the staged build context
+# never holds .venv, node_modules, .drem (local state and signing keys), .drem-aws or cdk.out.
+LIVE_IMAGE_FILES: tuple[str, ...] = (
+    "*",
+    "!live",
+    "!requirements/live.txt",
+    "!infra_cdk/drem_infra/__init__.py",
+    "!infra_cdk/drem_infra/resources.py",
+    "!leaderboard/drem_leaderboard",
+    "!web/drem_web",
+    "!functions/chalicelib",
+    "**/__pycache__",
+    "**/*.pyc",
+    "web/drem_web/static/vendor",
+)
+
+PATH_PATTERN = "/live/*"
+HEALTH_PATH = "/live/healthz"
+CONTAINER_PORT = 8080
+# The live server's SSE heartbeat (a comment line every 15 s); the timeouts below are set against it.
+HEARTBEAT_SECONDS = 15
+ORIGIN_READ_TIMEOUT = cdk.Duration.seconds(60)  # CloudFront's maximum without a quota increase; 4 heartbeats
+ORIGIN_KEEPALIVE_TIMEOUT = cdk.Duration.seconds(60)
+ALB_IDLE_TIMEOUT = cdk.Duration.seconds(120)
+# A stream keeps its connection open, so a replaced task would otherwise wait the default 300 s before stopping;
+# viewers reconnect (EventSource retries by itself) to the new one.
+DEREGISTRATION_DELAY = cdk.Duration.seconds(30)
+# One small task serves a 2,000-spectator event (bench/aws_cost.py); CPU autoscaling adds tasks up to max_tasks.
+TASK_CPU = 512  # 0.5 vCPU
+TASK_MEMORY_MIB = 1024
+MIN_TASKS = 1
+MAX_TASKS = 4
+CPU_TARGET_PERCENT = 60
+LOG_RETENTION = logs.RetentionDays.ONE_MONTH
+# AWS's managed prefix list of CloudFront's origin-facing addresses (one per region; its id differs per region).
+CLOUDFRONT_PREFIX_LIST = "com.amazonaws.global.cloudfront.origin-facing"
+
+
+class LivePages(Construct):
+    """The live-page service of one stage. `environment` is the app's (the same DREM_* settings the functions get);
+    `tables` the stack's tables by logical name (the task role may read only those in permissions.LIVE_TABLE_ACTIONS).
+    Context `live_max_tasks` raises the autoscaling ceiling (`make deploy LIVE_MAX_TASKS=8`)."""
+
+    def __init__(self, scope: Construct, construct_id: str, *, stage: str, environment: Mapping[str, str],
+                 tables: Mapping[str, dynamodb.Table]) -> None:
+        super().__init__(scope, construct_id)
+        stack = cdk.Stack.of(self)
+        self.vpc = ec2.Vpc(
+            self, "Vpc", max_azs=2, nat_gateways=0,
+            subnet_configuration=[ec2.SubnetConfiguration(name="public", subnet_type=ec2.SubnetType.PUBLIC,
+                                                          cidr_mask=24)])
+        self.log_group = logs.LogGroup(self, "Logs", retention=LOG_RETENTION, removal_policy=cdk.RemovalPolicy.DESTROY)
+        self.task_role = self._task_role(tables)
+        task = ecs.FargateTaskDefinition(
+            self, "Task", cpu=TASK_CPU, memory_limit_mib=TASK_MEMORY_MIB, task_role=self.task_role,
+            runtime_platform=ecs.RuntimePlatform(cpu_architecture=ecs.CpuArchitecture.X86_64,
+                                                 operating_system_family=ecs.OperatingSystemFamily.LINUX))
+        task.add_container(
+            "Server",
+            image=ecs.ContainerImage.from_asset(
+                str(REPO_ROOT), file=DOCKERFILE, exclude=list(LIVE_IMAGE_FILES), ignore_mode=cdk.IgnoreMode.DOCKER,
+                platform=ecr_assets.Platform.LINUX_AMD64),
+            environment={**environment, "AWS_DEFAULT_REGION": stack.region},
+            port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT)],
+            logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
+        )
+        cluster = ecs.Cluster(self, "Cluster", vpc=self.vpc)
+        self.service = ecs.FargateService(
+            self, "Service", cluster=cluster, task_definition=task, desired_count=MIN_TASKS,
+            assign_public_ip=True, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC),
+            min_healthy_percent=100, max_healthy_percent=200, circuit_breaker=ecs.DeploymentCircuitBreaker(
+                rollback=True))
+        max_tasks = int(self.node.try_get_context("live_max_tasks") or MAX_TASKS)
+        scaling = self.service.auto_scale_task_count(min_capacity=MIN_TASKS, max_capacity=max(MIN_TASKS, max_tasks))
+        scaling.scale_on_cpu_utilization("Cpu", target_utilization_percent=CPU_TARGET_PERCENT)
+
+        self.alb_security_group = ec2.SecurityGroup(
+            self, "LoadBalancerSecurityGroup", vpc=self.vpc, allow_all_outbound=False,
+            description=f"drem {stage} live pages: HTTP from CloudFront only")
+        self.alb_security_group.add_ingress_rule(ec2.Peer.prefix_list(self._cloudfront_prefix_list()),
+                                                 ec2.Port.tcp(80), "CloudFront origin-facing servers")
+        self.load_balancer = elbv2.ApplicationLoadBalancer(
+            self, "LoadBalancer", vpc=self.vpc, internet_facing=True, security_group=self.alb_security_group,
+            idle_timeout=ALB_IDLE_TIMEOUT, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC))
+        listener = self.load_balancer.add_listener("Http", port=80, open=False)
+        self.target_group = listener.add_targets(
+            "Server", port=CONTAINER_PORT, protocol=elbv2.ApplicationProtocol.HTTP, targets=[self.service],
+            deregistration_delay=DEREGISTRATION_DELAY,
+            health_check=elbv2.HealthCheck(path=HEALTH_PATH, healthy_http_codes="200",
+                                           interval=cdk.Duration.seconds(15), timeout=cdk.Duration.seconds(5),
+                                           healthy_threshold_count=2, unhealthy_threshold_count=3))
+        self._alarms(stage)
+
+    def _task_role(self, tables: Mapping[str, dynamodb.Table]) -> iam.Role:
+        """Only the reads the live server makes, only on the tables it reads (tests/infra/test_iam_policy.py)."""
+        statements = [iam.PolicyStatement(actions=list(actions), resources=[tables[logical].table_arn])
+                      for logical, actions in permissions.LIVE_TABLE_ACTIONS.items()]
+        return iam.Role(self, "TaskRole", assumed_by=iam.ServicePrincipal("ecs-tasks.amazonaws.com"),
+                        description="drem live pages: read the materialised boards, overlays, events and races",
+                        inline_policies={"DremLiveReads": iam.PolicyDocument(statements=statements)})
+
+    def _cloudfront_prefix_list(self) -> str:
+        """The region's id of CLOUDFRONT_PREFIX_LIST, asked of EC2 at deploy time (a synth-time lookup would need AWS
+        credentials and cache the answer in cdk.context.json)."""
+        call = cr.AwsSdkCall(
+            service="EC2", action="describeManagedPrefixLists",
+            parameters={"Filters": [{"Name": "prefix-list-name", "Values": [CLOUDFRONT_PREFIX_LIST]}]},
+            physical_resource_id=cr.PhysicalResourceId.of(CLOUDFRONT_PREFIX_LIST),
+            output_paths=["PrefixLists.0.PrefixListId"])
+        lookup = cr.AwsCustomResource(
+            self, "CloudFrontPrefixList", on_create=call, on_update=call, install_latest_aws_sdk=False,
+            log_group=logs.LogGroup(self, "PrefixListLookupLogs", retention=LOG_RETENTION,
+                                    removal_policy=cdk.RemovalPolicy.DESTROY),
+            # Describe* calls have no resource-level permissions in IAM: "*" is the only resource they accept.
+            policy=cr.AwsCustomResourcePolicy.from_sdk_calls(resources=cr.AwsCustomResourcePolicy.ANY_RESOURCE))
+        return lookup.get_response_field("PrefixLists.0.PrefixListId")
+
+    def _alarms(self, stage: str) -> None:
+        """A task failing its health checks, and 5xx answers from the server or the load balancer itself."""
+        five_minutes = cdk.Duration.minutes(5)
+        unhealthy = self.target_group.metrics.unhealthy_host_count(period=cdk.Duration.minutes(1), statistic="Maximum")
+        unhealthy.create_alarm(self, "UnhealthyHostsAlarm", threshold=1, evaluation_periods=3,
+                               comparison_operator=cloudwatch.ComparisonOperator.GREATER_THAN_OR_EQUAL_TO_THRESHOLD,
+                               alarm_description=f"drem {stage}: a live-page task fails its health check",
+                               treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
+        server_5xx = self.target_group.metrics.http_code_target(elbv2.HttpCodeTarget.TARGET_5XX_COUNT,
+                                                                period=five_minutes, statistic="Sum")
+        alb_5xx = self.load_balancer.metrics.http_code_elb(elbv2.HttpCodeElb.ELB_5XX_COUNT, period=five_minutes,
+                                                           statistic="Sum")
+        for name, metric in (("Server5xxAlarm", server_5xx), ("LoadBalancer5xxAlarm", alb_5xx)):
+            metric.create_alarm(self, name, threshold=5, evaluation_periods=1,
+                                comparison_operator=cloudwatch.ComparisonOperator.GREATER_THAN_OR_EQUAL_TO_THRESHOLD,
+                                alarm_description=f"drem {stage}: live pages answered 5xx in 5 minutes",
+                                treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
+
+    def serve_through(self, distribution: cloudfront.Distribution) -> None:
+        """Add the `/live/*` behaviour to the app's distribution.
+
+        Why CachingDisabled + an all-viewer-headers origin request policy: a cache policy that enables gzip/brotli
+        (which is what makes CloudFront normalise and forward Accept-Encoding) is rejected when its TTLs are all 0,
+        and with a non-zero TTL identical stream URLs would be cacheable and subject to request collapsing; an
+        origin request policy may not name Accept-Encoding in an allow-list (CloudFront rejects it; CDK refuses it
+        too). With both compression flags off, CloudFront "treats the Accept-Encoding header the same as any other
+        HTTP header in the viewer request" (CloudFront API reference, ParametersInCacheKeyAndForwardedToOrigin), so a
+        policy forwarding all viewer headers passes the viewer's own Accept-Encoding to the server, and the server's
+        gzip passes back untouched (`compress=False`: CloudFront compresses nothing itself)."""
+        origin = origins.LoadBalancerV2Origin(
+            self.load_balancer, protocol_policy=cloudfront.OriginProtocolPolicy.HTTP_ONLY, http_port=80,
+            read_timeout=ORIGIN_READ_TIMEOUT, keepalive_timeout=ORIGIN_KEEPALIVE_TIMEOUT)
+        policy = cloudfront.OriginRequestPolicy(
+            self, "OriginRequestPolicy",
+            comment="drem live pages: viewer headers (Accept-Encoding, Last-Event-ID, If-None-Match) and query",
+            header_behavior=cloudfront.OriginRequestHeaderBehavior.all(),
+            query_string_behavior=cloudfront.OriginRequestQueryStringBehavior.all(),
+            cookie_behavior=cloudfront.OriginRequestCookieBehavior.none())
+        distribution.add_behavior(
+            PATH_PATTERN, origin, viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            allowed_methods=cloudfront.AllowedMethods.ALLOW_GET_HEAD,
+            cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=policy, compress=False)

@@ -1,0 +1,236 @@
+"""The live pages on AWS (drem_infra.live_pages), read from the real app's synthesised template: the push server on
+Fargate behind a load balancer only CloudFront reaches, served uncached at /live/* of the app's own distribution with
+timeouts that let a Server-Sent-Events stream live, its logs expiring and its failures alarmed. The task role is
+checked against the code in tests/infra/test_iam_policy.py."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from drem_infra import live_pages
+
+pytestmark = pytest.mark.infra
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CACHING_DISABLED = "4135ea2d-6df8-44a3-9df3-4b5a84be39ad"  # AWS managed cache policy CachingDisabled
+
+
+def _one(template, resource_type: str) -> tuple[str, dict]:
+    found = template.find_resources(resource_type)
+    assert len(found) == 1, f"{resource_type}: {list(found)}"
+    return next(iter(found.items()))
+
+
+def _live_behaviour(app_template) -> tuple[dict, dict]:
+    config = _one(app_template, "AWS::CloudFront::Distribution")[1]["Properties"]["DistributionConfig"]
+    behaviour = {b["PathPattern"]: b for b in config["CacheBehaviors"]}[live_pages.PATH_PATTERN]
+    origin = {o["Id"]: o for o in config["Origins"]}[behaviour["TargetOriginId"]]
+    return behaviour, origin
+
+
+def test_live_pages_reach_the_load_balancer_uncached_with_the_viewers_accept_encoding(app_template):
+    behaviour, origin = _live_behaviour(app_template)
+    alb_id, _ = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
+
+    assert origin["DomainName"] == {"Fn::GetAtt": [alb_id, "DNSName"]}
+    assert behaviour["CachePolicyId"] == CACHING_DISABLED, "every stream goes to the server, none is collapsed"
+    assert behaviour["Compress"] is False, "the server's gzip passes through; CloudFront compresses nothing"
+    assert behaviour["ViewerProtocolPolicy"] == "redirect-to-https"
+    assert sorted(behaviour["AllowedMethods"]) == ["GET", "HEAD"]
+    policies = app_template.find_resources("AWS::CloudFront::OriginRequestPolicy")
+    policy = policies[behaviour["OriginRequestPolicyId"]["Ref"]]["Properties"]["OriginRequestPolicyConfig"]
+    # With caching disabled, Accept-Encoding is an ordinary viewer header: only "all viewer headers" forwards it (an
+    # allow-list may not name it). Cookies stay with the app: the live pages are public.
+    assert policy["HeadersConfig"] == {"HeaderBehavior": "allViewer"}
+    assert policy["QueryStringsConfig"] == {"QueryStringBehavior": "all"}
+    assert policy["CookiesConfig"] == {"CookieBehavior": "none"}
+    # The rest of the site still goes to the API as before.
+    config = _one(app_template, "AWS::CloudFront::Distribution")[1]["Properties"]["DistributionConfig"]
+    assert config["DefaultCacheBehavior"]["TargetOriginId"] != behaviour["TargetOriginId"]
+
+
+def test_timeouts_outlast_the_heartbeat_so_a_quiet_stream_stays_open(app_template):
+    _, origin = _live_behaviour(app_template)
+    custom = origin["CustomOriginConfig"]
+    heartbeat = live_pages.HEARTBEAT_SECONDS
+
+    assert custom["OriginProtocolPolicy"] == "http-only" and custom["HTTPPort"] == 80
+    assert custom["OriginReadTimeout"] >= 2 * heartbeat, "a missed heartbeat must not cut the stream"
+    assert custom["OriginKeepaliveTimeout"] >= heartbeat
+    assert "ResponseCompletionTimeout" not in origin, "a stream has no total time limit"
+    _, alb = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
+    attributes = {a["Key"]: a["Value"] for a in alb["Properties"]["LoadBalancerAttributes"]}
+    assert int(attributes["idle_timeout.timeout_seconds"]) > 2 * heartbeat
+    _, target_group = _one(app_template, "AWS::ElasticLoadBalancingV2::TargetGroup")
+    props = target_group["Properties"]
+    assert props["HealthCheckPath"] == live_pages.HEALTH_PATH and props["Port"] == live_pages.CONTAINER_PORT
+    assert props["TargetType"] == "ip"
+
+
+def test_one_small_fargate_task_in_public_subnets_and_no_nat_gateway(app_template):
+    _, service = _one(app_template, "AWS::ECS::Service")
+    props = service["Properties"]
+    assert props["LaunchType"] == "FARGATE" and props["DesiredCount"] == 1
+    network = props["NetworkConfiguration"]["AwsvpcConfiguration"]
+    assert network["AssignPublicIp"] == "ENABLED", "without a NAT gateway the task reaches DynamoDB and ECR itself"
+    assert app_template.find_resources("AWS::EC2::NatGateway") == {}
+    subnets = app_template.find_resources("AWS::EC2::Subnet")
+    assert subnets and all(s["Properties"]["MapPublicIpOnLaunch"] for s in subnets.values())
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    assert int(task["Properties"]["Cpu"]) <= 1024 and int(task["Properties"]["Memory"]) <= 2048
+    assert task["Properties"]["RuntimePlatform"]["CpuArchitecture"] == "X86_64"
+    _, scaling = _one(app_template, "AWS::ApplicationAutoScaling::ScalableTarget")
+    assert scaling["Properties"]["MinCapacity"] == 1 and scaling["Properties"]["MaxCapacity"] >= 1
+    _, policy = _one(app_template, "AWS::ApplicationAutoScaling::ScalingPolicy")
+    tracking = policy["Properties"]["TargetTrackingScalingPolicyConfiguration"]
+    assert tracking["PredefinedMetricSpecification"]["PredefinedMetricType"] == "ECSServiceAverageCPUUtilization"
+
+
+def test_only_cloudfront_reaches_the_load_balancer_and_only_the_load_balancer_the_task(app_template):
+    alb_id, alb = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
+    [alb_group] = [g["Fn::GetAtt"][0] for g in alb["Properties"]["SecurityGroups"]]
+    groups = app_template.find_resources("AWS::EC2::SecurityGroup")
+    ingress = [(gid, rule) for gid, g in groups.items() for rule in g["Properties"].get("SecurityGroupIngress", [])]
+    ingress += [(r["Properties"]["GroupId"]["Fn::GetAtt"][0], r["Properties"])
+                for r in app_template.find_resources("AWS::EC2::SecurityGroupIngress").values()]
+
+    assert not any("CidrIp" in rule or "CidrIpv6" in rule for _, rule in ingress), "nothing open to the internet"
+    [(_, to_alb)] = [(g, r) for g, r in ingress if g == alb_group]
+    assert to_alb["FromPort"] == to_alb["ToPort"] == 80
+    lookup = json.dumps(to_alb["SourcePrefixListId"])
+    lookups = app_template.find_resources("Custom::AWS")
+    [lookup_id] = [i for i in lookups if i in lookup]
+    assert live_pages.CLOUDFRONT_PREFIX_LIST in json.dumps(lookups[lookup_id]["Properties"])
+    _, service = _one(app_template, "AWS::ECS::Service")
+    [task_group] = [g["Fn::GetAtt"][0] for g in
+                    service["Properties"]["NetworkConfiguration"]["AwsvpcConfiguration"]["SecurityGroups"]]
+    to_task = [r for g, r in ingress if g == task_group]
+    assert [(r["SourceSecurityGroupId"]["Fn::GetAtt"][0], r["FromPort"]) for r in to_task] == \
+        [(alb_group, live_pages.CONTAINER_PORT)]
+
+
+def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_its_own_origin(app_template):
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    [container] = task["Properties"]["ContainerDefinitions"]
+    env = {e["Name"]: e["Value"] for e in container["Environment"]}
+    functions = app_template.find_resources("AWS::Serverless::Function").values()
+    lambda_env = [f["Properties"]["Environment"]["Variables"] for f in functions]
+
+    assert all(v["DREM_LIVE_URL"] == "" for v in lambda_env), "same origin: CloudFront routes /live/* to the server"
+    for name in (n for n in lambda_env[0] if n.startswith("DREM_")):
+        assert env[name] == lambda_env[0][name], name
+    assert "AWS_DEFAULT_REGION" in env
+    assert container["PortMappings"] == [{"ContainerPort": live_pages.CONTAINER_PORT, "Protocol": "tcp"}]
+
+
+def test_the_live_server_logs_expire_and_failures_raise_alarms(app_template):
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    [container] = task["Properties"]["ContainerDefinitions"]
+    log = container["LogConfiguration"]
+    groups = app_template.find_resources("AWS::Logs::LogGroup")
+    assert log["LogDriver"] == "awslogs"
+    assert groups[log["Options"]["awslogs-group"]["Ref"]]["Properties"]["RetentionInDays"] > 0
+    assert all(g["Properties"].get("RetentionInDays", 0) > 0 for g in groups.values()), "no log group kept forever"
+
+    alarms = [a["Properties"] for a in app_template.find_resources("AWS::CloudWatch::Alarm").values()]
+    watched = {a["MetricName"] for a in alarms if a.get("Namespace") == "AWS/ApplicationELB"}
+    assert watched == {"UnHealthyHostCount", "HTTPCode_Target_5XX_Count", "HTTPCode_ELB_5XX_Count"}
+
+
+@pytest.fixture(scope="module")
+def staged_image_context(tmp_path_factory):
+    """The image's build context as `cdk synth` stages it (a storage-only stack with the live pages: the app's
+    Chalice packaging has nothing to do with the image)."""
+    import aws_cdk as cdk
+    from aws_cdk import aws_cloudfront as cloudfront
+    from aws_cdk import aws_cloudfront_origins as origins
+
+    from drem_infra.stack import DremStack
+
+    out = tmp_path_factory.mktemp("live-cdk") / "cdk.out"
+    app = cdk.App(outdir=str(out))
+    stack = DremStack(app, "drem-live", stage="live")
+    live = live_pages.LivePages(stack, "Live", stage="live", environment=stack.app_environment(), tables=stack.tables)
+    live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
+        origin=origins.HttpOrigin("example.org"))))
+    app.synth()
+    manifest = json.loads((out / "drem-live.assets.json").read_text())
+    [image] = manifest["dockerImages"].values()
+    return out / image["source"]["directory"], image["source"]
+
+
+def test_the_image_is_built_from_drems_own_code_only(staged_image_context):
+    context, source = staged_image_context
+    files = {str(p.relative_to(context)) for p in context.rglob("*") if p.is_file()}
+
+    assert source["dockerFile"] == live_pages.DOCKERFILE and source["platform"] == "linux/amd64"
+    assert {"live/Dockerfile", "requirements/live.txt", "infra_cdk/drem_infra/resources.py",
+            "functions/chalicelib/routes/public_pages.py", "functions/chalicelib/services.py"} <= files
+    assert any(f.startswith("leaderboard/drem_leaderboard/") for f in files)
+    assert any(f.startswith("web/drem_web/templates/") for f in files)
+    tops = {f.split("/")[0] for f in files}
+    assert tops == {"live", "requirements", "infra_cdk", "leaderboard", "web", "functions"}
+    # No local state, keys, virtualenvs, vendored wheels or build output in what docker sees.
+    forbidden = (".venv/", ".drem", "node_modules/", "functions/vendor/", "cdk.out", "__pycache__", "static/vendor/")
+    assert not [f for f in files if any(part in f for part in forbidden)]
+    assert not any(f.startswith("infra_cdk/drem_infra/") and f.endswith(("stack.py", "live_pages.py")) for f in files)
+
+
+def test_the_image_installs_only_hashed_wheels_and_runs_the_live_server(staged_image_context):
+    context, _ = staged_image_context
+    dockerfile = (context / live_pages.DOCKERFILE).read_text()
+    lock = (context / "requirements" / "live.txt").read_text()
+
+    assert "pip install --require-hashes --no-deps --only-binary=:all: -r" in dockerfile
+    pinned = [line for line in lock.splitlines() if "==" in line and not line.startswith((" ", "#"))]
+    assert pinned and all("--hash=sha256:" in lock.split(line, 1)[1].split("\n", 2)[1] for line in pinned)
+    assert {"aiohttp", "boto3", "chalice", "pydantic", "jinja2"} <= {line.split("==")[0] for line in pinned}
+    assert 'CMD ["python", "-m", "drem_live", "--host", "0.0.0.0", "--port", "8080"]' in dockerfile
+    assert "USER 10001" in dockerfile
+
+
+
+def test_the_images_packages_import_and_render_the_live_routes(staged_image_context, tmp_path):
+    """The Dockerfile's steps without Docker: its lock installed as it installs it (hashed wheels only, no resolving),
+    its COPY lines laid out under a stand-in /app, its PYTHONPATH; the live routes then import and render."""
+    context, _ = staged_image_context
+    root = tmp_path / "image"
+    inside = lambda path: root / path.lstrip("/")  # noqa: E731 - the image's absolute paths under the stand-in root
+    uv = REPO_ROOT / ".tools" / "bin" / "uv"
+    venv = tmp_path / "venv"
+    subprocess.run([str(uv), "venv", "--quiet", "--python", sys.executable, str(venv)], check=True, timeout=120)
+    install = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(venv / "bin" / "python"),
+                              "--require-hashes", "--no-deps", "--only-binary", ":all:",
+                              "-r", str(context / "requirements" / "live.txt")],
+                             capture_output=True, text=True, timeout=600)
+    assert install.returncode == 0, install.stderr
+    pythonpath = ""
+    for line in (context / live_pages.DOCKERFILE).read_text().splitlines():
+        if line.startswith("COPY ") and "requirements/" not in line:
+            *sources, destination = line.split()[1:]
+            for source in sources:
+                target = inside(destination) / Path(source).name if destination.endswith("/") else inside(destination)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                copy = shutil.copytree if (context / source).is_dir() else shutil.copy
+                copy(context / source, target)
+        elif line.startswith("ENV PYTHONPATH="):
+            pythonpath = os.pathsep.join(str(inside(p)) for p in line.split("=", 1)[1].split(":"))
+
+    probe = ("import aiohttp, boto3\n"
+             "from chalicelib.routes import public_pages\n"
+             "from drem_web import render\n"
+             "html = render.fragment('leaderboard_live', rows=[], footers=[], summaries=[], poll_url='/x', token='1',"
+             " scroll=True, t=lambda s: s, clock_at=0, page_ms=8000).body\n"
+             "assert html.lstrip().startswith('<section'), html\n"
+             "print(public_pages.__file__)\n")
+    run = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=120, env={"PATH": "/usr/bin:/bin", "PYTHONPATH": pythonpath,
+                                           "AWS_DEFAULT_REGION": "us-east-1"})
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().startswith(str(root / "app" / "functions" / "chalicelib"))

@@ -1,0 +1,54 @@
+"""The simulator's speed work (issue 17) changed no behaviour: the demonstrator, a wild noisy driver and the
+sample model drive the same laps, with the same lap times and off-track counts, as before it.
+
+The expected figures were measured with the code before the speed work (main at ea6f11c, the same drive as
+below: `drem_sim.learn.evaluate.drive`, seed 0) and matched to the last digit after it; the tolerance only
+allows for another CPU's onnxruntime kernels rounding the last bits of the model's outputs differently."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
+from drem_sim.env import RaceEnv
+from drem_sim.learn.evaluate import drive
+from drem_sim.learn.pilot import OnnxPilot
+
+pytestmark = pytest.mark.sim
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
+LAP_TOLERANCE_S = 0.02
+
+# (lap times s, off-tracks, progress per attempt %) before the speed work.
+BEFORE = {
+    ("demonstrator", "reinvent_base"): ([9.337, 9.182], 0, [100.0, 100.0]),
+    ("demonstrator", "2024_reinvent_champ_ccw"): ([13.503, 13.216], 0, [100.0, 100.0]),
+    ("model", "reinvent_base"): ([9.329, 9.134], 0, [100.0, 100.0]),
+    ("model", "2024_reinvent_champ_ccw"): ([], 2, [34.29, 14.98]),
+    ("wild", "reinvent_base"): ([], 4, [20.93, 7.9, 19.48, 12.0]),
+    ("wild", "2024_reinvent_champ_ccw"): ([], 4, [26.61, 26.59, 66.12, 70.27]),
+}
+
+
+def _policy(driver: str, env: RaceEnv):  # noqa: ANN202 - a drive() policy
+    if driver == "model":
+        pilot = OnnxPilot.from_archive(SAMPLE)
+        return lambda observation, _params: pilot.act(observation)
+    if driver == "wild":  # too fast, 12 deg of steering noise: leaves the track, so resets are exercised
+        config = DemonstratorConfig(steering_noise_deg=12.0, max_speed=3.2, lateral_accel=6.0)
+        wild = Demonstrator(env.track, config, rng=np.random.default_rng(5))
+        return lambda _observation, params: wild.act(params)
+    teacher = Demonstrator(env.track)
+    return lambda _observation, params: teacher.act(params)
+
+
+@pytest.mark.parametrize(("driver", "track"), sorted(BEFORE))
+def test_laps_and_off_tracks_are_what_they_were_before_the_speed_work(driver: str, track: str) -> None:
+    lap_times, offtracks, progress = BEFORE[(driver, track)]
+    env = RaceEnv(track)
+    metrics = drive(env, _policy(driver, env), len(progress), 0, driver, track)
+    assert metrics.offtrack_count == offtracks
+    assert metrics.lap_times_s == pytest.approx(lap_times, abs=LAP_TOLERANCE_S)
+    assert metrics.attempt_progress == pytest.approx(progress, abs=0.5)
