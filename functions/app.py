@@ -52,6 +52,7 @@ app.register_middleware(logs.request_log_middleware, "http")
 app.register_middleware(security_headers_middleware, "http")
 # Printed results and labels are PDFs; Chalice base64-encodes only the types listed here (and API Gateway with them).
 app.api.binary_types.append("application/pdf")
+app.api.binary_types.append("image/gif")  # a model's scrutineering clip
 app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models,

@@ -9,7 +9,9 @@ Tests replace the clock with `monkeypatch.setattr(services, "now_ms", ...)`: eve
 """
 from __future__ import annotations
 
+import importlib.util
 import time
+from datetime import UTC, datetime
 from typing import Any
 
 from chalicelib.auth.revocation import REVOKED
@@ -27,13 +29,14 @@ from chalicelib.domain.leaderboards import LeaderboardPublisher
 from chalicelib.domain.league import LeagueService
 from chalicelib.domain.model_conversion import ConsoleConverter
 from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
-from chalicelib.domain.model_scrutiny import ScrutineerService
+from chalicelib.domain.model_scrutiny import ScrutineerService, ScrutinyEnqueuer, upcoming_track_types
 from chalicelib.domain.on_deck import OnDeck
 from chalicelib.domain.passwords import PasswordService
 from chalicelib.domain.profiles import Profile, ProfileService, ProfilesForBoards
 from chalicelib.domain.racer_models import ModelRecord, ModelService, ModelStatus
 from chalicelib.domain.racer_queue import RacerQueueService
 from chalicelib.domain.races import RaceService
+from chalicelib.domain.scrutineer_queue import ScrutineerQueue
 from chalicelib.domain.stats import StatsDigests
 from chalicelib.domain.timing import TimingService
 from chalicelib.domain.users import ModelsEraser, OwnedDataEraser, UserService
@@ -56,6 +59,7 @@ from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.racer_queue import DynamoQueueStore
 from chalicelib.storage.races import DynamoRaceStore
+from chalicelib.storage.scrutineer_queue import DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
 
@@ -208,6 +212,7 @@ def model_service(settings: Settings | None = None, **options: Any) -> ModelServ
     """The model service over the configured table and bucket (clients built lazily, on first use)."""
     settings = settings or get_settings()
     options.setdefault("converter", ConsoleConverter())
+    options.setdefault("scrutineer_queue", scrutiny_enqueuer(settings))
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
                         S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)
 
@@ -222,7 +227,25 @@ def registry_service(settings: Settings | None = None) -> RegistryService:
 def scrutineer_service(settings: Settings | None = None) -> ScrutineerService:
     settings = settings or get_settings()
     return ScrutineerService(model_service(settings),
-                             EventTrackTypes(DynamoEventStore(clients.dynamodb(), settings.table("events"))))
+                             EventTrackTypes(DynamoEventStore(clients.dynamodb(), settings.table("events"))),
+                             queue=scrutineer_queue(settings))
+
+
+def scrutineer_queue(settings: Settings | None = None) -> ScrutineerQueue:
+    settings = settings or get_settings()
+    return ScrutineerQueue(DynamoJobStore(clients.dynamodb(), settings.table("models")), now_ms)
+
+
+def scrutiny_enqueuer(settings: Settings | None = None) -> ScrutinyEnqueuer | None:
+    """New AVAILABLE models are queued for a background drive on the upcoming events' track types, where a worker
+    can drive them: the simulator is installed (the local stack). The Lambda bundle has none, so on AWS nothing is
+    queued and models stay "not scrutineered" instead of "queued" for ever."""
+    if importlib.util.find_spec("drem_sim") is None:
+        return None
+    settings = settings or get_settings()
+    events = DynamoEventStore(clients.dynamodb(), settings.table("events"))
+    today = lambda: datetime.fromtimestamp(now_ms() / 1000, UTC).date()  # noqa: E731 - read at call time
+    return ScrutinyEnqueuer(scrutineer_queue(settings), lambda: upcoming_track_types(events.list(), today()))
 
 
 def assignment_service(settings: Settings | None = None) -> AssignmentService:

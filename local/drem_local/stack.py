@@ -1,4 +1,6 @@
-"""Start, watch and stop the local stack: the durable moto server, the bootstrap, and the app server.
+"""Start, watch and stop the local stack: the durable moto server, the bootstrap, the app server, the
+scrutineering worker (drem_local.workers.scrutineer: background test drives of uploaded models) and, for `drem up`,
+the learning booth's trainer (drem_local.workers.trainer).
 
 Shared by `drem up`, `drem status`, the integration-test fixtures and `bench/startup.py`, so all of them run the
 stack the same way. Child processes get their own session (a Ctrl-C reaches only `drem up`, which then stops them
@@ -298,6 +300,12 @@ def start_trainer(config: StackConfig, env: dict[str, str]) -> ManagedProcess:
                  config.log_dir / "trainer.log", env=env)
 
 
+def start_scrutineer(config: StackConfig, env: dict[str, str]) -> ManagedProcess:
+    """The scrutineering worker: it has no port; it takes jobs from the queue in storage (drem status shows it)."""
+    return spawn("scrutineering worker", [sys.executable, "-m", "drem_local.workers.scrutineer"],
+                 config.log_dir / "scrutineer.log", env=env)
+
+
 def _child_env() -> dict[str, str]:
     env = {name: value for name, value in os.environ.items() if name not in _SHELL_AWS_VARIABLES}
     env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
@@ -324,6 +332,7 @@ class RunningStack:
     env: dict[str, str]
     timings: dict[str, float] = field(default_factory=dict)
     trainer: ManagedProcess | None = None
+    scrutineer: ManagedProcess | None = None
 
     def restart_storage(self, timeout: float = 30.0) -> None:
         """Start the storage server again on the same state dir and port (it recovers from its journal)."""
@@ -336,16 +345,21 @@ class RunningStack:
 
     def restart_trainer(self, timeout: float = 30.0) -> None:
         self.trainer = start_trainer(self.config, self.env)
+
+    def restart_scrutineer(self, timeout: float = 30.0) -> None:
+        self.scrutineer = start_scrutineer(self.config, self.env)
         self._record_pids()
 
     def _record_pids(self) -> None:
         write_stack_file(self.config, self.outputs, self.admin.username, storage_pid=self.storage.pid,
-                         app_pid=self.app.pid, trainer_pid=self.trainer.pid if self.trainer else None)
+                         app_pid=self.app.pid, trainer_pid=self.trainer.pid if self.trainer else None,
+                         scrutineer_pid=self.scrutineer.pid if self.scrutineer else None)
 
     def stop(self) -> tuple[int | None, int | None]:
-        """The trainer and the app first (they may still be writing), then storage, which snapshots on SIGTERM."""
-        if self.trainer is not None:
-            self.trainer.stop()
+        """The workers and the app first (they may still be writing), then storage, which snapshots on SIGTERM."""
+        for worker in (self.trainer, self.scrutineer):
+            if worker is not None:
+                worker.stop()
         app_code = self.app.stop()
         storage_code = self.storage.stop(timeout=30.0)
         stack_file = self.config.state_dir / STACK_FILE
@@ -380,18 +394,20 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
             app.stop(5)
         storage.stop(30)
         raise
-    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid,
-                     trainer_pid=trainer.pid if trainer else None)
     ready = time.perf_counter()
+    scrutineer = start_scrutineer(config, env)
+    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid,
+                     trainer_pid=trainer.pid if trainer else None, scrutineer_pid=scrutineer.pid)
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
                "app_s": ready - bootstrapped, "total_s": ready - started}
-    return RunningStack(config, storage, app, outputs, admin, env, timings, trainer)
+    return RunningStack(config, storage, app, outputs, admin, env, timings, trainer, scrutineer)
 
 
 # --- stack.json -----------------------------------------------------------------------------------------------
 
 def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, storage_pid: int,
-                     app_pid: int | None, trainer_pid: int | None = None) -> None:
+                     app_pid: int | None, trainer_pid: int | None = None,
+                     scrutineer_pid: int | None = None) -> None:
     _write_json(config.state_dir / STACK_FILE, {
         "outputs": json.loads(outputs.to_json()),
         "admin_username": admin_username,
@@ -399,7 +415,8 @@ def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, 
         "app_host": config.app_host,
         "ports": {"app": config.app_port, "storage": config.storage_port},
         "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url},
-        "pids": {"storage": storage_pid, "app": app_pid, "trainer": trainer_pid, "drem_up": os.getpid()},
+        "pids": {"storage": storage_pid, "app": app_pid, "trainer": trainer_pid, "scrutineer": scrutineer_pid,
+                 "drem_up": os.getpid()},
         "started_at": time.time(),
         "stopped_at": None,
     })

@@ -1,4 +1,5 @@
-"""Keep `drem up`'s children running: a storage or app server that dies is started again, with backoff.
+"""Keep `drem up`'s children running: a storage or app server (or a background worker) that dies is started
+again, with backoff.
 
 The storage server recovers everything acknowledged from its journal on start, and the app holds no state of its own
 (left-over board publishes are finished by its sweeper), so restarting either is safe at any moment. Each crash and
@@ -48,6 +49,9 @@ class Supervisor:
         trainer = self.stack.trainer
         if trainer is not None and not trainer.alive():  # a job it was training is queued again when it starts
             self._revive("trainer", lambda: self.stack.trainer or trainer, self.stack.restart_trainer)
+        worker = self.stack.scrutineer
+        if worker is not None and not worker.alive():  # its job's lease expires; the new one drives it again
+            self._revive("scrutineer", lambda: self.stack.scrutineer or worker, self.stack.restart_scrutineer)
 
     def _revive(self, role: str, current: Callable[[], ManagedProcess], restart: Callable[[], None]) -> None:
         failed_restart: str | None = None  # why the last restart attempt failed (its own log lines included)

@@ -36,6 +36,7 @@ def test_a_console_model_is_scrutineered_on_the_events_track_from_the_cli(live_s
                                                                           tmp_path: Path) -> None:
     model = _upload(admin_api, "console_model.tar.gz", console_fixture.require_fixture().read_bytes())
     assert model["status"] == "AVAILABLE" and model["scrutiny"] == "ready", model
+    assert model["scrutineer_status"] == "queued"  # converted, so queued for its background drive at once
     event = admin_api.post("/api/events", {"name": "Scrutineering cup", "event_type": "TEST_EVENT",
                                            "date": "2026-11-24", "country_code": "GB",
                                            "race_config": {"track_type": "ATOZ_SPEEDWAY"}})
@@ -57,6 +58,7 @@ def test_a_model_that_cannot_be_scrutineered_says_why(admin_api: ApiClient) -> N
     stereo = console_fixture.console_archive(metadata={"sensor": ["STEREO_CAMERAS"]})
     model = _upload(admin_api, "stereo_model.tar.gz", stereo)
     assert model["status"] == "AVAILABLE" and model["scrutiny"] == "cannot_scrutineer"
+    assert model["scrutineer_status"] == "cannot_scrutineer" and "STEREO_CAMERAS" in model["scrutineer_status_reason"]
 
     with pytest.raises(ApiError) as refused:
         admin_api.post(f"/api/models/{model['model_id']}/scrutineer", {"laps": 1})

@@ -39,6 +39,8 @@ def test_status_describes_a_running_stack_in_plain_words(live_stack):
     text = describe(facts)
 
     assert facts["processes"]["storage"]["alive"] and facts["app_answering"]
+    assert facts["processes"]["scrutineer"]["alive"]
+    assert "The scrutineering worker is running" in text
     assert f"open {live_stack.url}" in text
     assert "Admin user: admin." in text
     assert str(live_stack.state_dir.resolve()) in text
@@ -116,7 +118,7 @@ def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on
         assert "admin (created now, with the password in DREM_ADMIN_PASSWORD)" in banner
         assert "password unchanged" not in banner
 
-        for role in ("storage", "app"):
+        for role in ("storage", "app", "scrutineer"):
             before = read_stack_file(state_dir)["pids"][role]
             os.kill(before, signal.SIGKILL)
             said = read_until(up, "is running again")

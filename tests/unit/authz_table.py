@@ -238,6 +238,8 @@ TABLE: dict[tuple[str, str], Case] = {
     ("DELETE", "/api/models/{model_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("POST", "/api/models/{model_id}/complete"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("POST", "/api/models/{model_id}/scrutineer"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("GET", "/api/models/{model_id}/scrutineer/clip.gif"): Case(allow("racer_a", "operator", "admin"),
+                                                                racer_a_model),
     # model assignments to cars
     ("PUT", "/api/cars/{device_id}/models"): Case(allow("admin", "operator"), car_x_device),
     ("GET", "/api/cars/{device_id}/models"): Case(allow(*STAFF), car_x_device),
@@ -296,6 +298,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/models/rows"): ADMIN_OPERATOR,
     ("POST", "/console/models/assign"): ADMIN_OPERATOR,
     ("POST", "/console/models/{model_id}/scrutineer"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
+    ("GET", "/console/models/{model_id}/scrutiny"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("GET", "/console/models/car-status"): Case(allow("admin", "operator"),
                                                 lambda w, c: Call({}, None)),
     ("GET", "/console/events"): ADMIN_OPERATOR,

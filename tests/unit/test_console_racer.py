@@ -109,7 +109,11 @@ def test_my_models_lists_status_and_reason_and_polls_only_while_uploaded(app: An
     polling = racer.get(f"/console/my-models/{waiting['model_id']}/row")
     assert 'hx-trigger="every 2s"' in body(polling) and "Checking…" in text(polling)
     settled = racer.get(f"/console/my-models/{good['model_id']}/row")
-    assert "every 2s" not in body(settled) and "Ready to race" in text(settled)
+    assert f'hx-get="/console/my-models/{good["model_id"]}/row"' not in body(settled)
+    assert "Ready to race" in text(settled)
+    # Its background test drive is queued: only the scrutineering box polls itself, until the drive is over.
+    assert f'hx-get="/console/models/{good["model_id"]}/scrutiny" hx-trigger="every 2s"' in body(settled)
+    assert "queued" in text(racer.get(f"/console/models/{good['model_id']}/scrutiny"))
     assert bad["status"] == "NOT_VALID"
 
 

@@ -138,8 +138,15 @@ def test_operator_gives_models_to_a_car_and_sees_its_progress(app: Any, users: A
                                                           "model_ids": broken["model_id"]}, htmx=True)
     assert not_valid.status_code == 409 and "only AVAILABLE models can be given to a car" in text(not_valid)
 
-    sent = post(operator, "/console/models/assign", {"device_id": car.device_id, "model_ids": good["model_id"]},
-                htmx=True)
+    # Not scrutineered yet: staff are asked first (and nothing is sent), then may send it anyway.
+    asked = post(operator, "/console/models/assign", {"device_id": car.device_id, "model_ids": good["model_id"]},
+                 htmx=True)
+    assert asked.status_code == 200 and "Models sent to the car." not in text(asked)
+    assert "ada – ada-fast: not scrutineered yet (its test drive is queued)" in text(asked)
+    assert 'data-testid="send-anyway"' in body(asked)
+    assert "ada-fast" not in text(operator.get(f"/console/models/car-status?device_id={car.device_id}"))
+    sent = post(operator, "/console/models/assign", {"device_id": car.device_id, "model_ids": good["model_id"],
+                                                     "confirmed": "yes"}, htmx=True)
     assert sent.status_code == 200 and "Models sent to the car." in text(sent)
     assert "ada-fast ada assigned" in text(sent) and 'hx-trigger="every 2s"' in body(sent)
 

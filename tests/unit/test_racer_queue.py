@@ -32,9 +32,10 @@ class Track:
     def base(self) -> str:
         return f"/console/timekeeper/{self.event_id}/1"
 
-    def add(self, racer: str, model: str | None = None) -> Any:
-        return self.console.post(f"{self.base}/queue", {"queue_racer": racer,
-                                                        "queue_model": model or self.models[racer]["name"]},
+    def add(self, racer: str, model: str | None = None, *, confirmed: bool = True) -> Any:
+        """Add as staff who already said yes to models that have not passed scrutineering (no worker runs here)."""
+        form = {"queue_racer": racer, "queue_model": model or self.models[racer]["name"]}
+        return self.console.post(f"{self.base}/queue", {**form, "queue_confirmed": "yes"} if confirmed else form,
                                  htmx=True)
 
     def press(self, action: str, racer: str, **extra: str) -> Any:
@@ -240,3 +241,18 @@ def test_two_screens_changing_the_queue_at_once_lose_neither_change(console, mon
     moved = track.press("move", "alice", direction="down")
     assert moved.status_code == 200 and raced
     assert track.on_deck() == ["alice"]  # bob stays removed: the stale write was refused and the move re-applied
+
+
+def test_a_model_that_has_not_passed_scrutineering_is_queued_only_after_staff_say_yes(console):
+    track = _track(console)
+
+    asked = track.add("alice", confirmed=False)
+    shown = html.unescape(asked.body.decode())
+    assert asked.status_code == 409
+    assert "alice – alice-model: not scrutineered yet (its test drive is queued)" in shown
+    assert "add it anyway?" in shown and 'data-testid="queue-add-anyway"' in shown
+    assert 'value="alice-model"' in shown  # what was typed stays, so "Add anyway" sends the same racer and model
+    assert track.on_deck() == [], "nothing reaches the queue (and so no car) before the answer"
+
+    assert track.add("alice", confirmed=True).status_code == 200
+    assert track.on_deck() == ["alice"]

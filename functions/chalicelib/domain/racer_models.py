@@ -106,6 +106,10 @@ class ModelRecord(BaseModel):
     scrutiny_reason: str | None = None
     conversion_max_diff: float | None = None
     scrutineer_result: ScrutineerResult | None = None
+    # The background test drive (domain/scrutineer_queue.py): "queued" or "driving" while it has a job, else None;
+    # the top-down clip of its last drive (models/...scrutineer.gif), served only to the owner and model staff.
+    scrutineer_state: str | None = None
+    scrutineer_clip_key: str | None = None
 
     @property
     def scrutiny_text(self) -> str:
@@ -115,9 +119,41 @@ class ModelRecord(BaseModel):
             return f"converted to ONNX (agrees with OpenVINO to {self.conversion_max_diff or 0:.1e})"
         return "ready" if self.status is ModelStatus.AVAILABLE else ""
 
+    @property
+    def scrutineer_status(self) -> str:
+        """Where the model's test drive stands: queued, driving, passed, failed, cannot_scrutineer (with
+        `scrutineer_status_reason`) or not_scrutineered; empty for a model that is not AVAILABLE."""
+        if self.status is not ModelStatus.AVAILABLE:
+            return ""
+        if self.scrutiny == "cannot_scrutineer":
+            return "cannot_scrutineer"
+        if self.scrutineer_state in ("queued", "driving"):
+            return self.scrutineer_state
+        if self.scrutineer_result is None:
+            return "not_scrutineered"
+        verdict = self.scrutineer_result.verdict
+        return verdict if verdict in ("passed", "failed") else "cannot_scrutineer"
+
+    @property
+    def scrutineer_status_reason(self) -> str | None:
+        if self.scrutineer_status != "cannot_scrutineer":
+            return None
+        if self.scrutiny == "cannot_scrutineer":
+            return self.scrutiny_reason or "no reason given"
+        return self.scrutineer_result.message if self.scrutineer_result else None
+
+    @property
+    def scrutineer_passed(self) -> bool:
+        return self.scrutineer_status == "passed"
+
     def public(self) -> dict[str, Any]:
         """What API callers see (storage keys stay inside)."""
-        return self.model_dump(mode="json", exclude={"upload_key", "s3_key", "converted_key"})
+        shown = self.model_dump(mode="json", exclude={"upload_key", "s3_key", "converted_key",
+                                                      "scrutineer_clip_key"})
+        shown.update(scrutineer_status=self.scrutineer_status, scrutineer_status_reason=self.scrutineer_status_reason,
+                     scrutineer_clip=f"/api/models/{self.model_id}/scrutineer/clip.gif"
+                     if self.scrutineer_clip_key else None)
+        return shown
 
 
 class ModelPage(BaseModel):
@@ -219,6 +255,10 @@ def converted_key(owner_sub: str, model_id: str) -> str:
     return f"models/{owner_sub}/{model_id}.onnx"
 
 
+def scrutineer_clip_key(owner_sub: str, model_id: str) -> str:
+    return f"models/{owner_sub}/{model_id}.scrutineer.gif"
+
+
 def quarantine_key(owner_sub: str, model_id: str) -> str:
     return f"quarantine/{owner_sub}/{model_id}.tar.gz"
 
@@ -240,14 +280,19 @@ class Converter(Protocol):
     def convert(self, archive: IO[bytes]) -> ConversionOutcome: ...
 
 
+class ScrutinyEnqueuer(Protocol):
+    def queue_for_scrutiny(self, record: ModelRecord) -> ModelRecord: ...  # the record marked "queued"
+
+
 class ModelService:
     def __init__(self, store: ModelStore, files: ModelFiles, *, limits: ArchiveLimits = DEFAULT_LIMITS,
                  clock: Callable[[], str] = utc_now, new_id: Callable[[], str] = new_model_id,
-                 converter: Converter | None = None) -> None:
+                 converter: Converter | None = None, scrutineer_queue: ScrutinyEnqueuer | None = None) -> None:
         self.store = store
         self.files = files
         self.limits = limits
         self.converter = converter
+        self.scrutineer_queue = scrutineer_queue
         self._clock = clock
         self._new_id = new_id
 
@@ -297,6 +342,11 @@ class ModelService:
             verdict = self._judge(record)
         except _AlreadyJudged as judged:
             return judged.record
+        if (self.scrutineer_queue is not None and verdict.status is ModelStatus.AVAILABLE
+                and verdict.scrutiny == "ready"):
+            # The job first: a crash before the record is written leaves a job the worker drops or drives, never a
+            # record saying "queued" with nothing in the queue.
+            verdict = self.scrutineer_queue.queue_for_scrutiny(verdict)
         try:
             self.store.replace(verdict, expected_status=ModelStatus.UPLOADED)
         except ModelChanged:

@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.auth.principals import User
 from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
 from chalicelib.domain.events import Event
+from chalicelib.domain.model_scrutiny import scrutiny_doubt
 from chalicelib.domain.racer_models import ModelRecord
 
 MAX_QUEUE_LENGTH = 50
@@ -62,6 +63,7 @@ class AddToQueue(BaseModel):
     model_config = ConfigDict(extra="forbid")
     racer_username: str = Field(min_length=1, max_length=128)
     model: str = Field(min_length=1, max_length=200, description="the racer's model: its name or its id")
+    confirmed: bool = Field(default=False, description="add it even though the model has not passed scrutineering")
 
 
 class QueueEntryRef(BaseModel):
@@ -122,6 +124,10 @@ class RacerQueueService:
         racer = self._racers.get_user(data.racer_username)
         username, sub = racer.username, racer.sub
         model = self._racer_model(data.model.strip(), username, sub)
+        doubt = None if data.confirmed else scrutiny_doubt(model)
+        if doubt:  # the head's model goes to a car by itself: ask before, never refuse
+            raise Conflict(f"{doubt}. On the car it may leave the track or not drive at all: add it anyway?",
+                           field="confirm")
         entry = QueueEntry(entry_id=uuid.uuid4().hex, racer_username=username, racer_sub=sub,
                            model_id=model.model_id, model_name=model.name, added_by=principal.username,
                            added_at_ms=self._clock_ms())

@@ -224,7 +224,8 @@ class ModelsEraser:
         while True:
             page = store.list_owner(sub, limit=100, next_token=token, include_deleted=True)
             for record in page.models:
-                for key in {record.s3_key, record.upload_key} - {None}:
+                stored = {record.s3_key, record.upload_key, record.converted_key, record.scrutineer_clip_key}
+                for key in stored - {None}:
                     files.delete(key)
                 gone = record.model_copy(update={"status": ModelStatus.DELETED, "owner_username": anonymised_name(sub)})
                 try:

@@ -53,6 +53,14 @@ def scrutineer_model(principal: User, model_id: str, body: ScrutineerRequest) ->
     return {"model": services.scrutineer_service().scrutineer(principal, model_id, body).public()}
 
 
+@route(bp, "/api/models/{model_id}/scrutineer/clip.gif", allow=SIGNED_IN,
+       summary="The top-down GIF of the model's last background test drive (owner, admins, operators)")
+def scrutineer_clip(principal: User, model_id: str) -> Response:
+    body = services.scrutineer_service().clip(principal, model_id)
+    return Response(body=body, status_code=200, headers={"Content-Type": "image/gif",
+                                                         "Cache-Control": "private, max-age=60"})
+
+
 def handle_upload_complete_event(event: dict[str, Any]) -> dict[str, Any]:
     """EventBridge "Object Created" (models bucket, uploads/ prefix) → validate the upload, exactly like /complete."""
     detail = event.get("detail") or {}

@@ -45,7 +45,7 @@ def gather(state_dir: Path) -> dict:
         "admin_username": info.get("admin_username"),
         "urls": urls,
         "processes": {name: {"pid": pids.get(name), "alive": pid_is_drem(pids.get(name))}
-                      for name in ("storage", "app", "trainer")},
+                      for name in ("storage", "app", "trainer", "scrutineer")},
     })
     manifest = state_dir / SNAPSHOT_DIR / "manifest.json"
     if manifest.exists():
@@ -85,6 +85,12 @@ def describe(facts: dict) -> str:
                      f"{facts['logs_dir']}/trainer.log).")
     elif trainer.get("pid"):
         lines.append("The learning booth's trainer is not running (drem up restarts it).")
+    worker = facts["processes"]["scrutineer"]
+    if worker["alive"]:
+        lines.append(f"The scrutineering worker is running (pid {worker['pid']}): it test-drives uploaded models "
+                     "in the background (log: scrutineer.log).")
+    elif facts["app_answering"]:
+        lines.append("The scrutineering worker is not running: uploaded models wait in its queue until it is.")
     lines.append(f"Data lives in {facts['state_dir']}: snapshots {_human(facts['snapshot_bytes'])}, "
                  f"journal {_human(health['journal_bytes'] if health else facts['journal_bytes'])} "
                  f"(moto {facts['moto_version'] or 'unknown'}).")

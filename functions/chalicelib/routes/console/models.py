@@ -54,10 +54,15 @@ def model_rows(principal: User) -> Response:
 @route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
 def assign_models(principal: User) -> Response:
     request = bp.current_request
-    device_id = submitted(request, "device_id").get("device_id", "")
+    values = submitted(request, "device_id", "confirmed")
+    device_id, model_ids = values.get("device_id", ""), submitted_list(request, "model_ids")
+    doubts = services.scrutineer_service().doubts(model_ids) if values.get("confirmed") != "yes" else []
+    if device_id and doubts:  # asked, not refused: staff may still send a model that did not pass
+        return render.fragment("console/car_status", assignment=None, device_id=device_id, errors={},
+                               notice="", doubts=doubts, model_ids=model_ids)
     service = services.assignment_service()
     try:
-        assignment = service.assign(principal, _chosen_car(device_id), submitted_list(request, "model_ids"))
+        assignment = service.assign(principal, _chosen_car(device_id), model_ids)
     except SHOWN_ON_FORM as exc:
         # A car deregistered meanwhile: said in the status box, not as a 404 page swapped into it.
         errors = field_errors(exc, "model_ids", missing_object_field="device_id")
@@ -104,6 +109,13 @@ def _cars() -> list:
 
 # --- scrutineering (owner or model staff: the service decides, another racer's model answers 403) ----------------
 
+@route(bp, "/console/models/{model_id}/scrutiny", allow=SIGNED_IN)
+def model_scrutiny(principal: User, model_id: str) -> Response:
+    """The scrutineering box alone: the page polls it while the background drive is queued or driving."""
+    return render.fragment("console/model_scrutiny", model=services.model_service().get(principal, model_id),
+                           track_types=TRACK_TYPES)
+
+
 @route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
 def scrutineer_model(principal: User, model_id: str) -> Response:
     values = submitted(bp.current_request, "track_type", "event_id", "laps")
@@ -114,5 +126,5 @@ def scrutineer_model(principal: User, model_id: str) -> Response:
     except SHOWN_ON_FORM as exc:
         model = services.model_service().get(principal, model_id)
         error, status = " ".join(field_errors(exc, "model_id").values()), error_status(exc)
-    return render.fragment("console/model_scrutiny", status=status, model=model, error=error,
+    return render.fragment("console/model_scrutiny", status=status, model=model, scrutiny_error=error,
                            track_types=TRACK_TYPES)

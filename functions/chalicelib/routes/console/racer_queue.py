@@ -32,8 +32,9 @@ def queue_list(principal: User, event_id: str, track_id: str) -> Response:
 
 @route(bp, BASE, methods=["POST"], allow=QUEUE_STAFF)
 def add_to_queue(principal: User, event_id: str, track_id: str) -> Response:
-    values = submitted(bp.current_request, "queue_racer", "queue_model")
-    data = {"racer_username": values.get("queue_racer", "").strip(), "model": values.get("queue_model", "")}
+    values = submitted(bp.current_request, "queue_racer", "queue_model", "queue_confirmed")
+    data = {"racer_username": values.get("queue_racer", "").strip(), "model": values.get("queue_model", ""),
+            "confirmed": values.get("queue_confirmed") == "yes"}
     try:
         services.on_deck().add(principal, event_id, track_id, AddToQueue.model_validate(data))
     except SHOWN_ON_FORM as exc:
@@ -75,7 +76,8 @@ def _button() -> dict[str, str]:
     return submitted(bp.current_request, "entry_id", "direction")  # a row button's hx-vals
 
 
-_INPUTS = {"racer_username": "queue_racer", "username": "queue_racer", "model": "queue_model"}
+_INPUTS = {"racer_username": "queue_racer", "username": "queue_racer", "model": "queue_model",
+           "confirm": "queue_confirm"}
 
 
 def _form_name(name: str) -> str:

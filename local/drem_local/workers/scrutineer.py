@@ -1,0 +1,199 @@
+"""The scrutineering worker: `drem up` runs it beside the app server; it test-drives queued models one at a time.
+
+    python -m drem_local.workers.scrutineer [--poll-s 1.0] [--once]
+
+It reads the same environment as the app (tables, buckets, storage endpoint) and takes one job at a time from the
+queue (chalicelib.domain.scrutineer_queue). The drive itself runs in a child process (drem_local.workers.
+scrutineer_drive) bounded like the console-model converter: a wall-clock limit, a CPU-time limit and an address-space
+limit, one onnxruntime/OpenMP thread, and the lowest priority (nice, and SCHED_IDLE on Linux), so a rush of uploads
+queues up here instead of competing with the live pages for the CPU. A racer's graph that loops, balloons or crashes
+costs that child only and the model says "could not scrutineer" with the reason. On SIGTERM the running drive is
+stopped and its job goes back to the queue; after kill -9 the job's lease expires and another start of the worker
+drives it again.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from drem_local.app_source import use_app_source
+
+DRIVE_MODULE = "drem_local.workers.scrutineer_drive"
+NICENESS = 10  # below the app server (0): the live pages win every contest for the CPU
+GiB = 1024 ** 3
+_PR_SET_PDEATHSIG = 1
+LEASE_VARIABLE = "DREM_SCRUTINEER_LEASE_S"  # how long a taken job is the worker's (default 5 minutes)
+
+
+@dataclass(frozen=True)
+class ScrutineerLimits:
+    wall_seconds: float = 90.0
+    cpu_seconds: int = 90
+    memory_bytes: int = 3 * GiB  # address space: onnxruntime and OpenCV map more than they touch
+    niceness: int = NICENESS
+
+
+class BoundedClipDrive:
+    """`ClipDrive` (chalicelib.domain.model_scrutiny) in a contained child process."""
+
+    def __init__(self, limits: ScrutineerLimits | None = None, *, python: str = sys.executable) -> None:
+        self.limits = limits or ScrutineerLimits()
+        self.python = python
+        self.process: subprocess.Popen[bytes] | None = None
+
+    def __call__(self, folder: Path, track_types: list[str], laps: int) -> Any:
+        from chalicelib.domain.model_scrutiny import DriveOutcome
+
+        limits = self.limits
+        clip = folder / "clip.gif"
+        command = [self.python, "-m", DRIVE_MODULE, "--folder", str(folder), "--laps", str(laps),
+                   "--clip", str(clip), *[arg for track in track_types for arg in ("--track-type", track)]]
+        environment = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1",
+                       "DREM_SIM_THREADS": "1"}
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
+                                   cwd=folder, start_new_session=True, preexec_fn=_limit(limits))
+        self.process = process
+        try:
+            stdout, stderr = process.communicate(timeout=limits.wall_seconds)
+        except subprocess.TimeoutExpired:
+            self.stop()
+            process.communicate()
+            return DriveOutcome(failure=f"the drive took longer than {limits.wall_seconds:.0f} s and was stopped")
+        except BaseException:  # SIGTERM while it drives: the drive stops with the worker
+            self.stop()
+            raise
+        finally:
+            self.process = None
+        if process.returncode != 0:
+            return DriveOutcome(failure=_crash_reason(process.returncode, stderr, limits))
+        try:
+            answer = json.loads(stdout.decode("utf-8", "replace").strip().splitlines()[-1])
+            outcome = DriveOutcome.model_validate({"reports": answer["reports"]})
+        except (ValueError, KeyError, IndexError):
+            return DriveOutcome(failure="the simulator gave no answer")
+        if clip.is_file():
+            outcome = outcome.model_copy(update={"clip": clip.read_bytes()})
+        return outcome
+
+    def stop(self) -> None:
+        process = self.process
+        if process is not None:
+            try:
+                os.killpg(process.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: runs in the child before exec
+    def apply() -> None:
+        import ctypes
+        import resource
+
+        try:  # the drive dies with its worker (a kill -9 of the worker must not leave a drive running unwatched)
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        except (OSError, AttributeError):
+            pass
+        os.nice(limits.niceness)
+        lowest_priority()
+        resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
+        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    return apply
+
+
+def lowest_priority() -> None:
+    """SCHED_IDLE where Linux offers it: the process runs only on CPU time nothing else wants, and any other task that
+    wakes up (the app server answering a spectator) takes the CPU from it at once. `nice` alone still leaves a niced
+    task its small share and a wait for the scheduler's wake-up granularity."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass  # not Linux (or not allowed): the nice value stands
+
+
+def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> str:
+    text = stderr.decode("utf-8", "replace")
+    if returncode < 0:
+        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
+        if name == "SIGXCPU":
+            return f"the drive used more than {limits.cpu_seconds} s of CPU and was stopped"
+        return f"the simulator crashed ({name})"
+    if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
+        return f"the drive needed more than {limits.memory_bytes // GiB} GiB of memory and was stopped"
+    last = next((line for line in reversed(text.strip().splitlines()) if line.strip()), "")
+    return f"the simulator failed (exit {returncode}): {last[:200]}".rstrip(": ")
+
+
+class _Stop(BaseException):
+    """SIGTERM/SIGINT. A BaseException, like KeyboardInterrupt: botocore retries whatever `Exception` breaks a
+    request, so an Exception raised while the worker waits on storage would be swallowed and the worker never stop."""
+
+
+def _raise_stop(_signum: int, _frame: object) -> None:
+    raise _Stop()
+
+
+def background_scrutineer(drive: Any) -> Any:
+    from chalicelib import services
+    from chalicelib.domain.model_scrutiny import BackgroundScrutineer
+
+    queue = services.scrutineer_queue()
+    if os.environ.get(LEASE_VARIABLE):  # tests and benches that kill workers on purpose wait less for the lease
+        queue.lease_ms = int(float(os.environ[LEASE_VARIABLE]) * 1000)
+    return BackgroundScrutineer(services.scrutineer_service(), queue, drive)
+
+
+def serve(poll_s: float, once: bool = False) -> int:
+    use_app_source()
+    from chalicelib import logs
+
+    os.nice(NICENESS)
+    lowest_priority()
+    drive = BoundedClipDrive()
+    worker = background_scrutineer(drive)
+    signal.signal(signal.SIGTERM, _raise_stop)
+    signal.signal(signal.SIGINT, _raise_stop)
+    logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
+    try:
+        while True:
+            try:
+                job = worker.run_one()
+            except Exception as error:  # storage briefly away (restarting): wait and take the queue again
+                logs.log(logging.WARNING, "scrutineering worker could not take a job", error=repr(error)[:300])
+                job = None
+                time.sleep(poll_s * 3)
+            if once and job is None:
+                return 0
+            if job is None:
+                time.sleep(poll_s)
+    except _Stop:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        drive.stop()
+        try:
+            worker.give_back()
+        except Exception as error:  # the lease then expires and the job is driven after the next start
+            logs.log(logging.WARNING, "scrutineering job not given back", error=repr(error)[:300])
+        logs.log(logging.INFO, "scrutineering worker stopped")
+        return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drem_local.workers.scrutineer", description=__doc__.split("\n")[0])
+    parser.add_argument("--poll-s", type=float, default=1.0, help="how often an idle worker looks at the queue")
+    parser.add_argument("--once", action="store_true", help="drive until the queue is empty, then exit")
+    args = parser.parse_args(argv)
+    return serve(args.poll_s, args.once)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
