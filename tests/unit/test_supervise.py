@@ -20,13 +20,14 @@ def _crashing(name: str, log: Path, words: str) -> ManagedProcess:
 
 
 class FakeStack:
-    """Only what the supervisor touches: two children and their restart methods."""
+    """Only what the supervisor touches: the children (workers absent unless a test sets one) and their restarts."""
 
     def __init__(self, storage: ManagedProcess, app: ManagedProcess, restart_storage) -> None:
         self.storage, self.app = storage, app
         self.restart_storage = lambda: restart_storage(self)
         self.restart_app = lambda: None
         self.trainer: ManagedProcess | None = None
+        self.scrutineer: ManagedProcess | None = None
 
 
 def _alive(log: Path) -> ManagedProcess:

@@ -272,10 +272,13 @@ def main(argv: list[str] | None = None) -> int:
     trainer = Trainer(say)
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
-    for job in trainer.training.requeue_interrupted():
-        say(f"trainer: job {job.job_id} was interrupted by a restart; queued again")
+    requeued = False  # jobs a dead trainer left RUNNING go back to the queue once storage answers
     while not stopping:
         try:
+            if not requeued:
+                for job in trainer.training.requeue_interrupted():
+                    say(f"trainer: job {job.job_id} was interrupted by a restart; queued again")
+                requeued = True
             busy = trainer.work_once()
         except Exception:  # noqa: BLE001 - storage briefly away (a restart): say so and look again
             say(f"trainer: could not reach the queue: {traceback.format_exc(limit=2)}")
