@@ -9,6 +9,7 @@ import os
 from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict
 
@@ -29,6 +30,9 @@ class Settings(BaseModel):
     # Local stacks: the installation's token signing key (the only key local tokens may be signed with). None on AWS,
     # where Cognito's published JWKS is trusted.
     token_key_file: Path | None = None
+    # The live server (drem_live) the public pages' live regions subscribe to: its origin locally
+    # (http://host:8002); unset on AWS, where CloudFront routes /live/* to it on the pages' own origin.
+    live_url: str | None = None
 
     @classmethod
     def from_env(cls, env: Mapping[str, str]) -> Settings:
@@ -45,6 +49,7 @@ class Settings(BaseModel):
             "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
             "state_dir": state_dir,
             "token_key_file": token_key_file,
+            "live_url": (env.get("DREM_LIVE_URL") or "").rstrip("/") or None,
         }
         return cls.model_validate(values)
 
@@ -52,6 +57,22 @@ class Settings(BaseModel):
     def cookie_secure(self) -> bool:
         # Browsers drop Secure cookies on plain http, which would make local sign-in impossible.
         return self.public_url.lower().startswith("https://")
+
+    @property
+    def live_stream_base(self) -> str | None:
+        """The prefix of the live server's URLs for the pages ("" = the pages' own origin); None = no live server, the
+        live regions poll the app. Locally only an explicit DREM_LIVE_URL means one runs (drem up sets it)."""
+        if self.live_url:
+            return self.live_url
+        return None if self.endpoint_url else ""
+
+    @property
+    def live_origin(self) -> str | None:
+        """The live server's origin when it is another one than the pages' (CSP connect-src must allow it)."""
+        if not self.live_url:
+            return None
+        parts = urlsplit(self.live_url)
+        return f"{parts.scheme}://{parts.netloc}"
 
     @property
     def local_identity(self) -> bool:

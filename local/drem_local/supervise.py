@@ -1,4 +1,4 @@
-"""Keep `drem up`'s children running: a storage or app server that dies is started again, with backoff.
+"""Keep `drem up`'s children running: a storage, live or app server that dies is started again, with backoff.
 
 The storage server recovers everything acknowledged from its journal on start, and the app holds no state of its own
 (left-over board publishes are finished by its sweeper), so restarting either is safe at any moment. Each crash and
@@ -43,6 +43,9 @@ class Supervisor:
         """Restart whichever child has died (storage first: the app needs it to answer). Raises GaveUp."""
         if not self.stack.storage.alive():
             self._revive("storage", lambda: self.stack.storage, self.stack.restart_storage)
+        live = self.stack.live
+        if live is not None and not live.alive():
+            self._revive("live", lambda: self.stack.live or live, self.stack.restart_live)
         if not self.stack.app.alive():
             self._revive("app", lambda: self.stack.app, self.stack.restart_app)
 
