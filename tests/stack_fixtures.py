@@ -138,7 +138,8 @@ def live_stack(tmp_path_factory: pytest.TempPathFactory):
         running = local_stack.start_stack(config, "admin", password, timeout=60.0)
     except local_stack.StackError as exc:
         pytest.fail(f"the local stack did not start: {exc}")
-    yield LiveStack(url=config.app_url, live_url=config.live_url, storage_url=config.storage_url, outputs=running.outputs, env=running.env,
+    yield LiveStack(url=config.app_url, live_url=config.live_url, storage_url=config.storage_url,
+                    outputs=running.outputs, env=running.env,
                     admin_username="admin", admin_password=password, state_dir=state_dir, running=running)
     _app_code, storage_code = running.stop()
     if storage_code not in (0, None):

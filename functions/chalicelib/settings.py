@@ -49,7 +49,7 @@ class Settings(BaseModel):
             "public_url": env.get("DREM_PUBLIC_URL") or "http://127.0.0.1:8000",
             "state_dir": state_dir,
             "token_key_file": token_key_file,
-            "live_url": (env.get("DREM_LIVE_URL") or "").rstrip("/") or None,
+            "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
         }
         return cls.model_validate(values)
 
@@ -99,6 +99,14 @@ class Settings(BaseModel):
 
     def bucket(self, logical: str) -> str:
         return resources.bucket_name(self.stage, logical)
+
+
+def _http_origin_or_none(url: str) -> str | None:
+    """An http(s) URL without a trailing slash; anything else (it ends up in the CSP and in pages) is no URL."""
+    parts = urlsplit(url.strip())
+    if parts.scheme not in ("http", "https") or not parts.netloc or any(c in url for c in " ;,'\"<>"):
+        return None
+    return url.strip().rstrip("/")
 
 
 @lru_cache(maxsize=1)

@@ -87,7 +87,8 @@ async def healthz(request: web.Request) -> web.Response:
 def client_address(request: web.Request) -> str:
     header = request.app[STREAMS].limits.client_address_header
     named = request.headers.get(header, "") if header else ""
-    return (named.rsplit(":", 1)[0] if named.count(":") == 1 else named) or (request.remote or "")
+    # CloudFront-Viewer-Address is "address:port" (IPv6 too: "2001:db8::1:443"); the port says nothing about who.
+    return named.rsplit(":", 1)[0] if named else (request.remote or "")
 
 
 async def known_event(request: web.Request, event_id: str) -> bool:

@@ -8,6 +8,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
+from chalicelib.security_headers import content_security_policy
+from chalicelib.settings import Settings
 from chalicelib.views.live_regions import token_is_newer
 from drem_live.channels import Channels, Subscriber
 from drem_live.limits import Limits, StreamCount
@@ -111,3 +113,15 @@ def test_streams_are_capped_in_total_and_per_client_address() -> None:
     assert "full" in (count.refusal("10.0.0.7") or "")
     count.close("10.0.0.5")
     assert count.refusal("10.0.0.5") is None
+
+
+def test_the_pages_may_connect_to_the_live_server_and_only_to_a_real_http_origin() -> None:
+    local = {"AWS_ENDPOINT_URL": "http://127.0.0.1:8001", "DREM_PUBLIC_URL": "http://192.168.8.20:8000"}
+    pushed = Settings.from_env({**local, "DREM_LIVE_URL": "http://192.168.8.20:8002/"})
+    assert pushed.live_stream_base == "http://192.168.8.20:8002"
+    assert "http://192.168.8.20:8002" in content_security_policy(pushed, embeddable=True).split("; ")[4]
+    assert Settings.from_env(local).live_stream_base is None  # locally without a live server the pages poll
+    assert Settings.from_env({}).live_stream_base == ""  # on AWS: /live/... on the pages' own origin
+    for hostile in ("javascript:alert(1)", "http://x; script-src *", "ftp://host"):
+        settings = Settings.from_env({**local, "DREM_LIVE_URL": hostile})
+        assert settings.live_url is None and settings.live_stream_base is None
