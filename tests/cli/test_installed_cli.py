@@ -76,7 +76,7 @@ def test_up_serves_and_stops_cleanly_on_ctrl_c(outside: Path, tmp_path: Path) ->
         # Wait for the banner a user waits for (the app may answer before `drem up` has finished starting).
         for line in process.stdout:  # type: ignore[union-attr]
             seen.append(line)
-            if "drem is running" in line:
+            if "Press Ctrl-C" in line:  # the banner's last line
                 break
         assert "drem is running" in "".join(seen), "".join(seen)
         assert requests.get(f"http://127.0.0.1:{app_port}/api/ping", timeout=5).status_code == 200
