@@ -314,19 +314,26 @@ def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -
     return process
 
 
-def start_live(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -> ManagedProcess:
-    """The live server (drem_live), on the app's address; it reads storage with the app's settings."""
+def start_live(config: StackConfig, env: dict[str, str], timeout: float = 30.0, *,
+               wait: bool = True) -> ManagedProcess:
+    """The live server (drem_live), on the app's address; it reads storage with the app's settings. `wait=False`
+    returns at once (then `wait_for_live`), so it can start while the app does."""
     _require_free_port(config.app_host, config.live_server_port, "live server", "--live-port")
     process = spawn("live server", [
         sys.executable, "-m", "drem_live", "--host", config.app_host, "--port", str(config.live_server_port),
         "--workers", str(config.live_workers),
     ], config.log_dir / "live.log", env=env)
+    if wait:
+        wait_for_live(config, process, timeout)
+    return process
+
+
+def wait_for_live(config: StackConfig, process: ManagedProcess, timeout: float) -> None:
     try:
         wait_for_ok(config.live_local_url + LIVE_HEALTH_PATH, process, timeout)
     except BaseException:
         process.stop(2)
         raise
-    return process
 
 
 def _child_env() -> dict[str, str]:
@@ -405,9 +412,9 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
         bootstrapped = time.perf_counter()
         env = app_environment(config, outputs)
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
-        live = start_live(config, env, timeout)
-        live_ready = time.perf_counter()
+        live = start_live(config, env, timeout, wait=False)  # starts beside the app: drem up waits for the slower
         app = start_app(config, env, timeout)
+        wait_for_live(config, live, timeout)
     except BaseException:
         for process in (app, live):
             if process is not None:
@@ -417,7 +424,7 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
     write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid, live_pid=live.pid)
     ready = time.perf_counter()
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
-               "live_s": live_ready - bootstrapped, "app_s": ready - live_ready, "total_s": ready - started}
+               "app_s": ready - bootstrapped, "total_s": ready - started}
     return RunningStack(config, storage, app, outputs, admin, env, live, timings)
 
 
