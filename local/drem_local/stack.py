@@ -412,9 +412,10 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
         bootstrapped = time.perf_counter()
         env = app_environment(config, outputs)
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
-        live = start_live(config, env, timeout, wait=False)  # starts beside the app: drem up waits for the slower
         app = start_app(config, env, timeout)
-        wait_for_live(config, live, timeout)
+        # After the app (not beside it: on two cores their imports would slow the app's start); until it answers the
+        # pages poll the app, and their EventSource connects once it does.
+        live = start_live(config, env, timeout)
     except BaseException:
         for process in (app, live):
             if process is not None:
