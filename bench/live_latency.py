@@ -200,6 +200,8 @@ def main(argv: list[str] | None = None) -> int:
                                 for name, v in latencies.items())
             print(f"  N={crowd}: {summary}", flush=True)
         browser.close()
+        health = _stack.call(f"http://127.0.0.1:{stack.live_port}", "GET", "/live/healthz")
+    sizes = health["message_bytes"]  # one worker's figures: each broadcast message, as sent plain and gzip
 
     print(f"\n{args.samples} laps per N ({LAP_PAUSE_S[0]}-{LAP_PAUSE_S[1]} s apart + latency), each seen "
           f"on both pages (pushed over SSE); latency = POST sent -> first frame with the lap; live server: "
@@ -218,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{max(board):8.0f}ms {_stack.percentile(overlay, 50):6.0f}ms {_stack.percentile(overlay, 95):6.0f}ms "
               f"{max(overlay):6.0f}ms {crowd_cols} {r['clock_error_ms']:6.1f}ms "
               f"{'-' if r['app_cpu'] is None else format(r['app_cpu'], '.0f') + ' %':>8s} {r['machine_load']:5.1f}")
+    print(f"bytes per pushed message (50-racer board and overlay fragments, one live worker): plain "
+          f"{sizes['plain_bytes_avg']:.0f}, gzip {sizes['gzip_bytes_avg']:.0f} over {sizes['messages']} messages")
     goals = {500: 500.0, 2000: 1000.0}
     met = all(r["crowd"] in goals for r in results if r["crowd"]) and {r["crowd"] for r in results} >= set(goals)
     for r in results:
@@ -232,7 +236,8 @@ def main(argv: list[str] | None = None) -> int:
                        f"{_stack.percentile(r['latencies']['overlay'], 95):.0f}ms"
                        + (f",errors={r['load']['errors']},backwards={r['load']['backwards']}" if r["load"] else "")
                        for r in results)
-    print(f"RESULT live_latency: {figures} load={_stack.machine_load()} | goal p95<=500ms at N=500 and <=1000ms at "
+    print(f"RESULT live_latency: {figures} bytes/msg={sizes['plain_bytes_avg']:.0f}plain/"
+          f"{sizes['gzip_bytes_avg']:.0f}gzip load={_stack.machine_load()} | goal p95<=500ms at N=500 and <=1000ms at "
           f"N=2000, 0 errors, 0 backwards | {'met' if met else 'not met'}")
     return 0
 

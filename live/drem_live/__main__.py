@@ -64,7 +64,8 @@ def _serve(host: str, port: int, *, reuse_port: bool) -> None:
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
     web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,
-                access_log=None, backlog=1024, handler_cancellation=True)  # a viewer leaving frees its stream at once
+                access_log=None, backlog=1024, keepalive_timeout=15.0,  # an idle poller's connection is not kept long
+                handler_cancellation=True)  # a viewer leaving frees its stream at once
 
 
 if __name__ == "__main__":

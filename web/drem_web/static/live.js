@@ -197,7 +197,8 @@
       streaming = true;
       var region = liveRegion();
       var token = message.lastEventId || fragmentToken(message.data);
-      if (!region || !tokenIsNewer(token, region.dataset.version)) { pushedAt = null; return; }
+      var sameRegion = region && message.data.indexOf('id="' + region.id + '"') !== -1;
+      if (!sameRegion || !tokenIsNewer(token, region.dataset.version)) { pushedAt = null; return; }
       window.htmx.swap(region, message.data, { swapStyle: "outerHTML", swapDelay: 0, settleDelay: 0 },
                        { eventInfo: { dremPushedAt: pushedAt } });
       pushedAt = null;
