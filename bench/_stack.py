@@ -45,8 +45,8 @@ class BenchStack:
     admin_username: str
     admin_password: str
     tmp: Path
-    live_url: str
-    live_port: int
+    live_url: str = ""  # no live server: the pages poll the app
+    live_port: int = 0
 
 
 @contextmanager

@@ -22,6 +22,7 @@ import argparse
 import multiprocessing
 import os
 import random
+import re
 import sys
 import time
 from pathlib import Path
@@ -72,6 +73,22 @@ def clock_offset_ms(page: Any) -> tuple[float, float]:
             best = sample
     assert best is not None
     return best
+
+
+def poll_period_ms(page: Any, selector: str) -> int:
+    """The live region's fallback poll period as its htmx trigger says (`every 500ms`); bench/lan.py times the polls."""
+    trigger = page.get_attribute(selector, "hx-trigger") or ""
+    match = re.fullmatch(r"every (\d+)(ms|s)", trigger.strip())
+    if not match:
+        raise SystemExit(f"{selector} does not poll on a fixed period: hx-trigger={trigger!r}")
+    return int(match.group(1)) * (1 if match.group(2) == "ms" else 1000)
+
+
+def live_path(page: Any, selector: str) -> tuple[str, str]:
+    """(the live region's poll path without its `v=`, the token) exactly as the page's htmx polls it."""
+    url = page.get_attribute(selector, "hx-get")
+    base, _, token = url.rpartition("&v=")
+    return base, token
 
 
 def server_cpu_seconds(marker: bytes, port: int) -> float | None:
