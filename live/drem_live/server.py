@@ -17,6 +17,7 @@ import asyncio
 import logging
 import os
 import re
+import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -50,6 +51,8 @@ CHANNELS: web.AppKey[Channels] = web.AppKey("channels", Channels)
 STREAMS: web.AppKey[StreamCount] = web.AppKey("streams", StreamCount)
 POLLS: web.AppKey[PollViews] = web.AppKey("polls", PollViews)
 KNOWN_EVENTS: web.AppKey[set[str]] = web.AppKey("known_events", set)
+UNKNOWN_EVENTS: web.AppKey[dict[str, float]] = web.AppKey("unknown_events", dict)
+UNKNOWN_EVENT_S = 5.0
 EXECUTOR: web.AppKey[ThreadPoolExecutor] = web.AppKey("executor", ThreadPoolExecutor)
 
 
@@ -89,14 +92,21 @@ def client_address(request: web.Request) -> str:
 
 
 async def known_event(request: web.Request, event_id: str) -> bool:
-    """Whether the event exists (one read, remembered): a stream of a made-up event opens no channel."""
-    known = request.app[KNOWN_EVENTS]
+    """Whether the event exists (one read, remembered; a missing one for UNKNOWN_EVENT_S, so made-up ids cost one read
+    each per window, not one per request): a stream of a made-up event opens no channel."""
+    known, unknown = request.app[KNOWN_EVENTS], request.app[UNKNOWN_EVENTS]
     if event_id in known:
         return True
+    if time.monotonic() - unknown.get(event_id, -UNKNOWN_EVENT_S) < UNKNOWN_EVENT_S:
+        return False
     exists = await asyncio.get_running_loop().run_in_executor(request.app[EXECUTOR], request.app[CODE].event_exists,
                                                               event_id)
     if exists and len(known) < 10_000:
         known.add(event_id)
+    elif not exists:
+        if len(unknown) >= 10_000:
+            unknown.clear()
+        unknown[event_id] = time.monotonic()
     return exists
 
 
@@ -209,6 +219,7 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8) 
     app[STREAMS] = StreamCount(limits)
     app[POLLS] = PollViews(read_view, poll_s, executor)
     app[KNOWN_EVENTS] = set()
+    app[UNKNOWN_EVENTS] = {}
     app.router.add_get("/live/healthz", healthz)
     for kind in ("leaderboard", "overlay"):
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))
