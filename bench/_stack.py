@@ -1,5 +1,6 @@
-"""Shared plumbing for the live-update benches: a durable moto server + the real app server as subprocesses on free
-ports (like `tests/stack_fixtures.py`), the JSON API as a client calls it, a seeded 50-racer board, a wrk runner with
+"""Shared plumbing for the live-update benches: a durable moto server + the live server (drem_live, started the way
+`drem up` starts it) + the real app server as subprocesses on free ports (like `tests/stack_fixtures.py`), the JSON
+API as a client calls it, a seeded 50-racer board, a wrk runner with
 a Lua script, and percentiles.
 
 The app server is the real `app.py`; `/api/ping` (chalicelib.routes.ping) is added to the bench's app process only
@@ -44,33 +45,41 @@ class BenchStack:
     admin_username: str
     admin_password: str
     tmp: Path
+    live_url: str = ""  # no live server: the pages poll the app
+    live_port: int = 0
 
 
 @contextmanager
-def bench_stack(extra_env: dict[str, str] | None = None) -> Iterator[BenchStack]:
+def bench_stack(extra_env: dict[str, str] | None = None, live_workers: int = 1) -> Iterator[BenchStack]:
     from drem_local import stack as local_stack
     from drem_local.bootstrap import generate_password
 
     with tempfile.TemporaryDirectory(prefix="drem-bench-") as tmp_name:
         tmp = Path(tmp_name)
         config = local_stack.StackConfig(state_dir=tmp / "state", app_port=local_stack.free_port(),
-                                         storage_port=local_stack.free_port())
+                                         storage_port=local_stack.free_port(), live_port=local_stack.free_port(),
+                                         live_workers=live_workers)
         config.state_dir.mkdir(parents=True)
         storage = local_stack.start_storage(config, timeout=60)
         app: Any = None
+        live: Any = None
         try:
             password = generate_password()
             outputs, _admin = local_stack.bootstrap(config, "admin", password)
             env = {**local_stack.app_environment(config, outputs), "PYTHONPATH": str(ROOT), **(extra_env or {})}
+            live = local_stack.start_live(config, env, timeout=60)
             script = "import sys; from bench._stack import serve; serve(int(sys.argv[1]))"
             app = local_stack.spawn("app server", [sys.executable, "-c", script, str(config.app_port)],
                                     config.log_dir / "app.log", env=env)
             local_stack.wait_for_ok(config.app_url + local_stack.APP_HEALTH_PATH, app, 60)
             yield BenchStack(url=config.app_url, port=config.app_port, storage_url=config.storage_url, env=env,
-                             admin_username="admin", admin_password=password, tmp=tmp)
+                             admin_username="admin", admin_password=password, tmp=tmp, live_url=config.live_url,
+                             live_port=config.live_server_port)
         finally:
             if app is not None:
                 app.stop(10)
+            if live is not None:
+                live.stop(10)
             storage.stop(30)
 
 

@@ -79,7 +79,8 @@ def two_door_stack(lan_address: str):
         try:
             password = generate_password()
             outputs, _admin = local_stack.bootstrap(config, "admin", password)
-            env = {**local_stack.app_environment(config, outputs), "PYTHONPATH": str(ROOT)}
+            # No live server: this bench times the pages' polls through each door.
+            env = {**local_stack.app_environment(config, outputs), "PYTHONPATH": str(ROOT), "DREM_LIVE_URL": ""}
             script = "import sys; from bench._stack import serve; serve(int(sys.argv[1]), sys.argv[2])"
             doors, pids = {}, {}
             for name, host in (("loopback", "127.0.0.1"), ("lan", lan_address)):

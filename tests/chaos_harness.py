@@ -141,7 +141,8 @@ class Chaos:
     def __init__(self, state_dir: Path, *, seed: int, say: Callable[[str], None] = lambda line: None) -> None:
         self.random = random.Random(seed)
         self.say = say
-        self.config = StackConfig(state_dir=state_dir, app_port=free_port(), storage_port=free_port())
+        self.config = StackConfig(state_dir=state_dir, app_port=free_port(), storage_port=free_port(),
+                                  live_port=free_port())
         self.stack: RunningStack | None = None
         self.report = ChaosReport()
         self.api = Api(self.config.app_url)

@@ -1,7 +1,8 @@
 """Fixtures that start real local stacks (moto server subprocess, app over HTTP) for integration and browser tests.
 
 - `durable_server_factory`: start / `kill -9` / restart durable moto servers on free ports in tmp state dirs.
-- `live_stack`: the whole `drem up` stack (durable moto + bootstrap + app server) once per test session.
+- `live_stack`: the whole `drem up` stack (durable moto + bootstrap + live server + app server) once per test
+  session.
 Subprocess logs are printed when something fails to start, so a red test says why.
 """
 from __future__ import annotations
@@ -109,6 +110,7 @@ def durable_server_factory(tmp_path_factory: pytest.TempPathFactory):
 @dataclass(frozen=True)
 class LiveStack:
     url: str
+    live_url: str  # the live server (drem_live) the pages' live regions subscribe to
     storage_url: str
     outputs: Any  # drem_local.bootstrap.StackOutputs
     env: dict[str, str]
@@ -130,13 +132,14 @@ def live_stack(tmp_path_factory: pytest.TempPathFactory):
 
     state_dir = tmp_path_factory.mktemp("live-stack") / "state"
     config = local_stack.StackConfig(state_dir=state_dir, app_port=local_stack.free_port(),
-                                     storage_port=local_stack.free_port())
+                                     storage_port=local_stack.free_port(), live_port=local_stack.free_port())
     password = generate_password()
     try:
         running = local_stack.start_stack(config, "admin", password, timeout=60.0)
     except local_stack.StackError as exc:
         pytest.fail(f"the local stack did not start: {exc}")
-    yield LiveStack(url=config.app_url, storage_url=config.storage_url, outputs=running.outputs, env=running.env,
+    yield LiveStack(url=config.app_url, live_url=config.live_url, storage_url=config.storage_url,
+                    outputs=running.outputs, env=running.env,
                     admin_username="admin", admin_password=password, state_dir=state_dir, running=running)
     _app_code, storage_code = running.stop()
     if storage_code not in (0, None):

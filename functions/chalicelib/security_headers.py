@@ -2,7 +2,8 @@
 
 * Content-Security-Policy: scripts only from drem itself (no inline scripts or handlers: drem.js attaches them; htmx
   runs without eval), no plugins, forms and `<base>` only to drem; `connect-src` adds the storage origin browsers
-  upload models to (the local storage server, or S3 on AWS). Inline `style` attributes stay allowed: templates set
+  upload models to (the local storage server, or S3 on AWS) and the live server's origin when it has its own
+  (`DREM_LIVE_URL`: the public pages' event streams). Inline `style` attributes stay allowed: templates set
   racer colours as CSS variables, and a style cannot run code. `/_storage/...` (the local storage gateway) is
   answered before the app runs, with its own `Content-Security-Policy: sandbox`.
 * frame-ancestors: 'none' (with X-Frame-Options DENY for old browsers) except the overlay and leaderboard pages,
@@ -48,6 +49,8 @@ def add_security_headers(response: Response, request: Request, settings: Setting
 
 def content_security_policy(settings: Settings, *, embeddable: bool) -> str:
     connect = ["'self'", _upload_origin(settings)]
+    if settings.live_origin and settings.live_origin not in connect:
+        connect.append(settings.live_origin)  # the live pages' event stream (drem_live) on its own port
     directives = {
         "default-src": "'self'",
         "script-src": "'self'",

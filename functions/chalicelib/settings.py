@@ -35,6 +35,9 @@ class Settings(BaseModel):
     # Local stacks: the installation's token signing key (the only key local tokens may be signed with). None on AWS,
     # where Cognito's published JWKS is trusted.
     token_key_file: Path | None = None
+    # The live server (drem_live) the public pages' live regions subscribe to: its origin locally
+    # (http://host:8002); unset on AWS, where CloudFront routes /live/* to it on the pages' own origin.
+    live_url: str | None = None
 
     @classmethod
     def from_env(cls, env: Mapping[str, str]) -> Settings:
@@ -52,6 +55,7 @@ class Settings(BaseModel):
             "base_path": env.get("DREM_BASE_PATH") or "",
             "state_dir": state_dir,
             "token_key_file": token_key_file,
+            "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
         }
         settings = cls.model_validate(values)
         if settings.base_path and urlsplit(settings.public_url).path in ("", "/"):
@@ -73,6 +77,22 @@ class Settings(BaseModel):
     def cookie_secure(self) -> bool:
         # Browsers drop Secure cookies on plain http, which would make local sign-in impossible.
         return self.public_url.lower().startswith("https://")
+
+    @property
+    def live_stream_base(self) -> str | None:
+        """The prefix of the live server's URLs for the pages ("" = the pages' own origin); None = no live server, the
+        live regions poll the app. Locally only an explicit DREM_LIVE_URL means one runs (drem up sets it)."""
+        if self.live_url:
+            return self.live_url
+        return None if self.endpoint_url else ""
+
+    @property
+    def live_origin(self) -> str | None:
+        """The live server's origin when it is another one than the pages' (CSP connect-src must allow it)."""
+        if not self.live_url:
+            return None
+        parts = urlsplit(self.live_url)
+        return f"{parts.scheme}://{parts.netloc}"
 
     @property
     def local_identity(self) -> bool:
@@ -99,6 +119,14 @@ class Settings(BaseModel):
 
     def bucket(self, logical: str) -> str:
         return resources.bucket_name(self.stage, logical)
+
+
+def _http_origin_or_none(url: str) -> str | None:
+    """An http(s) URL without a trailing slash; anything else (it ends up in the CSP and in pages) is no URL."""
+    parts = urlsplit(url.strip())
+    if parts.scheme not in ("http", "https") or not parts.netloc or any(c in url for c in " ;,'\"<>"):
+        return None
+    return url.strip().rstrip("/")
 
 
 @lru_cache(maxsize=1)

@@ -1,6 +1,7 @@
-"""Start, watch and stop the local stack: the durable moto server, the bootstrap, the app server, the
-scrutineering worker (drem_local.workers.scrutineer: background test drives of uploaded models) and, for `drem up`,
-the learning booth's trainer (drem_local.workers.trainer).
+"""Start, watch and stop the local stack: the durable moto server, the bootstrap, the app server, the live server
+(drem_live: the public pages' pushed updates, on the app's port + 2), the scrutineering worker
+(drem_local.workers.scrutineer: background test drives of uploaded models) and, for `drem up`, the learning
+booth's trainer (drem_local.workers.trainer).
 
 Shared by `drem up`, `drem status`, the integration-test fixtures and `bench/startup.py`, so all of them run the
 stack the same way. Child processes get their own session (a Ctrl-C reaches only `drem up`, which then stops them
@@ -30,6 +31,8 @@ DEFAULT_STORAGE_PORT = 8001
 REGION = "us-east-1"
 HEALTH_PATH = "/_drem/health"
 APP_HEALTH_PATH = "/healthz"
+LIVE_HEALTH_PATH = "/live/healthz"
+LIVE_PORT_OFFSET = 2  # 8000 app, 8001 storage, 8002 live
 _PR_SET_PDEATHSIG = 1
 # Credentials a shell may hold that must never steer (or leak into) calls to the local storage server.
 _SHELL_AWS_VARIABLES = ("AWS_PROFILE", "AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_SESSION_TOKEN",
@@ -55,6 +58,8 @@ class StackConfig:
     announce: str | None = None
     public_url: str | None = None  # a TLS proxy's URL in front of the app, when there is one
     trainer: bool = False  # also run the learning booth's worker (drem_local.workers.trainer); `drem up` does
+    live_port: int | None = None  # None: the app's port + 2
+    live_workers: int = 1  # live server processes sharing its port (SO_REUSEPORT)
 
     @property
     def storage_url(self) -> str:
@@ -70,6 +75,23 @@ class StackConfig:
         if self.public_url:
             return self.public_url.rstrip("/")
         return f"http://{self.announce or self.app_host}:{self.app_port}"
+
+    @property
+    def live_server_port(self) -> int:
+        return self.live_port or self.app_port + LIVE_PORT_OFFSET
+
+    @property
+    def live_url(self) -> str:
+        """The live server's origin for the pages (DREM_LIVE_URL): on the app's address, its own port. Behind a TLS
+        proxy (public_url) there is no plain-HTTP origin a page may use, so the pages poll the app instead."""
+        if self.public_url:
+            return ""
+        return f"http://{self.announce or self.app_host}:{self.live_server_port}"
+
+    @property
+    def live_local_url(self) -> str:
+        host = self.host if self.app_host in (self.host, "0.0.0.0") else self.app_host
+        return f"http://{host}:{self.live_server_port}"
 
     @property
     def app_local_url(self) -> str:
@@ -277,6 +299,7 @@ def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
         DREM_STATE_DIR=str(config.state_dir.resolve()),
         DREM_PUBLIC_URL=config.app_url,
     )
+    env.setdefault("DREM_LIVE_URL", config.live_url)
     return env
 
 
@@ -306,6 +329,28 @@ def start_scrutineer(config: StackConfig, env: dict[str, str]) -> ManagedProcess
                  config.log_dir / "scrutineer.log", env=env)
 
 
+def start_live(config: StackConfig, env: dict[str, str], timeout: float = 30.0, *,
+               wait: bool = True) -> ManagedProcess:
+    """The live server (drem_live), on the app's address; it reads storage with the app's settings. `wait=False`
+    returns at once (then `wait_for_live`), so it can start while the app does."""
+    _require_free_port(config.app_host, config.live_server_port, "live server", "--live-port")
+    process = spawn("live server", [
+        sys.executable, "-m", "drem_live", "--host", config.app_host, "--port", str(config.live_server_port),
+        "--workers", str(config.live_workers),
+    ], config.log_dir / "live.log", env=env)
+    if wait:
+        wait_for_live(config, process, timeout)
+    return process
+
+
+def wait_for_live(config: StackConfig, process: ManagedProcess, timeout: float) -> None:
+    try:
+        wait_for_ok(config.live_local_url + LIVE_HEALTH_PATH, process, timeout)
+    except BaseException:
+        process.stop(2)
+        raise
+
+
 def _child_env() -> dict[str, str]:
     env = {name: value for name, value in os.environ.items() if name not in _SHELL_AWS_VARIABLES}
     env["NO_PROXY"] = ",".join(filter(None, [env.get("NO_PROXY"), "127.0.0.1", "localhost"]))
@@ -330,6 +375,7 @@ class RunningStack:
     outputs: Any
     admin: Any
     env: dict[str, str]
+    live: ManagedProcess | None = None
     timings: dict[str, float] = field(default_factory=dict)
     trainer: ManagedProcess | None = None
     scrutineer: ManagedProcess | None = None
@@ -345,22 +391,31 @@ class RunningStack:
 
     def restart_trainer(self, timeout: float = 30.0) -> None:
         self.trainer = start_trainer(self.config, self.env)
+        self._record_pids()
 
     def restart_scrutineer(self, timeout: float = 30.0) -> None:
         self.scrutineer = start_scrutineer(self.config, self.env)
         self._record_pids()
 
+    def restart_live(self, timeout: float = 30.0) -> None:
+        self.live = start_live(self.config, self.env, timeout)
+        self._record_pids()
+
     def _record_pids(self) -> None:
         write_stack_file(self.config, self.outputs, self.admin.username, storage_pid=self.storage.pid,
-                         app_pid=self.app.pid, trainer_pid=self.trainer.pid if self.trainer else None,
+                         app_pid=self.app.pid, live_pid=self.live.pid if self.live else None,
+                         trainer_pid=self.trainer.pid if self.trainer else None,
                          scrutineer_pid=self.scrutineer.pid if self.scrutineer else None)
 
     def stop(self) -> tuple[int | None, int | None]:
-        """The workers and the app first (they may still be writing), then storage, which snapshots on SIGTERM."""
+        """The workers and the app first (they may still be writing), then the live server, then storage, which
+        snapshots on SIGTERM."""
         for worker in (self.trainer, self.scrutineer):
             if worker is not None:
                 worker.stop()
         app_code = self.app.stop()
+        if self.live is not None:
+            self.live.stop()
         storage_code = self.storage.stop(timeout=30.0)
         stack_file = self.config.state_dir / STACK_FILE
         info = read_stack_file(self.config.state_dir)
@@ -375,48 +430,54 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
     refuse_if_running(config.state_dir)
     _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
     _require_free_port(config.app_host, config.app_port, "app server", "--port")
+    _require_free_port(config.app_host, config.live_server_port, "live server", "--live-port")
     from drem_local.storage_keys import load_or_create
 
     load_or_create(config.state_dir)  # the state dir 0700, its files 0600, the storage keys drawn once
     started = time.perf_counter()
     storage = start_storage(config, timeout)
     storage_ready = time.perf_counter()
-    app = None
+    app = live = None
     try:
         outputs, admin = bootstrap(config, admin_username, admin_password)
         bootstrapped = time.perf_counter()
         env = app_environment(config, outputs)
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
         app = start_app(config, env, timeout)
+        # After the app (not beside it: on two cores their imports would slow the app's start); until it answers the
+        # pages poll the app, and their EventSource connects once it does.
+        live = start_live(config, env, timeout)
         trainer = start_trainer(config, env) if config.trainer else None
     except BaseException:
-        if app is not None:
-            app.stop(5)
+        for process in (app, live):
+            if process is not None:
+                process.stop(5)
         storage.stop(30)
         raise
     ready = time.perf_counter()
     scrutineer = start_scrutineer(config, env)
-    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid,
+    write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=app.pid, live_pid=live.pid,
                      trainer_pid=trainer.pid if trainer else None, scrutineer_pid=scrutineer.pid)
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
                "app_s": ready - bootstrapped, "total_s": ready - started}
-    return RunningStack(config, storage, app, outputs, admin, env, timings, trainer, scrutineer)
+    return RunningStack(config, storage, app, outputs, admin, env, live, timings, trainer, scrutineer)
 
 
 # --- stack.json -----------------------------------------------------------------------------------------------
 
 def write_stack_file(config: StackConfig, outputs: Any, admin_username: str, *, storage_pid: int,
-                     app_pid: int | None, trainer_pid: int | None = None,
+                     app_pid: int | None, live_pid: int | None = None, trainer_pid: int | None = None,
                      scrutineer_pid: int | None = None) -> None:
     _write_json(config.state_dir / STACK_FILE, {
         "outputs": json.loads(outputs.to_json()),
         "admin_username": admin_username,
         "host": config.host,
         "app_host": config.app_host,
-        "ports": {"app": config.app_port, "storage": config.storage_port},
-        "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url},
-        "pids": {"storage": storage_pid, "app": app_pid, "trainer": trainer_pid, "scrutineer": scrutineer_pid,
-                 "drem_up": os.getpid()},
+        "ports": {"app": config.app_port, "storage": config.storage_port, "live": config.live_server_port},
+        "urls": {"app": config.app_url, "app_local": config.app_local_url, "storage": config.storage_url,
+                 "live": config.live_url, "live_local": config.live_local_url},
+        "pids": {"storage": storage_pid, "app": app_pid, "live": live_pid, "trainer": trainer_pid,
+                 "scrutineer": scrutineer_pid, "drem_up": os.getpid()},
         "started_at": time.time(),
         "stopped_at": None,
     })

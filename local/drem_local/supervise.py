@@ -1,4 +1,4 @@
-"""Keep `drem up`'s children running: a storage or app server (or a background worker) that dies is started
+"""Keep `drem up`'s children running: a storage, live or app server (or a background worker) that dies is started
 again, with backoff.
 
 The storage server recovers everything acknowledged from its journal on start, and the app holds no state of its own
@@ -44,6 +44,9 @@ class Supervisor:
         """Restart whichever child has died (storage first: the app needs it to answer). Raises GaveUp."""
         if not self.stack.storage.alive():
             self._revive("storage", lambda: self.stack.storage, self.stack.restart_storage)
+        live = self.stack.live
+        if live is not None and not live.alive():
+            self._revive("live", lambda: self.stack.live or live, self.stack.restart_live)
         if not self.stack.app.alive():
             self._revive("app", lambda: self.stack.app, self.stack.restart_app)
         trainer = self.stack.trainer

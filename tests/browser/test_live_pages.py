@@ -43,7 +43,9 @@ def pages_url(live_stack: Any, tmp_path_factory: pytest.TempPathFactory) -> Iter
 
     port = local_stack.free_port()
     url = f"http://127.0.0.1:{port}"
-    env = {**live_stack.env, "DREM_PUBLIC_URL": url, "PYTHONPATH": str(REPO)}
+    # No DREM_LIVE_URL: these pages poll the app (the fallback path); tests/browser/test_live_push.py covers the push.
+    env = {**{k: v for k, v in live_stack.env.items() if k != "DREM_LIVE_URL"}, "DREM_PUBLIC_URL": url,
+           "PYTHONPATH": str(REPO)}
     log = tmp_path_factory.mktemp("pages-app") / "app.log"
     script = "import sys; from tests.browser.test_live_pages import serve; serve(int(sys.argv[1]))"
     command = [sys.executable, "-c", script, str(port)]

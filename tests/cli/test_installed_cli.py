@@ -65,22 +65,27 @@ def test_top_level_help_lists_every_subcommand(outside: Path) -> None:
 
 
 def test_up_serves_and_stops_cleanly_on_ctrl_c(outside: Path, tmp_path: Path) -> None:
-    app_port, storage_port = local_stack.free_port(), local_stack.free_port()
+    app_port, storage_port, live_port = local_stack.free_port(), local_stack.free_port(), local_stack.free_port()
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     process = subprocess.Popen([str(DREM), "up", "--state-dir", str(tmp_path / "state"), "--port", str(app_port),
-                                "--storage-port", str(storage_port)], cwd=outside, env=env,
+                                "--storage-port", str(storage_port), "--live-port", str(live_port)], cwd=outside,
+                               env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     seen: list[str] = []
     try:
         # Wait for the banner a user waits for (the app may answer before `drem up` has finished starting).
         for line in process.stdout:  # type: ignore[union-attr]
             seen.append(line)
-            if "drem is running" in line:
+            if "Press Ctrl-C" in line:  # the banner's last line
                 break
         assert "drem is running" in "".join(seen), "".join(seen)
         assert requests.get(f"http://127.0.0.1:{app_port}/api/ping", timeout=5).status_code == 200
-        # The learning booth's trainer is one of drem up's children, shown by drem status.
+        # The live server is one of drem up's children: announced, answering, and named by drem status.
+        assert f"Live pages:          http://127.0.0.1:{live_port}" in "".join(seen), "".join(seen)
+        assert requests.get(f"http://127.0.0.1:{live_port}/live/healthz", timeout=5).json()["ok"] is True
         status = ok(drem("status", "--state-dir", str(tmp_path / "state"), cwd=outside))
+        assert f"live server is pushing the public pages at http://127.0.0.1:{live_port}" in status, status
+        # The learning booth's trainer is one of drem up's children, shown by drem status.
         assert "The learning booth's trainer is running" in status, status
         trainer_pid = json.loads(ok(drem("status", "--state-dir", str(tmp_path / "state"), "--json",
                                          cwd=outside)))["processes"]["trainer"]["pid"]
@@ -91,6 +96,7 @@ def test_up_serves_and_stops_cleanly_on_ctrl_c(outside: Path, tmp_path: Path) ->
     assert process.returncode == 0, out
     assert "Traceback" not in out and "stopped cleanly" in out, out
     assert not local_stack.pid_is_drem(trainer_pid)  # stopped with the rest
+    assert local_stack.http_get(f"http://127.0.0.1:{live_port}/live/healthz") is None  # stopped with the rest
 
 
 def test_status_reports_the_running_stack(live_stack, outside: Path) -> None:

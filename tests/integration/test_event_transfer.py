@@ -53,7 +53,7 @@ def _cognito(storage_url: str, state_dir: Path):
 def target_stack(tmp_path_factory: pytest.TempPathFactory):
     state_dir = tmp_path_factory.mktemp("transfer-target") / "state"
     config = local_stack.StackConfig(state_dir=state_dir, app_port=local_stack.free_port(),
-                                     storage_port=local_stack.free_port())
+                                     storage_port=local_stack.free_port(), live_port=local_stack.free_port())
     try:
         running = local_stack.start_stack(config, "admin", generate_password(), timeout=60.0)
     except local_stack.StackError as exc:

@@ -103,11 +103,11 @@ def _drem_up(cwd, state_dir, app_port, storage_port, env) -> subprocess.Popen:
     """The installed `drem` as a user runs it, from a directory outside the repo."""
     drem = str(Path(sys.executable).with_name("drem"))
     return subprocess.Popen([drem, "up", "--state-dir", str(state_dir), "--port", str(app_port),
-                             "--storage-port", str(storage_port)], cwd=cwd,
+                             "--storage-port", str(storage_port), "--live-port", str(free_port())], cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
 
 
-def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on(tmp_path):
+def test_drem_up_restarts_a_crashed_storage_server_live_server_and_app_and_the_event_goes_on(tmp_path):
     state_dir = tmp_path / "state"
     app_port, storage_port = free_port(), free_port()
     env = {**os.environ, "DREM_ADMIN_PASSWORD": "Admin-Pass-123!"}
@@ -118,7 +118,7 @@ def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on
         assert "admin (created now, with the password in DREM_ADMIN_PASSWORD)" in banner
         assert "password unchanged" not in banner
 
-        for role in ("storage", "app", "scrutineer"):
+        for role in ("storage", "live", "app", "scrutineer"):
             before = read_stack_file(state_dir)["pids"][role]
             os.kill(before, signal.SIGKILL)
             said = read_until(up, "is running again")
@@ -129,6 +129,8 @@ def test_drem_up_restarts_a_crashed_storage_server_and_app_and_the_event_goes_on
             while (answer := http_get(f"http://127.0.0.1:{app_port}/healthz")) is None or answer[0] != 200:
                 assert time.monotonic() < deadline, answer
                 time.sleep(0.1)
+        live = read_stack_file(state_dir)["urls"]["live_local"]
+        assert http_get(live + "/live/healthz")[0] == 200  # the restarted live server answers (its workers too)
         from drem_local.storage_keys import load, local_client
 
         cognito = local_client("cognito-idp", f"http://127.0.0.1:{storage_port}", load(state_dir))

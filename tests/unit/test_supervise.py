@@ -20,10 +20,12 @@ def _crashing(name: str, log: Path, words: str) -> ManagedProcess:
 
 
 class FakeStack:
-    """Only what the supervisor touches: the children (workers absent unless a test sets one) and their restarts."""
+    """Only what the supervisor touches: its children (no live server; workers absent unless a test sets one) and
+    their restart methods."""
 
     def __init__(self, storage: ManagedProcess, app: ManagedProcess, restart_storage) -> None:
         self.storage, self.app = storage, app
+        self.live = None  # no live server in these tests
         self.restart_storage = lambda: restart_storage(self)
         self.restart_app = lambda: None
         self.trainer: ManagedProcess | None = None

@@ -12,16 +12,9 @@ from pydantic import Field
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
 from chalicelib.auth.principals import User
-from chalicelib.routes.public_pages import (
-    PageOptions,
-    event_or_404,
-    fragment_headers,
-    live_race,
-    live_url,
-    read_live,
-    unchanged,
-)
+from chalicelib.routes.public_pages import event_or_404, fragment_headers, read_race, unchanged
 from chalicelib.views import public_views as views
+from chalicelib.views.live_regions import PageOptions, live_race, live_url, read_live
 from drem_web import i18n, render
 
 bp = Blueprint(__name__)
@@ -35,12 +28,13 @@ class CommentatorQuery(PageOptions):
 
 def commentator_live(event_id: str, query: CommentatorQuery) -> tuple[str, Any]:
     now_ms = services.now_ms()
-    items = read_live(event_id, query.track, [query.track])
+    items = read_live(services.publisher(), event_id, query.track, [query.track])
     token = views.version_token(items.board.version, items.overlay.version)
 
     def context() -> dict[str, Any]:
         t = i18n.translator(query.lang)
-        view = views.commentator_view(items.overlay, items.board, live_race(event_id, items.overlay), now_ms, t)
+        race = live_race(read_race, event_id, items.overlay)
+        view = views.commentator_view(items.overlay, items.board, race, now_ms, t)
         poll = live_url(f"/commentator/{quote(event_id, safe='')}/live",
                         {"track": query.track, "lang": query.lang, "v": token})
         return {"view": view, "poll_url": poll, "token": token, "t": t}

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
 def gather(state_dir: Path) -> dict:
     from drem_local.durable.journal import read_all
     from drem_local.durable.state import JOURNAL_FILE, SNAPSHOT_DIR, VERSION_FILE
-    from drem_local.stack import APP_HEALTH_PATH, HEALTH_PATH, http_get, pid_is_drem, read_stack_file
+    from drem_local.stack import APP_HEALTH_PATH, HEALTH_PATH, LIVE_HEALTH_PATH, http_get, pid_is_drem, read_stack_file
 
     info = read_stack_file(state_dir) or {}
     urls = info.get("urls", {})
@@ -45,7 +45,7 @@ def gather(state_dir: Path) -> dict:
         "admin_username": info.get("admin_username"),
         "urls": urls,
         "processes": {name: {"pid": pids.get(name), "alive": pid_is_drem(pids.get(name))}
-                      for name in ("storage", "app", "trainer", "scrutineer")},
+                      for name in ("storage", "app", "live", "trainer", "scrutineer")},
     })
     manifest = state_dir / SNAPSHOT_DIR / "manifest.json"
     if manifest.exists():
@@ -55,6 +55,8 @@ def gather(state_dir: Path) -> dict:
     app_url = urls.get("app_local") or urls.get("app")  # the public URL may be a proxy this machine cannot reach
     app_answer = http_get(app_url + APP_HEALTH_PATH) if app_url else None
     facts["app_answering"] = bool(app_answer and app_answer[0] == 200)
+    live_url = urls.get("live_local")
+    facts["live_health"] = _json_or_none(http_get(live_url + LIVE_HEALTH_PATH)) if live_url else None
     return facts
 
 
@@ -79,6 +81,15 @@ def describe(facts: dict) -> str:
         lines.append(f"App process {app['pid']} is alive but {urls.get('app')}/healthz does not answer.")
     else:
         lines.append("The app is not running. Start everything with `drem up`.")
+    live, live_health = facts["processes"]["live"], facts["live_health"]
+    if live_health:
+        lines.append(f"The live server is pushing the public pages at {urls.get('live') or urls.get('live_local')} "
+                     f"(pid {live['pid']}; {live_health['streams']} viewers on {live_health['channels']} pages).")
+    elif live["alive"]:
+        lines.append(f"Live server process {live['pid']} is alive but {urls.get('live_local')}/live/healthz does not "
+                     "answer (the public pages poll the app meanwhile).")
+    elif live["pid"] or urls.get("live_local"):
+        lines.append("The live server is not running (the public pages poll the app).")
     trainer = facts["processes"].get("trainer") or {}
     if trainer.get("alive"):
         lines.append(f"The learning booth's trainer is running (pid {trainer['pid']}; log: "

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-HELP = "start the local stack (durable storage + app) and keep it running until Ctrl-C"
+HELP = "start the local stack (durable storage + live server + app) and keep it running until Ctrl-C"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,6 +17,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=8000, help="app port (default 8000; on 127.0.0.1 unless --lan)")
     parser.add_argument("--storage-port", type=int, default=8001,
                         help="durable moto (AWS API) port on 127.0.0.1, always loopback only (default 8001)")
+    parser.add_argument("--live-port", type=int, default=None,
+                        help="live server port: pushes the public pages' updates (default: app port + 2, i.e. 8002; "
+                             "on the app's address)")
+    parser.add_argument("--live-workers", type=int, default=os.cpu_count() or 1,
+                        help="live server processes sharing its port (default: one per core)")
     network = parser.add_argument_group("the venue network (docs/operations.md)")
     network.add_argument("--lan", action="store_true",
                          help="serve the app to the venue network (phones, laptops, timers, cars), on every interface, "
@@ -46,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
     from drem_local.stack import StackConfig, StackError, lan_config, start_stack
 
     config = StackConfig(state_dir=args.state_dir, app_port=args.port, storage_port=args.storage_port,
-                         public_url=args.public_url, trainer=not args.no_trainer)
+                         public_url=args.public_url, live_port=args.live_port, live_workers=max(1, args.live_workers),
+                         trainer=not args.no_trainer)
     if args.lan or args.host:
         try:
             config = lan_config(config, args.host, args.public_url)
@@ -95,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         if demo is not None:
             print("\nStopping the demo cars ...", flush=True)
             demo.stop()
-        print("\nStopping: app first, then storage (it saves a snapshot) ...", flush=True)
+        print("\nStopping: app first, then the live server, then storage (it saves a snapshot) ...", flush=True)
         app_code, storage_code = stack.stop()
         if storage_code not in (0, None):
             print(f"The storage server exited with code {storage_code}; see {stack.storage.log_path}. "
@@ -140,7 +146,10 @@ def _print_ready(stack, *, admin_password_from_env: bool) -> None:
         if not config.app_url.startswith("https://"):
             lines.append("  Plain HTTP:          anyone on an open WiFi can read sessions; use a WPA2/WPA3 network "
                          "(docs/security.md)")
+    live_url = stack.env.get("DREM_LIVE_URL") or "none (the pages poll the app)"
     lines += [
+        f"  Live pages:          {live_url}   (pushes board and overlay updates; {config.live_workers} "
+        f"process{'es' if config.live_workers > 1 else ''})",
         f"  Storage (moto):      {config.storage_url}   (this machine only; signed requests only)",
         f"  Data directory:      {config.state_dir.resolve()}",
         f"  Logs:                {config.log_dir.resolve()}",

@@ -3,6 +3,10 @@
 // A fragment may have been built (and cached on the server) a while before this poll got it: its clocks carry the
 // server time they were read at (data-clock-at) and the response the server time it was sent (X-Drem-Server-Ms), so a
 // running clock starts from its reading plus the difference. Each clock element is anchored once, when it arrives.
+// Push: when the page names a live server stream (data-live-stream), the live region subscribes to it (EventSource,
+// one fragment per change) and its htmx polls are cancelled while the stream is up; when the stream fails the polls
+// run again. Either way a fragment older than the one shown is never swapped in: version tokens are ordered (groups
+// of "-"-joined integers separated by "."; see chalicelib/views/live_regions.py, token_is_newer).
 (function () {
   "use strict";
   var HIGHLIGHT_MS = 12000;
@@ -138,8 +142,82 @@
     });
   }
 
+  // --- version tokens: the same rule as live_regions.token_is_newer ---
+  function tokenOrder(token) {
+    var groups = String(token).split(".").map(function (group) {
+      return group.split("-").map(function (part) { return /^\d+$/.test(part) ? Number(part) : NaN; });
+    });
+    return groups.some(function (g) { return g.some(isNaN); }) ? null : groups;
+  }
+  function compareGroup(a, b) {
+    for (var i = 0; i < a.length; i += 1) { if (a[i] !== b[i]) { return a[i] > b[i] ? 1 : -1; } }
+    return 0;
+  }
+  function tokenIsNewer(candidate, shown) {
+    if (!shown) { return true; }
+    var fresh = tokenOrder(candidate), old = tokenOrder(shown);
+    if (!fresh || !old || fresh.length !== old.length || fresh.some(function (g, i) { return g.length !== old[i].length; })) {
+      return candidate !== shown;
+    }
+    var forward = false;
+    for (var i = 0; i < fresh.length; i += 1) {
+      var order = compareGroup(fresh[i], old[i]);
+      if (order < 0) { return false; }
+      if (order > 0) { forward = true; }
+    }
+    return forward;
+  }
+  function fragmentToken(html) {
+    var found = /data-version="([^"]*)"/.exec(html || "");
+    return found ? found[1] : null;
+  }
+  function liveRegion() { return document.querySelector("[data-version]"); }
+  window.dremTokenIsNewer = tokenIsNewer;  // the browser tests check the rule against the server's
+
+  // A poll's answer (on AWS from any Lambda instance, whose cache may be older) is refused when it is not newer.
+  function guardPoll(event) {
+    var region = liveRegion();
+    var xhr = event.detail && event.detail.xhr;
+    if (!region || !xhr || event.detail.target !== region || xhr.status !== 200) { return; }
+    var token = fragmentToken(xhr.responseText);
+    if (token !== null && !tokenIsNewer(token, region.dataset.version)) { event.detail.shouldSwap = false; }
+  }
+
+  // --- push: the live server's event stream ---
+  var streaming = false;
+  var pushedAt = null;  // the server time the stream's first fragment was sent (an older, cached build)
+  function subscribe() {
+    var holder = document.querySelector("[data-live-stream]");
+    var url = holder ? holder.dataset.liveStream : "";
+    if (!url || !window.EventSource || !window.htmx) { return; }
+    var source = new EventSource(url);
+    source.addEventListener("open", function () { streaming = true; });
+    source.addEventListener("clock", function (message) { pushedAt = Number(message.data) || null; });
+    source.addEventListener("fragment", function (message) {
+      streaming = true;
+      var region = liveRegion();
+      var token = message.lastEventId || fragmentToken(message.data);
+      var sameRegion = region && message.data.indexOf('id="' + region.id + '"') !== -1;
+      if (!sameRegion || !tokenIsNewer(token, region.dataset.version)) { pushedAt = null; return; }
+      window.htmx.swap(region, message.data, { swapStyle: "outerHTML", swapDelay: 0, settleDelay: 0 },
+                       { eventInfo: { dremPushedAt: pushedAt } });
+      pushedAt = null;
+    });
+    source.addEventListener("error", function () {
+      // The htmx polls run again until the stream is back: EventSource reconnects by itself (sending the last token
+      // as Last-Event-ID) unless the server refused it (503 when full, not an event stream), then polls stay on.
+      streaming = false;
+    });
+    window.dremLiveStream = source;
+  }
+  function holdPollWhileStreaming(event) {
+    var region = liveRegion();
+    if (streaming && region && event.detail && event.detail.elt === region) { event.preventDefault(); }
+  }
+
   function arrived(event) {
-    anchorClocks(serverTime(event && event.detail ? event.detail.xhr : null));
+    var detail = event && event.detail ? event.detail : {};
+    anchorClocks(detail.dremPushedAt || serverTime(detail.xhr || null));
     tick();
   }
   function start() {
@@ -148,6 +226,9 @@
     arrived(null);
     markChangedRows();
     document.body.addEventListener("htmx:afterSwap", arrived);
+    document.body.addEventListener("htmx:beforeSwap", guardPoll);
+    document.body.addEventListener("htmx:beforeRequest", holdPollWhileStreaming);
+    subscribe();
     pageShownAt = Date.now();
     paginate(false);
     document.body.addEventListener("htmx:afterSettle", function () {

@@ -1,0 +1,72 @@
+"""`python -m drem_live --host H --port P [--workers N]`: the live server (see server.py).
+
+It reads the app's DREM_* / AWS_* settings (chalicelib.settings) to reach storage. With several workers each is its own
+process listening on the same port (SO_REUSEPORT: the kernel spreads connections over them), so one GIL does not cap
+the polls; the first process starts the others and stops them when it stops (they also die with it).
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import logging
+import os
+import signal
+import subprocess
+import sys
+
+DEFAULT_POLL_MS = 100
+_PR_SET_PDEATHSIG = 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drem_live", description=__doc__.splitlines()[0])
+    parser.add_argument("--host", default="127.0.0.1")
+    parser.add_argument("--port", type=int, default=8002)
+    parser.add_argument("--workers", type=int, default=int(os.environ.get("DREM_LIVE_WORKERS") or 1),
+                        help="processes sharing the port (SO_REUSEPORT); default $DREM_LIVE_WORKERS or 1")
+    parser.add_argument("--reuse-port", action="store_true", help=argparse.SUPPRESS)  # a worker started by the first
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s drem_live %(message)s")
+    others = [_start_worker(args) for _ in range(max(0, args.workers - 1))]
+    try:
+        _serve(args.host, args.port, reuse_port=args.workers > 1 or args.reuse_port)
+    finally:
+        for worker in others:
+            worker.terminate()
+        for worker in others:
+            try:
+                worker.wait(5)
+            except subprocess.TimeoutExpired:
+                worker.kill()
+    return 0
+
+
+def _start_worker(args: argparse.Namespace) -> subprocess.Popen[bytes]:
+    def die_with_parent() -> None:
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+        except (OSError, AttributeError):
+            pass  # not Linux: the parent still terminates its workers when it stops
+    command = [sys.executable, "-m", "drem_live", "--host", args.host, "--port", str(args.port), "--workers", "1",
+               "--reuse-port"]
+    return subprocess.Popen(command, preexec_fn=die_with_parent)
+
+
+def _serve(host: str, port: int, *, reuse_port: bool) -> None:
+    from aiohttp import web
+
+    from drem_live.app_code import AppCode
+    from drem_live.limits import env_limits
+    from drem_live.server import make_app
+
+    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or DEFAULT_POLL_MS)
+    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits())
+    logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
+                                        poll_ms)
+    web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,
+                access_log=None, backlog=1024, keepalive_timeout=15.0,  # an idle poller's connection is not kept long
+                handler_cancellation=True)  # a viewer leaving frees its stream at once
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,86 @@
+"""The one place the live server imports the app's code (chalicelib, in functions/).
+
+In a container functions/ is on sys.path (PYTHONPATH); from a clone `drem_local.app_source` puts it there, the way the
+local stack does. Everything the live server needs from the app goes through `AppCode`, so the rest of drem_live never
+imports chalicelib.
+"""
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if importlib.util.find_spec("chalicelib") is None:
+    from drem_local.app_source import use_app_source
+
+    use_app_source()
+
+from chalicelib import services  # noqa: E402  (after functions/ is on sys.path)
+from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView  # noqa: E402
+from chalicelib.routes.responses import etag_matches  # noqa: E402
+from chalicelib.settings import get_settings  # noqa: E402
+from chalicelib.storage import clients  # noqa: E402
+from chalicelib.storage.leaderboards import DynamoBoardStore  # noqa: E402
+from chalicelib.views import live_regions  # noqa: E402
+from drem_leaderboard.models import Race  # noqa: E402
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
+
+__all__ = ["AppCode", "PublicView", "etag_matches", "live_regions"]
+
+QUERY_MODELS: Mapping[str, type[BaseModel]] = {
+    "leaderboard": live_regions.LeaderboardQuery, "overlay": live_regions.OverlayQuery}
+
+
+@dataclass
+class AppCode:
+    """Reads storage the way the app's public routes do, but without the app's 250 ms poll cache: the live server
+    keeps what it read in memory itself and re-reads every DREM_LIVE_POLL_MS."""
+    publisher: LeaderboardPublisher
+
+    @classmethod
+    def from_settings(cls) -> AppCode:
+        table = DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards"))
+        return cls(LeaderboardPublisher(table, services.now_ms, cache=None))
+
+    @staticmethod
+    def now_ms() -> int:
+        return services.now_ms()
+
+    @staticmethod
+    def parse_query(kind: str, params: Mapping[str, str]) -> Any:
+        """The fragment route's query model (pydantic ValidationError on bad input)."""
+        return QUERY_MODELS[kind].model_validate(dict(params))
+
+    def region(self, kind: str, event_id: str, query: Any, now_ms: int) -> live_regions.LiveRegion:
+        if kind == "leaderboard":
+            track, footer_tracks = live_regions.leaderboard_fragment_tracks(query)
+            return live_regions.leaderboard_region(self.publisher, event_id, track, query, footer_tracks, now_ms)
+        return live_regions.overlay_region(self.publisher, read_race, event_id, query, now_ms)
+
+    @staticmethod
+    def channel_options(kind: str, event_id: str, query: Any) -> tuple[Any, ...]:
+        if kind == "leaderboard":
+            return ("leaderboard", *live_regions.leaderboard_options(event_id, query))
+        return ("overlay", *live_regions.overlay_options(event_id, query))
+
+    def view(self, kind: str, event_id: str, track: str) -> PublicView:
+        """What `GET /api/leaderboard|overlay/{event}?track=` answers (the stored body and its version)."""
+        if kind == "leaderboard":
+            return self.publisher.board(event_id, track)
+        return self.publisher.overlay(event_id, track)
+
+    @staticmethod
+    def event_exists(event_id: str) -> bool:
+        return services.event_store().get(event_id) is not None
+
+
+def read_race(event_id: str, race_id: str) -> Race | None:
+    record = services.race_store().get(event_id, race_id)
+    return record.race if record else None
+
+
+def token_is_newer(candidate: str, shown: str | None) -> bool:
+    return live_regions.token_is_newer(candidate, shown)

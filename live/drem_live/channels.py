@@ -1,0 +1,138 @@
+"""Channels: one per (kind, event, options) that anyone watches. A single watcher per channel reads storage every
+`poll_s`, renders the live region once per token change (in a worker thread: boto3 and jinja block) and hands the same
+message bytes to every subscriber. A channel never broadcasts a token that is not newer than the last one it sent
+(`token_is_newer`), and it stops when its last subscriber leaves.
+
+A subscriber keeps only the newest message it has not written yet: a slow phone skips intermediate boards instead of
+queueing them, so memory per subscriber is bounded and nobody is shown an older board after a newer one.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Hashable
+from concurrent.futures import Executor
+from dataclasses import dataclass, field
+
+from drem_live.sse import Message
+
+log = logging.getLogger("drem_live")
+
+
+
+class ChannelsFull(Exception):
+    """More channels than the cap: someone is opening many different option sets."""
+
+
+@dataclass(eq=False)  # compared (and hashed) by identity: each is one viewer's connection
+class Subscriber:
+    pending: Message | None = None
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def offer(self, message: Message) -> None:
+        self.pending = message
+        self.wake.set()
+
+    def take(self) -> Message | None:
+        self.wake.clear()
+        message, self.pending = self.pending, None
+        return message
+
+
+@dataclass
+class MessageSizes:
+    """Bytes per broadcast message, plain and gzip (the AWS cost model prices data transfer per byte)."""
+    messages: int = 0
+    plain_bytes: int = 0
+    gzip_bytes: int = 0
+
+    def add(self, message: Message) -> None:
+        self.messages += 1
+        self.plain_bytes += len(message.plain)
+        self.gzip_bytes += len(message.gzip)
+
+    def as_dict(self) -> dict[str, float]:
+        count = max(1, self.messages)
+        return {"messages": self.messages, "plain_bytes_avg": round(self.plain_bytes / count, 1),
+                "gzip_bytes_avg": round(self.gzip_bytes / count, 1)}
+
+
+class Channel:
+    def __init__(self, key: Hashable, step: Callable[[Message | None], Message | None], poll_s: float,
+                 executor: Executor, sizes: MessageSizes, is_newer: Callable[[str, str | None], bool]) -> None:
+        self.key = key
+        self.subscribers: set[Subscriber] = set()
+        self.latest: Message | None = None
+        self.first = asyncio.Event()
+        self._step = step
+        self._poll_s = poll_s
+        self._executor = executor
+        self._sizes = sizes
+        self._is_newer = is_newer
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._watch())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    async def _watch(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            started = time.monotonic()
+            try:
+                message = await loop.run_in_executor(self._executor, self._step, self.latest)
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # storage briefly away: keep the last board on screen, try again next round
+                log.exception("live channel %s could not read or render", self.key)
+                message = None
+            if message is not None and self._is_newer(message.token, self.latest.token if self.latest else None):
+                self.latest = message
+                self._sizes.add(message)
+                for subscriber in self.subscribers:
+                    subscriber.offer(message)
+                self.first.set()
+            await asyncio.sleep(max(0.0, self._poll_s - (time.monotonic() - started)))
+
+
+class Channels:
+    """The open channels, capped in number."""
+
+    def __init__(self, poll_s: float, executor: Executor, max_channels: int,
+                 is_newer: Callable[[str, str | None], bool]) -> None:
+        self.poll_s = poll_s
+        self.is_newer = is_newer
+        self.executor = executor
+        self.max_channels = max_channels
+        self.sizes = MessageSizes()
+        self._open: dict[Hashable, Channel] = {}
+
+    def __len__(self) -> int:
+        return len(self._open)
+
+    def join(self, key: Hashable, step: Callable[[Message | None], Message | None],
+             subscriber: Subscriber) -> Channel:
+        channel = self._open.get(key)
+        if channel is None:
+            if len(self._open) >= self.max_channels:
+                raise ChannelsFull(f"the live server already watches {self.max_channels} different pages")
+            channel = Channel(key, step, self.poll_s, self.executor, self.sizes, self.is_newer)
+            self._open[key] = channel
+            channel.start()
+        channel.subscribers.add(subscriber)
+        return channel
+
+    def leave(self, channel: Channel, subscriber: Subscriber) -> None:
+        channel.subscribers.discard(subscriber)
+        if not channel.subscribers and self._open.get(channel.key) is channel:
+            del self._open[channel.key]
+            channel.stop()
+
+    def stop_all(self) -> None:
+        for channel in self._open.values():
+            channel.stop()
+        self._open.clear()

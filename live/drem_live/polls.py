@@ -1,0 +1,58 @@
+"""The board/overlay JSON polls (`/live/api/leaderboard|overlay/{event}?track=`) served from memory.
+
+Each (kind, event, track) is read from storage at most once per `fresh_s` (one read in flight at a time; everyone
+else waits for it), whatever the poll rate. A re-read never replaces a view with an older version (monotonic). The
+table is bounded (least recently used out first), so made-up event ids cannot grow it.
+"""
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Executor
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class CachedView:
+    version: int
+    etag: str
+    body: bytes
+    read_at: float
+
+
+class PollViews:
+    def __init__(self, read: Callable[[str, str, str], tuple[int, str]], fresh_s: float, executor: Executor,
+                 max_entries: int = 1024) -> None:
+        self._read = read  # (kind, event, track) -> (version, body)
+        self._fresh_s = fresh_s
+        self._executor = executor
+        self._max_entries = max_entries
+        self._views: OrderedDict[tuple[str, str, str], CachedView] = OrderedDict()
+        self._reading: dict[tuple[str, str, str], asyncio.Future[CachedView]] = {}
+
+    async def get(self, kind: str, event_id: str, track: str) -> CachedView:
+        key = (kind, event_id, track)
+        cached = self._views.get(key)
+        if cached is not None and time.monotonic() - cached.read_at < self._fresh_s:
+            return cached
+        flight = self._reading.get(key)
+        if flight is None:
+            flight = asyncio.ensure_future(self._refresh(key, cached))
+            self._reading[key] = flight
+            flight.add_done_callback(lambda _f: self._reading.pop(key, None))
+        return await asyncio.shield(flight)
+
+    async def _refresh(self, key: tuple[str, str, str], cached: CachedView | None) -> CachedView:
+        read_at = time.monotonic()
+        version, body = await asyncio.get_running_loop().run_in_executor(self._executor, self._read, *key)
+        if cached is not None and version < cached.version:  # an eventually consistent read lagging behind
+            view = CachedView(cached.version, cached.etag, cached.body, read_at)
+        else:
+            view = CachedView(version, f'"v{version}"', body.encode(), read_at)
+        self._views[key] = view
+        self._views.move_to_end(key)
+        while len(self._views) > self._max_entries:
+            self._views.popitem(last=False)
+        return view

@@ -1,0 +1,127 @@
+"""The live server's building blocks without a network: version-token order (the rule live.js applies too), a
+channel that never broadcasts an older state, and gzip chunks compressed once that any subscriber can append."""
+from __future__ import annotations
+
+import asyncio
+import zlib
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+from chalicelib.security_headers import content_security_policy
+from chalicelib.settings import Settings
+from chalicelib.views.live_regions import token_is_newer
+from drem_live.channels import Channels, Subscriber
+from drem_live.limits import Limits, StreamCount
+from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, event_bytes
+
+
+@pytest.mark.parametrize(("candidate", "shown", "newer"), [
+    ("2.5-0", "1.5-0", True),          # the board moved on
+    ("1.6-0", "1.5-2", True),          # a new race: its phase starts again at "racing"
+    ("1.5-1", "1.5-0", True),          # the overlay's phase advanced (racing → just finished)
+    ("1.5-0", "1.5-1", False),         # a Lambda whose cache still had the racing phase
+    ("1.5-0", "2.5-0", False),         # instance A renders v0 again after B rendered v1
+    ("1.5-0", "1.5-0", False),         # the same state is no news
+    ("2.4-0", "1.5-0", False),         # mixed (board newer, overlay older): wait for one newer in both
+    ("3.7-1.7-0", "3.7-0.7-0", True),  # a held summary ended (0 held → 1 shown)
+    ("3.7-1", None, True),             # anything beats nothing
+])
+def test_a_token_is_newer_only_when_nothing_in_it_went_back(candidate, shown, newer) -> None:
+    assert token_is_newer(candidate, shown) is newer
+
+
+def _broadcasts(tokens: list[str]) -> list[str]:
+    """Tokens a subscriber receives from a channel whose storage reads give `tokens` one after the other."""
+    async def run() -> list[str]:
+        reads = iter(tokens)
+        done = asyncio.Event()
+        received: list[str] = []
+
+        def step(_last: Message | None) -> Message | None:
+            token = next(reads, None)
+            if token is None:
+                done.set()
+                return None
+            return Message.fragment(token, f"<section data-version=\"{token}\"></section>")
+
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(0.001, executor, max_channels=4, is_newer=token_is_newer)
+            subscriber = Subscriber()
+            channel = channels.join(("leaderboard", "e1"), step, subscriber)
+            while not done.is_set():
+                try:
+                    await asyncio.wait_for(subscriber.wake.wait(), 0.05)
+                except TimeoutError:
+                    continue
+                message = subscriber.take()
+                if message is not None:
+                    received.append(message.token)
+            channels.leave(channel, subscriber)
+            assert len(channels) == 0  # the last subscriber left: the channel (and its watcher) stopped
+        return received
+
+    return asyncio.run(run())
+
+
+def test_a_channel_never_broadcasts_an_older_state_than_it_sent() -> None:
+    received = _broadcasts(["1.5-0", "1.6-0", "1.5-0", "1.6-0", "2.6-1", "1.6-1"])
+    # A slow subscriber may skip an intermediate state (it keeps only the newest), never go back.
+    assert received[-1] == "2.6-1" and set(received) <= {"1.5-0", "1.6-0", "2.6-1"}, received
+    assert all(token_is_newer(b, a) for a, b in zip(received, received[1:], strict=False)), received
+
+
+def test_a_channel_cap_refuses_one_more_option_set() -> None:
+    async def run() -> None:
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(10, executor, max_channels=1, is_newer=token_is_newer)
+            channels.join("a", lambda _last: None, Subscriber())
+            with pytest.raises(Exception, match="already watches 1 different pages"):
+                channels.join("b", lambda _last: None, Subscriber())
+            channels.stop_all()
+
+    asyncio.run(run())
+
+
+def test_each_message_is_compressed_once_and_decodes_after_any_subscribers_header() -> None:
+    first = Message.fragment("1.1-0", "<section>\nfirst</section>")
+    second = Message.fragment("1.2-0", "<section>second</section>")
+    # One subscriber saw both messages, one joined for the second only; both decode what they were sent.
+    for chunks, expected in (([first, HEARTBEAT, second], first.plain + HEARTBEAT.plain + second.plain),
+                             ([second], second.plain)):
+        stream = GZIP_HEADER + b"".join(m.gzip for m in chunks)
+        assert zlib.decompressobj(16 + zlib.MAX_WBITS).decompress(stream) == expected
+    assert first.plain == b"id: 1.1-0\nevent: fragment\ndata: <section>\ndata: first</section>\n\n"
+
+
+def test_sse_data_lines_cannot_be_ended_early_by_a_carriage_return() -> None:
+    assert event_bytes("fragment", "a\rid: 9\r\nb") == b"event: fragment\ndata: a\ndata: id: 9\ndata: b\n\n"
+
+
+def test_gzip_is_used_only_when_the_client_accepts_it() -> None:
+    assert accepts_gzip("gzip, deflate, br") and accepts_gzip("br;q=1, gzip;q=0.5")
+    assert not accepts_gzip("") and not accepts_gzip("gzip;q=0") and not accepts_gzip("gzip;q=x")
+
+
+def test_streams_are_capped_in_total_and_per_client_address() -> None:
+    count = StreamCount(Limits(max_streams=3, max_streams_per_client=2))
+    count.open("10.0.0.5")
+    count.open("10.0.0.5")
+    assert "from one address" in (count.refusal("10.0.0.5") or "")
+    assert count.refusal("10.0.0.6") is None
+    count.open("10.0.0.6")
+    assert "full" in (count.refusal("10.0.0.7") or "")
+    count.close("10.0.0.5")
+    assert count.refusal("10.0.0.5") is None
+
+
+def test_the_pages_may_connect_to_the_live_server_and_only_to_a_real_http_origin() -> None:
+    local = {"AWS_ENDPOINT_URL": "http://127.0.0.1:8001", "DREM_PUBLIC_URL": "http://192.168.8.20:8000"}
+    pushed = Settings.from_env({**local, "DREM_LIVE_URL": "http://192.168.8.20:8002/"})
+    assert pushed.live_stream_base == "http://192.168.8.20:8002"
+    assert "http://192.168.8.20:8002" in content_security_policy(pushed, embeddable=True).split("; ")[4]
+    assert Settings.from_env(local).live_stream_base is None  # locally without a live server the pages poll
+    assert Settings.from_env({}).live_stream_base == ""  # on AWS: /live/... on the pages' own origin
+    for hostile in ("javascript:alert(1)", "http://x; script-src *", "ftp://host"):
+        settings = Settings.from_env({**local, "DREM_LIVE_URL": hostile})
+        assert settings.live_url is None and settings.live_stream_base is None
