@@ -54,6 +54,7 @@ LIVE_IMAGE_FILES: tuple[str, ...] = (
     "web/drem_web/static/vendor",
 )
 
+VIEWER_ADDRESS_HEADER = "CloudFront-Viewer-Address"  # "address:port" of the viewer, added by CloudFront
 PATH_PATTERN = "/live/*"
 HEALTH_PATH = "/live/healthz"
 CONTAINER_PORT = 8080
@@ -100,7 +101,10 @@ class LivePages(Construct):
             image=ecs.ContainerImage.from_asset(
                 str(REPO_ROOT), file=DOCKERFILE, exclude=list(LIVE_IMAGE_FILES), ignore_mode=cdk.IgnoreMode.DOCKER,
                 platform=ecr_assets.Platform.LINUX_AMD64),
-            environment={**environment, "AWS_DEFAULT_REGION": stack.region},
+            # Per-viewer stream caps count CloudFront's viewer address: behind the ALB every connection comes from
+            # CloudFront. Only CloudFront reaches the ALB, and it sets this header itself.
+            environment={**environment, "AWS_DEFAULT_REGION": stack.region,
+                         "DREM_LIVE_CLIENT_ADDRESS_HEADER": VIEWER_ADDRESS_HEADER},
             port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT)],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
         )
@@ -190,7 +194,7 @@ class LivePages(Construct):
         policy = cloudfront.OriginRequestPolicy(
             self, "OriginRequestPolicy",
             comment="drem live pages: viewer headers (Accept-Encoding, Last-Event-ID, If-None-Match) and query",
-            header_behavior=cloudfront.OriginRequestHeaderBehavior.all(),
+            header_behavior=cloudfront.OriginRequestHeaderBehavior.all(VIEWER_ADDRESS_HEADER),
             query_string_behavior=cloudfront.OriginRequestQueryStringBehavior.all(),
             cookie_behavior=cloudfront.OriginRequestCookieBehavior.none())
         distribution.add_behavior(

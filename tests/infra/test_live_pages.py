@@ -47,7 +47,9 @@ def test_live_pages_reach_the_load_balancer_uncached_with_the_viewers_accept_enc
     policy = policies[behaviour["OriginRequestPolicyId"]["Ref"]]["Properties"]["OriginRequestPolicyConfig"]
     # With caching disabled, Accept-Encoding is an ordinary viewer header: only "all viewer headers" forwards it (an
     # allow-list may not name it). Cookies stay with the app: the live pages are public.
-    assert policy["HeadersConfig"] == {"HeaderBehavior": "allViewer"}
+    # CloudFront's own viewer-address header too: the server caps streams per viewer address.
+    assert policy["HeadersConfig"] == {"HeaderBehavior": "allViewerAndWhitelistCloudFront",
+                                       "Headers": ["CloudFront-Viewer-Address"]}
     assert policy["QueryStringsConfig"] == {"QueryStringBehavior": "all"}
     assert policy["CookiesConfig"] == {"CookieBehavior": "none"}
     # The rest of the site still goes to the API as before.
@@ -126,6 +128,7 @@ def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_it
     for name in (n for n in lambda_env[0] if n.startswith("DREM_")):
         assert env[name] == lambda_env[0][name], name
     assert "AWS_DEFAULT_REGION" in env
+    assert env["DREM_LIVE_CLIENT_ADDRESS_HEADER"] == "CloudFront-Viewer-Address", "caps count viewers, not CloudFront"
     assert container["PortMappings"] == [{"ContainerPort": live_pages.CONTAINER_PORT, "Protocol": "tcp"}]
 
 
