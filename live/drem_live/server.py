@@ -14,6 +14,7 @@ state, unless the client's Last-Event-ID already is; then one per token change, 
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import logging
 import os
 import re
@@ -86,9 +87,17 @@ async def healthz(request: web.Request) -> web.Response:
 
 def client_address(request: web.Request) -> str:
     header = request.app[STREAMS].limits.client_address_header
-    named = request.headers.get(header, "") if header else ""
-    # CloudFront-Viewer-Address is "address:port" (IPv6 too: "2001:db8::1:443"); the port says nothing about who.
-    return named.rsplit(":", 1)[0] if named else (request.remote or "")
+    named = request.headers.get(header, "").split(",")[-1].strip() if header else ""  # the nearest proxy's entry
+    if not named:
+        return request.remote or ""
+    # CloudFront-Viewer-Address is "address:port" (IPv6 too: "2001:db8::1:443", itself a valid IPv6 address, so
+    # only the header's name tells), and the port says nothing about who; X-Forwarded-For names an address.
+    if header.lower() == "cloudfront-viewer-address":
+        return named.rsplit(":", 1)[0]
+    try:
+        return str(ipaddress.ip_address(named))
+    except ValueError:
+        return named
 
 
 async def known_event(request: web.Request, event_id: str) -> bool:

@@ -82,10 +82,11 @@ class StackConfig:
 
     @property
     def live_url(self) -> str:
-        """The live server's origin for the pages (DREM_LIVE_URL): on the app's address, its own port. Behind a TLS
-        proxy (public_url) there is no plain-HTTP origin a page may use, so the pages poll the app instead."""
+        """The live server's origin for the pages (DREM_LIVE_URL): on the app's address, its own port. Behind a proxy
+        (public_url) the pages subscribe through it, under its address (the proxy routes /live/ to the live server:
+        docs/operations.md); where it does not, their streams fail and they poll the app instead."""
         if self.public_url:
-            return ""
+            return self.public_url.rstrip("/")
         return f"http://{self.announce or self.app_host}:{self.live_server_port}"
 
     @property

@@ -7,6 +7,7 @@ import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
+from aiohttp import web
 
 from chalicelib.security_headers import content_security_policy
 from chalicelib.settings import Settings
@@ -125,3 +126,30 @@ def test_the_pages_may_connect_to_the_live_server_and_only_to_a_real_http_origin
     for hostile in ("javascript:alert(1)", "http://x; script-src *", "ftp://host"):
         settings = Settings.from_env({**local, "DREM_LIVE_URL": hostile})
         assert settings.live_url is None and settings.live_stream_base is None
+
+
+@pytest.mark.parametrize(("header", "value", "counted_as"), [
+    ("CloudFront-Viewer-Address", "203.0.113.7:51514", "203.0.113.7"),
+    ("CloudFront-Viewer-Address", "2001:db8::1:443", "2001:db8::1"),
+    ("X-Forwarded-For", "198.51.100.2", "198.51.100.2"),
+    ("X-Forwarded-For", "10.9.9.9, 2001:db8::5", "2001:db8::5"),  # the entry the nearest proxy added
+    ("X-Forwarded-For", "", "127.0.0.1"),  # no header: the connection's own address
+])
+def test_behind_a_proxy_viewers_are_counted_by_the_address_it_names(header, value, counted_as) -> None:
+    from aiohttp.test_utils import make_mocked_request
+
+    from drem_live.server import STREAMS, client_address
+
+    app = web.Application()
+    app[STREAMS] = StreamCount(Limits(client_address_header=header))
+    request = make_mocked_request("GET", "/live/leaderboard/e1", headers={header: value} if value else {}, app=app,
+                                  transport=_Transport("127.0.0.1"))
+    assert client_address(request) == counted_as
+
+
+class _Transport:
+    def __init__(self, peer: str) -> None:
+        self.peer = peer
+
+    def get_extra_info(self, name: str, default: object = None) -> object:
+        return (self.peer, 40000) if name == "peername" else default

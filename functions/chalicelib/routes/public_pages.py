@@ -101,6 +101,11 @@ def stream_url(poll_url: str) -> str:
     path, _, query = poll_url.partition("?")
     kind, event = path.strip("/").split("/")[:2]  # /leaderboard/{event}/live
     kept = urlencode([(k, v) for k, v in parse_qsl(query, keep_blank_values=True) if k != "v"])
+    if render.base_path():
+        # Reached under a prefix (a proxy's sub-path, or API Gateway's stage): the browser may not reach the live
+        # server's own origin, so it subscribes under the same prefix, where the proxy routes /live/ to the live
+        # server (docs/operations.md). Where nothing answers there, the region falls back to polling the app.
+        return render.url(f"/live/{kind}/{event}?{kept}")
     return f"{base}/live/{kind}/{event}?{kept}"
 
 

@@ -20,7 +20,7 @@
   }
 
   async function post(url, body) {
-    const response = await fetch(url, {
+    const response = await fetch(window.dremUrl(url), {  // under the base path the site lives at
       method: "POST", credentials: "same-origin", body: JSON.stringify(body || {}),
       headers: { "Content-Type": "application/json", "Accept": "application/json", "X-CSRF-Token": csrfToken() },
     });
@@ -97,7 +97,7 @@
     status.textContent = "Saving the run …";
     try {
       const answer = await post("/api/runs/" + runId + "/drive/finish");
-      window.location.href = "/booth/runs/" + answer.run.run_id;
+      window.location.href = window.dremUrl("/booth/runs/" + answer.run.run_id);
     } catch (error) {
       status.textContent = "Could not save: " + error.message;
     }
