@@ -11,10 +11,11 @@ big screen and stream overlay and everyone's phones (the phones spread evenly ov
 Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the timers' laps, the staff consoles).
 
 The message sizes are measured, not guessed: a 50-racer board and a racing overlay are built by the real publisher,
-rendered by the live-region routes (chalicelib.routes.public_pages) and gzipped one message at a time as the live
-server does. The request model is pure arithmetic over the profile (tests/unit/test_aws_cost.py checks it counts what
-the profile implies). Free tiers are ignored, tiered prices use their first tier (the 2,000-spectator profile stays
-inside it; far larger crowds are overestimated), and fixed infrastructure is charged for the whole 24-hour day that
+rendered by the live-region builders (chalicelib.views.live_regions, shared by the app and the live server) and
+gzipped one message at a time as the live server does. The request model is pure arithmetic over the profile
+(tests/unit/test_aws_cost.py checks it counts what the profile implies). Free tiers are ignored, tiered prices use
+their first tier (the 2,000-spectator profile stays inside it; far larger crowds are overestimated), and fixed
+infrastructure is charged for the whole 24-hour day that
 holds the event (the stack stays deployed).
 
 List prices, us-east-1 (CloudFront: United States edge), read on 2026-11-24 through the search tool:
@@ -281,9 +282,7 @@ def measure(racers: int = 50) -> Sizes:
     import os
     sys.path[:0] = [p for p in (str(ROOT / "functions"), str(ROOT)) if p not in sys.path]
     os.environ.setdefault("AWS_DEFAULT_REGION", REGION)
-    from types import SimpleNamespace
 
-    from chalicelib import services
     from chalicelib.domain.leaderboards import (
         BoardRow,
         LeaderboardPublisher,
@@ -292,7 +291,7 @@ def measure(racers: int = 50) -> Sizes:
         board_key,
         overlay_key,
     )
-    from chalicelib.routes import public_pages
+    from chalicelib.views import live_regions
     from drem_leaderboard.models import Lap, LapSource, RaceConfig, Racer, RaceStatus, new_race
     from drem_leaderboard.ranking import Leaderboard, RacerProfile
     from drem_leaderboard.summary import summarise_racer
@@ -335,22 +334,17 @@ def measure(racers: int = 50) -> Sizes:
     board = Leaderboard.model_validate_json(publisher.board(event_id, "1").body)
     publisher.publish_overlay(racing, now, board, racing.racer.username)
 
-    # The routes read through the composition root: point it at this store for the render, then put it back.
-    saved = services.publisher, services.race_store
-    services.publisher = lambda: publisher  # type: ignore[assignment]
-    services.race_store = lambda: SimpleNamespace(  # type: ignore[assignment]
-        get=lambda _event, _race: SimpleNamespace(race=racing))
-    try:
-        board_token, board_context = public_pages.leaderboard_live(
-            event_id, "1", public_pages.LeaderboardQuery(), ["1"], now)
-        board_html = render.fragment("leaderboard_live", **board_context()).body
-        overlay_token, overlay_context = public_pages.overlay_live(event_id, public_pages.OverlayQuery(track="1"), now)
-        overlay_html = render.fragment("overlay_live", **overlay_context()).body
-    finally:
-        services.publisher, services.race_store = saved
+    # The same builders the app's fragment routes and the live server use (chalicelib.views.live_regions).
+    board_region = live_regions.leaderboard_region(publisher, event_id, "1", live_regions.LeaderboardQuery(), ["1"],
+                                                   now)
+    board_token, board_context, board_html = board_region.token, board_region.context, board_region.render()
+    overlay_region = live_regions.overlay_region(publisher, lambda _event, _race: racing, event_id,
+                                                 live_regions.OverlayQuery(track="1"), now)
+    overlay_token, overlay_html = overlay_region.token, overlay_region.render()
     page_html = render.page("leaderboard", title="re:Invent 2026", track="1", tracks=["1"], lang="en", qr="none",
                             qr_svg="", page_url="https://drem.example.org/", track_title="", board_footer="",
-                            sponsor=None, links=[], **board_context()).body
+                            sponsor=None, links=[], stream_url="/live/leaderboard/reinvent-2026?track=1",
+                            **board_context()).body
 
     def item_bytes(key: tuple[str, str]) -> int:
         item = boards.items[key]

@@ -164,7 +164,8 @@ def test_the_document_and_the_docs_page_are_served_to_anyone(stack, chalice_app,
     assert page.status_code == 200 and page.headers["Content-Type"].startswith("text/html")
     assert 'data-method="DELETE" data-path="/api/devices/{device_id}"' in html
     assert html.count('data-testid="api-operation"') == len(operation_rows(document))
-    layout_scripts = ('<script src="/static/vendor/htmx.min.js" defer></script>',
+    layout_scripts = ('<script src="/static/urls.js" defer></script>',
+                      '<script src="/static/vendor/htmx.min.js" defer></script>',
                       '<script src="/static/drem.js" defer></script>')
     for script in layout_scripts:
         html = html.replace(script, "")
