@@ -158,12 +158,15 @@ def test_leaderboard_and_overlay_show_a_timer_lap_live_in_their_own_tabs(live_st
     overlay.screenshot(path=str(ARTIFACTS / "overlay.png"))
 
     # The QR code on the big screen really decodes to the event's landing page (read back from the rendered pixels).
-    png = board.locator('[data-testid="qr"] svg').screenshot()
+    # Drawn at ~4 px per module the code has fractional module widths after the browser's scaling, which both of
+    # OpenCV's detectors misread for some event ids and ports; a phone's camera sees it much larger, and so does this
+    # test: the same SVG, laid out 600 px wide, then read back from the rendered pixels.
+    qr = board.locator('[data-testid="qr"] svg')
+    qr.evaluate("svg => { svg.style.width = '600px'; svg.style.height = '600px'; }")
+    png = qr.screenshot()
     image = cv2.imdecode(np.frombuffer(png, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
     _, black_and_white = cv2.threshold(image, 128, 255, cv2.THRESH_BINARY)
     quiet_zone = cv2.copyMakeBorder(black_and_white, 40, 40, 40, 40, cv2.BORDER_CONSTANT, value=255)
-    # The ArUco-based detector: the classic one misreads some codes drawn at ~4 px per module (fractional module
-    # widths after the browser's scaling), so the test failed for some event ids and ports.
     decoded, _points, _ = cv2.QRCodeDetectorAruco().detectAndDecode(quiet_zone)
     assert decoded == f"{pages_url}/event/{eid}"
 
