@@ -23,6 +23,7 @@ from typing import IO, Literal
 
 from pydantic import BaseModel, ValidationError
 
+from chalicelib.contained import kill_group, limit_resources
 from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extract
 
 GiB = 1024 ** 3
@@ -97,7 +98,7 @@ class ConsoleConverter:
         try:
             stdout, stderr = process.communicate(timeout=limits.wall_seconds)
         except subprocess.TimeoutExpired:
-            _kill_group(process)
+            kill_group(process)
             process.communicate()
             return _cannot(f"the conversion took longer than {limits.wall_seconds:.0f} s and was stopped")
         if process.returncode != 0:
@@ -110,19 +111,8 @@ class ConsoleConverter:
 
 def _limit(limits: ConversionLimits) -> Callable[[], None]:  # a preexec_fn
     def apply() -> None:
-        import resource
-
-        resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
-        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
-        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        limit_resources(limits.memory_bytes, limits.cpu_seconds)
     return apply
-
-
-def _kill_group(process: subprocess.Popen[bytes]) -> None:
-    try:
-        os.killpg(process.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
 
 
 def _crash_reason(returncode: int, stderr: bytes, limits: ConversionLimits) -> str:

@@ -86,18 +86,18 @@ class BoundedClipDrive:
         return outcome
 
     def stop(self) -> None:
+        from chalicelib.contained import kill_group
+
         process = self.process
         if process is not None:
-            try:
-                os.killpg(process.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+            kill_group(process)
 
 
 def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: runs in the child before exec
+    from chalicelib.contained import limit_resources  # imported here, in the parent: the child only calls it
+
     def apply() -> None:
         import ctypes
-        import resource
 
         try:  # the drive dies with its worker (a kill -9 of the worker must not leave a drive running unwatched)
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
@@ -105,9 +105,7 @@ def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: run
             pass
         os.nice(limits.niceness)
         lowest_priority()
-        resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
-        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds))
-        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        limit_resources(limits.memory_bytes, limits.cpu_seconds)
     return apply
 
 
