@@ -182,6 +182,13 @@ def publisher() -> LeaderboardPublisher:
     return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms)
 
 
+def uncached_publisher() -> LeaderboardPublisher:
+    """For the live server (drem_live), which keeps what it read itself and re-reads on its own schedule: the app's
+    250 ms poll cache in front would only delay each change."""
+    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms,
+                                cache=None)
+
+
 def audit_log() -> DynamoAuditLog:
     return DynamoAuditLog(clients.dynamodb(), get_settings().table("races"))
 

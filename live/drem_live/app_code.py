@@ -19,9 +19,6 @@ if importlib.util.find_spec("chalicelib") is None:
 from chalicelib import services  # noqa: E402  (after functions/ is on sys.path)
 from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView  # noqa: E402
 from chalicelib.routes.responses import etag_matches  # noqa: E402
-from chalicelib.settings import get_settings  # noqa: E402
-from chalicelib.storage import clients  # noqa: E402
-from chalicelib.storage.leaderboards import DynamoBoardStore  # noqa: E402
 from chalicelib.views import live_regions  # noqa: E402
 from drem_leaderboard.models import Race  # noqa: E402
 
@@ -42,8 +39,7 @@ class AppCode:
 
     @classmethod
     def from_settings(cls) -> AppCode:
-        table = DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards"))
-        return cls(LeaderboardPublisher(table, services.now_ms, cache=None))
+        return cls(services.uncached_publisher())
 
     @staticmethod
     def now_ms() -> int:
