@@ -127,6 +127,8 @@ CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c cert
 	$(if $(LIVE_MAX_TASKS),-c live_max_tasks=$(LIVE_MAX_TASKS),)
 # SES_FROM=drem@example.org SES_IDENTITY_ARN=arn:aws:ses:...: Cognito emails through SES (docs/deploy.md, Email).
 CDK_CONTEXT += $(if $(SES_FROM)$(SES_IDENTITY_ARN),-c ses_from='$(SES_FROM)' -c ses_identity_arn=$(SES_IDENTITY_ARN),)
+# ALARM_EMAIL=ops@example.org: the stage's alarms (errors, throttling, live pages) email it (docs/deploy.md, Alarms).
+CDK_CONTEXT += $(if $(ALARM_EMAIL),-c alarm_email='$(ALARM_EMAIL)',)
 
 $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund

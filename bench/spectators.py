@@ -6,7 +6,10 @@ publisher, and drives the board poll with wrk over 200 concurrent keep-alive con
   - live changed:   `GET /live/api/leaderboard/{event}?track=1` holding an old version (If-None-Match "v0") -> 200,
   - live unchanged: the same holding the current version -> 304, empty body,
 side by side, in the same run and in alternating rounds, with
-  (a) nginx (Debian package, one worker, unprivileged child on a free port) serving the same bytes as a static file,
+  (a) nginx (Debian package, unprivileged child on a free port) serving the same bytes as a static file, with as many
+      worker processes as the live server has in this run (`--workers`) sharing its port the same way (`listen ...
+      reuseport`: one socket per worker, the kernel spreads connections): the "x nginx" ratio compares the two
+      servers process for process on the same cores, not N live processes with one nginx worker,
   (b) the app's own `GET /api/leaderboard/{event}?track=1` (the path the live server replaces), changed case.
 Starved clients: while each wrk run is under way, `ss -ti` lists the server's established connections; one whose
 server side has sent no data segment has had no response. wrk's own errors/timeouts are reported too.
@@ -55,8 +58,10 @@ PLAIN_LUA = """
 function response(status, headers, body) summary_status(status) end
 """
 
+# worker_processes: the live server's process count in this run (start_nginx); reuseport: each worker its own
+# listening socket on the port, as the live server's processes have with SO_REUSEPORT.
 NGINX_CONF = """
-worker_processes 1;
+worker_processes {workers};
 daemon off;
 pid {tmp}/nginx.pid;
 error_log {tmp}/nginx-error.log warn;
@@ -72,7 +77,7 @@ http {{
     keepalive_timeout 75s;
     types {{ application/json json; }}
     server {{
-        listen 127.0.0.1:{port};
+        listen 127.0.0.1:{port} reuseport;
         root {root};
         location / {{ }}
     }}
@@ -80,8 +85,9 @@ http {{
 """
 
 
-def start_nginx(body: bytes) -> tuple[subprocess.Popen[bytes], int, Path]:
-    """nginx as an unprivileged child (as `nobody` when this bench runs as root) in its own temp dir."""
+def start_nginx(body: bytes, workers: int) -> tuple[subprocess.Popen[bytes], int, Path]:
+    """nginx with `workers` worker processes, as an unprivileged child (as `nobody` when this bench runs as root) in
+    its own temp dir."""
     from drem_local import stack as local_stack
 
     tmp = Path(tempfile.mkdtemp(prefix="drem-bench-nginx-"))
@@ -90,7 +96,7 @@ def start_nginx(body: bytes) -> tuple[subprocess.Popen[bytes], int, Path]:
     (root / "board.json").write_bytes(body)
     port = local_stack.free_port()
     conf = tmp / "nginx.conf"
-    conf.write_text(NGINX_CONF.format(tmp=tmp, port=port, root=root))
+    conf.write_text(NGINX_CONF.format(tmp=tmp, port=port, root=root, workers=workers))
     drop: dict[str, Any] = {}
     if os.geteuid() == 0:
         nobody = pwd.getpwnam("nobody")
@@ -136,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=8)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--connections", type=int, default=200)
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="live server processes")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                        help="live server processes, and as many nginx workers (default: one per core)")
     args = parser.parse_args(argv)
     for tool in (_stack.WRK, NGINX, shutil.which("ss")):
         if not tool or not Path(tool).exists():
@@ -154,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         with _stack._NO_PROXY.open(urllib.request.Request(app_url), timeout=10) as reply:
             if reply.read() != body:
                 raise SystemExit("the live server's board differs from the app's")
-        nginx, nginx_port, nginx_dir = start_nginx(body)
+        nginx, nginx_port, nginx_dir = start_nginx(body, args.workers)
         try:
             cases = {
                 "changed": (poll_url, stack.live_port, POLL_LUA % '"v0"'),
@@ -188,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"\n{args.connections} keep-alive connections, wrk -t {WRK_THREADS}, {args.rounds} rounds x "
           f"{args.seconds:.0f} s per case (alternating); board body {len(body)} bytes; live server: {args.workers} "
-          f"worker process(es) on one port (SO_REUSEPORT); 'app changed' = the app's /api/leaderboard")
+          f"worker process(es) on one port (SO_REUSEPORT), nginx the same number of workers (reuseport); "
+          f"'app changed' = the app's /api/leaderboard")
     print(f"machine load before the bench: {load_before} (the machine is shared with other work)")
     print("saturated = every connection sends its next request as soon as the answer is in (max throughput);")
     print("@1000/s   = every connection polls every ~180 ms (200 x ~5.6/s offered, ~1,100/s)")
@@ -212,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         figures.append(f"live {case}: {rate(paced):.0f}/s p99={p99:.1f}ms starved={starved} max={rate(case):.0f}/s "
                        f"{vs_nginx:.3f}x_nginx {vs_app:.1f}x_app")
     figures.append(f"app={rate('app changed'):.0f}/s nginx={rate('nginx'):.0f}/s workers={args.workers} "
+                   f"nginx_workers={args.workers} "
                    f"load={_stack.machine_load()}")
     print(f"RESULT spectators: {'; '.join(figures)} | goal >=1000 polls/s at p99<=50ms, 0 starved, saturated "
           f">=0.2x nginx | {'met' if met else 'not met'}")

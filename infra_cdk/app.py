@@ -6,6 +6,7 @@ Context:
   public_url      the URL people use (QR codes, cookies); `make deploy` passes CloudFront's after the first deploy.
   domain_name, certificate_arn      optional custom domain for CloudFront (an ACM certificate in us-east-1).
   ses_from, ses_identity_arn        optional: Cognito emails through Amazon SES from this verified identity.
+  alarm_email     optional: an address subscribed to the stage's alarm topic (every alarm notifies that topic).
 Before packaging the app this vendors drem_infra, drem_leaderboard and drem_web into functions/vendor/, so a
 deployment never ships stale copies. The third-party wheels must already be there (`drem build`, which `make deploy`
 runs): synth downloads nothing and makes no AWS calls.
@@ -41,7 +42,8 @@ def main() -> None:
         # The Chalice construct writes chalice.out/ into the working directory; keep it inside the (ignored) outdir.
         os.chdir(app.outdir)
     context = {name: app.node.try_get_context(name) or None
-               for name in ("public_url", "domain_name", "certificate_arn", "ses_from", "ses_identity_arn")}
+               for name in ("public_url", "domain_name", "certificate_arn", "ses_from", "ses_identity_arn",
+                            "alarm_email")}
     try:
         DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context,
                   env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),

@@ -8,6 +8,8 @@ import os
 import socket
 import sys
 
+from drem_cars.deployment_record import STAGE_HELP, NoDeploymentRecord, api_from_arguments
+
 HELP = "car agent: activate this car, run it (--sim, --pwm camera + PWM, --deepracer), show its status"
 EXIT_REVOKED = 3  # the same code as drem_cars.runner.EXIT_REVOKED (kept here so --help stays light)
 
@@ -18,7 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="car_command", metavar="ACTION", required=True)
     activate = sub.add_parser("activate", help="exchange a one-time activation code for this device's credential")
     activate.add_argument("--code", required=True, help="the code staff created for this car")
-    activate.add_argument("--api", required=True, help="drem API base URL, e.g. http://127.0.0.1:8000")
+    where = activate.add_mutually_exclusive_group(required=True)
+    where.add_argument("--api", help="drem API base URL, e.g. http://127.0.0.1:8000")
+    where.add_argument("--aws", action="store_true",
+                       help="the public URL of the AWS deployment, from .drem-aws/STAGE.json (`make deploy` writes it)")
+    activate.add_argument("--stage", default=None, help=STAGE_HELP)
     activate.add_argument("--hostname", default=socket.gethostname().split(".")[0],
                           help="this car's hostname as staff entered it (default: this machine's)")
     activate.add_argument("--kind", choices=("car", "timer"), default="car")
@@ -66,15 +72,21 @@ def _activate(args: argparse.Namespace) -> int:
     from drem_cars.client import DeviceApiError, activate
     from drem_cars.credentials import CredentialStore
 
+    try:
+        api = api_from_arguments(args.api, args.aws, args.stage)
+    except NoDeploymentRecord as exc:
+        print(f"drem car activate: {exc}", file=sys.stderr)
+        return 1
+    assert api is not None  # argparse requires --api or --aws
     store = CredentialStore(args.config_dir)
     try:
-        credential = activate(args.api, args.code, args.hostname, args.kind,
+        credential = activate(api, args.code, args.hostname, args.kind,
                               attempt_id=store.attempt_id_for(args.code))
     except DeviceApiError as exc:
         print(f"activation failed: {exc}", file=sys.stderr)
         return 1
     store.save(credential)
-    print(f"activated {credential.device_kind} {credential.hostname} as {credential.device_id} "
+    print(f"activated {credential.device_kind} {credential.hostname} at {credential.api} as {credential.device_id} "
           f"(fleet {credential.fleet_id}); credential saved to {store.path} (mode 0600)")
     return 0
 

@@ -7,6 +7,8 @@ import os
 import sys
 import time
 
+from drem_cars.deployment_record import STAGE_HELP, NoDeploymentRecord, api_from_arguments
+
 HELP = ("timing-strip agent for a Raspberry Pi: GPIO17/27 crossings → strip events "
         "(activate with `drem car activate --kind timer`)")
 
@@ -14,7 +16,11 @@ HELP = ("timing-strip agent for a Raspberry Pi: GPIO17/27 crossings → strip ev
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config-dir", default=os.environ.get("DREM_CAR_CONFIG"),
                         help="credential + outbox directory (default ~/.config/drem-car/)")
-    parser.add_argument("--api", help="override the API URL saved at activation")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--api", help="override the API URL saved at activation")
+    where.add_argument("--aws", action="store_true",
+                       help="use the AWS deployment's public URL from .drem-aws/STAGE.json (`make deploy` writes it)")
+    parser.add_argument("--stage", default=None, help=STAGE_HELP)
     parser.add_argument("--event", required=True, help="event id")
     parser.add_argument("--track", default="1", help="the event's track id (default 1)")
     parser.add_argument("--pins", default="17,27", help="BCM pins of the strips (default 17,27)")
@@ -33,10 +39,12 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     store = CredentialStore(args.config_dir)
     try:
-        client = DeviceClient(store, api=args.api)
-    except NotActivated as exc:
-        print(exc, file=sys.stderr)
+        client = DeviceClient(store, api=api_from_arguments(args.api, args.aws, args.stage))
+    except (NotActivated, NoDeploymentRecord) as exc:
+        print(f"drem timer: {exc}", file=sys.stderr)
         return 1
+    print(f"timer {client.credential.hostname}: event {args.event}, track {args.track}, strips on GPIO "
+          f"{args.pins}, posting to {client.api}", flush=True)
     outbox = Outbox(store.directory / "outbox.sqlite3")
     pins = tuple(int(p) for p in args.pins.split(","))
     strips = TimingStrips(outbox, args.event, args.track, client.device_id, pins)

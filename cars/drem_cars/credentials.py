@@ -75,8 +75,8 @@ class CredentialStore:
         try:
             data = json.loads(self.path.read_text())
         except FileNotFoundError:
-            raise NotActivated(f"this device is not activated (no {self.path}); run "
-                               "`drem car activate --code CODE --api URL` first") from None
+            raise NotActivated(f"this device is not activated (no {self.path}); run `drem car activate --code CODE "
+                               "--api URL` (or `--aws` for a `make deploy` stage) first") from None
         return StoredCredential(**data)
 
 

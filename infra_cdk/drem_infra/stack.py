@@ -19,6 +19,7 @@ from aws_cdk import aws_certificatemanager as acm
 from aws_cdk import aws_cloudfront as cloudfront
 from aws_cdk import aws_cloudfront_origins as origins
 from aws_cdk import aws_cloudwatch as cloudwatch
+from aws_cdk import aws_cloudwatch_actions as cloudwatch_actions
 from aws_cdk import aws_cognito as cognito
 from aws_cdk import aws_dynamodb as dynamodb
 from aws_cdk import aws_events as events
@@ -27,6 +28,8 @@ from aws_cdk import aws_iam as iam
 from aws_cdk import aws_lambda as lambda_
 from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
+from aws_cdk import aws_sns as sns
+from aws_cdk import aws_sns_subscriptions as sns_subscriptions
 from constructs import Construct
 
 from drem_infra import permissions, resources
@@ -39,6 +42,19 @@ LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 # (10,000 rps), so a runaway client cannot take the account's whole API quota.
 API_RATE_LIMIT_RPS = 200
 API_BURST_LIMIT = 400
+# Alarms on the API stage (AWS/ApiGateway, per ApiName and Stage), each over 5 minutes. API Gateway has no throttle
+# metric: a request over the limits above is answered 429 and counted in 4XXError, together with the app's own 4xx
+# (401 after a session expires, 403, 404 for a mistyped address, 400/422 for a form error), of which ordinary use
+# makes a few a minute. 300 in 5 minutes is one a second on average: throttling at API_RATE_LIMIT_RPS rejects
+# requests by the hundred each second, so a few seconds of it cross the line, and a day of ordinary mistakes never
+# does (a client or scanner hammering the API with rejected requests does, which deserves a look too).
+API_4XX_PER_5_MINUTES = 300
+# The app answers 5xx only when something is broken: an unhandled exception (Chalice turns it into a 500 that the
+# Lambda Errors alarm does not see), a function crash or timeout (502/504), API Gateway failing to invoke it. One is
+# in the logs; five in 5 minutes means a page or a device keeps failing (the live pages' 5xx alarms use 5 as well).
+API_5XX_PER_5_MINUTES = 5
+# `make deploy ALARM_EMAIL=ops@example.org`: one address subscribed to the stage's alarm topic.
+_PLAIN_EMAIL_ADDRESS = re.compile(r"^[^@\s<>,;]+@[^@\s<>,;]+\.[^@\s<>,;]+$")
 # The header the app reads its base path from (chalicelib.base_path.FORWARDED_PREFIX_HEADER).
 FORWARDED_PREFIX_HEADER = "X-Forwarded-Prefix"
 # The app's security headers (chalicelib.security_headers) on the one answer API Gateway gives by itself.
@@ -61,14 +77,19 @@ class DremStack(cdk.Stack):
     `public_url` is the URL people use (QR codes, activation commands, Secure cookies). CloudFront's own domain is
     only known after the first deploy, and the functions cannot reference the distribution that fronts their own
     API (a dependency cycle), so `make deploy` passes it in on a second deploy; with `domain_name` (and an ACM
-    `certificate_arn` in us-east-1) it is known from the start."""
+    `certificate_arn` in us-east-1) it is known from the start.
+
+    Every alarm notifies the stage's one SNS topic (output AlarmTopicArn); `alarm_email` subscribes an address."""
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str,
                  functions_dir: Path | None = None, public_url: str | None = None,
                  domain_name: str | None = None, certificate_arn: str | None = None,
-                 ses_from: str | None = None, ses_identity_arn: str | None = None, **kwargs) -> None:
+                 ses_from: str | None = None, ses_identity_arn: str | None = None,
+                 alarm_email: str | None = None, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
+        # Every alarm of the stage notifies this one topic (see _notify_on_every_alarm).
+        self.alarm_topic = self._alarm_topic(alarm_email)
         self.ses_from, self.ses_identity_arn = ses_from, ses_identity_arn
         self.domain_name = domain_name
         self.public_url = public_url or (f"https://{domain_name}" if domain_name else None)
@@ -82,6 +103,7 @@ class DremStack(cdk.Stack):
                      if self.distribution is not None else None)
         if self.live is not None and self.distribution is not None:
             self.live.serve_through(self.distribution)
+        self._notify_on_every_alarm()
         self._outputs()
 
     # --- storage ------------------------------------------------------------------------------------------------
@@ -194,6 +216,29 @@ class DremStack(cdk.Stack):
         pool.node.default_child.add_property_override("EmailConfiguration", {
             "EmailSendingAccount": "DEVELOPER", "From": self.ses_from, "SourceArn": self.ses_identity_arn})
 
+    # --- alarms -------------------------------------------------------------------------------------------------
+
+    def _alarm_topic(self, alarm_email: str | None) -> sns.Topic:
+        """The stage's alarm topic, with `alarm_email` subscribed (AWS mails it a link to confirm first). No topic
+        policy: SNS's default one lets this account's CloudWatch alarms publish, and a KMS-encrypted topic would need a
+        key policy for CloudWatch, so it stays unencrypted (it carries alarm names and states, no event data)."""
+        topic = sns.Topic(self, "AlarmTopic", display_name=f"drem {self.stage} alarms")
+        if alarm_email:
+            if not _PLAIN_EMAIL_ADDRESS.match(alarm_email):
+                raise ValueError(f"ALARM_EMAIL={alarm_email!r} is not an email address (one address, e.g. "
+                                 "ops@example.org)")
+            topic.add_subscription(sns_subscriptions.EmailSubscription(alarm_email))
+        return topic
+
+    def _notify_on_every_alarm(self) -> None:
+        """Every CloudWatch alarm in the stack, whichever construct made it (the functions', the API's, the live
+        pages'), notifies the alarm topic when it goes off and when it clears."""
+        action = cloudwatch_actions.SnsAction(self.alarm_topic)
+        for construct in self.node.find_all():
+            if isinstance(construct, cloudwatch.Alarm):
+                construct.add_alarm_action(action)
+                construct.add_ok_action(action)
+
     # --- application --------------------------------------------------------------------------------------------
 
     def app_environment(self) -> dict[str, str]:
@@ -257,9 +302,16 @@ class DremStack(cdk.Stack):
         self._alarms(app, functions)
         api = sam["Resources"].get("RestAPI")
         if api is not None:
-            app.get_resource("RestAPI").add_property_override("MethodSettings", [{
+            rest_api = app.get_resource("RestAPI")
+            rest_api.add_property_override("MethodSettings", [{
                 "ResourcePath": "/*", "HttpMethod": "*",
                 "ThrottlingRateLimit": API_RATE_LIMIT_RPS, "ThrottlingBurstLimit": API_BURST_LIMIT}])
+            # API Gateway's metrics name a REST API by its name, which Chalice leaves at the app's ("drem") for every
+            # stage: a stage-scoped name keeps two stages of one account apart in the API alarms.
+            api_name = f"drem-{self.stage}"
+            rest_api.add_property_override("Name", api_name)
+            rest_api.add_property_override("DefinitionBody.info.title", api_name)
+            self._api_alarms(api_name, api["Properties"]["StageName"])
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
         if upload_fn in sam["Resources"]:
             for spec in resources.BUCKETS:
@@ -297,7 +349,7 @@ class DremStack(cdk.Stack):
             "Policies", [{"PolicyName": "DremApp", "PolicyDocument": self.resolve(document.to_json())}])
 
     def _alarms(self, app, functions: list[str]) -> None:
-        """Errors and throttles of every function, so a broken deploy or a quota problem shows up on the dashboard."""
+        """Errors and throttles of every function, so a broken deploy or a quota problem reaches the alarm topic."""
         for name in functions:
             function_name = app.get_resource(name).ref
             for metric_name in ("Errors", "Throttles"):
@@ -307,6 +359,19 @@ class DremStack(cdk.Stack):
                 metric.create_alarm(self, f"{name}{metric_name}Alarm", threshold=1, evaluation_periods=1,
                                     alarm_description=f"drem {self.stage}: {name} {metric_name.lower()} in 5 minutes",
                                     treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
+
+    def _api_alarms(self, api_name: str, stage_name: str) -> None:
+        """Rejected requests (throttling shows here, as 429s) and server errors of the API stage."""
+        for metric_name, threshold, what in (
+                ("4XXError", API_4XX_PER_5_MINUTES, "requests rejected (4xx, throttled 429s among them)"),
+                ("5XXError", API_5XX_PER_5_MINUTES, "server errors (5xx)")):
+            metric = cloudwatch.Metric(namespace="AWS/ApiGateway", metric_name=metric_name, statistic="Sum",
+                                       period=cdk.Duration.minutes(5),
+                                       dimensions_map={"ApiName": api_name, "Stage": stage_name})
+            metric.create_alarm(self, f"Api{metric_name[0]}xxAlarm", threshold=threshold, evaluation_periods=1,
+                                comparison_operator=cloudwatch.ComparisonOperator.GREATER_THAN_OR_EQUAL_TO_THRESHOLD,
+                                alarm_description=f"drem {self.stage}: {threshold} or more API {what} in 5 minutes",
+                                treat_missing_data=cloudwatch.TreatMissingData.NOT_BREACHING)
 
     def _unknown_paths_are_not_found(self, app) -> None:  # noqa: ANN001 - chalice.cdk.Chalice
         """API Gateway answers a path no route matches with 403 "Missing Authentication Token"; make it the 404 it
@@ -343,6 +408,7 @@ class DremStack(cdk.Stack):
     def _outputs(self) -> None:
         cdk.CfnOutput(self, "Stage", value=self.stage)
         cdk.CfnOutput(self, "Region", value=self.region)
+        cdk.CfnOutput(self, "AlarmTopicArn", value=self.alarm_topic.topic_arn)
         if self.distribution is not None:
             cdk.CfnOutput(self, "DistributionUrl", value=f"https://{self.distribution.distribution_domain_name}")
             cdk.CfnOutput(self, "PublicUrl", value=self.public_url or "")

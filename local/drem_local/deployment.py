@@ -1,8 +1,10 @@
 """Where an AWS deployment of drem is, as `make deploy` records it: `.drem-aws/<stage>.json`.
 
 `cdk deploy --outputs-file` writes the stack's outputs; `drem aws record` turns them into this file, which
-`drem aws admin`, `drem export --aws` / `drem import --aws` and the docs' car/timer commands read, so nobody copies
-table names or pool ids into `DREM_*` variables by hand. It holds names and URLs, never credentials.
+`drem aws admin`, `drem export --aws` / `drem import --aws` and `drem car activate --aws` / `drem timer --aws` read, so
+nobody copies table names, pool ids or URLs into `DREM_*` variables or flags by hand. It holds names and URLs, never
+credentials. The car agent reads its `public_url` itself (drem_cars.deployment_record: a car has no drem_local), so
+that field's name and meaning must not change.
 """
 from __future__ import annotations
 
