@@ -26,14 +26,22 @@ def choose_password(page, url: str, password: str) -> None:
 
 
 def create_at_desk(page, username: str) -> str:
-    """Type a racer in, keyboard only (Enter submits); returns the temporary password shown."""
+    """Type a racer in, keyboard only (Enter submits); returns the temporary password shown. Like a person, it
+    starts typing once the cursor is in the username field (autofocus on a fresh page, htmx's refocus after a
+    swap): keys typed before that land nowhere."""
+    page.wait_for_function("() => document.activeElement && document.activeElement.id === 'username'")
     page.keyboard.type(username)
     page.keyboard.press("Tab")
     page.keyboard.type(f"{username}@example.test")
     page.fill("#country_code", "Germany")  # the country picker, by name
     page.focus("#email")
     page.keyboard.press("Enter")
-    page.get_by_test_id("registered-username").filter(has_text=username).wait_for()
+    registered = page.get_by_test_id("registered-username").filter(has_text=username)
+    try:
+        registered.wait_for(timeout=30_000)
+    except Exception as error:  # say what the desk showed instead (a refusal, an error page) rather than only a timeout
+        raise AssertionError(f"{username} was not registered; the page shows: "
+                             f"{page.locator('body').inner_text()[:1500]!r}") from error
     return page.get_by_test_id("temporary-password").inner_text()
 
 
