@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -21,6 +23,14 @@ def drem(*argv: str, cwd: Path, env: dict[str, str] | None = None, timeout: floa
     clean = {k: v for k, v in os.environ.items() if not k.startswith("DREM_")}
     return subprocess.run([str(DREM), *argv], cwd=cwd, capture_output=True, text=True, timeout=timeout,
                           env={**clean, **(env or {})})
+
+
+def drem_python(code: str, *, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
+    """The interpreter of the installed `drem` (its shebang), to ask where a package was imported from."""
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("DREM_")}
+    python = DREM.read_text().splitlines()[0].removeprefix("#!").strip() or sys.executable
+    return subprocess.run([python, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=60,
+                          env={**clean, **env})
 
 
 def test_the_cli_finds_the_running_stacks_port_and_takes_options_after_the_action(live_stack, tmp_path):
@@ -77,14 +87,20 @@ def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_
     activated = drem("car", "activate", "--code", code, "--hostname", "fresh-sim", "--api", live_stack.url,
                      "--config-dir", str(config), cwd=tmp_path)
     assert activated.returncode == 0, activated.stderr
-    # The venv's own entry point, with the shared folder beside the repo made to look absent (as in a fresh clone).
-    script = ("import sys; from pathlib import Path; import drem_sim.tracks as t; "
-              "t.DEFAULT_NPY_DIR = Path(sys.argv[1]); from drem_local.cli import main; sys.exit(main(sys.argv[2:]))")
-    ran = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c", script, str(tmp_path / "no-shared"),
-                          "car", "--config-dir", str(config), "run", "--sim", "--seconds", "3",
-                          "--event", event["event_id"], "--race-track", "1"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                         env={k: v for k, v in os.environ.items() if not k.startswith("DREM_")})
+    # A fresh clone has no ../shared beside it. drem_sim looks for the shared route files next to its own checkout
+    # (`<checkout>/../shared/deepracer-tracks`, from where the package sits), and $DREM_TRACKS_DIR only adds folders.
+    # So the installed `drem` runs with drem_sim as a fresh clone lays it out, in a checkout under tmp_path with
+    # nothing beside it: PYTHONPATH puts that copy ahead of the editable install; no code is patched.
+    clone = tmp_path / "fresh-clone"
+    shutil.copytree(REPO / "sim" / "drem_sim", clone / "sim" / "drem_sim",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    fresh = {"PYTHONPATH": str(clone / "sim")}
+    where = drem_python("import drem_sim.tracks as t; print(t.__file__); print(sorted(t.available_tracks()))",
+                        cwd=tmp_path, env=fresh)
+    assert where.returncode == 0, where.stderr
+    assert where.stdout.startswith(str(clone)) and "reinvent_base" not in where.stdout  # the clone's, no shared
+    ran = drem("car", "--config-dir", str(config), "run", "--sim", "--seconds", "3", "--event", event["event_id"],
+               "--race-track", "1", cwd=tmp_path, env=fresh)
     assert ran.returncode == 0, ran.stderr
     assert "Traceback" not in ran.stderr and "drive loop:" in ran.stdout
     # The sim car times its track with its own timing line: the timekeeper must not say there is no timer.

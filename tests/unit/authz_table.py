@@ -197,6 +197,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("PUT", "/api/users/{username}/role"): Case(allow("admin"), disposable_racer),
     ("POST", "/api/users/{username}/disable"): Case(allow("admin"), disposable_racer),
     ("POST", "/api/users/{username}/enable"): Case(allow("admin"), disposable_racer),
+    ("POST", "/api/users/{username}/confirm"): Case(allow("admin"), disposable_racer),
     # profiles
     ("GET", "/api/me/profile"): SIGNED_IN,
     ("PUT", "/api/me/profile"): SIGNED_IN,
@@ -293,6 +294,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/users/{username}/role"): Case(allow("admin"), disposable_racer),
     ("POST", "/console/users/{username}/disable"): Case(allow("admin"), disposable_racer),
     ("POST", "/console/users/{username}/enable"): Case(allow("admin"), disposable_racer),
+    ("POST", "/console/users/{username}/confirm"): Case(allow("admin"), disposable_racer),
     # console: operators' screens
     ("GET", "/console/models"): ADMIN_OPERATOR,
     ("GET", "/console/models/rows"): ADMIN_OPERATOR,

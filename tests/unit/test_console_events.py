@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -91,3 +92,28 @@ def test_only_operators_and_admins_see_the_events_screens(console):
     anonymous.cookies.clear()
     reply = anonymous.get("/console/events")
     assert reply.status_code == 303 and reply.headers["Location"].startswith("/login")
+
+
+def test_every_track_type_is_offered_by_its_name_up_to_re_invent_2024(console):
+    """Issue 13, item 18: the track picker showed DREM's values and seemed to stop at 2023. Every track type has a
+    label (none falls back to its de-shouted enum value), Forever Raceway says it is the re:Invent 2024 track, and an
+    event saved with it shows that name in the list."""
+    from drem_leaderboard.models import TrackType
+    from drem_web.labels import LABELS
+
+    assert all(track.value in LABELS for track in TrackType)
+    console.sign_in("eve", "operator")
+    form = console.web.get("/console/events/new").body.decode()
+    picker = form.split('<select id="track_type"')[1].split("</select>")[0]
+    offered = re.findall(r'<option value="([^"]*)"[^>]*>([^<]*)</option>', picker)
+    assert [value for value, _ in offered] == [track.value for track in TrackType]
+    names = [name for _, name in offered]
+    assert names[:5] == ["re:Invent 2018", "re:Invent 2019", "re:Invent 2022", "re:Invent 2023",
+                         "re:Invent 2024 · Forever Raceway"]
+    reply = console.post("/console/events", {**FORM, "track_type": "FOREVER_RACEWAY", "track-1-fleet_id": "",
+                                             "track-2-fleet_id": ""})
+    assert reply.status_code == 303
+    [event] = _events(console)
+    assert event["race_config"]["track_type"] == "FOREVER_RACEWAY"
+    listing = console.web.get("/console/events").body.decode()
+    assert 'data-testid="event-track-type">re:Invent 2024 · Forever Raceway<' in listing

@@ -14,16 +14,21 @@ LABELS: dict[str, str] = {
     "PRIVATE_WORKSHOP": "Private workshop", "PRIVATE_TRACK_RACE": "Private track race",
     "OFFICIAL_WORKSHOP": "Official workshop", "OFFICIAL_TRACK_RACE": "Official track race",
     "AWS_SUMMIT": "AWS Summit", "TEST_EVENT": "Test event", "OTHER": "Other",
-    # track types (DREM's list, newest tracks included)
+    # track types (DREM's list). Forever Raceway (`2024_reinvent_champ`) is the re:Invent 2024 championship track and
+    # the last official one (the 2025 virtual races used it too), so its label says the year: "stops at 2023" was only
+    # the label hiding it.
     "REINVENT_2018": "re:Invent 2018", "REINVENT_2019": "re:Invent 2019", "REINVENT_2022": "re:Invent 2022",
-    "REINVENT_2023": "re:Invent 2023", "FOREVER_RACEWAY": "Forever Raceway", "ATOZ_SPEEDWAY": "A to Z Speedway",
-    "SUMMIT_SPEEDWAY": "Summit Speedway 2022",
+    "REINVENT_2023": "re:Invent 2023", "FOREVER_RACEWAY": "re:Invent 2024 · Forever Raceway",
+    "ATOZ_SPEEDWAY": "A to Z Speedway", "SUMMIT_SPEEDWAY": "Summit Speedway 2022",
     # ranking methods
     "BEST_LAP_TIME": "Fastest lap", "BEST_AVERAGE_LAP_TIME_X_LAP": "Fastest average over X laps",
     "LAP_COUNT": "Most laps",
     # race statuses
     "READY": "Ready", "RUNNING": "Running", "PAUSED": "Paused", "OVER": "Time is up", "SUBMITTED": "Submitted",
     "DISCARDED": "Discarded",
+    # account statuses (Cognito's), on the Users page
+    "UNCONFIRMED": "Waiting for the emailed code", "FORCE_CHANGE_PASSWORD": "Temporary password, not signed in yet",
+    "RESET_REQUIRED": "Password reset required",
     # model statuses
     "UPLOADED": "Checking…", "AVAILABLE": "Ready to race", "NOT_VALID": "Not valid", "QUARANTINED": "Quarantined",
     "DELETED": "Deleted",

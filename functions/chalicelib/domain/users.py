@@ -23,6 +23,8 @@ _CHARS_MESSAGE = "A username may contain only letters, digits, '.', '_' and '-'.
 # Deliberately simple: the directory sends a code to it, which is the real check.
 _EMAIL = re.compile(r"^[^@\s<>\"']+@[^@\s<>\"']+\.[^@\s<>\"']+$")
 MAX_PAGE = 60
+# Cognito's status of a self sign-up whose emailed code has not been entered yet.
+UNCONFIRMED = "UNCONFIRMED"
 
 
 def check_sign_up_username(username: str) -> str:
@@ -262,7 +264,7 @@ class UserService:
         except Conflict:
             # The same sign-up again: finish what a crash left (no group yet), or, locally, the confirmation that
             # never came. A complete sign-up of someone else, or one awaiting its emailed code, stays "taken".
-            existing = self._resumable(form.username, form.email, status="UNCONFIRMED")
+            existing = self._resumable(form.username, form.email, status=UNCONFIRMED)
             if self._directory.groups_of(existing.username) and not self._confirm_sign_ups:
                 raise
             username, sub, resumed = existing.username, existing.sub, True
@@ -347,6 +349,19 @@ class UserService:
         else:
             self._sessions.ended(target.sub)
         return target.model_copy(update={"enabled": enabled})
+
+    def confirm_account(self, username: str) -> DirectoryUser:
+        """Staff confirm a self sign-up still waiting for its emailed code (on AWS without SES, or with a mistyped
+        address, the code never arrives); the racer can sign in with the password they chose. Only an account in
+        that state: a staff-registered one waits for its new password instead, which this would not give it."""
+        target = self._directory.get_user(username)
+        if target.status != UNCONFIRMED:
+            raise Conflict(f"{target.username} is not waiting for an emailed code; there is nothing to confirm.",
+                           field="username")
+        self._directory.confirm_without_code(target.username)
+        if not self._directory.groups_of(target.username):  # a sign-up cut off before its profile and role
+            self._finish(target.username, target.sub, target.country_code)
+        return target.model_copy(update={"status": "CONFIRMED"})
 
     def delete_self(self, caller: User, form: DeleteSelfForm) -> dict[str, object]:
         confirmed = (form.confirm.strip().casefold() == caller.username.casefold()

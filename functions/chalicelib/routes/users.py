@@ -1,4 +1,5 @@
-"""Accounts (JSON): self sign-up and confirmation, staff registration, user listing, roles, disabling, self-delete."""
+"""Accounts (JSON): self sign-up and confirmation, staff registration, user listing, roles, disabling, confirming a
+sign-up for the racer, self-delete."""
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -63,6 +64,12 @@ def disable_user(principal: User, username: str) -> dict:
 @route(bp, "/api/users/{username}/enable", methods=["POST"], allow={ADMIN}, response=DirectoryUser)
 def enable_user(principal: User, username: str) -> dict:
     return services.user_service().set_enabled(principal, username, True).model_dump()
+
+
+@route(bp, "/api/users/{username}/confirm", methods=["POST"], allow={ADMIN}, response=DirectoryUser)
+def confirm_user(principal: User, username: str) -> dict:
+    """Confirm a self sign-up whose emailed code never arrived (409 for an account not waiting for one)."""
+    return services.user_service().confirm_account(username).model_dump()
 
 
 @route(bp, "/api/me", methods=["DELETE"], allow=SIGNED_IN, body=DeleteSelfForm)

@@ -9,6 +9,7 @@ from pygal_maps_world.i18n import COUNTRIES as COUNTRY_NAMES
 from chalicelib.domain.stats import DIRECTION_LABELS, Stats, StatsFilter
 from chalicelib.views.svg_plots import Series, bar_chart, line_chart
 from chalicelib.views.world_map import world_map
+from drem_web import labels
 
 
 def country_name(code: str) -> str:
@@ -27,7 +28,7 @@ def stats_page(stats: Stats, wanted: StatsFilter, *, staff: bool) -> dict[str, A
         "activity": line_chart([Series("Races", [(i, float(r)) for i, (_, _, r) in enumerate(stats.by_month)]),
                                 Series("Events", [(i, float(e)) for i, (_, e, _) in enumerate(stats.by_month)])],
                                months, title="Activity per month", y_label="count", testid="stats-activity"),
-        "track_chart": bar_chart([(t.track_type.replace("_", " ").title(), float(t.races)) for t in stats.track_types],
+        "track_chart": bar_chart([(labels.label(t.track_type), float(t.races)) for t in stats.track_types],
                                  title="Races per track type", y_label="races", testid="stats-track-types"),
         "map": world_map(stats.events_by_country, names, title="Events by country", unit="events",
                          testid="stats-world-map"),

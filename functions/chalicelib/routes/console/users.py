@@ -1,4 +1,5 @@
-"""User administration (HTML, admins only): search as you type, change a user's role, disable and enable.
+"""User administration (HTML, admins only): search as you type, change a user's role, disable and enable, confirm a
+self sign-up whose emailed code never arrived.
 Same service as the JSON routes under /api/users; an admin cannot change or disable themselves (the service says
 so, next to the row)."""
 from __future__ import annotations
@@ -55,6 +56,13 @@ def disable_user(principal: User, username: str) -> Response:
 def enable_user(principal: User, username: str) -> Response:
     return _act(username, lambda: services.user_service().set_enabled(principal, username, True),
                 done=f"{username} is enabled and can sign in again.")
+
+
+@route(bp, "/console/users/{username}/confirm", methods=["POST"], allow={ADMIN})
+def confirm_user(principal: User, username: str) -> Response:
+    """A self sign-up waiting for an emailed code that never came: staff confirm it for the racer."""
+    return _act(username, lambda: services.user_service().confirm_account(username),
+                done=f"{username} is confirmed and can sign in now.")
 
 
 def _act(username: str, action, done: str) -> Response:  # noqa: ANN001 - a thunk
