@@ -311,3 +311,35 @@ def test_a_name_with_a_dash_is_accepted_at_the_desk_and_at_self_sign_up(chromium
     assert "kim-c" in confirmed.inner_text() and "is confirmed" in confirmed.inner_text()
     racer.context.close()
     context.close()
+
+
+def test_a_new_result_on_a_later_page_is_shown_at_once_and_held_for_a_whole_page(chromium, event_day, app_url,
+                                                                                  live_stack):
+    """Big-screen paging dwells on a new entry: a result that lands on page 2 while page 1 is up is shown straight
+    away, highlighted, and held for at least a page time before the board pages on. Runs last in this file: it
+    changes a result (staff correct day-mine's laps to the slowest of the day: the row moves to the last page)."""
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    page.goto(f"{app_url}/leaderboard/{event_day['event_id']}?track=1&page_seconds=8&summary_seconds=0")
+    label = "document.querySelector('[data-board-page]')"
+    # Catch page 1 as it comes up after the last page: by itself the board would stay on it for the next 8 s.
+    page.wait_for_function(f"() => {label} && !{label}.hidden && /^(\\d+) \\/ \\1$/.test({label}.textContent)",
+                           timeout=40_000)
+    page.wait_for_function(f"() => {label}.textContent.startsWith('1 /')", timeout=20_000)
+    page_one_at = page.evaluate("() => Date.now()")
+    path = f"/api/events/{event_day['event_id']}/races/{event_day['mine']}"
+    for lap, time_ms in ((0, 19_999), (1, 19_998)):
+        call(live_stack.url, "PUT", f"{path}/laps/{lap}", token=event_day["token"],
+             body={"time_ms": time_ms, "is_valid": True})
+    moved = page.locator('.board-row[data-racer="day-mine"]').filter(has_text="0:19.998")
+    moved.wait_for(state="visible")
+    shown_at = page.evaluate("() => Date.now()")
+    # The board jumped to the new result's page long before page 1's 8 s were up, and highlights it.
+    assert shown_at - page_one_at < 6_000, f"page 2 came only after {shown_at - page_one_at} ms: paging, not a jump"
+    assert "is-new" in (moved.get_attribute("class") or "")
+    assert "day-mine" in visible_racers(page)
+    # Held for at least a whole page time, then the board pages on to page 1 again.
+    page.wait_for_function(f"() => {label}.textContent.startsWith('1 /')", timeout=30_000)
+    held_ms = page.evaluate("() => Date.now()") - shown_at
+    assert held_ms >= 7_500, f"the new result's page gave way after {held_ms} ms"
+    context.close()

@@ -109,7 +109,7 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
     # (The stack's worker may have driven it in the background already, on the coming events' track: the button then
     # reads "Drive again", and the wait is for the REINVENT_2018 drive asked for here.)
     good.get_by_test_id("scrutineer-button").click()
-    good.locator('[data-testid="scrutineer-result"]', has_text="on REINVENT_2018:").wait_for(timeout=180_000)
+    good.locator('[data-testid="scrutineer-result"]', has_text="on re:Invent 2018:").wait_for(timeout=180_000)
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "models.png"), full_page=True)
 

@@ -8,6 +8,7 @@ import sys
 import time
 import zlib
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -173,3 +174,39 @@ def test_drem_status_names_the_live_server(live_stack: Any) -> None:
     out = subprocess.run([sys.executable, "-m", "drem_local.cli", "status", "--state-dir", str(live_stack.state_dir)],
                          capture_output=True, text=True, timeout=60).stdout
     assert f"live server is pushing the public pages at {live_stack.live_url}" in out, out
+
+
+def test_several_workers_share_the_port_and_stop_with_the_first(live_stack: Any,
+                                                               tmp_path_factory: pytest.TempPathFactory) -> None:
+    """`drem up` runs one live worker per core: new connections reach every worker process on the one port (so
+    one GIL does not cap the spectators), and stopping the first process stops the others too."""
+    port = local_stack.free_port()
+    process = local_stack.spawn("two-worker live server", [sys.executable, "-m", "drem_live", "--host", "127.0.0.1",
+                                                           "--port", str(port), "--workers", "2"],
+                                tmp_path_factory.mktemp("workers") / "live.log", env=live_stack.env)
+    try:
+        local_stack.wait_for_ok(f"http://127.0.0.1:{port}/live/healthz", process, 60)
+        pids: set[int] = set()
+        deadline = time.monotonic() + 30
+        while len(pids) < 2 and time.monotonic() < deadline:  # the second worker may still be starting
+            with requests.Session() as fresh_connection:
+                pids.add(fresh_connection.get(f"http://127.0.0.1:{port}/live/healthz", timeout=5,
+                                              proxies=NO_PROXY).json()["pid"])
+        assert len(pids) == 2, f"only {pids} answered on port {port}"
+        assert process.popen.pid in pids
+    finally:
+        process.stop(10)
+    (other,) = pids - {process.popen.pid}
+    deadline = time.monotonic() + 10
+    while running(other) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not running(other), "a worker outlived the live server it belonged to"
+
+
+def running(pid: int) -> bool:
+    """Whether the process exists and has not exited (a zombie waiting to be reaped has exited)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    return "State:\tZ" not in status

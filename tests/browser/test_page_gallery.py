@@ -1,0 +1,137 @@
+"""Every main page as people see it, at the big screen's (1920×1080), a tablet's (768×1024) and a phone's (390×844)
+size: each answers, nothing spills sideways out of the screen, the browser reports no error (no failed request, no
+missing favicon, no script error), and a screenshot of each lands in test-artifacts/gallery/NAME-WIDTHxHEIGHT.png
+(the ones in docs/screenshots/ are copied from there after being looked at)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.browser.console_api import PASSWORD, access_token, call, create_user
+
+pytestmark = pytest.mark.browser
+
+GALLERY = Path(__file__).resolve().parents[2] / "test-artifacts" / "gallery"
+BIG_SCREEN = {"width": 1920, "height": 1080}
+TABLET = {"width": 768, "height": 1024}
+PHONE = {"width": 390, "height": 844}
+SIZES = (BIG_SCREEN, TABLET, PHONE)
+
+
+@pytest.fixture(scope="module")
+def gallery_event(live_stack: Any) -> dict[str, str]:
+    """An event with a fleet, five racers with a submitted race each and one race running on track 1."""
+    url = live_stack.url
+    create_user(live_stack, "gallery-op", "operator")
+    token = access_token(live_stack, "gallery-op")
+    fleet = call(url, "POST", "/api/fleets", token=token, body={"name": "Gallery fleet"}, expect=201)
+    event = call(url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Gallery Grand Prix", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-01", "country_code": "FR",
+        "sponsor": "Acme Robotics", "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"],
+                                                "leaderboard_title": "Main stage"}]})
+    event_id = event["event_id"]
+    race_id = ""
+    for n, (racer, country) in enumerate([("gallery-ana", "ES"), ("gallery-bo", "SE"), ("gallery-chi", "JP"),
+                                          ("gallery-dee", "DE"), ("gallery-eli", "FR")]):
+        create_user(live_stack, racer, "racer")
+        call(url, "PUT", "/api/me/profile", token=access_token(live_stack, racer), expect=(200, 201),
+             body={"country_code": country})
+        race = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                    body={"track_id": "1", "racer_username": racer})
+        race_id = race["race_id"]
+        path = f"/api/events/{event_id}/races/{race_id}"
+        for kind in ("start", "capture_lap", "capture_lap", "end", "submit"):
+            call(url, "POST", path + "/commands", token=token, body={"kind": kind})
+        call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 9_120 + 211 * n, "is_valid": True})
+        call(url, "PUT", path + "/laps/1", token=token, body={"time_ms": 9_480 + 157 * n, "is_valid": True})
+    create_user(live_stack, "gallery-live", "racer")
+    live = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                body={"track_id": "1", "racer_username": "gallery-live"})
+    call(url, "POST", f"/api/events/{event_id}/races/{live['race_id']}/commands", token=token, body={"kind": "start"})
+    return {"event_id": event_id, "race_id": race_id}
+
+
+def public_pages(event: dict[str, str]) -> dict[str, str]:
+    event_id = event["event_id"]
+    return {"login": "/login", "signup": "/signup", "event-landing": f"/event/{event_id}",
+            "leaderboard": f"/leaderboard/{event_id}?track=1",
+            "overlay-chroma": f"/overlay/{event_id}?track=1&chroma=1",
+            "stats": "/stats", "league": "/league/reinvent_base"}
+
+
+# The stream overlay is an OBS browser source: a 1920×1080 canvas by design, never opened on a tablet or a phone.
+STREAM_CANVAS_ONLY = {"overlay-chroma"}
+
+
+def staff_pages(event: dict[str, str]) -> dict[str, str]:
+    event_id, race_id = event["event_id"], event["race_id"]
+    return {"home-admin": "/", "console-events": "/console/events", "console-event-new": "/console/events/new",
+            "console-event-edit": f"/console/events/{event_id}/edit",
+            "console-overlay-link": f"/console/events/{event_id}/overlay", "console-fleets": "/console/fleets",
+            "console-cars": "/console/cars", "console-models": "/console/models", "console-races": "/console/races",
+            "console-race-edit": f"/console/races/{event_id}/{race_id}", "console-timekeeper": "/console/timekeeper",
+            "console-timekeeper-track": f"/console/timekeeper/{event_id}/1",
+            "console-registration": "/console/registration", "console-users": "/console/users",
+            "commentator": f"/commentator/{event_id}", "registry": "/models/registry"}
+
+
+RACER_PAGES = {"home-racer": "/", "my-models": "/console/my-models", "my-races": "/console/my-races",
+               "profile": "/console/profile", "booth": "/booth"}
+
+
+def sign_in(page: Any, url: str, username: str, password: str) -> None:
+    page.goto(url + "/login")
+    page.fill("#username", username)
+    page.fill("#password", password)
+    page.get_by_role("button", name="Sign in").click()
+    page.wait_for_url(url + "/")
+
+
+def look_at_every_page(chromium: Any, url: str, pages: dict[str, str], *, user: tuple[str, str] | None) -> list[str]:
+    """Opens each page at each size; returns what a person would notice is wrong (empty when all is well)."""
+    GALLERY.mkdir(parents=True, exist_ok=True)
+    problems: list[str] = []
+    for size in SIZES:
+        context = chromium.new_context(viewport=size)
+        context.set_default_timeout(15_000)
+        page = context.new_page()
+        if user:
+            sign_in(page, url, *user)
+        errors: list[str] = []
+        page.on("console", lambda message, errors=errors: errors.append(f"console: {message.text}")
+                if message.type == "error" else None)
+        page.on("pageerror", lambda error, errors=errors: errors.append(f"script: {error}"))
+        page.on("response", lambda response, errors=errors: errors.append(
+            f"{response.status} {response.url}") if response.status >= 400 else None)
+        for name, path in pages.items():
+            if name in STREAM_CANVAS_ONLY and size != BIG_SCREEN:
+                continue
+            errors.clear()
+            answer = page.goto(url + path, wait_until="load")
+            page.wait_for_timeout(400)  # live regions subscribe and swap in; the screenshot shows the settled page
+            where = f"{name} at {size['width']}x{size['height']}"
+            if answer is None or answer.status != 200:
+                problems.append(f"{where}: answered {answer.status if answer else 'nothing'}")
+            spill = page.evaluate("() => document.scrollingElement.scrollWidth - window.innerWidth")
+            if spill > 1:
+                problems.append(f"{where}: {spill}px wider than the screen (sideways scrolling)")
+            problems.extend(f"{where}: {error}" for error in errors)
+            page.screenshot(path=str(GALLERY / f"{name}-{size['width']}x{size['height']}.png"))
+        context.close()
+    return problems
+
+
+def test_public_pages_fit_every_screen_without_errors(chromium, app_url, gallery_event):
+    assert look_at_every_page(chromium, app_url, public_pages(gallery_event), user=None) == []
+
+
+def test_staff_pages_fit_every_screen_without_errors(chromium, app_url, live_stack, gallery_event):
+    admin = (live_stack.admin_username, live_stack.admin_password)
+    problems = look_at_every_page(chromium, app_url, staff_pages(gallery_event), user=admin)
+    assert problems == [], "\n".join(problems)
+
+
+def test_racer_pages_fit_every_screen_without_errors(chromium, app_url, gallery_event):
+    assert look_at_every_page(chromium, app_url, RACER_PAGES, user=("gallery-ana", PASSWORD)) == []
