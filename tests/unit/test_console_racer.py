@@ -172,7 +172,7 @@ def test_a_racer_scrutineers_a_model_from_my_models_and_sees_the_result(app: Any
 
     assert driven.status_code == 200, text(driven)
     shown = text(driven)
-    assert re.search(r"(passed|failed) on REINVENT_2018: [01]/1 laps completed, best lap .+, \d+ off-tracks?", shown)
+    assert re.search(r"(passed|failed) on re:Invent 2018: [01]/1 laps completed, best lap .+, \d+ off-tracks?", shown)
     assert "scrutineer-result" in body(ada.get(f"/console/my-models/{model['model_id']}/row"))  # kept on the model
     bad = post(ada, f"/console/models/{model['model_id']}/scrutineer", {"laps": "9"}, htmx=True)
     assert bad.status_code == 400 and "laps" in text(bad).lower()

@@ -18,7 +18,7 @@ def _trail(html: str) -> list[dict[str, str]]:
     assert table, "the page shows no audit trail"
     rows = []
     for row in re.findall(r'<tr data-action="(\w+)">(.*?)</tr>', table.group(0), re.S):
-        cells = [text_of(c).strip() for c in re.findall(r"<td>(.*?)</td>", row[1], re.S)]
+        cells = [text_of(c).strip() for c in re.findall(r"<td[^>]*>(.*?)</td>", row[1], re.S)]
         rows.append(dict(zip(["when", "who", "what", "racer", "lap", "before", "after"], cells, strict=True),
                          action=row[0]))
     return rows
