@@ -79,6 +79,7 @@ class StreamProbe:
 
         self._arrivals: list[tuple[float, str]] = []
         self._lock = threading.Lock()
+        self._closed = threading.Event()
         self._response = requests.get(stream_url, stream=True, timeout=(5, 120), proxies={"http": "", "https": ""},
                                       headers={"Accept": "text/event-stream", "Accept-Encoding": "identity"})
         if self._response.status_code != 200:
@@ -86,6 +87,13 @@ class StreamProbe:
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
+        try:
+            self._read_messages()
+        except Exception:
+            if not self._closed.is_set():  # closing the stream at the end ends the read with an error: expected
+                raise
+
+    def _read_messages(self) -> None:
         buffer = b""
         for chunk in self._response.iter_content(chunk_size=None):
             buffer += chunk
@@ -108,6 +116,7 @@ class StreamProbe:
         return timeout_s * 1000
 
     def close(self) -> None:
+        self._closed.set()
         self._response.close()
 
 
