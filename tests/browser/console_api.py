@@ -50,3 +50,24 @@ def sign_in(page: Any, url: str, username: str) -> None:
     page.fill("#password", PASSWORD)
     page.get_by_role("button", name="Sign in").click()
     page.wait_for_url(url + "/")
+
+
+def submitted_race(url: str, token: str, event_id: str, racer: str, laps_ms: list[int], track_id: str = "1") -> str:
+    """A race run by hand on the timekeeper's commands (start, one capture per lap, end, submit), its laps then set to
+    `laps_ms` by the staff's lap edit, as a timekeeper corrects hand-captured times. Returns the race id."""
+    race_id: str = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                        body={"track_id": track_id, "racer_username": racer})["race_id"]
+    path = f"/api/events/{event_id}/races/{race_id}"
+    for kind in ("start", *["capture_lap"] * len(laps_ms), "end", "submit"):
+        call(url, "POST", path + "/commands", token=token, body={"kind": kind})
+    for lap_id, time_ms in enumerate(laps_ms):
+        call(url, "PUT", f"{path}/laps/{lap_id}", token=token, body={"time_ms": time_ms, "is_valid": True})
+    return race_id
+
+
+def running_race(url: str, token: str, event_id: str, racer: str, track_id: str = "1") -> str:
+    """A race started and left running (the "Now racing" bar). Returns the race id."""
+    race_id: str = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+                        body={"track_id": track_id, "racer_username": racer})["race_id"]
+    call(url, "POST", f"/api/events/{event_id}/races/{race_id}/commands", token=token, body={"kind": "start"})
+    return race_id

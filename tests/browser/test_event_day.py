@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.console_api import PASSWORD, access_token, call, create_user, sign_in
+from tests.browser.console_api import PASSWORD, access_token, call, create_user, running_race, sign_in, submitted_race
 
 pytestmark = pytest.mark.browser
 
@@ -35,26 +35,13 @@ def event_day(live_stack: Any) -> dict[str, Any]:
     for n, racer in enumerate(racers):
         call(url, "POST", "/api/users", token=admin_token(live_stack), expect=201,
              body={"username": racer, "email": f"{racer}@example.test", "country_code": "DE"})
-        race = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                    body={"track_id": "1", "racer_username": racer})
-        path = f"/api/events/{event_id}/races/{race['race_id']}"
-        for kind in ("start", "capture_lap", "end", "submit"):
-            call(url, "POST", path + "/commands", token=token, body={"kind": kind})
-        call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 8_000 + 137 * n, "is_valid": True})
+        submitted_race(url, token, event_id, racer, [8_000 + 137 * n])
     # A racer who can sign in, with one submitted race of 8.838 s.
     create_user(live_stack, "day-mine", "racer")
-    mine = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                body={"track_id": "1", "racer_username": "day-mine"})
-    mine_path = f"/api/events/{event_id}/races/{mine['race_id']}"
-    for kind in ("start", "capture_lap", "capture_lap", "end", "submit"):
-        call(url, "POST", mine_path + "/commands", token=token, body={"kind": kind})
-    call(url, "PUT", mine_path + "/laps/0", token=token, body={"time_ms": 8_838, "is_valid": True})
-    call(url, "PUT", mine_path + "/laps/1", token=token, body={"time_ms": 9_101, "is_valid": True})
+    mine = submitted_race(url, token, event_id, "day-mine", [8_838, 9_101])
     create_user(live_stack, "day-live", "racer")
-    live = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                body={"track_id": "1", "racer_username": "day-live"})
-    call(url, "POST", f"/api/events/{event_id}/races/{live['race_id']}/commands", token=token, body={"kind": "start"})
-    return {"event_id": event_id, "racers": racers + ["day-mine"], "token": token, "mine": mine["race_id"]}
+    running_race(url, token, event_id, "day-live")
+    return {"event_id": event_id, "racers": racers + ["day-mine"], "token": token, "mine": mine}
 
 
 _admin: dict[str, str] = {}

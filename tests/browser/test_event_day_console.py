@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 import requests
 
-from tests.browser.console_api import PASSWORD, access_token, call, cognito, create_user, sign_in
+from tests.browser.console_api import PASSWORD, access_token, call, cognito, create_user, sign_in, submitted_race
 from tests.browser.test_event_day import SCREENSHOTS
 from tests.unit.models_helpers import onnx_archive
 
@@ -36,12 +36,7 @@ def console_day(live_stack: Any) -> dict[str, Any]:
                    {"track_id": "2", "leaderboard_title": "Side stage"}]})
     event_id = event["event_id"]
     create_user(live_stack, "tab-racer", "racer")
-    race = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                body={"track_id": "1", "racer_username": "tab-racer"})
-    path = f"/api/events/{event_id}/races/{race['race_id']}"
-    for kind in ("start", "capture_lap", "capture_lap", "end", "submit"):
-        call(url, "POST", path + "/commands", token=token, body={"kind": kind})
-    call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 9_321, "is_valid": True})
+    submitted_race(url, token, event_id, "tab-racer", [9_321, 9_876])
     code = call(url, "POST", "/api/devices/activation-codes", token=token, expect=201, body={
         "fleet_id": fleet["fleet_id"], "hostname": "tablet-car-with-a-long-hostname", "device_kind": "car"})["code"]
     credential = call(url, "POST", "/api/devices/activate", expect=201, body={

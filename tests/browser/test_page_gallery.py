@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.console_api import PASSWORD, access_token, call, create_user
+from tests.browser.console_api import PASSWORD, access_token, call, create_user, running_race, submitted_race
 
 pytestmark = pytest.mark.browser
 
@@ -38,18 +38,9 @@ def gallery_event(live_stack: Any) -> dict[str, str]:
         create_user(live_stack, racer, "racer")
         call(url, "PUT", "/api/me/profile", token=access_token(live_stack, racer), expect=(200, 201),
              body={"country_code": country})
-        race = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                    body={"track_id": "1", "racer_username": racer})
-        race_id = race["race_id"]
-        path = f"/api/events/{event_id}/races/{race_id}"
-        for kind in ("start", "capture_lap", "capture_lap", "end", "submit"):
-            call(url, "POST", path + "/commands", token=token, body={"kind": kind})
-        call(url, "PUT", path + "/laps/0", token=token, body={"time_ms": 9_120 + 211 * n, "is_valid": True})
-        call(url, "PUT", path + "/laps/1", token=token, body={"time_ms": 9_480 + 157 * n, "is_valid": True})
+        race_id = submitted_race(url, token, event_id, racer, [9_120 + 211 * n, 9_480 + 157 * n])
     create_user(live_stack, "gallery-live", "racer")
-    live = call(url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
-                body={"track_id": "1", "racer_username": "gallery-live"})
-    call(url, "POST", f"/api/events/{event_id}/races/{live['race_id']}/commands", token=token, body={"kind": "start"})
+    running_race(url, token, event_id, "gallery-live")
     return {"event_id": event_id, "race_id": race_id}
 
 

@@ -10,34 +10,15 @@ missing record says which file was looked for and what writes it.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from drem_local.api_client import ApiClient
+from tests.cli.test_installed_cli import drem, ok
 
 pytestmark = pytest.mark.integration
 
-DREM = Path(sys.executable).parent / "drem"
-REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-def drem(*args: str, cwd: Path, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    """The installed `drem`, from `cwd` (outside the repo), without PYTHONPATH or a DREM_STAGE of the caller's."""
-    assert REPO_ROOT not in cwd.resolve().parents, "these tests must run from outside the repository"
-    full_env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "DREM_STAGE")}
-    full_env.update(env or {})
-    return subprocess.run([str(DREM), *args], cwd=cwd, env=full_env, capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def ok(result: subprocess.CompletedProcess) -> str:
-    assert result.returncode == 0, f"exit {result.returncode}\nstdout:\n{result.stdout}\nstderr:\n{result.stderr}"
-    assert "Traceback" not in result.stderr, result.stderr
-    return result.stdout
 
 
 def record_deployment(folder: Path, stage: str, public_url: str, outputs) -> None:

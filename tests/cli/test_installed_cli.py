@@ -26,9 +26,10 @@ SAMPLE_MODEL = REPO_ROOT / "sim" / "drem_sim" / "samples" / "drem-bc-oval.tar.gz
 
 
 def drem(*args: str, cwd: Path, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    """The installed `drem`, from `cwd` (outside the repo), with the user's environment minus any PYTHONPATH."""
+    """The installed `drem`, from `cwd` (outside the repo), with the user's environment minus any PYTHONPATH or
+    DREM_STAGE (a stage of the caller's would pick another deployment record)."""
     assert REPO_ROOT not in cwd.resolve().parents, "these tests must run from outside the repository"
-    full_env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    full_env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "DREM_STAGE")}
     full_env.update(env or {})
     return subprocess.run([str(DREM), *args], cwd=cwd, env=full_env, capture_output=True, text=True,
                           timeout=timeout)
