@@ -15,7 +15,6 @@ from tests.unit.models_helpers import onnx_archive
 pytestmark = pytest.mark.browser
 
 TABLET_PORTRAIT = {"width": 768, "height": 1024}
-TABLET_LANDSCAPE = {"width": 1024, "height": 768}
 DESKTOP = {"width": 1920, "height": 1080}
 FOREVER = "re:Invent 2024 · Forever Raceway"
 
@@ -120,80 +119,3 @@ def test_an_admin_confirms_a_sign_up_whose_emailed_code_never_came_and_the_racer
     assert racer.locator("h1").first.inner_text().strip() != "Not allowed"
     racer.context.close()
     context.close()
-
-
-# --- item 7: console errors (a favicon 403/404 on every page) -------------------------------------------------------
-
-def watch(page: Any) -> list[str]:
-    """Everything that shows up red in the browser's console: errors logged, requests that failed, answers >= 400."""
-    problems: list[str] = []
-    page.on("console", lambda message: problems.append(f"console {message.type}: {message.text}")
-            if message.type in ("error", "assert") else None)
-    page.on("pageerror", lambda error: problems.append(f"uncaught: {error}"))
-    page.on("requestfailed", lambda request: problems.append(f"failed: {request.url} {request.failure}"))
-    page.on("response", lambda response: problems.append(f"{response.status}: {response.url}")
-            if response.status >= 400 else None)
-    return problems
-
-
-@pytest.mark.parametrize("path", ["/console/events", "/console/timekeeper/{event_id}/1", "/leaderboard/{event_id}",
-                                  "/leaderboard/{event_id}?track=1&page_seconds=2"])
-def test_the_console_and_the_public_board_load_without_a_console_error(chromium, console_day, app_url, path):
-    context = chromium.new_context(viewport=DESKTOP)
-    if path.startswith("/console"):
-        sign_in(context.new_page(), app_url, "tab-op")
-    # A fresh tab (the context's session cookie): nothing of the sign-in's own page loads, or is cut off, in it.
-    page = context.new_page()
-    problems = watch(page)
-    page.goto(app_url + path.format(event_id=console_day["event_id"]))
-    page.wait_for_load_state("load")
-    page.wait_for_timeout(3_000)  # the pages' own polls and pushes, and a board page turn, happen meanwhile
-    # The browser asks for /favicon.ico on its own unless the page names an icon; either way it must be there.
-    icon = page.evaluate("() => document.querySelector('link[rel~=icon]')?.href")
-    assert icon and requests.get(icon, timeout=10).status_code == 200
-    assert requests.get(app_url + "/favicon.ico", timeout=10).status_code == 200
-    seen = list(problems)
-    context.close()
-    assert seen == [], seen
-
-
-# --- tablet layout: no sideways scrolling on the main console pages -------------------------------------------------
-
-def overflow(page: Any) -> dict[str, Any]:
-    """How far the page is wider than the window, and the elements that stick out past its right edge."""
-    return page.evaluate("""() => {
-        const width = window.innerWidth;
-        const wide = [...document.querySelectorAll('body *')].filter(el => {
-            const box = el.getBoundingClientRect();
-            return box.width > 0 && box.right > width + 1 && !el.closest('.table-scroll');
-        }).slice(0, 8).map(el => {
-            const named = typeof el.className === 'string' && el.className;
-            const classes = named ? '.' + el.className.split(' ').join('.') : '';
-            return `${el.tagName.toLowerCase()}${el.id ? '#' + el.id : ''}${classes}` +
-                   ` right=${Math.round(el.getBoundingClientRect().right)}`;
-        });
-        return {scroll: document.scrollingElement.scrollWidth, inner: width, wide};
-    }""")
-
-
-@pytest.mark.parametrize("size", [TABLET_PORTRAIT, TABLET_LANDSCAPE], ids=["768x1024", "1024x768"])
-def test_the_main_console_pages_fit_a_tablet(chromium, console_day, app_url, size):
-    context = chromium.new_context(viewport=size)
-    page = context.new_page()
-    sign_in(page, app_url, "tab-op")
-    misfits = {}
-    event_id = console_day["event_id"]
-    for name, path in (("events", "/console/events"), ("timekeeper", f"/console/timekeeper/{event_id}/1"),
-                       ("timekeeper-pick", "/console/timekeeper"), ("models", "/console/models"),
-                       ("cars", "/console/cars"), ("fleets", "/console/fleets"),
-                       ("event-form", f"/console/events/{event_id}/edit")):
-        page.goto(app_url + path)
-        page.wait_for_load_state("load")
-        page.wait_for_timeout(500)  # fonts, flags and the first poll's swap laid out
-        found = overflow(page)
-        if found["scroll"] > found["inner"]:
-            misfits[name] = found
-        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(SCREENSHOTS / f"tablet-{name}-{size['width']}.png"), full_page=True)
-    context.close()
-    assert misfits == {}, misfits
