@@ -76,16 +76,19 @@ class PasswordPolicy:
     temporary_password_validity_days: int = 2
 
     def random_password(self, length: int = 16) -> str:
-        """A random password this policy accepts: one character of each required class, the rest from all of them."""
+        """A random password this policy accepts: one character of each required class, the rest from all of them.
+
+        It starts with a letter: a password starting with "-" is read as an option by `drem --password -x…`, and
+        people copy these from a terminal into a command line."""
         classes = [chars for chars, required in ((string.ascii_lowercase, self.require_lowercase),
                                                  (string.ascii_uppercase, self.require_uppercase),
                                                  (string.digits, self.require_digits),
                                                  (PASSWORD_SYMBOLS, self.require_symbols)) if required]
         alphabet = string.ascii_letters + string.digits + PASSWORD_SYMBOLS
         chars = [secrets.choice(c) for c in classes]
-        chars += [secrets.choice(alphabet) for _ in range(max(length, self.minimum_length) - len(chars))]
+        chars += [secrets.choice(alphabet) for _ in range(max(length, self.minimum_length) - len(chars) - 1)]
         secrets.SystemRandom().shuffle(chars)
-        return "".join(chars)
+        return secrets.choice(string.ascii_letters) + "".join(chars)
 
 
 @dataclass(frozen=True)
