@@ -13,11 +13,10 @@ the physics and track lookups do), OpenCV perspective warps (the camera) and a s
 part. `rtf_at_ref100` is the real-time factor scaled to a machine on which the reference takes 100 ms: compare
 that figure across machines, the raw rtf only within one.
 
-    .venv/bin/python bench/sim.py [--track reinvent_base] [--sim-seconds 240] [--supersample 1]
+    .venv/bin/python bench/sim.py [--track reinvent_base] [--sim-seconds 240] [--supersample 2]
 
-`--supersample 1` renders the camera at the model's input size directly instead of 2x then shrunk: about a
-third of the camera's time, but the frames differ from the ones every model was trained on (see docs/sim.md),
-so it is a measured option, not the default.
+`--supersample 2` renders the camera at twice the model's input size and shrinks it, as the simulator did before
+2026-11-26: three times the camera's time, and not the frames the sample models are now trained on (docs/sim.md).
 """
 from __future__ import annotations
 
@@ -90,11 +89,14 @@ def reference_workload_ms(repeats: int = 3) -> float:
 
 
 def main() -> int:
+    from drem_sim.camera import CameraConfig
+
+    default_frames = CameraConfig().supersample
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--track", default="reinvent_base")
     parser.add_argument("--sim-seconds", type=float, default=240.0)
-    parser.add_argument("--supersample", type=int, choices=(1, 2), default=2,
-                        help="camera supersampling (2 = the simulator's default frames)")
+    parser.add_argument("--supersample", type=int, choices=(1, 2), default=default_frames,
+                        help=f"camera supersampling ({default_frames} = the simulator's default frames)")
     parser.add_argument("--archive", type=Path, help="model archive (default: the newest in sim/drem_sim/samples)")
     args = parser.parse_args()
 
@@ -109,7 +111,6 @@ def main() -> int:
     import numpy as np
     import torch
 
-    from drem_sim.camera import CameraConfig
     from drem_sim.env import EnvConfig, RaceEnv
     from drem_sim.learn.package import ONNX_MEMBER, read_model_files
     from drem_sim.learn.pilot import OnnxPilot
@@ -172,14 +173,14 @@ def main() -> int:
           f"on 1 core; laps {env.laps}, resets {env.resets}")
     print(f"per frame    sim+camera+ort {wall_s / steps * 1e3:.3f} ms wall, {cpu_s / steps * 1e3:.3f} ms CPU "
           f"(camera supersample {args.supersample}"
-          f"{'' if args.supersample == 2 else ': NOT the default frames'})")
+          f"{'' if args.supersample == default_frames else ': NOT the default frames'})")
     print(f"reference    median {reference_ms:.1f} ms of {len(reference_samples)} runs interleaved with the loop "
           f"(min {min(reference_samples):.1f}, max {max(reference_samples):.1f}); "
           f"rtf {rtf:.0f}x = {rtf_at_ref100:.0f}x on a machine where the reference takes {REFERENCE_TARGET_MS:.0f} ms")
     print(f"onnxruntime  p50 {ort_p50:.3f} ms  p99 {ort_p99:.3f} ms")
     print(f"torch eager  p50 {torch_p50:.3f} ms  p99 {torch_p99:.3f} ms  (max |torch - ort| {max_difference:.1e})")
     met = rtf >= 100 and ort_p99 <= 1.0 and speedup >= 2
-    label = "sim" if args.supersample == 2 else f"sim (camera supersample {args.supersample})"
+    label = "sim" if args.supersample == default_frames else f"sim (camera supersample {args.supersample})"
     load = "/".join(f"{value:.1f}" for value in os.getloadavg())
     print(f"RESULT {label}: rtf={rtf:.0f}x ref={reference_ms:.0f}ms rtf_at_ref100={rtf_at_ref100:.0f}x "
           f"rtf_cpu={rtf_cpu:.0f}x ort_p99={ort_p99:.3f}ms speedup={speedup:.1f}x load={load} "

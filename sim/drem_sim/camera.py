@@ -2,8 +2,10 @@
 
 The track is drawn once, top-down, into a grayscale texture (dark road, white borders, a dashed
 centre line, grass around). A pinhole camera looking at the flat ground plane is a homography,
-so each frame is one `cv2.warpPerspective` of that texture, rendered at `supersample`x and shrunk
-with INTER_AREA (thin far lines alias otherwise). Rows above the horizon get a constant sky value.
+so each frame is one `cv2.warpPerspective` of that texture at the model's input size. `supersample=2` renders
+at twice the size and shrinks with INTER_AREA, which smooths the farthest centre-line dashes a little but costs
+three times as much; frames differ from 1x ones by about one grey level on average (docs/sim.md, "1x frames").
+Rows above the horizon get a constant sky value.
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ class CameraConfig:
     pitch_deg: float = 15.0  # down
     mount_forward: float = 0.092  # m ahead of the car origin
     mount_height: float = 0.115  # m above the ground: 0.08 above the chassis + chassis height
-    supersample: int = 2
+    supersample: int = 1  # 2 until 2026-11-26: the simulator's speed goal needed the camera's third back
     texture_px_per_m: float = 200.0
     border_width: float = 0.05  # m (2 in tape)
     dash_width: float = 0.05

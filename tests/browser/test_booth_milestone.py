@@ -1,6 +1,7 @@
 """The learning booth's first milestone in a real browser: a racer drives the oval with the keyboard → presses Train →
 the booth trainer (the worker `drem up` starts) makes v0001, which is validated, scrutineered and drives an autonomous
-run → its metrics are computed → the model registry shows v0001 with them. Small on purpose (one short drive, two
+run → its metrics are computed → the model registry shows v0001 with them → an operator sends the racer's active
+version to a car from the booth. Small on purpose (one short drive, two
 epochs), so it fits in CI."""
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from drem_local import stack as local_stack
-from tests.browser.console_api import create_user, sign_in
+from tests.browser.console_api import access_token, call, create_user, sign_in
 
 pytestmark = pytest.mark.browser
 
@@ -85,3 +86,29 @@ def test_drive_train_race_and_see_v0001_with_its_metrics(app_url, live_stack, pa
     assert f"drem_oval: {float(completion.removesuffix(' %')):.0f} % complete" in row.inner_text()
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "booth-registry.png"), full_page=True)
+
+    # Staff send the racer's active version to a car from the booth (asked first unless it passed scrutineering).
+    operator = create_user(live_stack, f"booth.op.{secrets.token_hex(3)}", "operator")
+    token = access_token(live_stack, operator)
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": f"Booth {operator}"}, expect=201)
+    hostname = f"booth-car-{secrets.token_hex(2)}"
+    code = call(app_url, "POST", "/api/devices/activation-codes", token=token, expect=201,
+                body={"fleet_id": fleet["fleet_id"], "hostname": hostname, "device_kind": "car"})["code"]
+    call(app_url, "POST", "/api/devices/activate", expect=201,
+         body={"code": code, "hostname": hostname, "device_kind": "car"})
+    page.context.clear_cookies()
+    sign_in(page, app_url, operator)
+    page.goto(app_url + "/booth?everyone=true")
+    active = page.locator(f'[data-testid=active-row][data-racer="{username}"]')
+    assert "v0001" in active.inner_text()
+    active.get_by_role("combobox").select_option(label=f"{hostname} (offline)")
+    active.get_by_test_id("send-to-car").click()
+    status = page.get_by_test_id("car-status")
+    status.get_by_text("Models sent to the car.").or_(status.get_by_test_id("send-anyway")).wait_for()
+    if status.get_by_test_id("send-anyway").count():
+        assert f"{username} – v0001:" in status.get_by_test_id("scrutiny-warning").inner_text()
+        status.get_by_test_id("send-anyway").click()
+        status.get_by_text("Models sent to the car.").wait_for()
+    sent = status.locator('[data-testid=car-model-row][data-model-name="v0001"]')
+    assert sent.get_by_test_id("car-model-status").inner_text() == "assigned"
+    page.screenshot(path=str(ARTIFACTS / "booth-send-to-car.png"), full_page=True)

@@ -11,7 +11,7 @@ import pytest
 
 from chalicelib.domain.booth_runs import compute_metrics, parse_controls
 from chalicelib.domain.errors import InvalidInput
-from tests.unit.models_helpers import ModelsApi, bearer, onnx_archive
+from tests.unit.models_helpers import ModelsApi, activate_device, bearer, make_fleet, onnx_archive
 
 pytestmark = pytest.mark.unit
 
@@ -157,14 +157,27 @@ def test_training_jobs_queue_in_order_and_a_trained_archive_becomes_the_next_ver
     assert alice.call("POST", f"/api/models/{model.model_id}/active").status_code == 200
     page = client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
     assert 'data-version="v0001"' in page and 'data-testid="active-version"' in page
-    # Staff see each driver's active version and reach the console's assign-to-car flow filtered to that racer.
-    staff = client.http.get("/booth?everyone=true", headers={"Authorization": operator.headers["Authorization"]})
-    html = staff.body.decode()
+    # Staff see each driver's active version with a form that sends exactly that version to a chosen car (through
+    # the console's assign flow, which asks first when it has not passed scrutineering).
+    staff_headers = {"Authorization": operator.headers["Authorization"]}
+    no_cars = client.http.get("/booth?everyone=true", headers=staff_headers).body.decode()
+    row = no_cars[no_cars.index('data-racer="alice"'):]
+    assert "Activate a car first" in row[:row.index("</tr>")]
+    car = activate_device("booth-car", make_fleet("booth-fleet"))
+    html = client.http.get("/booth?everyone=true", headers=staff_headers).body.decode()
     row = html[html.index('data-racer="alice"'):]
-    assert "v0001" in row[:row.index("</tr>")] and 'href="/console/models?racer=alice"' in row[:row.index("</tr>")]
-    console = client.http.get("/console/models?racer=alice",
-                              headers={"Authorization": operator.headers["Authorization"]})
-    assert console.status_code == 200 and "v0001" in console.body.decode()
+    row = row[:row.index("</tr>")]
+    assert "v0001" in row and 'hx-post="/console/models/assign"' in row
+    assert f'name="model_ids" value="{model.model_id}"' in row
+    assert f'<option value="{car.device_id}">booth-car (offline)</option>' in row
+    assert client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode() \
+        .count('data-testid="send-active"') == 0  # a racer does not send to cars
+    # Everyone's jobs name their racer, on the page and in the fragment the page polls; a racer's own never do.
+    assert '<span data-testid="job-racer">alice</span>' in html
+    polled = client.http.get("/booth/jobs?everyone=true", headers=staff_headers).body.decode()
+    assert '<span data-testid="job-racer">alice</span>' in polled
+    own = client.http.get("/booth/jobs?everyone=true", headers={"Authorization": alice.headers["Authorization"]})
+    assert 'data-testid="job"' in own.body.decode() and "job-racer" not in own.body.decode()
 
 
 def test_a_worker_that_died_leaves_its_job_queued_again(alice: ModelsApi) -> None:

@@ -13,6 +13,7 @@ from chalicelib import services
 from chalicelib.auth.access import SIGNED_IN, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.booth_runs import ListRunsQuery
+from chalicelib.domain.racer_models import MODEL_STAFF
 from chalicelib.views import booth_views
 from drem_web import render
 
@@ -28,7 +29,7 @@ class TrainForm(BaseModel):
 def booth(principal: User, query: ListRunsQuery) -> Response:
     """The booth: tracks to drive, your runs, training jobs and model versions"""
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), everyone=query.everyone)
+                                  services.track_service(), services.device_service(), everyone=query.everyone)
     return render.page("booth", view=view)
 
 
@@ -36,7 +37,7 @@ def booth(principal: User, query: ListRunsQuery) -> Response:
 def booth_jobs(principal: User, query: ListRunsQuery) -> Response:
     """Your training jobs (htmx fragment, polled while one is queued or running)"""
     jobs = booth_views.jobs_view(principal, services.training_service(), everyone=query.everyone)
-    return render.fragment("booth_jobs", jobs=jobs)
+    return render.fragment("booth_jobs", jobs=jobs, everyone=query.everyone and bool(principal.roles & MODEL_STAFF))
 
 
 @route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)
@@ -66,5 +67,5 @@ def booth_make_active(principal: User, model_id: str) -> Response:
     """Mark one of your versions active (htmx; answers the booth page)"""
     services.training_service().set_active(principal, model_id)
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), everyone=False)
+                                  services.track_service(), services.device_service(), everyone=False)
     return render.page("booth", view=view)

@@ -10,6 +10,7 @@ from chalicelib.auth.principals import Principal
 from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
+from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
 
@@ -27,10 +28,11 @@ class BoothView:
     aggregates: list[dict[str, Any]]
     trainable: int  # finished manual runs of the caller
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
+    cars: list[DeviceView]  # staff: the cars an active version can be sent to
 
 
-def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService, *,
-               everyone: bool) -> BoothView:
+def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService,
+               devices: DeviceService, *, everyone: bool) -> BoothView:
     everyone = everyone and bool(principal.roles & MODEL_STAFF)
     query = ListRunsQuery(everyone=everyone)
     mine = runs.list_runs(principal, query)
@@ -43,7 +45,8 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
                      jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [])
+                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [],
+                     cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [])
 
 
 def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
