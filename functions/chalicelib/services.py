@@ -319,4 +319,4 @@ def training_service(settings: Settings | None = None) -> TrainingService:
 
 
 def drive_service() -> DriveService:
-    return DriveService(LIVE_DRIVES, run_service())
+    return DriveService(LIVE_DRIVES, run_service(), get_settings().drive_dir)

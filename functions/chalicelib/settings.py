@@ -100,6 +100,12 @@ class Settings(BaseModel):
         return self.token_key_file is not None
 
     @property
+    def drive_dir(self) -> Path | None:
+        """Where a local stack's app keeps the booth's live drives while they are driven: under the state dir, so a
+        drive survives the app being killed and can still be saved (chalicelib.domain.booth_drive). None on AWS."""
+        return Path(self.state_dir) / "drives" if self.endpoint_url else None
+
+    @property
     def issuer(self) -> str:
         # Cognito (and moto) always issue for the AWS host, even when the API is served from a local endpoint.
         return f"https://cognito-idp.{self.region}.amazonaws.com/{self.user_pool_id}"

@@ -42,12 +42,15 @@ class RunRecorder:
 
     def __init__(self, root: Path, track_id: str, *, direction: str, driver: str, seed: int | None,
                  camera: CameraConfig | None = None, run_id: str | None = None,
-                 started_at: dt.datetime | None = None, extra: dict[str, Any] | None = None) -> None:
+                 started_at: dt.datetime | None = None, extra: dict[str, Any] | None = None,
+                 row_by_row: bool = False) -> None:
+        """`row_by_row` hands each controls row to the OS as it is added (line buffering), so a process killed
+        mid-run leaves every row it had added on disk: the booth's live drive acknowledges each one."""
         self.started_at = started_at or dt.datetime.now(dt.UTC)
         self.run_id = run_id or new_run_id(self.started_at)
         self.path = Path(root) / track_id / f"{self.started_at:%Y-%m-%d}" / self.run_id
         (self.path / "frames").mkdir(parents=True, exist_ok=False)
-        self._controls = (self.path / "controls.jsonl").open("w")
+        self._controls = (self.path / "controls.jsonl").open("w", buffering=1 if row_by_row else -1)
         self.frames = 0
         self._meta = {"run_id": self.run_id, "track_id": track_id, "direction": direction, "driver": driver,
                       "source": "sim", "seed": seed, "camera": camera.as_dict() if camera else None, **(extra or {})}

@@ -228,3 +228,26 @@ def test_a_racer_may_hold_only_a_few_open_runs(alice: ModelsApi, bob: ModelsApi)
     assert refused.status_code == 429 and "not finished yet" in refused.json_body["error"]["message"]
     assert alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).status_code == 429
     assert bob.call("POST", "/api/runs", {"track_id": "drem_oval"}).status_code == 201  # a limit per racer
+
+
+def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsApi, tmp_path: Any) -> None:
+    """A kill -9 can cut the controls row being written: the saved run ends at the last whole row (the decisions
+    the racer saw answered), and the half row neither fails the save nor becomes a decision."""
+    from chalicelib import services
+    from chalicelib.auth.principals import User
+    from chalicelib.domain.booth_drive import DriveControl, DriveService, LiveDrives, StartDrive
+
+    live = LiveDrives()
+    service = DriveService(live, services.run_service(), tmp_path / "drives")
+    racer = User(sub="alice-sub", username="alice", groups=frozenset({"racer"}))
+    run_id = service.start(racer, StartDrive(track_id="drem_oval"))["run_id"]
+    for _ in range(7):
+        service.step(racer, run_id, DriveControl(throttle=1.0))
+    lost = live.pop(run_id)  # the process forgets it, as a killed app does; its folder stays
+    assert lost is not None
+    written = next((tmp_path / "drives" / run_id).rglob("controls.jsonl"))
+    with written.open("a") as handle:
+        handle.write('{"index": 7, "frame": "frames/000007.png", "t_ms": 4')  # cut mid-row
+    saved = service.finish(racer, run_id)
+    assert saved.status.value == "FINALISED" and saved.metrics is not None and saved.metrics.frames == 7
+    assert not (tmp_path / "drives" / run_id).exists()

@@ -10,11 +10,18 @@ Live sessions are held by the app process (`LiveDrives`): this needs a long-live
 Lambda a drive would need a sticky process (see docs/deploy.md). At most `MAX_LIVE` drive at once (each costs a
 simulator's CPU) and each racer drives one car: starting again saves the racer's earlier drive, and a session nobody
 has steered for `IDLE_S` is finished by the next start, so its run is kept.
+
+Every answered decision is on disk before its answer leaves (one controls row handed to the OS per decision, the frame
+written first). With a drive folder (`drive_dir`, the local stack's state dir) a drive the app lost, because it was
+killed or restarted, is still saved: **Finish** saves what was recorded, and the next start saves every such drive.
+The folder is `{drive_dir}/{run_id}/`: one app process per state dir (drem up refuses a second), so a folder without a
+live session in this process belongs to a drive the process lost.
 """
 from __future__ import annotations
 
 import base64
 import logging
+import re
 import shutil
 import tempfile
 import threading
@@ -27,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
 from chalicelib.auth.principals import Principal
-from chalicelib.domain.booth_runs import NewRun, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_runs import RUN_ID_PATTERN, NewRun, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN
 from chalicelib.domain.errors import Conflict, DremError, Forbidden, NotFound, RateLimited, ServiceUnavailable
 
@@ -36,6 +43,10 @@ IDLE_S = 120.0
 MAX_FRAMES = 15 * 60 * 5  # five minutes of driving
 FULL_THROTTLE_SPEED = 3.0  # m/s, as `drem sim drive`
 UPLOAD_THREADS = 4
+RUN_FOLDER = re.compile(RUN_ID_PATTERN)  # a run id: the only names made in drive_dir
+# Starting a drive (which saves lost ones) and saving a lost one run one at a time, so a folder that is being made for
+# a new drive, or being saved by one request, is never taken for a lost drive by another.
+_FOLDERS = threading.Lock()
 
 
 class StartDrive(BaseModel):
@@ -52,7 +63,7 @@ class DriveControl(BaseModel):
 class LiveDrive:
     """One racer's car on one track, recording every decision into a run folder on local disk."""
 
-    def __init__(self, record: RunRecord) -> None:
+    def __init__(self, record: RunRecord, drive_dir: Path | None = None) -> None:
         try:
             from drem_sim.env import RaceEnv
             from drem_sim.runs import RunRecorder
@@ -62,14 +73,19 @@ class LiveDrive:
         self.record = record
         self.lock = threading.Lock()
         self.last_used = time.monotonic()
-        self.folder = Path(tempfile.mkdtemp(prefix="drem-drive-"))
+        if drive_dir is None:
+            self.folder = Path(tempfile.mkdtemp(prefix="drem-drive-"))
+        else:
+            self.folder = drive_dir / record.run_id
+            self.folder.mkdir(parents=True, mode=0o700)
         self.env = RaceEnv(load_track(record.track_id))
         self.obs, info = self.env.reset(seed=0)
         self.params = info["params"]
         assert self.env.camera is not None, "RaceEnv observes by default"
         self.recorder = RunRecorder(self.folder, record.track_id, direction="forward", driver="human", seed=0,
                                     camera=self.env.camera.config, run_id=record.run_id,
-                                    extra={"track_direction": self.env.track.direction, "decision_hz": 15})
+                                    extra={"track_direction": self.env.track.direction, "decision_hz": 15},
+                                    row_by_row=True)
 
     def step(self, control: DriveControl) -> dict[str, Any]:
         with self.lock:
@@ -139,27 +155,85 @@ class LiveDrives:
 
 
 class DriveService:
-    def __init__(self, live: LiveDrives, runs: RunService) -> None:
+    def __init__(self, live: LiveDrives, runs: RunService, drive_dir: Path | None = None) -> None:
         self.live = live
         self.runs = runs
+        self.drive_dir = drive_dir
 
     def start(self, principal: Principal, request: StartDrive) -> dict[str, Any]:
         earlier = self.live.of(principal.sub or "")  # one car per racer: a new start saves the drive before it
         for stale in [*earlier, *(d for d in self.live.idle(IDLE_S) if d not in earlier)]:  # abandoned tabs too
             self._finish_quietly(stale)
-        if len(self.live) >= MAX_LIVE:
-            raise RateLimited(f"{MAX_LIVE} people are driving already; try again in a minute.", field="track_id")
-        record = self.runs.create(principal, NewRun(track_id=request.track_id, mode=RunMode.MANUAL))
-        drive = LiveDrive(record)
-        self.live.add(drive)
+        with _FOLDERS:
+            self._save_lost_drives()
+            if len(self.live) >= MAX_LIVE:
+                raise RateLimited(f"{MAX_LIVE} people are driving already; try again in a minute.", field="track_id")
+            record = self.runs.create(principal, NewRun(track_id=request.track_id, mode=RunMode.MANUAL))
+            drive = LiveDrive(record, self.drive_dir)
+            self.live.add(drive)
         return drive.state(frame=True)
 
     def step(self, principal: Principal, run_id: str, control: DriveControl) -> dict[str, Any]:
         return self._mine(principal, run_id).step(control)
 
     def finish(self, principal: Principal, run_id: str) -> RunRecord:
+        with _FOLDERS:
+            if self.live.get(run_id) is None and (folder := self._lost_folder(run_id)) is not None:
+                record = self.runs.get(principal, run_id)  # 403 for another racer's run, as for a live one
+                if record.owner_sub != principal.sub:
+                    raise Forbidden("This drive belongs to another user.")
+                return self._save_lost(record, folder)
         drive = self._mine(principal, run_id)
         return self._finish(drive)
+
+    # -- drives the process lost (killed or restarted app) ----------------------------------------------------------
+
+    def _lost_folder(self, run_id: str) -> Path | None:
+        if self.drive_dir is None or not RUN_FOLDER.fullmatch(run_id or ""):
+            return None
+        folder = self.drive_dir / run_id
+        return folder if folder.is_dir() else None
+
+    def _save_lost_drives(self) -> None:
+        if self.drive_dir is None or not self.drive_dir.is_dir():
+            return
+        for folder in sorted(self.drive_dir.iterdir()):
+            if not RUN_FOLDER.fullmatch(folder.name) or self.live.get(folder.name) is not None:
+                continue
+            record = self.runs.store.get_run(folder.name)
+            try:
+                if record is None:  # its run record was never written: nothing to save it under
+                    shutil.rmtree(folder, ignore_errors=True)
+                else:
+                    self._save_lost(record, folder)
+            except DremError as error:
+                logs.log(logging.WARNING, "lost drive not saved", run_id=folder.name, error=error.message)
+
+    def _save_lost(self, record: RunRecord, folder: Path) -> RunRecord:
+        """Upload what the lost drive recorded, up to its last whole controls row, and finalise it like a finish."""
+        try:
+            if record.status is not RunStatus.RECORDING:
+                return record  # saved already (a finish that crashed after finalising)
+            found = sorted(folder.rglob("controls.jsonl"))
+            data = found[0].read_bytes() if found else b""
+            whole = data[:data.rfind(b"\n") + 1]  # a row cut by the kill is not a decision anyone saw answered
+            if not whole:
+                return self.runs.mark(record, RunStatus.FAILED, "nothing was driven")
+            self._upload(record, found[0].parent, {"controls.jsonl": whole})
+            return self.runs.finalise_record(record)
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+
+    def _upload(self, record: RunRecord, folder: Path, replaced: dict[str, bytes] | None = None) -> None:
+        replaced = replaced or {}
+        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "metadata.json")
+
+        def put(path: Path) -> None:
+            key = path.relative_to(folder).as_posix()
+            self.runs.files.put(record.prefix + key, replaced[key] if key in replaced else path.read_bytes())
+
+        with ThreadPoolExecutor(UPLOAD_THREADS) as pool:  # ~1000 small frames: a few seconds, not a minute
+            list(pool.map(put, files))
 
     def _finish_quietly(self, drive: LiveDrive) -> None:
         try:
@@ -174,17 +248,16 @@ class DriveService:
             if drive.recorder.frames == 0:
                 drive.close()
                 return self.runs.mark(drive.record, RunStatus.FAILED, "nothing was driven")
-            folder = drive.close()
-            files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "metadata.json")
-            with ThreadPoolExecutor(UPLOAD_THREADS) as pool:  # ~1000 small frames: a few seconds, not a minute
-                list(pool.map(lambda p: self.runs.files.put(drive.record.prefix + p.relative_to(folder).as_posix(),
-                                                            p.read_bytes()), files))
+            self._upload(drive.record, drive.close())
             return self.runs.finalise_record(drive.record)
         finally:
             shutil.rmtree(drive.folder, ignore_errors=True)
 
     def _mine(self, principal: Principal, run_id: str) -> LiveDrive:
         drive = self.live.get(run_id)
+        if drive is None and self._lost_folder(run_id) is not None:
+            raise NotFound("This drive was interrupted (the server restarted): press Finish to save what you drove.",
+                           field="run_id")
         if drive is None:
             raise NotFound("There is no live drive with this run id (finished, or the server restarted).",
                            field="run_id")
