@@ -83,6 +83,9 @@ lock: | $(UV)
 	@# Lambda's python3.11 runs on Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels only.
 	$(UV) pip compile --quiet --generate-hashes --python-version 3.11 --python-platform x86_64-manylinux_2_17 \
 		$(if $(UPGRADE),--upgrade,) requirements/lambda.in --constraint $(RUNTIME_LOCK) -o requirements/lambda.txt
+	@# The learning booth's container (booth/Dockerfile): drem with the simulator and training, same platform as
+	@# the live server's below; torch is the CPU wheel (pins.txt), which the image build fetches from PyTorch's index.
+	$(UV_COMPILE) pyproject.toml --extra sim --extra train --constraint $(DEV_LOCK) -o requirements/booth.txt
 	@# The live-page server's container (live/Dockerfile): python:3.11-slim-bookworm on Fargate X86_64.
 	$(UV) pip compile --quiet --generate-hashes --python-version 3.11 --python-platform x86_64-manylinux_2_28 \
 		$(if $(UPGRADE),--upgrade,) requirements/live.in --constraint $(RUNTIME_LOCK) -o requirements/live.txt
@@ -117,7 +120,7 @@ build: install
 	$(BIN)/drem build
 
 ## make bench: every bench/ script (each ends with a RESULT line); installs wrk and nginx for the spectator benches
-## make deploy STAGE=dev: deploy to the AWS account of your default credentials (docs/deploy.md); prints the URL
+## make deploy STAGE=dev [BOOTH=1]: deploy to the AWS account of your default credentials (docs/deploy.md); prints the URL
 STAGE ?= dev
 CDK := infra_cdk/node_modules/.bin/cdk
 CDK_RUN := cd infra_cdk && JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION=20 node_modules/.bin/cdk
@@ -129,6 +132,8 @@ CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c cert
 CDK_CONTEXT += $(if $(SES_FROM)$(SES_IDENTITY_ARN),-c ses_from='$(SES_FROM)' -c ses_identity_arn=$(SES_IDENTITY_ARN),)
 # ALARM_EMAIL=ops@example.org: the stage's alarms (errors, throttling, live pages) email it (docs/deploy.md, Alarms).
 CDK_CONTEXT += $(if $(ALARM_EMAIL),-c alarm_email='$(ALARM_EMAIL)',)
+# BOOTH=1 adds the learning booth's Fargate task (docs/deploy.md, "The learning booth"): about 2.4 USD a day, always on.
+CDK_CONTEXT += $(if $(BOOTH),-c booth=true,)
 
 $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund

@@ -44,8 +44,9 @@ def main() -> None:
     context = {name: app.node.try_get_context(name) or None
                for name in ("public_url", "domain_name", "certificate_arn", "ses_from", "ses_identity_arn",
                             "alarm_email")}
+    booth = str(app.node.try_get_context("booth") or "false").lower() == "true"  # `make deploy BOOTH=1`
     try:
-        DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context,
+        DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context, booth=booth,
                   env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),
                                       region=os.environ.get("CDK_DEFAULT_REGION")))
     except ValueError as exc:  # a wrong option: say which, without a traceback

@@ -108,10 +108,13 @@ class LivePages(Construct):
             port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT)],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
         )
-        cluster = ecs.Cluster(self, "Cluster", vpc=self.vpc)
+        # The cluster, the public subnets and the load balancer's listener are shared with the learning booth's task
+        # (drem_infra.booth_service), when the stage has one.
+        self.cluster = ecs.Cluster(self, "Cluster", vpc=self.vpc)
+        self.public_subnets = ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC)
         self.service = ecs.FargateService(
-            self, "Service", cluster=cluster, task_definition=task, desired_count=MIN_TASKS,
-            assign_public_ip=True, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC),
+            self, "Service", cluster=self.cluster, task_definition=task, desired_count=MIN_TASKS,
+            assign_public_ip=True, vpc_subnets=self.public_subnets,
             min_healthy_percent=100, max_healthy_percent=200, circuit_breaker=ecs.DeploymentCircuitBreaker(
                 rollback=True))
         max_tasks = int(self.node.try_get_context("live_max_tasks") or MAX_TASKS)
@@ -126,8 +129,8 @@ class LivePages(Construct):
         self.load_balancer = elbv2.ApplicationLoadBalancer(
             self, "LoadBalancer", vpc=self.vpc, internet_facing=True, security_group=self.alb_security_group,
             idle_timeout=ALB_IDLE_TIMEOUT, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC))
-        listener = self.load_balancer.add_listener("Http", port=80, open=False)
-        self.target_group = listener.add_targets(
+        self.listener = self.load_balancer.add_listener("Http", port=80, open=False)
+        self.target_group = self.listener.add_targets(
             "Server", port=CONTAINER_PORT, protocol=elbv2.ApplicationProtocol.HTTP, targets=[self.service],
             deregistration_delay=DEREGISTRATION_DELAY,
             health_check=elbv2.HealthCheck(path=HEALTH_PATH, healthy_http_codes="200",
@@ -188,7 +191,7 @@ class LivePages(Construct):
         HTTP header in the viewer request" (CloudFront API reference, ParametersInCacheKeyAndForwardedToOrigin), so a
         policy forwarding all viewer headers passes the viewer's own Accept-Encoding to the server, and the server's
         gzip passes back untouched (`compress=False`: CloudFront compresses nothing itself)."""
-        origin = origins.LoadBalancerV2Origin(
+        self.origin = origins.LoadBalancerV2Origin(
             self.load_balancer, protocol_policy=cloudfront.OriginProtocolPolicy.HTTP_ONLY, http_port=80,
             read_timeout=ORIGIN_READ_TIMEOUT, keepalive_timeout=ORIGIN_KEEPALIVE_TIMEOUT)
         policy = cloudfront.OriginRequestPolicy(
@@ -198,6 +201,6 @@ class LivePages(Construct):
             query_string_behavior=cloudfront.OriginRequestQueryStringBehavior.all(),
             cookie_behavior=cloudfront.OriginRequestCookieBehavior.none())
         distribution.add_behavior(
-            PATH_PATTERN, origin, viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            PATH_PATTERN, self.origin, viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
             allowed_methods=cloudfront.AllowedMethods.ALLOW_GET_HEAD,
             cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=policy, compress=False)

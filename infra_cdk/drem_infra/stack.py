@@ -33,6 +33,7 @@ from aws_cdk import aws_sns_subscriptions as sns_subscriptions
 from constructs import Construct
 
 from drem_infra import permissions, resources
+from drem_infra.booth_service import BoothService
 from drem_infra.live_pages import LivePages
 from drem_infra.resources import BucketSpec, TableSpec
 
@@ -85,7 +86,7 @@ class DremStack(cdk.Stack):
                  functions_dir: Path | None = None, public_url: str | None = None,
                  domain_name: str | None = None, certificate_arn: str | None = None,
                  ses_from: str | None = None, ses_identity_arn: str | None = None,
-                 alarm_email: str | None = None, **kwargs) -> None:
+                 alarm_email: str | None = None, booth: bool = False, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
         # Every alarm of the stage notifies this one topic (see _notify_on_every_alarm).
@@ -103,6 +104,12 @@ class DremStack(cdk.Stack):
                      if self.distribution is not None else None)
         if self.live is not None and self.distribution is not None:
             self.live.serve_through(self.distribution)
+        # The learning booth (drives, training) in a container beside the live pages: opt-in, it costs by the hour.
+        self.booth = (BoothService(self, "Booth", stage=stage, environment=self.app_environment(), live=self.live,
+                                   tables=self.tables, buckets=self.buckets, user_pool=self.user_pool)
+                      if booth and self.live is not None else None)
+        if self.booth is not None and self.live is not None and self.distribution is not None:
+            self.booth.serve_through(self.distribution, self.live)
         self._notify_on_every_alarm()
         self._outputs()
 

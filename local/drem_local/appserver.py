@@ -199,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stage", default=os.environ.get("DREM_STAGE", "local"))
     parser.add_argument("--storage-url", default=None,
                         help="forward /_storage/... (presigned uploads and downloads) to this storage server")
+    parser.add_argument("--serve-only", action="store_true",
+                        help="no repair sweeps (publishes, registrations, stale uploads): the learning booth's "
+                             "container on AWS serves the booth's routes and does nothing else")
     return parser
 
 
@@ -219,8 +222,10 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper", daemon=True).start()
-    threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
+    if not args.serve_only:
+        threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper",
+                         daemon=True).start()
+        threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
     host, port = server.server.server_address[:2]
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:

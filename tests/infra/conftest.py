@@ -75,7 +75,9 @@ def templates(tmp_path_factory, lambda_build):
         app = cdk.App(outdir=str(work / "cdk.out"))
         SYNTH_OUTDIR["app"] = work / "cdk.out"
         storage_only = DremStack(app, "drem-storage", stage=STAGE)
-        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL)
+        # With the learning booth (`make deploy BOOTH=1`): every infra test, the emulated deploy included, sees it.
+        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL,
+                             booth=True)
         with functions_dir_exclusively():  # the Chalice construct packages functions/ (its .chalice/ cache too)
             app.synth()
         return Template.from_stack(storage_only), Template.from_stack(with_app)
