@@ -245,11 +245,12 @@ def scrutineer_queue(settings: Settings | None = None) -> ScrutineerQueue:
 
 def scrutiny_enqueuer(settings: Settings | None = None) -> ScrutinyEnqueuer | None:
     """New AVAILABLE models are queued for a background drive on the upcoming events' track types, where a worker
-    can drive them: the simulator is installed (the local stack). The Lambda bundle has none, so on AWS nothing is
-    queued and models stay "not scrutineered" instead of "queued" for ever."""
-    if importlib.util.find_spec("drem_sim") is None:
-        return None
+    can drive them: the simulator is installed (the local stack), or the settings say a worker runs elsewhere (on AWS
+    with the learning booth's task). Otherwise (the Lambda bundle has no simulator) nothing is queued, and models stay
+    "not scrutineered" instead of "queued" for ever."""
     settings = settings or get_settings()
+    if importlib.util.find_spec("drem_sim") is None and not settings.scrutineering_worker:
+        return None
     events = DynamoEventStore(clients.dynamodb(), settings.table("events"))
     today = lambda: datetime.fromtimestamp(now_ms() / 1000, UTC).date()  # noqa: E731 - read at call time
     return ScrutinyEnqueuer(scrutineer_queue(settings), lambda: upcoming_track_types(events.list(), today()))

@@ -4,7 +4,7 @@ booth/Dockerfile, in the live pages' VPC behind their load balancer, served thro
 Why a container and not the Lambda functions: a live drive keeps the racer's simulator in one process between control
 messages (chalicelib.domain.booth_drive.LiveDrives), 15 a second; training needs PyTorch (several hundred MB, past
 Lambda's 250 MB bundle) and minutes of CPU per job; tracks, finalising and the run pictures need the simulator, NumPy
-and OpenCV, which the Lambda bundle leaves out. So the task runs two containers of the one image:
+and OpenCV, which the Lambda bundle leaves out. So the task runs three containers of the one image:
 
 - `app`: drem_local.appserver, the Chalice app exactly as `drem up` serves it (same routes, same auth: the user pool's
   tokens and the session cookie, verified in the app). CloudFront sends it only BOOTH_PATHS; everything else stays
@@ -12,6 +12,8 @@ and OpenCV, which the Lambda bundle leaves out. So the task runs two containers 
   control messages between two processes, and only one holds the drive.
 - `trainer`: drem_local.workers.trainer, the booth's worker (one job at a time, oldest first), polling the booth
   table's queue; a job it was running when the task stopped is queued again when it starts (TrainingService).
+- `scrutineer`: drem_local.workers.scrutineer, the background test drive of every new model (issue 17): with the
+  booth, the functions queue new models for it (`DREM_SCRUTINEERING_WORKER=1` in their settings), as `drem up` does.
 
 Both get the functions' settings (`DremStack.app_environment`) and a task role with the functions' data permissions
 (tables, the models and runs buckets, the user pool's admin calls: drem_infra.permissions, which
@@ -76,7 +78,7 @@ PATTERNS_PER_RULE = 5
 
 
 class BoothService(Construct):
-    """The booth's task, its two containers, its routing from the live pages' load balancer and CloudFront."""
+    """The booth's task, its three containers, its routing from the live pages' load balancer and CloudFront."""
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str, environment: Mapping[str, str],
                  live: LivePages, tables: Mapping[str, dynamodb.Table], buckets: Mapping[str, s3.Bucket],
@@ -103,6 +105,10 @@ class BoothService(Construct):
             "Trainer", image=image, environment=settings, essential=True,
             command=["python", "-m", "drem_local.workers.trainer"],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="booth-trainer", log_group=self.log_group))
+        task.add_container(
+            "Scrutineer", image=image, environment=settings, essential=True,
+            command=["python", "-m", "drem_local.workers.scrutineer"],
+            logging=ecs.LogDrivers.aws_logs(stream_prefix="booth-scrutineer", log_group=self.log_group))
         self.service = ecs.FargateService(
             self, "Service", cluster=live.cluster, task_definition=task, desired_count=1, assign_public_ip=True,
             vpc_subnets=live.public_subnets,

@@ -89,6 +89,7 @@ class DremStack(cdk.Stack):
                  alarm_email: str | None = None, booth: bool = False, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
+        self.with_booth = booth
         # Every alarm of the stage notifies this one topic (see _notify_on_every_alarm).
         self.alarm_topic = self._alarm_topic(alarm_email)
         self.ses_from, self.ses_identity_arn = ses_from, ses_identity_arn
@@ -107,7 +108,7 @@ class DremStack(cdk.Stack):
         # The learning booth (drives, training) in a container beside the live pages: opt-in, it costs by the hour.
         self.booth = (BoothService(self, "Booth", stage=stage, environment=self.app_environment(), live=self.live,
                                    tables=self.tables, buckets=self.buckets, user_pool=self.user_pool)
-                      if booth and self.live is not None else None)
+                      if self.with_booth and self.live is not None else None)
         if self.booth is not None and self.live is not None and self.distribution is not None:
             self.booth.serve_through(self.distribution, self.live)
         self._notify_on_every_alarm()
@@ -258,6 +259,8 @@ class DremStack(cdk.Stack):
             env["DREM_PUBLIC_URL"] = self.public_url
         # The live pages' EventSource base: empty means the page's own origin (CloudFront routes /live/* to them).
         env["DREM_LIVE_URL"] = ""
+        if self.with_booth:  # its task runs the scrutineering worker, so the functions queue new models for it
+            env[resources.SCRUTINEERING_WORKER_ENV] = "1"
         return env
 
     def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:

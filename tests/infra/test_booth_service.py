@@ -35,23 +35,28 @@ def _only(found: dict[str, dict]) -> tuple[str, dict]:
     return next(iter(found.items()))
 
 
-def test_one_task_runs_the_app_server_and_the_trainer_from_one_image_never_two_at_once(app_template):
+def test_one_task_runs_the_app_server_the_trainer_and_the_scrutineer_never_two_at_once(app_template):
     _, task = _only(_booth(app_template, "AWS::ECS::TaskDefinition"))
     props = task["Properties"]
     assert (props["Cpu"], props["Memory"]) == (str(booth_service.TASK_CPU), str(booth_service.TASK_MEMORY_MIB))
     containers = {c["Name"]: c for c in props["ContainerDefinitions"]}
-    assert set(containers) == {"App", "Trainer"}
-    app, trainer = containers["App"], containers["Trainer"]
-    assert app["Image"] == trainer["Image"] and app["Essential"] and trainer["Essential"]
+    assert set(containers) == {"App", "Trainer", "Scrutineer"}
+    app, trainer, scrutineer = containers["App"], containers["Trainer"], containers["Scrutineer"]
+    assert app["Image"] == trainer["Image"] == scrutineer["Image"]
+    assert all(c["Essential"] for c in containers.values())  # one that stops replaces the task
     assert app["Command"] == ["python", "-m", "drem_local.appserver", "--host", "0.0.0.0", "--port", "8080",
                               "--stage", "test", "--serve-only"]
     assert trainer["Command"] == ["python", "-m", "drem_local.workers.trainer"]
-    assert app["PortMappings"] == [{"ContainerPort": 8080, "Protocol": "tcp"}] and "PortMappings" not in trainer
+    assert scrutineer["Command"] == ["python", "-m", "drem_local.workers.scrutineer"]
+    assert app["PortMappings"] == [{"ContainerPort": 8080, "Protocol": "tcp"}]
+    assert "PortMappings" not in trainer and "PortMappings" not in scrutineer
 
     # The functions' settings (tables, buckets, user pool, public URL), so both run the app's code against the stage.
     functions = app_template.find_resources("AWS::Serverless::Function").values()
     function_env = next(iter(functions))["Properties"]["Environment"]["Variables"]
-    for container in (app, trainer):
+    # With the booth's scrutineering worker running, the functions queue every new model for a test drive.
+    assert function_env["DREM_SCRUTINEERING_WORKER"] == "1"
+    for container in containers.values():
         env = {e["Name"]: e["Value"] for e in container["Environment"]}
         assert {k: v for k, v in env.items() if k in function_env} == function_env
         assert "AWS_DEFAULT_REGION" in env
@@ -221,7 +226,7 @@ def test_the_images_packages_serve_the_booth_routes_and_train(staged_image_conte
     """The Dockerfile's steps without Docker: its lock installed as it installs it (hashed wheels only; torch's CPU
     wheel from this machine's wheel directory instead of PyTorch's index), its COPY lines laid out under a stand-in
     /app, its PYTHONPATH. The app container's command then answers the booth's track list from the simulator, and
-    the trainer's modules and torch import."""
+    the trainer's and the scrutineer's modules and torch import."""
     context, _ = staged_image_context
     root = tmp_path / "image"
     inside = lambda path: root / path.lstrip("/")  # noqa: E731 - the image's absolute paths under the stand-in root
@@ -249,6 +254,7 @@ def test_the_images_packages_serve_the_booth_routes_and_train(staged_image_conte
 
     trainer = subprocess.run([str(venv / "bin" / "python"), "-c",
                               "import torch, drem_local.workers.trainer, drem_sim.learn.pipeline\n"
+                              "import drem_local.workers.scrutineer, drem_local.workers.scrutineer_drive\n"
                               "print(torch.__version__, drem_local.workers.trainer.__file__)"],
                              cwd=tmp_path, capture_output=True, text=True, timeout=300, env=env)
     assert trainer.returncode == 0, trainer.stderr

@@ -207,3 +207,22 @@ def test_driving_it_by_hand_takes_its_place_in_the_queue(stack: Any, aws_clients
     driven = by_hand.scrutineer(ALICE, model.model_id, ScrutineerRequest(laps=1))
     assert driven.scrutineer_status == "failed" and driven.scrutineer_state is None
     assert services.scrutineer_queue().state_of(model.model_id) is None, "no second, background drive"
+
+
+@pytest.mark.parametrize(("worker_elsewhere", "shown"), [(False, "not_scrutineered"), ("1", "queued")])
+def test_without_a_simulator_a_model_is_queued_only_where_a_worker_runs_elsewhere(
+        stack: Any, aws_clients: Any, monkeypatch: pytest.MonkeyPatch, worker_elsewhere: Any, shown: str) -> None:
+    """The functions on AWS have no simulator: alone they queue nothing (a model "queued" for ever would mislead);
+    with the learning booth's task, which runs the scrutineering worker, the stack tells them so and they queue."""
+    import importlib.util
+
+    from drem_infra.resources import SCRUTINEERING_WORKER_ENV
+
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(services.importlib.util, "find_spec",
+                        lambda name, *args: None if name == "drem_sim" else find_spec(name, *args))
+    if worker_elsewhere:
+        monkeypatch.setenv(SCRUTINEERING_WORKER_ENV, worker_elsewhere)
+    model = upload(stack, aws_clients)
+    assert services.model_service().get(ALICE, model.model_id).public()["scrutineer_status"] == shown
+    assert (services.scrutineer_queue().state_of(model.model_id) is not None) is bool(worker_elsewhere)
