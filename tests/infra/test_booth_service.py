@@ -7,16 +7,15 @@ from __future__ import annotations
 import fnmatch
 import json
 import os
-import shutil
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 from drem_infra import booth_service, live_pages, permissions
+from tests.infra import image_steps
 
 pytestmark = pytest.mark.infra
 
@@ -176,10 +175,7 @@ def staged_image_context(tmp_path_factory):
     booth_service.BoothService(stack, "Booth", stage="booth", environment=stack.app_environment(), live=live,
                                tables=stack.tables, buckets=stack.buckets, user_pool=stack.user_pool)
     app.synth()
-    manifest = json.loads((out / "drem-booth.assets.json").read_text())
-    [image] = [i for i in manifest["dockerImages"].values()
-               if i["source"]["dockerFile"] == booth_service.DOCKERFILE]
-    return out / image["source"]["directory"], image["source"]
+    return image_steps.staged_context(out, "drem-booth", booth_service.DOCKERFILE)
 
 
 def test_the_image_is_built_from_drems_own_code_only(staged_image_context):
@@ -205,9 +201,7 @@ def test_the_image_installs_only_hashed_wheels_torch_the_cpu_build(staged_image_
     lock = (context / "requirements" / "booth.txt").read_text()
 
     assert "pip install --require-hashes --no-deps --only-binary=:all:" in dockerfile
-    pinned = [line for line in lock.splitlines() if "==" in line and not line.startswith((" ", "#"))]
-    assert pinned and all("--hash=sha256:" in lock.split(line, 1)[1].split("\n", 2)[1] for line in pinned)
-    names = {line.split("==")[0]: line.split("==")[1].split()[0] for line in pinned}
+    names = image_steps.hashed_pins(lock)
     assert {"chalice", "boto3", "onnxruntime", "opencv-python-headless", "pymunk", "onnx", "numpy"} <= set(names)
     assert names["torch"] == "2.13.0+cpu"
     assert not [n for n in names if n.startswith(("nvidia-", "triton"))], "CUDA packages in the booth's lock"
@@ -229,30 +223,12 @@ def test_the_images_packages_serve_the_booth_routes_and_train(staged_image_conte
     the trainer's and the scrutineer's modules and torch import."""
     context, _ = staged_image_context
     root = tmp_path / "image"
-    inside = lambda path: root / path.lstrip("/")  # noqa: E731 - the image's absolute paths under the stand-in root
-    uv = REPO_ROOT / ".tools" / "bin" / "uv"
-    venv = tmp_path / "venv"
-    subprocess.run([str(uv), "venv", "--quiet", "--python", sys.executable, str(venv)], check=True, timeout=120)
-    install = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(venv / "bin" / "python"),
-                              "--require-hashes", "--no-deps", "--only-binary", ":all:", "--find-links",
-                              str(TORCH_WHEELS), "-r", str(context / "requirements" / "booth.txt")],
-                             capture_output=True, text=True, timeout=900)
-    assert install.returncode == 0, install.stderr
-    pythonpath = ""
-    for line in (context / booth_service.DOCKERFILE).read_text().splitlines():
-        if line.startswith("COPY ") and "requirements/" not in line:
-            *sources, destination = line.split()[1:]
-            for source in sources:
-                target = inside(destination) / Path(source).name if destination.endswith("/") else inside(destination)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                copy = shutil.copytree if (context / source).is_dir() else shutil.copy
-                copy(context / source, target)
-        elif line.startswith("ENV PYTHONPATH="):
-            pythonpath = os.pathsep.join(str(inside(p)) for p in line.split("=", 1)[1].split(":"))
+    python = image_steps.install_lock(context / "requirements" / "booth.txt", tmp_path / "venv", TORCH_WHEELS)
+    pythonpath = image_steps.lay_out(context, booth_service.DOCKERFILE, root)
     env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": pythonpath, "AWS_DEFAULT_REGION": "us-east-1", "HOME": str(tmp_path),
            "DREM_STAGE": "booth"}
 
-    trainer = subprocess.run([str(venv / "bin" / "python"), "-c",
+    trainer = subprocess.run([str(python), "-c",
                               "import torch, drem_local.workers.trainer, drem_sim.learn.pipeline\n"
                               "import drem_local.workers.scrutineer, drem_local.workers.scrutineer_drive\n"
                               "print(torch.__version__, drem_local.workers.trainer.__file__)"],
@@ -262,7 +238,7 @@ def test_the_images_packages_serve_the_booth_routes_and_train(staged_image_conte
     assert version == "2.13.0+cpu" and location.startswith(str(root / "app" / "local"))
 
     port = _free_port()
-    server = subprocess.Popen([str(venv / "bin" / "python"), "-m", "drem_local.appserver", "--host", "127.0.0.1",
+    server = subprocess.Popen([str(python), "-m", "drem_local.appserver", "--host", "127.0.0.1",
                                "--port", str(port), "--stage", "booth", "--serve-only"], cwd=tmp_path, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

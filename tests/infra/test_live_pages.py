@@ -5,15 +5,13 @@ checked against the code in tests/infra/test_iam_policy.py."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from drem_infra import live_pages
+from tests.infra import image_steps
 
 pytestmark = pytest.mark.infra
 
@@ -164,9 +162,7 @@ def staged_image_context(tmp_path_factory):
     live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
         origin=origins.HttpOrigin("example.org"))))
     app.synth()
-    manifest = json.loads((out / "drem-live.assets.json").read_text())
-    [image] = manifest["dockerImages"].values()
-    return out / image["source"]["directory"], image["source"]
+    return image_steps.staged_context(out, "drem-live", live_pages.DOCKERFILE)
 
 
 def test_the_image_is_built_from_drems_own_code_only(staged_image_context):
@@ -192,9 +188,7 @@ def test_the_image_installs_only_hashed_wheels_and_runs_the_live_server(staged_i
     lock = (context / "requirements" / "live.txt").read_text()
 
     assert "pip install --require-hashes --no-deps --only-binary=:all: -r" in dockerfile
-    pinned = [line for line in lock.splitlines() if "==" in line and not line.startswith((" ", "#"))]
-    assert pinned and all("--hash=sha256:" in lock.split(line, 1)[1].split("\n", 2)[1] for line in pinned)
-    assert {"aiohttp", "boto3", "chalice", "pydantic", "jinja2"} <= {line.split("==")[0] for line in pinned}
+    assert {"aiohttp", "boto3", "chalice", "pydantic", "jinja2"} <= set(image_steps.hashed_pins(lock))
     assert 'CMD ["python", "-m", "drem_live", "--host", "0.0.0.0", "--port", "8080"]' in dockerfile
     assert "USER 10001" in dockerfile
 
@@ -205,26 +199,8 @@ def test_the_images_packages_import_and_render_the_live_routes(staged_image_cont
     its COPY lines laid out under a stand-in /app, its PYTHONPATH; the live routes then import and render."""
     context, _ = staged_image_context
     root = tmp_path / "image"
-    inside = lambda path: root / path.lstrip("/")  # noqa: E731 - the image's absolute paths under the stand-in root
-    uv = REPO_ROOT / ".tools" / "bin" / "uv"
-    venv = tmp_path / "venv"
-    subprocess.run([str(uv), "venv", "--quiet", "--python", sys.executable, str(venv)], check=True, timeout=120)
-    install = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(venv / "bin" / "python"),
-                              "--require-hashes", "--no-deps", "--only-binary", ":all:",
-                              "-r", str(context / "requirements" / "live.txt")],
-                             capture_output=True, text=True, timeout=600)
-    assert install.returncode == 0, install.stderr
-    pythonpath = ""
-    for line in (context / live_pages.DOCKERFILE).read_text().splitlines():
-        if line.startswith("COPY ") and "requirements/" not in line:
-            *sources, destination = line.split()[1:]
-            for source in sources:
-                target = inside(destination) / Path(source).name if destination.endswith("/") else inside(destination)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                copy = shutil.copytree if (context / source).is_dir() else shutil.copy
-                copy(context / source, target)
-        elif line.startswith("ENV PYTHONPATH="):
-            pythonpath = os.pathsep.join(str(inside(p)) for p in line.split("=", 1)[1].split(":"))
+    python = image_steps.install_lock(context / "requirements" / "live.txt", tmp_path / "venv")
+    pythonpath = image_steps.lay_out(context, live_pages.DOCKERFILE, root)
 
     probe = ("import aiohttp, boto3\n"
              "from chalicelib.routes import public_pages\n"
@@ -233,7 +209,7 @@ def test_the_images_packages_import_and_render_the_live_routes(staged_image_cont
              " scroll=True, t=lambda s: s, clock_at=0, page_ms=8000).body\n"
              "assert html.lstrip().startswith('<section'), html\n"
              "print(public_pages.__file__)\n")
-    run = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=tmp_path, capture_output=True, text=True,
+    run = subprocess.run([str(python), "-c", probe], cwd=tmp_path, capture_output=True, text=True,
                          timeout=120, env={"PATH": "/usr/bin:/bin", "PYTHONPATH": pythonpath,
                                            "AWS_DEFAULT_REGION": "us-east-1"})
     assert run.returncode == 0, run.stderr

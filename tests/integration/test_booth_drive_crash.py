@@ -33,8 +33,12 @@ def controls(url: str, token: str, run_id: str) -> list[dict[str, Any]]:
 
 def kill_and_restart_app(live_stack: Any) -> None:
     running = live_stack.running
-    running.app.kill_hard()
-    running.restart_app(timeout=APP_START_S)
+    try:
+        running.app.kill_hard()
+        running.restart_app(timeout=APP_START_S)
+    finally:
+        if not running.app.alive():
+            running.restart_app(timeout=APP_START_S)  # the session's other tests use this stack
 
 
 def test_finish_after_a_kill_9_saves_every_answered_decision(live_stack: Any) -> None:
@@ -42,11 +46,7 @@ def test_finish_after_a_kill_9_saves_every_answered_decision(live_stack: Any) ->
     username = create_user(live_stack, f"crash.{secrets.token_hex(3)}", "racer")
     token = access_token(live_stack, username)
     run_id = drive(url, token, 30)
-    try:
-        kill_and_restart_app(live_stack)
-    finally:
-        if not live_stack.running.app.alive():
-            live_stack.running.restart_app(timeout=APP_START_S)
+    kill_and_restart_app(live_stack)
 
     # The page's next decision says what happened and what to do; Finish then saves the drive.
     lost = requests.post(f"{url}/api/runs/{run_id}/drive", json={"steering": 0, "throttle": 1}, timeout=15,
@@ -68,11 +68,7 @@ def test_a_drive_left_behind_by_a_crash_is_saved_when_the_next_drive_starts(live
     url = live_stack.url
     walked_away = access_token(live_stack, create_user(live_stack, f"crash.w.{secrets.token_hex(3)}", "racer"))
     run_id = drive(url, walked_away, 12)
-    try:
-        kill_and_restart_app(live_stack)
-    finally:
-        if not live_stack.running.app.alive():
-            live_stack.running.restart_app(timeout=APP_START_S)
+    kill_and_restart_app(live_stack)
     assert call(url, "GET", f"/api/runs/{run_id}", token=walked_away)["run"]["status"] == "RECORDING"
 
     next_racer = access_token(live_stack, create_user(live_stack, f"crash.n.{secrets.token_hex(3)}", "racer"))
