@@ -84,7 +84,7 @@ class Profile:
     phone_reconnect_every_s: float = 600.0
     screen_reconnect_every_s: float = 3_600.0
     phone_page_loads: int = 2  # the event page once, the board once more later (a reload, a second track)
-    static_files_per_page: int = 6  # CSS, JS, favicon, fonts: CloudFront cache hits, billed as requests only
+    static_files_per_page: int = 7  # CSS, JS, favicon, fonts, the event's logo: CloudFront cache hits (requests only)
     heartbeat_every_s: float = 15.0
     # The live server re-reads each channel's items on this fixed poll (per task, whatever the viewers).
     server_poll_every_s: float = 0.5
@@ -344,6 +344,7 @@ def measure(racers: int = 50) -> Sizes:
     page_html = render.page("leaderboard", title="re:Invent 2026", track="1", tracks=["1"], lang="en", qr="none",
                             qr_svg="", page_url="https://drem.example.org/", track_title="", board_footer="",
                             sponsor=None, links=[], stream_url="/live/leaderboard/reinvent-2026?track=1",
+                            logo_url="/event/reinvent-2026/logo?v=0123456789abcdef",
                             **board_context()).body
 
     def item_bytes(key: tuple[str, str]) -> int:

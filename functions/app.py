@@ -6,6 +6,7 @@ from chalice import Chalice
 
 from chalicelib import logs
 from chalicelib.auth.principals import set_device_credential_verifier
+from chalicelib.formats import logo_image
 from chalicelib.routes import (
     accounts,
     api_docs,
@@ -15,6 +16,7 @@ from chalicelib.routes import (
     commentator,
     devices,
     event_landing,
+    event_logos,
     events,
     fleets,
     health,
@@ -50,16 +52,20 @@ from drem_web import favicon
 app = Chalice(app_name="drem")
 app.register_middleware(logs.request_log_middleware, "http")
 app.register_middleware(security_headers_middleware, "http")
-# Printed results and labels are PDFs; Chalice base64-encodes only the types listed here (and API Gateway with them).
-app.api.binary_types.append("application/pdf")
-app.api.binary_types.append("image/gif")  # a model's scrutineering clip
-app.api.binary_types.append(favicon.CONTENT_TYPE)  # /favicon.ico is bytes (API Gateway base64-encodes them)
+# Bodies of these types are bytes. Chalice base64-encodes such responses for API Gateway, which decodes them for the
+# viewer whatever the viewer's Accept header says (the stack sets the API's own binary media types to */*:
+# infra_cdk/drem_infra/stack.py). Printed results and labels are PDFs; a model's scrutineering clip is a GIF; an
+# event's logo is stored as PNG or WebP and uploaded as any of logo_image.UPLOAD_TYPES; a form with a file input is
+# multipart; /favicon.ico is an icon.
+for binary_type in ("application/pdf", *sorted({"image/gif", *logo_image.CONTENT_TYPES, *logo_image.UPLOAD_TYPES}),
+                    "multipart/form-data", favicon.CONTENT_TYPE):
+    app.api.binary_types.append(binary_type)
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models,
                          assignments, races, timing, leaderboards, api_docs, public_pages, commentator, console_events,
                          console_fleets, console_timekeeper, console_races, console_racer, console_registration,
                          console_users, console_models, console_racer_queue, league, registry, results, labels,
-                         stats, event_landing, booth, booth_pages, ping):
+                         stats, event_landing, event_logos, booth, booth_pages, ping):
     app.register_blueprint(blueprint_module.bp)
 
 set_device_credential_verifier(devices.verify_device_credential)

@@ -23,6 +23,7 @@ from chalicelib.domain.booth_tracks import TrackService
 from chalicelib.domain.booth_training import TrainingService
 from chalicelib.domain.devices import DeviceService
 from chalicelib.domain.errors import ServiceUnavailable
+from chalicelib.domain.event_logos import EventLogoService
 from chalicelib.domain.events import EventService
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.leaderboards import LeaderboardPublisher
@@ -48,6 +49,7 @@ from chalicelib.storage.booth import DynamoBoothStore
 from chalicelib.storage.cognito import CognitoIdentityProvider
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.evaluations import DynamoEvaluationStore
+from chalicelib.storage.event_logos import DynamoLogoStore
 from chalicelib.storage.events import DynamoEventStore, DynamoLiveRaceProbe
 from chalicelib.storage.fleets import DynamoFleetStore
 from chalicelib.storage.leaderboards import DynamoBoardStore
@@ -150,6 +152,10 @@ def event_service() -> EventService:
     settings, dynamodb = get_settings(), clients.dynamodb()
     return EventService(event_store(), DynamoLiveRaceProbe(dynamodb, settings.table("races")),
                         DynamoFleetStore(dynamodb, settings.table("fleet")), now_ms)
+
+
+def event_logo_service() -> EventLogoService:
+    return EventLogoService(event_store(), DynamoLogoStore(clients.dynamodb(), get_settings().table("events")))
 
 
 def device_store() -> DynamoDeviceStore:

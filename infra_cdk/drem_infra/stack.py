@@ -275,6 +275,11 @@ class DremStack(cdk.Stack):
                                  protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)
         certificate = (acm.Certificate.from_certificate_arn(self, "Certificate", certificate_arn)
                        if certificate_arn else None)
+        additional_behaviors = {"/static/*": cloudfront.BehaviorOptions(
+            origin=api,
+            viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            cache_policy=cloudfront.CachePolicy.CACHING_OPTIMIZED,
+        ), "/event/*/logo": self._logo_behavior(api_domain)}  # chalicelib/routes/event_logos.py
         return cloudfront.Distribution(
             self, "Distribution",
             comment=f"drem {self.stage}",
@@ -285,16 +290,32 @@ class DremStack(cdk.Stack):
                 cache_policy=cloudfront.CachePolicy.CACHING_DISABLED,
                 origin_request_policy=cloudfront.OriginRequestPolicy.ALL_VIEWER_EXCEPT_HOST_HEADER,
             ),
-            additional_behaviors={"/static/*": cloudfront.BehaviorOptions(
-                origin=api,
-                viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
-                cache_policy=cloudfront.CachePolicy.CACHING_OPTIMIZED,
-            )},
+            additional_behaviors=additional_behaviors,
             domain_names=[self.domain_name] if self.domain_name and certificate else None,
             certificate=certificate,
             price_class=cloudfront.PriceClass.PRICE_CLASS_100,
             http_version=cloudfront.HttpVersion.HTTP2_AND_3,
         )
+
+    def _logo_behavior(self, api_domain: str) -> cloudfront.BehaviorOptions:
+        """An event's logo, cached at the edge by its ?v= (the pages link the current version, so a new logo is a new
+        URL); nothing of the viewer's reaches the app, which answers every viewer the same bytes."""
+        # Chalice refuses a binary answer (400) unless the request's Accept matches a binary type, and a cache policy
+        # forwards no viewer header: this origin always asks with Accept */* (CloudFront overwrites a viewer's header
+        # of a custom header's name: CloudFront Developer Guide, "Add custom headers to origin requests").
+        origin = origins.HttpOrigin(api_domain, origin_path="/api",
+                                    custom_headers={FORWARDED_PREFIX_HEADER: "/", "Accept": "*/*"},
+                                    protocol_policy=cloudfront.OriginProtocolPolicy.HTTPS_ONLY)
+        cache_policy = cloudfront.CachePolicy(
+            self, "LogoCachePolicy",
+            comment=f"drem {self.stage} event logos: keyed by version only",
+            query_string_behavior=cloudfront.CacheQueryStringBehavior.allow_list("v"),
+            header_behavior=cloudfront.CacheHeaderBehavior.none(),
+            cookie_behavior=cloudfront.CacheCookieBehavior.none(),
+            min_ttl=cdk.Duration.seconds(0), default_ttl=cdk.Duration.days(1), max_ttl=cdk.Duration.days(365),
+        )
+        return cloudfront.BehaviorOptions(origin=origin, cache_policy=cache_policy,
+                                          viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS)
 
     def _chalice_app(self, functions_dir: Path):
         # Imported here: packaging imports the app, which needs its runtime deps; the storage-only stack does not.
@@ -321,6 +342,14 @@ class DremStack(cdk.Stack):
             api_name = f"drem-{self.stage}"
             rest_api.add_property_override("Name", api_name)
             rest_api.add_property_override("DefinitionBody.info.title", api_name)
+            # API Gateway decodes a base64 (binary) Lambda answer only when the viewer's *first* Accept type is one of
+            # the API's binary media types, and a browser's first is text/html (a PDF link) or image/avif (an <img>):
+            # "to return binary media when you can't control the order of Accept header values, such as requests
+            # from a browser, set your API's binary media types to */*" (AWS API Gateway developer guide, "Binary
+            # media types for REST APIs"). Which answers are binary stays the app's decision (app.api.binary_types:
+            # Chalice base64-encodes only those); request bodies then all arrive base64-encoded, which Chalice's
+            # Request.raw_body decodes.
+            rest_api.add_property_override("DefinitionBody.x-amazon-apigateway-binary-media-types", ["*/*"])
             self._api_alarms(api_name, api["Properties"]["StageName"])
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
         if upload_fn in sam["Resources"]:

@@ -129,3 +129,29 @@ def test_drem_aws_explains_a_missing_deployment(tmp_path):
                           text=True, timeout=60)
     assert done.returncode == 1
     assert "make deploy STAGE=nowhere" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_event_logos_are_cached_at_the_edge_by_version_and_fetched_as_bytes_every_viewer_may_get(app_template):
+    from app import app
+    from chalice.app import _matches_content_type
+
+    config = _distribution(app_template)
+    logo = {b["PathPattern"]: b for b in config["CacheBehaviors"]}["/event/*/logo"]
+    assert "/event/{event_id}/logo" in app.routes  # the pattern names the app's route
+    policies = app_template.find_resources("AWS::CloudFront::CachePolicy")
+    policy = next(p["Properties"]["CachePolicyConfig"] for name, p in policies.items()
+                  if logo["CachePolicyId"] == {"Ref": name})
+    key = policy["ParametersInCacheKeyAndForwardedToOrigin"]
+    # A new logo is a new ?v= (the pages link the current one), so the version alone keys the cache: a viewer's
+    # cookies or headers would only split it, and none of them changes the answer.
+    assert key["QueryStringsConfig"] == {"QueryStringBehavior": "whitelist", "QueryStrings": ["v"]}
+    assert key["HeadersConfig"]["HeaderBehavior"] == "none"
+    assert key["CookiesConfig"]["CookieBehavior"] == "none"
+    assert policy["MaxTTL"] >= 30 * 24 * 3600 and policy["MinTTL"] == 0
+    assert "OriginRequestPolicyId" not in logo  # nothing of the viewer's reaches the app
+
+    origin = next(o for o in config["Origins"] if o["Id"] == logo["TargetOriginId"])
+    headers = {h["HeaderName"]: h["HeaderValue"] for h in origin["OriginCustomHeaders"]}
+    assert origin["OriginPath"] == "/api" and headers["X-Forwarded-Prefix"] == "/"
+    # Chalice answers a binary body only to a request whose Accept matches one of its binary types (else 400).
+    assert _matches_content_type(headers["Accept"], app.api.binary_types)

@@ -11,7 +11,9 @@ prints the resources left out and checks that none of them is one the app needs.
 from __future__ import annotations
 
 import base64
+import fnmatch
 import hashlib
+import io
 import json
 import os
 import subprocess
@@ -184,10 +186,22 @@ class ApiGateway:
         self.function = function
         self.matcher = RouteMatcher(list(definition["paths"]))
         self.methods = {path: {m.upper() for m in ops} for path, ops in definition["paths"].items()}
+        self.binary_types = [t.lower() for t in definition.get("x-amazon-apigateway-binary-media-types", [])]
         self.api_id = api_id
 
-    def request(self, method: str, url: str, body: Any = None, headers: dict[str, str] | None = None
-                ) -> tuple[int, dict[str, str], Any]:
+    def is_binary(self, media_type: str | None) -> bool:
+        """Whether a media type is one of the API's binary media types (`*` a wildcard: "*/*", "image/*")."""
+        if not media_type:
+            return False
+        kind, _, sub = media_type.split(";")[0].strip().lower().partition("/")
+        return any(fnmatch.fnmatchcase(f"{kind}/{sub}", pattern) for pattern in self.binary_types)
+
+    def request(self, method: str, url: str, body: Any = None, headers: dict[str, str] | None = None,
+                raw: bytes | None = None) -> tuple[int, dict[str, str], Any]:
+        """`body` is sent as JSON; `raw` as the bytes they are (with the Content-Type in `headers`). Binary media
+        types (AWS API Gateway developer guide, "Content type conversions in API Gateway", Lambda proxy): a request
+        whose Content-Type is one reaches the function base64-encoded; a base64 answer (isBase64Encoded) is decoded
+        only when the *first* type of the request's Accept is one, else the viewer gets the base64 text."""
         parts = urlsplit(url)
         match = self.matcher.match_route(parts.path)
         assert method in self.methods[match.route] or "X-AMAZON-APIGATEWAY-ANY-METHOD" in self.methods[match.route], \
@@ -195,9 +209,16 @@ class ApiGateway:
         query = parse_qs(parts.query) or None
         headers = {"Accept": "application/json", "Host": f"{self.api_id}.execute-api.{REGION}.amazonaws.com",
                    "User-Agent": "drem-e2e", "X-Forwarded-Proto": "https", **(headers or {})}
-        text = None if body is None else json.dumps(body)
-        if text is not None:
+        payload_bytes = raw if raw is not None else None if body is None else json.dumps(body).encode()
+        if body is not None:
             headers["Content-Type"] = "application/json"
+        encoded = payload_bytes is not None and self.is_binary(headers.get("Content-Type"))
+        if payload_bytes is None:
+            text = None
+        elif encoded:
+            text = base64.b64encode(payload_bytes).decode("ascii")
+        else:
+            text = payload_bytes.decode("utf-8")
         event = {
             "resource": match.route, "path": parts.path, "httpMethod": method,
             "headers": headers, "multiValueHeaders": {k: [v] for k, v in headers.items()},
@@ -211,7 +232,7 @@ class ApiGateway:
                 "requestTimeEpoch": int(time.time() * 1000),
                 "identity": {"sourceIp": "198.51.100.7", "userAgent": "drem-e2e"},
             },
-            "body": text, "isBase64Encoded": False,
+            "body": text, "isBase64Encoded": encoded,
         }
         reply = self.function.invoke(event)
         # API Gateway sends both maps' headers to the client (multiValueHeaders holds the repeated ones, e.g. cookies).
@@ -220,9 +241,16 @@ class ApiGateway:
         # A proxy answer without Content-Type reaches the client as application/json (API Gateway's default).
         headers.setdefault("content-type", "application/json")
         payload = reply.get("body") or ""
+        if reply.get("isBase64Encoded") and self.is_binary(first_accepted(event)):
+            return reply["statusCode"], headers, base64.b64decode(payload)
         if payload and "json" in headers.get("content-type", ""):
             payload = json.loads(payload)
         return reply["statusCode"], headers, payload
+
+
+def first_accepted(event: dict[str, Any]) -> str:
+    """The first media type of the request's Accept header, the one API Gateway goes by."""
+    return (event["headers"].get("Accept") or "").split(",")[0]
 
 
 @pytest.fixture(scope="module")
@@ -317,6 +345,46 @@ def test_the_packaged_api_signs_in_records_a_race_and_shows_the_board(deployed, 
     races_table = deployed.outputs["RacesTableName"]
     items = deployed.client("dynamodb").scan(TableName=races_table)["Items"]
     assert any(race["race_id"] in json.dumps(item) for item in items)
+
+
+# What Chromium sends for a page (a link to a PDF too) and for an <img>: neither starts with the answer's type.
+BROWSER_PAGE_ACCEPT = ("text/html,application/xhtml+xml,application/xml;q=0.9,image/avif,image/webp,image/apng,*/*;"
+                       "q=0.8,application/signed-exchange;v=b3;q=0.7")
+BROWSER_IMAGE_ACCEPT = "image/avif,image/webp,image/apng,image/svg+xml,image/*,*/*;q=0.8"
+
+
+def test_a_logo_upload_and_printed_results_reach_a_browser_as_the_bytes_they_are(deployed, api, admin_password):
+    from PIL import Image
+
+    _, _, grant = api.request("POST", "/api/auth/token", {"username": "admin", "password": admin_password})
+    admin = {"Authorization": f"Bearer {grant['access_token']}"}
+    status, _, event = api.request("POST", "/api/events", {
+        "name": "Binary Cup", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
+        "race_config": {}, "tracks": [{"track_id": "1"}]}, admin)
+    assert status == 201, event
+    event_id = event["event_id"]
+    upload = io.BytesIO()
+    Image.new("RGB", (400, 100), (255, 153, 0)).save(upload, format="JPEG")
+
+    status, _, saved = api.request("PUT", f"/api/events/{event_id}/logo", raw=upload.getvalue(),
+                                   headers={**admin, "Content-Type": "image/jpeg"})
+    assert status == 200, (saved, api.function.log_tail())
+    assert (saved["width"], saved["height"]) == (400, 100)
+
+    status, _, page = api.request("GET", f"/leaderboard/{event_id}", headers={"Accept": BROWSER_PAGE_ACCEPT})
+    assert status == 200 and f"/event/{event_id}/logo?v={saved['version']}" in page  # pages stay text
+    status, headers, image = api.request("GET", f"/event/{event_id}/logo?v={saved['version']}",
+                                         headers={"Accept": BROWSER_IMAGE_ACCEPT})
+    assert status == 200 and headers["content-type"] == "image/png", headers
+    assert isinstance(image, bytes), "the browser got the image's base64 text"
+    shown = Image.open(io.BytesIO(image))
+    assert shown.size == (400, 100) and shown.convert("RGB").getpixel((200, 50))[0] > 240
+
+    status, headers, pdf = api.request("GET", f"/api/events/{event_id}/results/summary.pdf",
+                                       headers={**admin, "Accept": BROWSER_PAGE_ACCEPT})
+    assert status == 200 and headers["content-type"] == "application/pdf"
+    assert isinstance(pdf, bytes), "the browser got the PDF's base64 text"
+    assert pdf[:5] == b"%PDF-"  # the document, not its base64 text
 
 
 def test_a_model_upload_is_routed_by_the_stacks_rule_to_the_upload_function_and_judged(

@@ -85,9 +85,10 @@ class World:
     _minted: int = 0
 
     def call(self, method: str, path: str, principal: str, body: Any = None,
-             headers: dict[str, str] | None = None) -> Reply:
+             headers: dict[str, str] | None = None, raw: bytes | None = None) -> Reply:
+        """`body` goes as JSON; `raw` as the bytes they are (with its Content-Type in `headers`)."""
         all_headers = {**self.headers[principal], "Content-Type": "application/json", **(headers or {})}
-        payload = b"" if body is None else json.dumps(body).encode()
+        payload = raw if raw is not None else b"" if body is None else json.dumps(body).encode()
         response = getattr(self.client.http, method.lower())(path, headers=all_headers, body=payload)
         return Reply(response.status_code, dict(response.headers), response.body or b"")
 

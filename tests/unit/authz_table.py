@@ -37,6 +37,8 @@ def allow(*who: str, deny404: tuple[str, ...] = ()) -> dict[str, str]:
 class Call:
     params: dict[str, str] = field(default_factory=dict)
     body: Any = None
+    headers: dict[str, str] = field(default_factory=dict)
+    raw: bytes | None = None  # a body that is not JSON (an image), sent with `headers`' Content-Type
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,7 @@ class Case:
     expect: dict[str, str]
     build: Callable[[World, str], Call] | None = None
     consumes_caller: bool = False
+    content_type: str = "application/json"  # what the route takes (others are refused with 415 before anything)
 
 
 # --- scenarios ------------------------------------------------------------------------------------------------------
@@ -134,6 +137,17 @@ def matrix_event(world: World, caller: str) -> dict:
 
 def event_only(world: World, caller: str) -> Call:
     return Call({"event_id": matrix_event(world, caller)["event_id"], "track_id": "1"})
+
+
+def event_logo_upload(world: World, caller: str) -> Call:
+    """An event and a real PNG for its logo: staff's upload is taken, everyone else is refused before it is read."""
+    import io
+
+    from PIL import Image
+
+    png = io.BytesIO()
+    Image.new("RGB", (120, 40), (255, 153, 0)).save(png, format="PNG")
+    return Call(event_only(world, caller).params, headers={"Content-Type": "image/png"}, raw=png.getvalue())
 
 
 def racer_a_race(world: World, caller: str) -> Call:
@@ -311,6 +325,8 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/events/{event_id}/edit"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/events/{event_id}/delete"): Case(allow("admin", "operator"), event_only),
     ("POST", "/console/events/{event_id}/delete"): Case(allow("admin", "operator"), event_only),
+    ("POST", "/console/events/{event_id}/logo"): Case(allow("admin", "operator"), event_only),
+    ("POST", "/console/events/{event_id}/logo/remove"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/fleets"): ADMIN_OPERATOR,
     ("POST", "/console/fleets"): ADMIN_OPERATOR,
     ("GET", "/console/cars"): ADMIN_OPERATOR,
@@ -335,6 +351,10 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/races"): ADMIN_OPERATOR,
     ("GET", "/stats"): PUBLIC,
     ("GET", "/event/{event_id}"): Case(allow(*EVERYONE), event_only),
+    ("GET", "/event/{event_id}/logo"): Case(allow(*EVERYONE), event_only),
+    ("PUT", "/api/events/{event_id}/logo"): Case(allow("admin", "operator"), event_logo_upload,
+                                                 content_type="image/png"),
+    ("DELETE", "/api/events/{event_id}/logo"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/cars/labels.pdf"): Case(allow("admin", "operator")),
     ("POST", "/console/registration/card.pdf"): Case(allow("admin", "registration"), racer_card_form),
     ("GET", "/console/races/{event_id}/{race_id}"): Case(allow("admin", "operator"), racer_a_race),

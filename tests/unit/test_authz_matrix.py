@@ -85,7 +85,7 @@ def test_authz_matrix(world: World, method: str, path: str, principal: str):
     caller = world.mint(principal) if case.consumes_caller else principal
     body = call.body if call.body is not None else ({} if method in {"POST", "PUT", "PATCH"} else None)
 
-    reply = world.call(method, concrete_path(path, call.params), caller, body)
+    reply = world.call(method, concrete_path(path, call.params), caller, body, call.headers, call.raw)
 
     denied = reply.status in DENIED.get(expected, {401, 403})
     assert denied == (expected != "allow") and reply.status < 500, (
@@ -98,5 +98,6 @@ def test_the_cookie_path_without_the_csrf_token_is_refused(world: World):
     for (method, path), case in sorted(TABLE.items()):
         if method == "GET" or case.expect["admin_cookie"] != "allow" or case.expect["anonymous"] == "allow":
             continue  # public routes: nothing of the admin's to abuse (CSRF-exempt ones act as anonymous)
-        reply = world.call(method, concrete_path(path, {}), "admin_cookie", {}, headers=headers)
+        reply = world.call(method, concrete_path(path, {}), "admin_cookie", {},
+                           headers={**headers, "Content-Type": case.content_type})
         assert reply.status == 403, f"{method} {path} acted without a CSRF token: {reply.status}"

@@ -31,6 +31,9 @@ are documentation only.
 activating, an API client exchanging a password for tokens); such a view is always given the anonymous principal, so
 a session cookie that rides along can never act through it.
 
+`shared=True` marks a PUBLIC GET whose answer is the same for everyone (static files, the favicon, an event's logo):
+no CSRF cookie is issued with it, because a `Set-Cookie` makes the answer private and CloudFront would never keep it.
+
 `declared_routes(app)` lists every (path, method, allow, ...) for the authorization-matrix test and the OpenAPI
 document; `undeclared_routes(app)` lists any route registered without this wrapper.
 """
@@ -47,7 +50,7 @@ from chalice import Blueprint, Chalice, Response
 from chalice.app import Request
 from pydantic import BaseModel, ValidationError
 
-from chalicelib import base_path, http_errors, logs
+from chalicelib import base_path, http_errors, logs, multipart_form
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.cookies import CSRF_COOKIE, request_cookies
 from chalicelib.auth.principals import ANONYMOUS, Principal, Role
@@ -123,6 +126,7 @@ class RouteDocs:
     description: str = ""
     tags: tuple[str, ...] = ()
     csrf: bool = True
+    shared: bool = False
 
 
 @dataclass(frozen=True)
@@ -155,11 +159,13 @@ def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], 
           content_types: list[str] | None = None, body: type[BaseModel] | None = None,
           query: type[BaseModel] | None = None, response: Any = None, status_code: int = 200,
           conditional: bool = False, summary: str | None = None, tags: Iterable[str] = (), csrf: bool = True,
-          **route_kwargs: Any) -> Callable[[Callable[..., Any]], Callable]:
+          shared: bool = False, **route_kwargs: Any) -> Callable[[Callable[..., Any]], Callable]:
     declared = as_allow(allow)
     if not csrf and not declared.public:
         raise ValueError(f"{path}: csrf=False is only for PUBLIC routes (a signed-in caller's cookie needs CSRF)")
     methods = [m.upper() for m in methods]
+    if shared and (not declared.public or methods != ["GET"]):
+        raise ValueError(f"{path}: shared=True is only for PUBLIC GET routes (the same answer for everyone)")
     if content_types is None and set(methods) & double_submit.STATE_CHANGING_METHODS:
         content_types = FORM_CONTENT_TYPES
     for name, model in (("body", body), ("query", query)):
@@ -177,7 +183,7 @@ def route(bp: Blueprint | Chalice, path: str, *, allow: Allow | Iterable[Role], 
         docs = RouteDocs(body=body, query=query, response=response, status_code=status_code,
                          conditional=conditional, summary=summary or _summary_from(doc_lines, view.__name__),
                          description="\n".join(line.strip() for line in doc_lines[1:]).strip(), tags=tuple(tags),
-                         csrf=csrf)
+                         csrf=csrf, shared=shared)
         access = RouteAccess(declared, f"{view.__module__}.{view.__qualname__}", docs)
         handler.drem_access = access  # type: ignore[attr-defined]
         extra = {"content_types": content_types} if content_types else {}
@@ -203,13 +209,28 @@ def undeclared_routes(app: Chalice) -> list[tuple[str, str]]:
 
 
 def form_fields(request: Request) -> dict[str, str]:
-    """A urlencoded form body as {name: first value} (Chalice leaves form parsing to the app)."""
-    content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
+    """A form body's text fields as {name: first value} (Chalice leaves form parsing to the app): urlencoded, or
+    multipart (a form with a file input; its files come from `multipart_body`)."""
+    header = request.headers.get("content-type") or ""
+    content_type = header.split(";")[0].strip().lower()
+    if multipart_form.is_multipart(content_type) and request.raw_body:
+        return multipart_body(request).fields
     if content_type != "application/x-www-form-urlencoded" or not request.raw_body:
         return {}
     raw = request.raw_body  # bytes from API Gateway and chalice local; typed str | bytes by Chalice
     parsed = parse_qs(raw.decode("utf-8", errors="replace") if isinstance(raw, bytes) else raw, keep_blank_values=True)
     return {name: values[0] for name, values in parsed.items()}
+
+
+def multipart_body(request: Request) -> multipart_form.MultipartForm:
+    """The request's multipart form, parsed once (the CSRF check and the view both read it)."""
+    cached: multipart_form.MultipartForm | None = getattr(request, "_drem_multipart", None)
+    if cached is None:
+        raw = request.raw_body
+        cached = multipart_form.parsed(request.headers.get("content-type") or "",
+                                       raw if isinstance(raw, bytes) else raw.encode("utf-8"))
+        request._drem_multipart = cached  # type: ignore[attr-defined]
+    return cached
 
 
 def current_scope() -> RequestScope:
@@ -261,7 +282,8 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
     settings = get_settings()
     cookies = request_cookies(request.headers)
     scope = RequestScope(request=request, csrf_token=cookies.get(CSRF_COOKIE, ""))
-    browser = "authorization" not in request.headers
+    # A browser gets a CSRF token with every answer it may post a form from; a file shared by everyone gets none.
+    browser = "authorization" not in request.headers and not (docs is not None and docs.shared)
     if browser and not double_submit.fits(scope.csrf_token, None):
         _issue_csrf_token(scope, None, settings.cookie_secure)
     _local.scope = scope

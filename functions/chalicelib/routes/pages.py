@@ -23,24 +23,24 @@ def home(principal: Principal) -> Response:
     return render.page("home", roles=sorted(r.value for r in principal.roles), links=links_for(principal))
 
 
-@route(bp, "/static/{name}", allow=PUBLIC)
+@route(bp, "/static/{name}", allow=PUBLIC, shared=True)
 def static_file(principal: Principal, name: str) -> Response:
     return _static(name, "", max_age=300)
 
 
-@route(bp, "/static/vendor/{name}", allow=PUBLIC)
+@route(bp, "/static/vendor/{name}", allow=PUBLIC, shared=True)
 def vendor_file(principal: Principal, name: str) -> Response:
     # Vendored files are pinned by package-lock.json; they change only with a new release of drem.
     return _static(name, "vendor", max_age=86400)
 
 
-@route(bp, "/static/vendor/flags/{name}", allow=PUBLIC)
+@route(bp, "/static/vendor/flags/{name}", allow=PUBLIC, shared=True)
 def flag_file(principal: Principal, name: str) -> Response:
     # flag-icons' 4×3 SVGs, copied at setup (Makefile); named by lower-case ISO 3166-1 alpha-2 code.
     return _static(name, "vendor/flags", max_age=86400)
 
 
-@route(bp, "/favicon.ico", allow=PUBLIC)
+@route(bp, "/favicon.ico", allow=PUBLIC, shared=True)
 def favicon_ico(principal: Principal) -> Response:
     """drem's icon (browsers ask for it on every site; a 403 here put an error in every page's console)"""
     return Response(body=favicon.ico_bytes(), headers={"Content-Type": favicon.CONTENT_TYPE,

@@ -12,6 +12,7 @@ from botocore.exceptions import BotoCoreError, ClientError
 from chalicelib.domain.errors import Conflict, NotFound
 from chalicelib.domain.events import Event
 from chalicelib.storage.aws_errors import all_items, translate_common, write_if
+from chalicelib.storage.event_logos import logo_key
 
 _SERVICE = "The events table"
 _META = "META"
@@ -50,6 +51,8 @@ class DynamoEventStore:
         if not write_if(self._client, "delete_item", _SERVICE, TableName=self._table, Key=event_key(event_id),
                         ConditionExpression="attribute_exists(pk)"):
             raise NotFound(f"There is no event {event_id}.")
+        # Its logo goes with it (a crash in between leaves an image nothing links to, never an event without one).
+        write_if(self._client, "delete_item", _SERVICE, TableName=self._table, Key=logo_key(event_id))
 
     def _put(self, event: Event, condition: str, values: dict[str, Any], on_condition: Exception) -> None:
         item = {**event_key(event.event_id), "eventId": {"S": event.event_id},

@@ -26,7 +26,7 @@ EVENT_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 ATTRIBUTE_TYPES = frozenset({"S", "N", "B", "BOOL", "NULL", "M", "L", "SS", "NS", "BS"})
 NOT_CARRIED = ["devices and their credentials (cars and timers re-activate on the target)", "live races",
                "device commands and strip idempotency records", "raw and quarantined uploads", "soft-deleted models",
-               "passwords"]
+               "passwords", "the event's logo (upload it again on the target's event page)"]
 
 Item = dict[str, Any]  # one DynamoDB item in attribute-value JSON
 

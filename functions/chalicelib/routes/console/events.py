@@ -1,13 +1,14 @@
-"""Operator console: events (list, create, edit, delete with confirmation). Calls the same `EventService` as the JSON
-API; the form lives in `console_event_form`."""
+"""Operator console: events (list, create, edit, delete with confirmation) and each event's logo. Calls the same
+`EventService` as the JSON API; the form lives in `console_event_form`."""
 from __future__ import annotations
 
 from chalice import Blueprint, Response
 
-from chalicelib import services
-from chalicelib.auth.access import ADMIN, OPERATOR, route
+from chalicelib import multipart_form, services
+from chalicelib.auth.access import ADMIN, OPERATOR, multipart_body, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
+from chalicelib.formats import logo_image
 from chalicelib.routes.console import event_form
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, redirect, submitted
 from chalicelib.routes.console.notices import done_notice
@@ -68,6 +69,24 @@ def update_event(principal: User, event_id: str) -> Response:
     return redirect("/console/events", done="event-saved")
 
 
+@route(bp, "/console/events/{event_id}/logo", methods=["POST"], allow=EVENT_EDITORS)
+def upload_logo(principal: User, event_id: str) -> Response:
+    """Store the posted image (file input `logo`) as the event's logo, shown on its big screen, overlay and page"""
+    upload = multipart_body(bp.current_request).files.get(logo_image.FIELD) if _is_multipart() else None
+    try:
+        services.event_logo_service().save(event_id, upload.data if upload else b"")
+    except SHOWN_ON_FORM as exc:
+        view = event_form.form_of(services.event_service().get_event(event_id))
+        return _form_page(event_id, view, field_errors(exc, logo_image.FIELD), error_status(exc))
+    return redirect(f"/console/events/{event_id}/edit#logo", done="logo-saved")
+
+
+@route(bp, "/console/events/{event_id}/logo/remove", methods=["POST"], allow=EVENT_EDITORS)
+def remove_logo(principal: User, event_id: str) -> Response:
+    services.event_logo_service().remove(event_id)
+    return redirect(f"/console/events/{event_id}/edit#logo", done="logo-removed")
+
+
 @route(bp, "/console/events/{event_id}/delete", allow=EVENT_EDITORS)
 def confirm_delete_page(principal: User, event_id: str) -> Response:
     return render.page("console/event_delete", event=services.event_service().get_event(event_id), errors={})
@@ -89,7 +108,13 @@ def _event_errors(exc: Exception, values: dict[str, str]) -> dict[str, str]:
     return event_form.country_message(field_errors(exc, rename=event_form.rename_for(values)), values)
 
 
+def _is_multipart() -> bool:
+    return multipart_form.is_multipart(bp.current_request.headers.get("content-type") or "")
+
+
 def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],
                status: int = 200) -> Response:
+    logo = services.event_logo_service().version(event_id) if event_id else None
     return render.page("console/event_form", status=status, event_id=event_id, form=view, errors=errors,
-                       fleets=services.fleet_service().list_fleets(), countries=COUNTRY_CHOICES)
+                       fleets=services.fleet_service().list_fleets(), countries=COUNTRY_CHOICES, logo=logo,
+                       flash=done_notice(bp.current_request))

@@ -13,6 +13,8 @@ DONE: dict[str, str] = {
     "event-created": "Event created.",
     "event-saved": "Event saved.",
     "event-deleted": "Event deleted.",
+    "logo-saved": "Logo saved; the big screen, the overlay and the event's page show it.",
+    "logo-removed": "Logo removed; the boards show the event's name alone.",
     "fleet-created": "Fleet created.",
     "car-moved": "Car moved; its row below shows the fleet.",
     "car-models": "Models on the car changed; its row below shows them.",

@@ -1,0 +1,75 @@
+"""An event's logo (the organiser's or the sponsor's): uploaded by staff, shown on the big screen, the overlay and the
+event's landing page. One logo per event; uploading again replaces it, and removing it leaves the pages text-only.
+
+The stored image is never the uploaded file: `formats.logo_image` draws it again from its pixels. Its `version` (a
+hash of the stored bytes) is part of the address pages link to, so a new logo shows at once and browsers may cache
+each version for good.
+"""
+from __future__ import annotations
+
+from typing import Protocol
+
+from pydantic import BaseModel, ConfigDict
+
+from chalicelib.domain.errors import NotFound
+from chalicelib.domain.events import EventRepository
+from chalicelib.formats.logo_image import normalised_logo
+
+
+class StoredLogo(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    event_id: str
+    version: str
+    content_type: str
+    width: int
+    height: int
+    data: bytes
+
+
+class LogoVersion(BaseModel):
+    """What a page needs to link to the logo without reading its bytes."""
+    model_config = ConfigDict(frozen=True)
+
+    version: str
+    width: int
+    height: int
+
+
+class LogoRepository(Protocol):
+    def get(self, event_id: str) -> StoredLogo | None: ...
+    def version(self, event_id: str) -> LogoVersion | None: ...
+    def put(self, logo: StoredLogo) -> None: ...
+    def delete(self, event_id: str) -> None: ...
+
+
+class EventLogoService:
+    def __init__(self, events: EventRepository, logos: LogoRepository) -> None:
+        self._events = events
+        self._logos = logos
+
+    def save(self, event_id: str, upload: bytes) -> LogoVersion:
+        """Store `upload` as the event's logo; InvalidInput (field "logo") for a file that is not a usable image."""
+        self._require_event(event_id)
+        image = normalised_logo(upload)
+        logo = StoredLogo(event_id=event_id, version=image.version, content_type=image.content_type,
+                          width=image.width, height=image.height, data=image.data)
+        self._logos.put(logo)
+        return LogoVersion(version=logo.version, width=logo.width, height=logo.height)
+
+    def remove(self, event_id: str) -> None:
+        self._require_event(event_id)
+        self._logos.delete(event_id)
+
+    def logo(self, event_id: str) -> StoredLogo:
+        logo = self._logos.get(event_id)
+        if logo is None:
+            raise NotFound(f"Event {event_id} has no logo.", field="event_id")
+        return logo
+
+    def version(self, event_id: str) -> LogoVersion | None:
+        return self._logos.version(event_id)
+
+    def _require_event(self, event_id: str) -> None:
+        if self._events.get(event_id) is None:
+            raise NotFound(f"There is no event {event_id}.", field="event_id")
