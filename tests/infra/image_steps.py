@@ -21,6 +21,24 @@ def staged_context(cdk_out: Path, stack_name: str, dockerfile: str) -> tuple[Pat
     return cdk_out / image["source"]["directory"], image["source"]
 
 
+def storage_stack_with_live_pages(cdk_out: Path, stage: str):  # noqa: ANN201 - CDK types, imported lazily
+    """(app, stack, live): a storage-only stack (the app's Chalice packaging has nothing to do with the images) with
+    the live pages behind a stand-in CloudFront distribution, ready for more constructs and `app.synth()`."""
+    import aws_cdk as cdk
+    from aws_cdk import aws_cloudfront as cloudfront
+    from aws_cdk import aws_cloudfront_origins as origins
+
+    from drem_infra import live_pages
+    from drem_infra.stack import DremStack
+
+    app = cdk.App(outdir=str(cdk_out))
+    stack = DremStack(app, f"drem-{stage}", stage=stage)
+    live = live_pages.LivePages(stack, "Live", stage=stage, environment=stack.app_environment(), tables=stack.tables)
+    live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
+        origin=origins.HttpOrigin("example.org"))))
+    return app, stack, live
+
+
 def hashed_pins(lock: str) -> dict[str, str]:
     """The lock's packages and versions; fails if a pinned package has no sha256 hash on the line after it."""
     pinned = [line for line in lock.splitlines() if "==" in line and not line.startswith((" ", "#"))]

@@ -160,18 +160,8 @@ def test_the_booth_is_opt_in_on_the_deploy_command_line():
 @pytest.fixture(scope="module")
 def staged_image_context(tmp_path_factory):
     """The booth image's build context as `cdk synth` stages it (the booth and the live pages on a storage stack)."""
-    import aws_cdk as cdk
-    from aws_cdk import aws_cloudfront as cloudfront
-    from aws_cdk import aws_cloudfront_origins as origins
-
-    from drem_infra.stack import DremStack
-
     out = tmp_path_factory.mktemp("booth-cdk") / "cdk.out"
-    app = cdk.App(outdir=str(out))
-    stack = DremStack(app, "drem-booth", stage="booth")
-    live = live_pages.LivePages(stack, "Live", stage="booth", environment=stack.app_environment(), tables=stack.tables)
-    live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
-        origin=origins.HttpOrigin("example.org"))))
+    app, stack, live = image_steps.storage_stack_with_live_pages(out, "booth")
     booth_service.BoothService(stack, "Booth", stage="booth", environment=stack.app_environment(), live=live,
                                tables=stack.tables, buckets=stack.buckets, user_pool=stack.user_pool)
     app.synth()

@@ -147,20 +147,9 @@ def test_the_live_server_logs_expire_and_failures_raise_alarms(app_template):
 
 @pytest.fixture(scope="module")
 def staged_image_context(tmp_path_factory):
-    """The image's build context as `cdk synth` stages it (a storage-only stack with the live pages: the app's
-    Chalice packaging has nothing to do with the image)."""
-    import aws_cdk as cdk
-    from aws_cdk import aws_cloudfront as cloudfront
-    from aws_cdk import aws_cloudfront_origins as origins
-
-    from drem_infra.stack import DremStack
-
+    """The image's build context as `cdk synth` stages it."""
     out = tmp_path_factory.mktemp("live-cdk") / "cdk.out"
-    app = cdk.App(outdir=str(out))
-    stack = DremStack(app, "drem-live", stage="live")
-    live = live_pages.LivePages(stack, "Live", stage="live", environment=stack.app_environment(), tables=stack.tables)
-    live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
-        origin=origins.HttpOrigin("example.org"))))
+    app, _, _ = image_steps.storage_stack_with_live_pages(out, "live")
     app.synth()
     return image_steps.staged_context(out, "drem-live", live_pages.DOCKERFILE)
 
