@@ -111,7 +111,28 @@ def source_event(live_stack) -> dict:
     assert any(not lap["is_valid"] for lap in laps), "the reset made one lap invalid"
     # A race admin correction: it goes into the audit trail, which travels with the races.
     admin.put(f"/api/events/{eid}/races/{race['race_id']}/laps/0", {"resets": 1})
-    return {"event_id": eid, "racers": racers, "model_id": model["model_id"], "fleet_id": fleet_id}
+    logo = requests.put(f"{live_stack.url}/api/events/{eid}/logo", data=_logo_png(), timeout=30,
+                        headers={"Authorization": f"Bearer {admin.token}", "Content-Type": "image/png"})
+    assert logo.status_code == 200, logo.text
+    return {"event_id": eid, "racers": racers, "model_id": model["model_id"], "fleet_id": fleet_id,
+            "logo_version": logo.json()["version"]}
+
+
+def _logo_png() -> bytes:
+    """A sponsor's logo with a transparent margin, as organisers upload them."""
+    import io
+
+    from PIL import Image, ImageDraw
+
+    image = Image.new("RGBA", (600, 300), (0, 0, 0, 0))
+    ImageDraw.Draw(image).ellipse((150, 50, 450, 250), fill=(255, 153, 0, 255))
+    out = io.BytesIO()
+    image.save(out, format="PNG")
+    return out.getvalue()
+
+
+def _logo(url: str, event_id: str) -> requests.Response:
+    return requests.get(f"{url}/event/{event_id}/logo", timeout=30)
 
 
 def _set_password(cognito, pool_id: str, username: str) -> str:
@@ -181,6 +202,8 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
     assert manifest["counts"]["races"] == 2 and manifest["counts"]["audit_entries"] == 1  # the lap edit
     assert manifest["counts"]["archives"] == len(list((first / "archives").glob("*.tar.gz"))) >= 1
     assert (first / "archives" / f"{source_event['model_id']}.tar.gz").read_bytes() == onnx_archive(0.25)
+    assert manifest["logo"] == "logo.png"
+    assert (first / "logo.png").read_bytes() == _logo(live_stack.url, eid).content
     capsys.readouterr()
 
     report_path = tmp_path / "report.json"
@@ -201,8 +224,15 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
     assert imported["by"].startswith("drem import") and imported["after"]["written"]["races"] == 3
     assert set(report["sub_map"].values()).isdisjoint(set(report["sub_map"]) - set(report["sub_map"].values()))
 
-    # The public board reads the same on both stacks.
+    # The public board reads the same on both stacks, and shows the same logo at the same address.
     assert _boards(target_stack.config.app_url, eid) == _boards(live_stack.url, eid)
+    version = source_event["logo_version"]
+    assert f"/event/{eid}/logo?v={version}" in requests.get(f"{target_stack.config.app_url}/leaderboard/{eid}",
+                                                            timeout=30).text
+    moved = _logo(target_stack.config.app_url, eid)
+    assert moved.status_code == 200 and moved.content == _logo(live_stack.url, eid).content
+    said = next(line for line in printed.splitlines() if line.startswith("Imported event"))
+    assert said.endswith("model archives, the logo."), said
 
     # A created racer signs in on the target with the temporary password printed once (and never stored).
     ada = source_event["racers"]["ada"]
@@ -307,6 +337,7 @@ def _tamper_json(folder: Path, path: str, change) -> None:
 def _nothing_written(target_stack, event_id: str, bucket_keys_before: set[str]) -> None:
     target = connect(StackLocation.from_state_dir(target_stack.config.state_dir))
     assert target.get_item("events", f"EVENT#{event_id}", "META") is None
+    assert target.get_item("events", f"EVENT#{event_id}", "LOGO") is None
     assert target.partition("races", f"EVENT#{event_id}") == []
     assert _bucket_keys(target_stack) == bucket_keys_before
 
@@ -459,7 +490,21 @@ def _overlay_with_a_forged_lap(folder: Path) -> str:
     return "the overlay does not describe race"
 
 
+def _script_in_place_of_the_logo(folder: Path) -> str:
+    _tamper(folder, "logo.png", b'<svg xmlns="http://www.w3.org/2000/svg"><script>alert(document.cookie)</script></svg>')
+    return "logo.png: SVG logos are not accepted"
+
+
+def _logo_pointing_at_another_file(folder: Path) -> str:
+    manifest = json.loads((folder / MANIFEST).read_text())
+    manifest["logo"] = "event.json"
+    (folder / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    return "field 'logo' must name a listed logo.png or logo.webp"
+
+
 TAMPERINGS = {
+    "a script in place of the logo": (_script_in_place_of_the_logo, None),
+    "the logo naming another file": (_logo_pointing_at_another_file, None),
     "board body edited apart from its rows": (_board_body_edited_apart_from_its_rows, None),
     "overlay with a forged lap": (_overlay_with_a_forged_lap, None),
     "archive key outside models/{owner}/": (_archive_key_elsewhere, "archives are written only to their model's"),

@@ -17,8 +17,11 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.domain.event_logos import StoredLogo
 from chalicelib.formats.event_export.records import Account, Item
+from chalicelib.formats.logo_image import LogoImage
 from chalicelib.storage.aws_errors import all_items, error_code, translate_common, write_if
+from chalicelib.storage.event_logos import DynamoLogoStore
 from chalicelib.storage.users import COUNTRY_ATTRIBUTE, translate_account_error
 
 # Where `drem up` keeps the keys its storage server accepts (drem_local.storage_keys.KEYS_FILE).
@@ -133,6 +136,20 @@ class StackStorage:
             self._s3.put_object(Bucket=self._bucket(bucket), Key=key, Body=data)
         except (ClientError, BotoCoreError) as exc:
             raise translate_common(exc, f"The {bucket} bucket") from exc
+
+    # --- the event's logo (its item's shape is the logo store's) ---------------------------------------------------
+
+    def read_logo(self, event_id: str) -> LogoImage | None:
+        logo = self._logos().get(event_id)
+        return None if logo is None else LogoImage(data=logo.data, content_type=logo.content_type, width=logo.width,
+                                                   height=logo.height)
+
+    def write_logo(self, event_id: str, logo: LogoImage) -> None:
+        self._logos().put(StoredLogo(event_id=event_id, version=logo.version, content_type=logo.content_type,
+                                     width=logo.width, height=logo.height, data=logo.data))
+
+    def _logos(self) -> DynamoLogoStore:
+        return DynamoLogoStore(self._dynamodb, self._table("events"))
 
     # --- boards -----------------------------------------------------------------------------------------------------
 

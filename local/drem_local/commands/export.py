@@ -60,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
     counts = manifest["counts"]
     print(f"Exported event {args.event_id} to {args.out}: {counts['races']} races, {counts['leaderboards']} "
           f"board/overlay items, {counts['accounts']} accounts, {counts['profiles']} profile items, "
-          f"{counts['fleet']} fleets, {counts['archives']} model archives ({len(manifest['files'])} files, "
+          f"{counts['fleet']} fleets, {counts['archives']} model archives"
+          f"{', the logo (' + manifest['logo'] + ')' if 'logo' in manifest else ''} ({len(manifest['files'])} files, "
           "checksums in manifest.json).")
     print("Not exported: devices and their credentials (cars and timers re-activate on the target), passwords.")
     return 0

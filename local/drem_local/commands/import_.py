@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     report_path.write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
     written = ", ".join(f"{n} {table}" for table, n in result.written.items())
     print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
-          f"{result.archives_written} model archives.")
+          f"{result.archives_written} model archives{', the logo' if result.logo_written else ''}.")
     if result.already_written:
         print(f"  finished an interrupted import: {result.already_written} items were already written by it")
     for line in result.kept:

@@ -69,4 +69,4 @@ def collect_event(source: StackReader, event_id: str) -> EventBundle:
              "fleet": fleets, "models": models}
     return EventBundle(event_id=event_id, items={t: sorted_items(v) for t, v in items.items()},
                        accounts=accounts, archives=sorted(archives, key=lambda a: a.model_id),
-                       archive_data=archive_data)
+                       archive_data=archive_data, logo=source.read_logo(event_id))

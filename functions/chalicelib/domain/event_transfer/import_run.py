@@ -30,15 +30,17 @@ class ImportResult:
     kept: list[str]
     temporary_passwords: dict[str, str]  # printed once by the CLI, never stored in the report
     already_written: int = 0  # items an interrupted run of this import had written (resuming)
+    logo_written: bool = False
 
     def report(self) -> dict[str, Any]:
         return {"event_id": self.event_id, "source_event_id": self.source_event_id, "sub_map": self.sub_map,
                 "accounts": self.accounts, "written": self.written, "archives_written": self.archives_written,
-                "kept_existing": self.kept, "already_written_by_an_interrupted_run": self.already_written}
+                "kept_existing": self.kept, "already_written_by_an_interrupted_run": self.already_written,
+                "logo_written": self.logo_written}
 
 
 def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | None = None) -> ImportResult:
-    """Write the plan: accounts, archives, shared items, races, boards, the event item last.
+    """Write the plan: accounts, archives, shared items, races, boards, the logo, the event item last.
 
     Each account is noted in `journal` (with its temporary password) before it is created, so a run cut off here can
     be resumed (`plan_import`). Resuming, an event item that is already stored and equal to this import's counts as
@@ -70,6 +72,10 @@ def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | N
             if table == "events":  # before the event shows: imported board bodies are never what the public sees
                 step = "recomputing the boards from the races"
                 target.recompute_boards(bundle.items["events"][0])
+                if bundle.logo is not None:  # replaces what an interrupted run of this import wrote
+                    step = "writing the event's logo"
+                    target.write_logo(plan.event_id, bundle.logo)
+                    written.append(f"the logo of event {plan.event_id}")
             step = f"writing the {table} table"
             counts[table] = 0
             for original, item in zip(originals[table], bundle.items.get(table, []), strict=True):
@@ -99,7 +105,7 @@ def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | N
                         accounts=accounts, written=counts, archives_written=archives_written, kept=plan.kept,
                         temporary_passwords={a.account.username: a.temporary_password or ""
                                              for a in plan.accounts if a.action in ("create", "resume")},
-                        already_written=resumed)
+                        already_written=resumed, logo_written=bundle.logo is not None)
 
 
 def _partial_message(step: str, reason: str, written: list[str]) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from chalicelib.domain.errors import InvalidInput
 from chalicelib.formats.event_export.checks import check_bundle
 from chalicelib.formats.event_export.records import (
     ALLOWED_PK,
@@ -24,6 +25,7 @@ from chalicelib.formats.event_export.records import (
     FORMAT,
     FORMAT_VERSION,
     ITEM_FILES,
+    LOGO_FILES,
     MANIFEST,
     USERS_FILE,
     Account,
@@ -33,6 +35,7 @@ from chalicelib.formats.event_export.records import (
     Item,
 )
 from chalicelib.formats.event_export.writer import checksums
+from chalicelib.formats.logo_image import LogoImage, normalised_logo
 from chalicelib.formats.member_names import RefusedMember, vet_folder_file
 
 
@@ -78,9 +81,22 @@ def read_export(folder: Path) -> EventBundle:
     if len(usernames) != len(set(usernames)):
         raise InvalidExport(f"{USERS_FILE}: a username appears twice.", field="username")
     bundle = EventBundle(event_id=event_id, items=items, accounts=accounts, archives=archives,
-                         archive_data=archive_data)
+                         archive_data=archive_data, logo=_logo(manifest.get("logo"), contents))
     check_bundle(bundle)
     return bundle
+
+
+def _logo(name: Any, contents: dict[str, bytes]) -> LogoImage | None:
+    """The manifest's logo file drawn again from its pixels, as an upload is: the file is hostile input too."""
+    if name is None:
+        return None
+    if name not in LOGO_FILES.values() or name not in contents:
+        raise InvalidExport(f"{MANIFEST}: field 'logo' must name a listed {' or '.join(LOGO_FILES.values())}.",
+                            field="logo")
+    try:
+        return normalised_logo(contents[name])
+    except InvalidInput as refused:
+        raise InvalidExport(f"{name}: {refused.message}", field="logo") from None
 
 
 def _verified_files(folder: Path, listed: dict[str, Any]) -> dict[str, bytes]:

@@ -9,6 +9,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.formats.logo_image import LogoImage
 
 FORMAT = "drem-event-export"
 FORMAT_VERSION = 1
@@ -16,6 +17,8 @@ MANIFEST = "manifest.json"
 USERS_FILE = "users.json"
 ARCHIVES_FILE = "archives.json"
 ARCHIVE_DIR = "archives"
+# The event's logo, when it has one: the image file itself (named in the manifest's "logo"), drawn again on import.
+LOGO_FILES = {"image/png": "logo.png", "image/webp": "logo.webp"}
 # file → logical table; the order is the order of writes on import (the event item last).
 ITEM_FILES: dict[str, str] = {"fleets.json": "fleet", "profiles.json": "profiles", "models.json": "models",
                               "races.json": "races", "leaderboards.json": "leaderboards", "event.json": "events"}
@@ -26,7 +29,7 @@ EVENT_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 ATTRIBUTE_TYPES = frozenset({"S", "N", "B", "BOOL", "NULL", "M", "L", "SS", "NS", "BS"})
 NOT_CARRIED = ["devices and their credentials (cars and timers re-activate on the target)", "live races",
                "device commands and strip idempotency records", "raw and quarantined uploads", "soft-deleted models",
-               "passwords", "the event's logo (upload it again on the target's event page)"]
+               "passwords"]
 
 Item = dict[str, Any]  # one DynamoDB item in attribute-value JSON
 
@@ -64,6 +67,7 @@ class EventBundle:
     accounts: list[Account]
     archives: list[ArchiveEntry]
     archive_data: dict[str, bytes]  # file → content
+    logo: LogoImage | None = None  # on import: already drawn again from the file's pixels
 
 
 def archive_file(model_id: str) -> str:

@@ -16,7 +16,7 @@ def remap(bundle: EventBundle, sub_map: dict[str, str], event_id: str) -> EventB
                      for item in table_items] for table, table_items in bundle.items.items()}
     archives = [a.model_copy(update={"key": subs(a.key)}) for a in bundle.archives]
     return EventBundle(event_id=event_id, items=items, accounts=bundle.accounts, archives=archives,
-                       archive_data=bundle.archive_data)
+                       archive_data=bundle.archive_data, logo=bundle.logo)
 
 
 def remap_items(items: list[Item], sub_map: dict[str, str]) -> list[Item]:

@@ -12,6 +12,7 @@ from chalicelib.formats.event_export.records import (
     FORMAT,
     FORMAT_VERSION,
     ITEM_FILES,
+    LOGO_FILES,
     MANIFEST,
     NOT_CARRIED,
     USERS_FILE,
@@ -28,6 +29,8 @@ def render_files(bundle: EventBundle) -> dict[str, bytes]:
                                                                    key=lambda a: a.username.casefold())])
     files[ARCHIVES_FILE] = json_bytes([a.model_dump() for a in sorted(bundle.archives, key=lambda a: a.model_id)])
     files.update(bundle.archive_data)
+    if bundle.logo is not None:
+        files[LOGO_FILES[bundle.logo.content_type]] = bundle.logo.data
     return files
 
 
@@ -35,12 +38,15 @@ def manifest_for(bundle: EventBundle, files: dict[str, bytes], exported_at: str)
     audit = sum(1 for i in bundle.items.get("races", []) if i["sk"]["S"].startswith("AUDIT#"))
     counts = {table: len(items) for table, items in sorted(bundle.items.items())}
     counts["races"] = counts.get("races", 0) - audit  # races.json also holds the audit trail, counted apart
-    return {
+    manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "event_id": bundle.event_id, "exported_at": exported_at,
         "counts": counts | {"audit_entries": audit, "accounts": len(bundle.accounts), "archives": len(bundle.archives)},
         "files": {path: checksums(data) for path, data in sorted(files.items())},
         "not_carried": list(NOT_CARRIED),
     }
+    if bundle.logo is not None:
+        manifest["logo"] = LOGO_FILES[bundle.logo.content_type]
+    return manifest
 
 
 def write_export(bundle: EventBundle, out_dir: Path, exported_at: str) -> dict[str, Any]:
