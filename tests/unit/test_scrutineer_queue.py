@@ -226,3 +226,39 @@ def test_without_a_simulator_a_model_is_queued_only_where_a_worker_runs_elsewher
     model = upload(stack, aws_clients)
     assert services.model_service().get(ALICE, model.model_id).public()["scrutineer_status"] == shown
     assert (services.scrutineer_queue().state_of(model.model_id) is not None) is bool(worker_elsewhere)
+
+
+def test_a_hand_drive_stored_just_before_the_background_drive_writes_is_kept(stack: Any, aws_clients: Any,
+                                                                             clock: FakeClock) -> None:
+    """What CI once met: staff drove the model on their event's track by hand, and its result landed between the
+    background worker's last read of the model and its write. The model must show the hand drive, the newer word."""
+    from types import SimpleNamespace
+
+    from chalicelib.domain.model_scrutiny import ScrutineerRequest, ScrutineerService
+
+    model = upload(stack, aws_clients)
+    report = SimpleNamespace(verdict="failed", message="0/1 laps completed on reInvent2019_wide",
+                             track="reInvent2019_wide", track_type="ATOZ_SPEEDWAY", laps=1, laps_completed=0,
+                             best_lap_time_s=None, mean_lap_time_s=None, offtrack_count=1)
+    by_hand = ScrutineerService(services.model_service(), tracks=None, drive=lambda folder, track, laps: report,
+                                queue=services.scrutineer_queue())  # type: ignore[arg-type]
+    drive = FakeDrive(DriveOutcome(reports=[passed("REINVENT_2018")], clip=GIF))
+    background = worker(drive)
+    store = background.models.store
+    read = store.get
+    hand_driven: list[ModelRecord] = []
+
+    def read_then_a_hand_drive_lands(owner_sub: str, model_id: str) -> ModelRecord | None:
+        record = read(owner_sub, model_id)
+        if drive.calls and not hand_driven:  # the worker's read after its drive, before it writes
+            hand_driven.append(by_hand.scrutineer(OPERATOR, model_id, ScrutineerRequest(
+                laps=1, track_type="ATOZ_SPEEDWAY")))
+        return record
+
+    store.get = read_then_a_hand_drive_lands  # type: ignore[method-assign]
+    assert background.run_one() is not None and hand_driven
+
+    shown = services.model_service().get(ALICE, model.model_id)
+    assert shown.scrutineer_result is not None
+    assert shown.scrutineer_result.track_type == "ATOZ_SPEEDWAY", "the background drive overwrote the hand drive"
+    assert shown.scrutineer_status == "failed" and shown.scrutineer_state is None

@@ -145,12 +145,18 @@ class ScrutineerService:
             if name in found:
                 (folder / name).write_bytes(found[name])
 
-    def update(self, record: ModelRecord, **changes: Any) -> ModelRecord:
-        """Write `changes` onto the model while it stays AVAILABLE (re-read and retried when another write won)."""
+    def update(self, record: ModelRecord, *, newer_than: str = "", **changes: Any) -> ModelRecord:
+        """Write `changes` onto the model while it stays AVAILABLE and its scrutineering result is still `record`'s
+        (re-read and retried when another write won, so no drive's result is lost to a write from an older read).
+
+        `newer_than` is when a background drive started: a result stored after that moment (a drive by hand) is the
+        newer word, and `changes` keep it instead of writing their own."""
         for _ in range(3):
+            if newer_than and record.scrutineer_result is not None and record.scrutineer_result.at > newer_than:
+                changes = {name: value for name, value in changes.items() if name != "scrutineer_result"}
             updated = record.model_copy(update=changes)
             try:
-                self.models.store.replace(updated, expected_status=ModelStatus.AVAILABLE)
+                self.models.store.replace(updated, expected_status=ModelStatus.AVAILABLE, result_as_in=record)
                 return updated
             except ModelChanged:
                 latest = self.models.store.get(record.owner_sub, record.model_id)
@@ -289,17 +295,15 @@ class BackgroundScrutineer:
     def _finish(self, job: ScrutineerJob, record: ModelRecord, result: ScrutineerResult, clip: bytes | None, *,
                 started: str = "") -> None:
         changes: dict[str, Any] = {"scrutineer_result": result, "scrutineer_state": None}
-        latest = self.models.store.get(record.owner_sub, record.model_id) or record
-        if started and latest.scrutineer_result is not None and latest.scrutineer_result.at > started:
-            # Someone drove it by hand ("drive again") while this drive ran: theirs is the newer word.
-            changes, clip = {"scrutineer_state": None}, None
-        record = latest
+        record = self.models.store.get(record.owner_sub, record.model_id) or record
+        if started and record.scrutineer_result is not None and record.scrutineer_result.at > started:
+            clip = None  # someone drove it by hand ("drive again") while this drive ran: theirs is the newer word
         if clip is not None:
             key = scrutineer_clip_key(record.owner_sub, record.model_id)
             self.models.files.put(key, clip)
             changes["scrutineer_clip_key"] = key
-        try:
-            self.scrutineer.update(record, **changes)
+        try:  # a hand drive stored between that read and this write is kept too (update's newer_than)
+            self.scrutineer.update(record, newer_than=started, **changes)
         except Conflict:
             pass  # deleted while it drove: nothing left to show the result on
         self.queue.finish(job)

@@ -47,13 +47,23 @@ class DynamoModelStore:
             {"Put": {"TableName": self._table, "Item": pointer, "ConditionExpression": "attribute_not_exists(pk)"}},
         ])
 
-    def replace(self, record: ModelRecord, *, expected_status: ModelStatus) -> None:
-        """Write `record` only if the stored status is still `expected_status` (raises ModelChanged otherwise)."""
-        if not write_if(self._client, "put_item", _SERVICE,
-                        TableName=self._table, Item=_to_item(record),
-                        ConditionExpression="#status = :expected",
-                        ExpressionAttributeNames={"#status": "status"},
-                        ExpressionAttributeValues={":expected": {"S": expected_status.value}}):
+    def replace(self, record: ModelRecord, *, expected_status: ModelStatus,
+                result_as_in: ModelRecord | None = None) -> None:
+        """Write `record` only if the stored status is still `expected_status` and, given `result_as_in`, the stored
+        scrutineering result is still the one that record holds (raises ModelChanged otherwise)."""
+        condition = "#status = :expected"
+        names = {"#status": "status"}
+        values = {":expected": {"S": expected_status.value}}
+        if result_as_in is not None:
+            names["#result"] = "scrutineer_result"
+            if result_as_in.scrutineer_result is None:
+                condition += " AND attribute_not_exists(#result)"
+            else:  # the stored text is this exact dump (_to_item), so equal text is the same result
+                condition += " AND #result = :result"
+                values[":result"] = {"S": result_as_in.scrutineer_result.model_dump_json()}
+        if not write_if(self._client, "put_item", _SERVICE, TableName=self._table, Item=_to_item(record),
+                        ConditionExpression=condition, ExpressionAttributeNames=names,
+                        ExpressionAttributeValues=values):
             raise ModelChanged(record.model_id)
 
     # -- reads -----------------------------------------------------------------------------------------------------
