@@ -23,7 +23,7 @@ RACERS = (("astrid", "SE", "#0000FF", "identicon", 8_412), ("bruno", "DE", "#FF0
           ("chiara", "IT", "#FF8200", "none", 8_905), ("dev", "IN", "#800080", "identicon", 9_120),
           ("emi", "JP", "#1E90FF", "identicon", 9_377), ("farid", "FR", "#7CFC00", "none", 9_650))
 FEATURED = "gwen"  # races live in the test: a timer device posts her crossings
-# "Readable from 5 m": ANSI/HFES 100-2007 (Human Factors Engineering of Computer Workstations, 5.2) asks for a
+# "Readable from 5 m": ANSI/HFES 100-2007 (Human Factors Engineering of Computer Workstations) asks for a
 # character height of at least 16 minutes of arc at the reader's eye (20-22 preferred). The big screen of a venue is
 # taken as 2 m wide (a 90" screen or a small projection) showing the 1920 px, read from 5 m.
 SCREEN_MM_PER_PX = 2000 / 1920
