@@ -222,15 +222,26 @@ def form_fields(request: Request) -> dict[str, str]:
     return {name: values[0] for name, values in parsed.items()}
 
 
+def body_bytes(request: Request) -> bytes:
+    """The request's body as bytes (API Gateway and chalice local give bytes; Chalice types it str | bytes)."""
+    raw = request.raw_body or b""
+    return raw if isinstance(raw, bytes) else raw.encode("utf-8")
+
+
 def multipart_body(request: Request) -> multipart_form.MultipartForm:
     """The request's multipart form, parsed once (the CSRF check and the view both read it)."""
     cached: multipart_form.MultipartForm | None = getattr(request, "_drem_multipart", None)
     if cached is None:
-        raw = request.raw_body
-        cached = multipart_form.parsed(request.headers.get("content-type") or "",
-                                       raw if isinstance(raw, bytes) else raw.encode("utf-8"))
+        cached = multipart_form.parsed(request.headers.get("content-type") or "", body_bytes(request))
         request._drem_multipart = cached  # type: ignore[attr-defined]
     return cached
+
+
+def uploaded_file(request: Request, name: str) -> multipart_form.UploadedFile | None:
+    """The file a form posted in its file input `name`; None when none was chosen or the form is not multipart."""
+    if not multipart_form.is_multipart(request.headers.get("content-type") or ""):
+        return None
+    return multipart_body(request).files.get(name)
 
 
 def current_scope() -> RequestScope:

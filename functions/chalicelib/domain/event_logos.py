@@ -13,18 +13,7 @@ from pydantic import BaseModel, ConfigDict
 
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.events import EventRepository
-from chalicelib.formats.logo_image import normalised_logo
-
-
-class StoredLogo(BaseModel):
-    model_config = ConfigDict(frozen=True)
-
-    event_id: str
-    version: str
-    content_type: str
-    width: int
-    height: int
-    data: bytes
+from chalicelib.formats.logo_image import LogoImage, normalised_logo
 
 
 class LogoVersion(BaseModel):
@@ -37,9 +26,9 @@ class LogoVersion(BaseModel):
 
 
 class LogoRepository(Protocol):
-    def get(self, event_id: str) -> StoredLogo | None: ...
+    def get(self, event_id: str) -> LogoImage | None: ...
     def version(self, event_id: str) -> LogoVersion | None: ...
-    def put(self, logo: StoredLogo) -> None: ...
+    def put(self, event_id: str, logo: LogoImage) -> None: ...
     def delete(self, event_id: str) -> None: ...
 
 
@@ -51,17 +40,15 @@ class EventLogoService:
     def save(self, event_id: str, upload: bytes) -> LogoVersion:
         """Store `upload` as the event's logo; InvalidInput (field "logo") for a file that is not a usable image."""
         self._require_event(event_id)
-        image = normalised_logo(upload)
-        logo = StoredLogo(event_id=event_id, version=image.version, content_type=image.content_type,
-                          width=image.width, height=image.height, data=image.data)
-        self._logos.put(logo)
+        logo = normalised_logo(upload)
+        self._logos.put(event_id, logo)
         return LogoVersion(version=logo.version, width=logo.width, height=logo.height)
 
     def remove(self, event_id: str) -> None:
         self._require_event(event_id)
         self._logos.delete(event_id)
 
-    def logo(self, event_id: str) -> StoredLogo:
+    def logo(self, event_id: str) -> LogoImage:
         logo = self._logos.get(event_id)
         if logo is None:
             raise NotFound(f"Event {event_id} has no logo.", field="event_id")

@@ -10,7 +10,7 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 
 from chalicelib import services
-from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
+from chalicelib.auth.access import PUBLIC, SIGNED_IN, body_bytes, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.booth_drive import DriveControl, StartDrive
 from chalicelib.domain.booth_runs import ListRunsQuery, NewRun, RunRecord
@@ -63,8 +63,7 @@ def get_run(principal: User, run_id: str) -> dict:
        tags=("booth",))
 def put_artifact(principal: User, run_id: str, name: str) -> dict:
     """Upload `controls.jsonl` or `frame-NNNNNN.png` (raw bytes) of your RECORDING run"""
-    raw = bp.current_request.raw_body or b""
-    data = raw.encode() if isinstance(raw, str) else raw
+    data = body_bytes(bp.current_request)
     return {"stored": services.run_service().put_artifact(principal, run_id, name, data)}
 
 

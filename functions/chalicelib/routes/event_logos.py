@@ -7,7 +7,7 @@ from chalice import Blueprint, Response
 from pydantic import BaseModel, Field
 
 from chalicelib import services
-from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, route
+from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, body_bytes, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.event_logos import LogoVersion
 from chalicelib.formats import logo_image
@@ -42,9 +42,7 @@ def put_event_logo(principal: User, event_id: str) -> dict:
 
     drem stores the image drawn again from its pixels (margin cropped, fitted into 960×360); the answer names the
     stored version, which the public pages link to as `/event/{event_id}/logo?v={version}`."""
-    raw = bp.current_request.raw_body or b""
-    saved = services.event_logo_service().save(event_id, raw if isinstance(raw, bytes) else raw.encode("utf-8"))
-    return saved.model_dump()
+    return services.event_logo_service().save(event_id, body_bytes(bp.current_request)).model_dump()
 
 
 @route(bp, "/api/events/{event_id}/logo", methods=["DELETE"], allow=EVENT_EDITORS)

@@ -17,7 +17,6 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError
 
 from chalicelib.domain.errors import InvalidInput
-from chalicelib.domain.event_logos import StoredLogo
 from chalicelib.formats.event_export.records import Account, Item
 from chalicelib.formats.logo_image import LogoImage
 from chalicelib.storage.aws_errors import all_items, error_code, translate_common, write_if
@@ -140,13 +139,10 @@ class StackStorage:
     # --- the event's logo (its item's shape is the logo store's) ---------------------------------------------------
 
     def read_logo(self, event_id: str) -> LogoImage | None:
-        logo = self._logos().get(event_id)
-        return None if logo is None else LogoImage(data=logo.data, content_type=logo.content_type, width=logo.width,
-                                                   height=logo.height)
+        return self._logos().get(event_id)
 
     def write_logo(self, event_id: str, logo: LogoImage) -> None:
-        self._logos().put(StoredLogo(event_id=event_id, version=logo.version, content_type=logo.content_type,
-                                     width=logo.width, height=logo.height, data=logo.data))
+        self._logos().put(event_id, logo)
 
     def _logos(self) -> DynamoLogoStore:
         return DynamoLogoStore(self._dynamodb, self._table("events"))

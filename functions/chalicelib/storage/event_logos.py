@@ -9,7 +9,8 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.event_logos import LogoVersion, StoredLogo
+from chalicelib.domain.event_logos import LogoVersion
+from chalicelib.formats.logo_image import LogoImage
 from chalicelib.storage.aws_errors import translate_common
 
 _SERVICE = "The events table"
@@ -27,12 +28,12 @@ class DynamoLogoStore:
         self._client = client
         self._table = table
 
-    def get(self, event_id: str) -> StoredLogo | None:
+    def get(self, event_id: str) -> LogoImage | None:
         item = self._get(event_id)
         if item is None:
             return None
-        return StoredLogo(event_id=event_id, version=item["version"]["S"], content_type=item["contentType"]["S"],
-                          width=int(item["width"]["N"]), height=int(item["height"]["N"]), data=item["image"]["B"])
+        return LogoImage(data=item["image"]["B"], content_type=item["contentType"]["S"],
+                         width=int(item["width"]["N"]), height=int(item["height"]["N"]))
 
     def version(self, event_id: str) -> LogoVersion | None:
         item = self._get(event_id, **_VERSION_ONLY)
@@ -41,8 +42,9 @@ class DynamoLogoStore:
         return LogoVersion(version=item["version"]["S"], width=int(item["width"]["N"]),
                            height=int(item["height"]["N"]))
 
-    def put(self, logo: StoredLogo) -> None:
-        item = {**logo_key(logo.event_id), "version": {"S": logo.version}, "contentType": {"S": logo.content_type},
+    def put(self, event_id: str, logo: LogoImage) -> None:
+        # The version is stored beside the image so that pages can read it without the image's bytes.
+        item = {**logo_key(event_id), "version": {"S": logo.version}, "contentType": {"S": logo.content_type},
                 "width": {"N": str(logo.width)}, "height": {"N": str(logo.height)}, "image": {"B": logo.data}}
         try:
             self._client.put_item(TableName=self._table, Item=item)

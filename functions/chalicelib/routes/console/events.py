@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from chalice import Blueprint, Response
 
-from chalicelib import multipart_form, services
-from chalicelib.auth.access import ADMIN, OPERATOR, multipart_body, route
+from chalicelib import services
+from chalicelib.auth.access import ADMIN, OPERATOR, route, uploaded_file
 from chalicelib.auth.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.formats import logo_image
@@ -72,7 +72,7 @@ def update_event(principal: User, event_id: str) -> Response:
 @route(bp, "/console/events/{event_id}/logo", methods=["POST"], allow=EVENT_EDITORS)
 def upload_logo(principal: User, event_id: str) -> Response:
     """Store the posted image (file input `logo`) as the event's logo, shown on its big screen, overlay and page"""
-    upload = multipart_body(bp.current_request).files.get(logo_image.FIELD) if _is_multipart() else None
+    upload = uploaded_file(bp.current_request, logo_image.FIELD)
     try:
         services.event_logo_service().save(event_id, upload.data if upload else b"")
     except SHOWN_ON_FORM as exc:
@@ -106,10 +106,6 @@ def delete_event(principal: User, event_id: str) -> Response:
 
 def _event_errors(exc: Exception, values: dict[str, str]) -> dict[str, str]:
     return event_form.country_message(field_errors(exc, rename=event_form.rename_for(values)), values)
-
-
-def _is_multipart() -> bool:
-    return multipart_form.is_multipart(bp.current_request.headers.get("content-type") or "")
 
 
 def _form_page(event_id: str | None, view: event_form.EventFormView, errors: dict[str, str],
