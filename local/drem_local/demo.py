@@ -28,9 +28,8 @@ from drem_local.stack import ManagedProcess, RunningStack, spawn
 DEMO_DIR = "demo"
 DEMO_FILE = "demo.json"
 DIRECTOR = "demo-director"
-# The sim track the cars drive and the sample model trained on it. re:Invent 2018 comes from the DeepRacer route files
-# (DREM_TRACKS_DIR or the shared folder beside the repository); drem_oval ships with drem_sim, so a fresh clone without
-# the route files still gets a demo.
+# The sim track the cars drive and the sample model trained on it: re:Invent 2018, whose DeepRacer route file ships
+# with drem_sim; drem_oval (drem's own) only if that file is missing from the install.
 SIM_TRACKS_AND_SAMPLES: tuple[tuple[str, str], ...] = (("reinvent_base", "drem-bc-sample"), ("drem_oval",
                                                                                              "drem-bc-oval"))
 TRACK_IDS = ("1", "2")  # one sim car per track

@@ -8,6 +8,7 @@ as in the DeepRacer files; "left"/"right" are relative to the racing direction.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from dataclasses import dataclass, field, replace
@@ -19,10 +20,12 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+# drem's own YAML tracks and the real DeepRacer route files (deepracer-simapp, Apache-2.0; see tracks/NOTICE.md) ship
+# inside the package: an organiser's laptop has nothing else to read them from.
 PACKAGE_TRACKS_DIR = Path(__file__).resolve().parent / "tracks"
-# sim/drem_sim/tracks.py -> repo root is three levels up; the shared tracks sit beside the repo.
-DEFAULT_NPY_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "deepracer-tracks"
 TRACKS_DIR_ENV = "DREM_TRACKS_DIR"
+# A folder's `SHA256SUMS` (sha256sum's format): a listed route file whose bytes differ is refused, never driven.
+CHECKSUMS_FILE = "SHA256SUMS"
 
 
 class TrackError(ValueError):
@@ -322,19 +325,51 @@ def _drop_repeats(rows: np.ndarray, closed: bool) -> np.ndarray:
 
 def track_from_npy(path: str | Path) -> Track:
     path = Path(path)
+    name = path.stem
+    _check_sum(path)
     try:
         data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise TrackError(f"{path}: not a readable .npy array ({exc})") from exc
+    except (OSError, ValueError, EOFError) as exc:
+        raise TrackError(f"track {name!r}: {path} is not a readable .npy route file ({exc}); restore the file or "
+                         "reinstall drem") from exc
     if data.ndim != 2 or data.shape[1] != 6 or data.shape[0] < 3:
-        raise TrackError(f"{path}: expected a (N, 6) array of centre/inner/outer x,y; got shape {data.shape}")
+        raise TrackError(f"track {name!r}: {path} should hold rows of centre, inner and outer x,y (an N×6 array); "
+                         f"it holds shape {data.shape}")
     if not np.isfinite(data).all():
-        raise TrackError(f"{path}: contains NaN or infinite values")
+        raise TrackError(f"track {name!r}: {path} contains NaN or infinite values")
     data = data.astype(np.float64)
     closed = bool(np.array_equal(data[0], data[-1]))
     rows = _drop_repeats(data, closed)
-    return Track(track_id=path.stem, name=path.stem, centerline=rows[:, 0:2], inner=rows[:, 2:4],
+    return Track(track_id=name, name=name, centerline=rows[:, 0:2], inner=rows[:, 2:4],
                  outer=rows[:, 4:6], is_closed=closed, source=str(path))
+
+
+def _check_sum(path: Path) -> None:
+    """Refuse a route file that its folder's SHA256SUMS lists with other bytes (damaged on disk, or edited)."""
+    expected = _listed_sums(path.parent).get(path.name)
+    if expected is None:
+        return
+    try:
+        actual = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise TrackError(f"track {path.stem!r}: cannot read {path} ({exc.strerror or exc})") from exc
+    if actual != expected:
+        raise TrackError(f"track {path.stem!r}: {path} does not match its checksum in {path.parent / CHECKSUMS_FILE} "
+                         "(the file is damaged or was changed); restore it or reinstall drem")
+
+
+def _listed_sums(folder: Path) -> dict[str, str]:
+    listing = folder / CHECKSUMS_FILE
+    try:
+        text = listing.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return {}
+    sums: dict[str, str] = {}
+    for line in text.splitlines():
+        digest, _, name = line.strip().partition(" ")
+        if len(digest) == 64 and name:
+            sums[name.strip().lstrip("*")] = digest.lower()
+    return sums
 
 
 def track_from_spec(spec: TrackSpec, source: str = "") -> Track:
@@ -382,9 +417,10 @@ def track_from_yaml(path: str | Path) -> Track:
 
 
 def npy_dirs() -> list[Path]:
-    """Where `.npy` routes are looked up: $DREM_TRACKS_DIR (os.pathsep-separated), the shared dir, the package."""
+    """Where `.npy` routes are looked up: the package's own (the 22 real DeepRacer tracks), then any folders staff add
+    in $DREM_TRACKS_DIR (os.pathsep-separated). A shipped name always means the shipped file."""
     dirs = [Path(p) for p in os.environ.get(TRACKS_DIR_ENV, "").split(os.pathsep) if p]
-    return [*dirs, DEFAULT_NPY_DIR, PACKAGE_TRACKS_DIR]
+    return [PACKAGE_TRACKS_DIR, *dirs]
 
 
 def available_tracks() -> dict[str, Path]:
@@ -399,8 +435,7 @@ def available_tracks() -> dict[str, Path]:
     return found
 
 
-# The track a command drives when none is named: re:Invent 2018 when its DeepRacer route file is found (the shared
-# folder or $DREM_TRACKS_DIR), else drem_oval, which ships with drem_sim (a fresh clone has no route files).
+# The track a command drives when none is named: re:Invent 2018 (shipped), else drem_oval (a damaged install).
 DEFAULT_TRACK_CHOICES = ("reinvent_base", "drem_oval")
 
 
@@ -417,11 +452,11 @@ def load_track(name_or_path: str | Path, *, reverse: bool = False) -> Track:
         if not path.is_file():
             names = ", ".join(sorted(available_tracks())) or "(none found)"
             raise TrackError(f"unknown track {str(name_or_path)!r}; known tracks: {names} "
-                             f"(set {TRACKS_DIR_ENV} to add a folder of .npy routes)")
+                             f"(staff can add a folder of .npy route files with {TRACKS_DIR_ENV})")
     if path.suffix == ".npy":
         track = track_from_npy(path)
     elif path.suffix in (".yaml", ".yml"):
         track = track_from_yaml(path)
     else:
-        raise TrackError(f"{path}: unknown track file type (want .npy or .yaml)")
+        raise TrackError(f"track {path.stem!r}: {path} is no track file (want .npy or .yaml)")
     return track.reversed() if reverse else track

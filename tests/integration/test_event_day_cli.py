@@ -72,7 +72,7 @@ def test_league_push_takes_drems_own_sample_model(live_stack, tmp_path):
 
 
 def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_stack, tmp_path):
-    """No ../shared beside the clone: the default track falls back to drem_oval (shipped) instead of a traceback."""
+    """No ../shared beside the clone: the real DeepRacer tracks ship inside drem_sim; the car drives re:Invent 2018."""
     token = requests.post(live_stack.url + "/api/auth/token", timeout=10, json={
         "username": live_stack.admin_username, "password": live_stack.admin_password}).json()["access_token"]
     headers = {"Authorization": f"Bearer {token}"}
@@ -87,10 +87,8 @@ def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_
     activated = drem("car", "activate", "--code", code, "--hostname", "fresh-sim", "--api", live_stack.url,
                      "--config-dir", str(config), cwd=tmp_path)
     assert activated.returncode == 0, activated.stderr
-    # A fresh clone has no ../shared beside it. drem_sim looks for the shared route files next to its own checkout
-    # (`<checkout>/../shared/deepracer-tracks`, from where the package sits), and $DREM_TRACKS_DIR only adds folders.
-    # So the installed `drem` runs with drem_sim as a fresh clone lays it out, in a checkout under tmp_path with
-    # nothing beside it: PYTHONPATH puts that copy ahead of the editable install; no code is patched.
+    # A fresh clone has no ../shared beside it. The installed `drem` runs with drem_sim as a fresh clone lays it out,
+    # in a checkout under tmp_path with nothing beside it: PYTHONPATH puts that copy ahead of the editable install.
     clone = tmp_path / "fresh-clone"
     shutil.copytree(REPO / "sim" / "drem_sim", clone / "sim" / "drem_sim",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -98,7 +96,8 @@ def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_
     where = drem_python("import drem_sim.tracks as t; print(t.__file__); print(sorted(t.available_tracks()))",
                         cwd=tmp_path, env=fresh)
     assert where.returncode == 0, where.stderr
-    assert where.stdout.startswith(str(clone)) and "reinvent_base" not in where.stdout  # the clone's, no shared
+    assert where.stdout.startswith(str(clone))  # the clone's own drem_sim
+    assert "reinvent_base" in where.stdout and "thunder_hill_pro" in where.stdout  # the real tracks came with it
     ran = drem("car", "--config-dir", str(config), "run", "--sim", "--seconds", "3", "--event", event["event_id"],
                "--race-track", "1", cwd=tmp_path, env=fresh)
     assert ran.returncode == 0, ran.stderr

@@ -38,7 +38,8 @@ def test_a_console_graph_openvino_cannot_read_is_reported_as_not_scrutineerable(
     report = scrutineer(archive, "reinvent_base", laps=1)
 
     assert report.verdict == "cannot_scrutineer"
-    assert report.message.startswith("cannot scrutineer: OpenVINO cannot read agent/model.pb")
+    assert report.message.startswith("drem could not turn this console model into one its simulator can drive")
+    assert (report.detail or "").startswith("OpenVINO cannot read agent/model.pb")
     assert report.completion_pct is None
 
 

@@ -4,6 +4,8 @@ with a reason the racer can read; a folder without a graph is reported, not cras
 from __future__ import annotations
 
 import io
+import re
+import shutil
 import tarfile
 from pathlib import Path
 
@@ -45,7 +47,8 @@ def test_a_drive_over_its_wall_clock_bound_is_stopped_with_the_reason(tmp_path: 
     outcome = BoundedClipDrive(ScrutineerLimits(wall_seconds=1.0))(_model_folder(tmp_path), ["REINVENT_2018"], 3)
 
     assert outcome.reports == [] and outcome.clip is None
-    assert outcome.failure == "the drive took longer than 1 s and was stopped"
+    assert outcome.failure is not None and outcome.failure.startswith("The test drive took longer than 1 s")
+    assert "Drive again" in outcome.failure and outcome.failure_detail == "wall-clock limit of 1 s reached"
 
 
 def test_a_folder_without_a_graph_is_reported_not_crashed_on(tmp_path: Path) -> None:
@@ -53,4 +56,40 @@ def test_a_folder_without_a_graph_is_reported_not_crashed_on(tmp_path: Path) -> 
 
     assert outcome.failure is None and outcome.clip is None
     assert [r.verdict for r in outcome.reports] == ["invalid"]  # not driven on the second track either
-    assert outcome.reports[0].message.startswith("cannot scrutineer:")
+    assert outcome.reports[0].message.startswith("drem could not read the model inside this archive")
+    assert "model.onnx" in (outcome.reports[0].detail or "")
+
+
+CODE_NAMES = re.compile(r"\b[A-Za-z_.]*(Error|Exception|Traceback)\b|\w+\.\w+\.\w+")
+
+
+def test_a_damaged_track_file_is_told_in_words_naming_the_track(tmp_path: Path, monkeypatch) -> None:
+    import numpy as np
+
+    import drem_sim.tracks as tracks
+    from drem_local.workers.scrutineer_drive import drive_track
+
+    damaged = tmp_path / "tracks"
+    shutil.copytree(tracks.PACKAGE_TRACKS_DIR, damaged)
+    data = np.load(damaged / "reInvent2019_wide.npy")
+    np.save(damaged / "reInvent2019_wide.npy", data[::-1])  # reordered bytes: no longer the checksummed file
+    monkeypatch.setattr(tracks, "PACKAGE_TRACKS_DIR", damaged)
+
+    report, track, path = drive_track(_model_folder(tmp_path), "ATOZ_SPEEDWAY", 1)
+
+    assert report["verdict"] == "cannot_scrutineer" and track is None and path == []
+    assert "“reInvent2019_wide”" in report["message"] and "tell the staff" in report["message"]
+    assert not CODE_NAMES.search(report["message"]), report["message"]
+    assert "TrackError" in report["detail"] and "checksum" in report["detail"]
+
+
+def test_a_graph_onnxruntime_refuses_is_told_in_words_with_the_detail_for_staff(tmp_path: Path) -> None:
+    folder = _model_folder(tmp_path)
+    (folder / "model.onnx").write_bytes(b"\x08\x07not-a-graph")
+
+    outcome = BoundedClipDrive()(folder, ["REINVENT_2018"], 1)
+
+    report = outcome.reports[0]
+    assert report.verdict in ("cannot_scrutineer", "invalid")
+    assert not CODE_NAMES.search(report.message), report.message
+    assert report.detail, "staff get what the software said"

@@ -1,4 +1,4 @@
-"""`drem up --demo` drives a real DeepRacer track when the route files are there, and our own oval when they are not."""
+"""`drem up --demo` drives a real DeepRacer track (shipped with drem), and our own oval when that file is gone."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,14 +12,23 @@ pytestmark = pytest.mark.unit
 SAMPLES = Path(demo.__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples"
 
 
-def test_the_demo_races_on_re_invent_2018_when_the_route_files_are_there():
+def test_the_demo_races_on_re_invent_2018_which_ships_with_drem(monkeypatch):
+    import drem_sim.tracks as tracks
+
+    monkeypatch.delenv(tracks.TRACKS_DIR_ENV, raising=False)  # nothing but what the package holds
+
     assert demo.demo_track_and_sample() == ("reinvent_base", "drem-bc-sample")
 
 
-def test_a_clone_without_the_route_files_races_on_the_oval_that_ships_with_drem(monkeypatch, tmp_path):
+def test_an_install_missing_the_route_file_races_on_the_oval_that_ships_with_drem(monkeypatch, tmp_path):
+    import shutil
+
     import drem_sim.tracks as tracks
 
-    monkeypatch.setattr(tracks, "DEFAULT_NPY_DIR", tmp_path / "no-shared-folder")
+    damaged = tmp_path / "tracks"
+    shutil.copytree(tracks.PACKAGE_TRACKS_DIR, damaged)
+    (damaged / "reinvent_base.npy").unlink()
+    monkeypatch.setattr(tracks, "PACKAGE_TRACKS_DIR", damaged)
     monkeypatch.delenv(tracks.TRACKS_DIR_ENV, raising=False)
 
     assert demo.demo_track_and_sample() == ("drem_oval", "drem-bc-oval")

@@ -123,11 +123,14 @@ def test_a_worker_step_stores_the_figures_and_the_clip_for_the_owner_only(stack:
 def test_a_drive_stopped_by_its_bounds_says_could_not_scrutineer_with_the_reason(stack: Any, aws_clients: Any,
                                                                                 clock: FakeClock) -> None:
     model = upload(stack, aws_clients)
-    worker(FakeDrive(DriveOutcome(failure="the drive took longer than 90 s and was stopped"))).run_one()
+    worker(FakeDrive(DriveOutcome(failure="The test drive took longer than 90 s and was stopped.",
+                                  failure_detail="wall-clock limit of 90 s reached"))).run_one()
 
     stored = services.model_service().get(ALICE, model.model_id)
     assert stored.scrutineer_status == "cannot_scrutineer"
-    assert stored.scrutineer_status_reason == "the drive took longer than 90 s and was stopped"
+    assert stored.scrutineer_status_reason == "The test drive took longer than 90 s and was stopped."
+    assert "detail" not in stored.public()["scrutineer_result"], "the racer's API answer has no technical detail"
+    assert stored.public(staff=True)["scrutineer_result"]["detail"] == "wall-clock limit of 90 s reached"
     with pytest.raises(NotFound):
         services.scrutineer_service().clip(ALICE, model.model_id)
 
@@ -144,7 +147,7 @@ def test_a_job_that_keeps_killing_its_worker_is_given_up(stack: Any, aws_clients
     assert drive.calls == [], "not driven a fourth time"
     stored = services.model_service().get(ALICE, model.model_id)
     assert stored.scrutineer_status == "cannot_scrutineer"
-    assert "stopped its worker 3 times" in (stored.scrutineer_status_reason or "")
+    assert "stopped 3 times without finishing" in (stored.scrutineer_status_reason or "")
     assert queue.state_of(model.model_id) is None
 
 

@@ -62,16 +62,19 @@ class TrackTypes(Protocol):
 Drive = Callable[[Path, str, int], Any]
 
 
+NO_REPORT = ("drem's simulator finished without a report, so your model was not checked. Try “Drive again”; if it "
+             "happens again, tell the staff.")
+
+
 def simulator_drive(folder: Path, track_type: str, laps: int) -> Any:
+    """drem_sim's report; every way the drive can stop comes back as a report with a sentence (drem_sim.learn.
+    scrutiny_words), so only a missing simulator is refused here."""
     try:
         from drem_sim.learn.scrutineer import scrutineer_for_event
     except ModuleNotFoundError:
-        raise Conflict("Scrutineering needs the simulator, which is not installed on this server.") from None
-    try:
-        return scrutineer_for_event(folder, track_type, laps)
-    except Exception as error:  # a racer's graph can fail in ways of its own: say so, never a 500
-        logs.log(logging.WARNING, "scrutineering drive failed", error=repr(error)[:300])
-        raise Conflict(f"The simulator could not drive this model: {str(error)[:200]}") from None
+        raise Conflict("This drem server has no simulator installed, so models cannot be test-driven here. Tell the "
+                       "staff.") from None
+    return scrutineer_for_event(folder, track_type, laps)
 
 
 class ScrutineerService:
@@ -95,8 +98,12 @@ class ScrutineerService:
         with tempfile.TemporaryDirectory(prefix="scrutineer-") as folder:
             self.model_files(record, Path(folder))
             report = self.drive(Path(folder), track_type, request.laps)
+        detail = getattr(report, "detail", None)  # drem_sim reports it when a drive stopped without a verdict
+        if detail:
+            logs.log(logging.WARNING, "scrutineering drive stopped", model_id=record.model_id, detail=detail[:300])
         result = ScrutineerResult(
-            verdict=report.verdict, message=report.message, track=report.track, track_type=report.track_type,
+            verdict=report.verdict, message=report.message, detail=detail, track=report.track,
+            track_type=report.track_type,
             laps=report.laps, laps_completed=report.laps_completed, best_lap_time_s=report.best_lap_time_s,
             mean_lap_time_s=report.mean_lap_time_s, offtrack_count=report.offtrack_count, at=self.models.now())
         stored = self.update(record, scrutineer_result=result, scrutineer_state=None)
@@ -214,7 +221,8 @@ class DriveOutcome(BaseModel):
     """What one bounded background drive produced: a report per track type, the clip, or why it stopped."""
     reports: list[ScrutineerResult] = []
     clip: bytes | None = None
-    failure: str | None = None  # the drive was stopped (time, CPU, memory) or crashed: the whole drive failed
+    failure: str | None = None  # the drive was stopped (time, CPU, memory) or crashed: why, in a racer's words
+    failure_detail: str | None = None  # what the simulator said, for staff
 
 
 # clip_drive(model folder, track types, laps) -> DriveOutcome; the worker runs it in a bounded subprocess.
@@ -260,8 +268,8 @@ class BackgroundScrutineer:
             self.queue.drop(job.model_id)  # deleted meanwhile, or nothing to drive: the job has no purpose
             return
         if self.queue.exhausted(job):
-            reason = (f"the test drive stopped its worker {MAX_ATTEMPTS} times without finishing; drive it again "
-                      "from the model page, or race it on a stock DeepRacer")
+            reason = (f"The test drive stopped {MAX_ATTEMPTS} times without finishing, so your model was not checked. "
+                      "Try “Drive again” on the model page; it can still race on a stock DeepRacer.")
             self._finish(job, record, self._result(job, "cannot_scrutineer", reason), None)
             return
         record = self._mark(record, "driving")
@@ -272,19 +280,20 @@ class BackgroundScrutineer:
             try:
                 self.scrutineer.model_files(record, Path(folder))
             except (NotFound, Conflict) as error:
-                outcome = DriveOutcome(failure=error.message)
+                outcome = DriveOutcome(failure=f"drem could not fetch your model's files for the test drive: "
+                                       f"{error.message} Upload the model again.", failure_detail=error.message)
             else:
                 outcome = self.drive(Path(folder), job.track_types, self.laps)
         if outcome.failure or not outcome.reports:
-            result = self._result(job, "cannot_scrutineer", outcome.failure or "the drive gave no report")
+            result = self._result(job, "cannot_scrutineer", outcome.failure or NO_REPORT, outcome.failure_detail)
         else:
             result = worst_result([r.model_copy(update={"at": self.models.now()}) for r in outcome.reports])
         clip = outcome.clip if outcome.clip and len(outcome.clip) <= self.max_clip_bytes else None
         self._finish(job, record, result, clip, started=started)
 
-    def _result(self, job: ScrutineerJob, verdict: str, message: str) -> ScrutineerResult:
-        return ScrutineerResult(verdict=verdict, message=message, track="", track_type=job.track_types[0],
-                                laps=self.laps, at=self.models.now())
+    def _result(self, job: ScrutineerJob, verdict: str, message: str, detail: str | None = None) -> ScrutineerResult:
+        return ScrutineerResult(verdict=verdict, message=message, detail=detail, track="",
+                                track_type=job.track_types[0], laps=self.laps, at=self.models.now())
 
     def _mark(self, record: ModelRecord, state: str) -> ModelRecord:
         try:

@@ -64,8 +64,9 @@ class ScrutineerResult(BaseModel):
     """The last test drive of a model in the simulator, on an event's track."""
     model_config = ConfigDict(frozen=True)
     verdict: str
-    message: str
+    message: str  # for the racer: a sentence, never an exception's name
     track: str
+    detail: str | None = None  # what the software said when a drive stopped without a verdict: staff only
     track_type: str | None = None
     laps: int = 0
     laps_completed: int = 0
@@ -146,14 +147,20 @@ class ModelRecord(BaseModel):
     def scrutineer_passed(self) -> bool:
         return self.scrutineer_status == "passed"
 
-    def public(self) -> dict[str, Any]:
-        """What API callers see (storage keys stay inside)."""
+    def public(self, *, staff: bool = False) -> dict[str, Any]:
+        """What API callers see (storage keys stay inside; a stopped drive's technical detail only for staff)."""
         shown = self.model_dump(mode="json", exclude={"upload_key", "s3_key", "converted_key",
                                                       "scrutineer_clip_key"})
+        if not staff and shown.get("scrutineer_result"):
+            shown["scrutineer_result"].pop("detail", None)
         shown.update(scrutineer_status=self.scrutineer_status, scrutineer_status_reason=self.scrutineer_status_reason,
                      scrutineer_clip=f"/api/models/{self.model_id}/scrutineer/clip.gif"
                      if self.scrutineer_clip_key else None)
         return shown
+
+    def shown_to(self, principal: Principal) -> dict[str, Any]:
+        """`public()` for this caller: model staff also get the technical detail of a stopped test drive."""
+        return self.public(staff=bool(principal.roles & MODEL_STAFF))
 
 
 class ModelPage(BaseModel):

@@ -34,12 +34,12 @@ def complete_upload(principal: User, model_id: str) -> dict:
 @route(bp, "/api/models", allow=SIGNED_IN, query=ListQuery)
 def list_models(principal: User, query: ListQuery) -> dict:
     page = services.model_service().list_models(principal, query)
-    return {"models": [model.public() for model in page.models], "next": page.next_token}
+    return {"models": [model.shown_to(principal) for model in page.models], "next": page.next_token}
 
 
 @route(bp, "/api/models/{model_id}", allow=SIGNED_IN)
 def get_model(principal: User, model_id: str) -> dict:
-    return {"model": services.model_service().get(principal, model_id).public()}
+    return {"model": services.model_service().get(principal, model_id).shown_to(principal)}
 
 
 @route(bp, "/api/models/{model_id}", methods=["DELETE"], allow=SIGNED_IN)
@@ -50,7 +50,7 @@ def delete_model(principal: User, model_id: str) -> dict:
 @route(bp, "/api/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN, body=ScrutineerRequest)
 def scrutineer_model(principal: User, model_id: str, body: ScrutineerRequest) -> dict:
     """Test-drive the model in the simulator on an event's track (owner, admins, operators); the result is kept."""
-    return {"model": services.scrutineer_service().scrutineer(principal, model_id, body).public()}
+    return {"model": services.scrutineer_service().scrutineer(principal, model_id, body).shown_to(principal)}
 
 
 @route(bp, "/api/models/{model_id}/scrutineer/clip.gif", allow=SIGNED_IN,

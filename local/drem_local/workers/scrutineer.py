@@ -27,10 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from drem_local.app_source import use_app_source
+from drem_sim.learn import scrutiny_words
+from drem_sim.learn.scrutiny_words import GiB, PlainFailure
 
 DRIVE_MODULE = "drem_local.workers.scrutineer_drive"
 NICENESS = 10  # below the app server (0): the live pages win every contest for the CPU
-GiB = 1024 ** 3
 _PR_SET_PDEATHSIG = 1
 LEASE_VARIABLE = "DREM_SCRUTINEER_LEASE_S"  # how long a taken job is the worker's (default 5 minutes)
 
@@ -68,19 +69,19 @@ class BoundedClipDrive:
         except subprocess.TimeoutExpired:
             self.stop()
             process.communicate()
-            return DriveOutcome(failure=f"the drive took longer than {limits.wall_seconds:.0f} s and was stopped")
+            return _failed(scrutiny_words.drive_timed_out(limits.wall_seconds))
         except BaseException:  # SIGTERM while it drives: the drive stops with the worker
             self.stop()
             raise
         finally:
             self.process = None
         if process.returncode != 0:
-            return DriveOutcome(failure=_crash_reason(process.returncode, stderr, limits))
+            return _failed(_crash_reason(process.returncode, stderr, limits))
         try:
             answer = json.loads(stdout.decode("utf-8", "replace").strip().splitlines()[-1])
             outcome = DriveOutcome.model_validate({"reports": answer["reports"]})
         except (ValueError, KeyError, IndexError):
-            return DriveOutcome(failure="the simulator gave no answer")
+            return _failed(scrutiny_words.no_answer(stderr.decode("utf-8", "replace")))
         if clip.is_file():
             outcome = outcome.model_copy(update={"clip": clip.read_bytes()})
         return outcome
@@ -119,17 +120,23 @@ def lowest_priority() -> None:
         pass  # not Linux (or not allowed): the nice value stands
 
 
-def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> str:
+def _failed(failure: PlainFailure) -> Any:
+    from chalicelib.domain.model_scrutiny import DriveOutcome
+
+    return DriveOutcome(failure=failure.message, failure_detail=failure.detail)
+
+
+def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> PlainFailure:
+    """Why the drive's child died, in a racer's words (and the child's own last lines for staff)."""
     text = stderr.decode("utf-8", "replace")
     if returncode < 0:
         name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
         if name == "SIGXCPU":
-            return f"the drive used more than {limits.cpu_seconds} s of CPU and was stopped"
-        return f"the simulator crashed ({name})"
+            return scrutiny_words.drive_out_of_cpu(limits.cpu_seconds)
+        return scrutiny_words.simulator_crashed(f"killed by {name}", text)
     if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
-        return f"the drive needed more than {limits.memory_bytes // GiB} GiB of memory and was stopped"
-    last = next((line for line in reversed(text.strip().splitlines()) if line.strip()), "")
-    return f"the simulator failed (exit {returncode}): {last[:200]}".rstrip(": ")
+        return scrutiny_words.drive_out_of_memory(limits.memory_bytes, text)
+    return scrutiny_words.simulator_crashed(f"exit {returncode}", text)
 
 
 class _Stop(BaseException):

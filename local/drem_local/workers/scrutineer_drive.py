@@ -52,20 +52,39 @@ def drive_track(folder: Path, track_type: str, laps: int) -> tuple[dict[str, Any
     from drem_sim.learn.package import ArchiveError
     from drem_sim.learn.pilot import OnnxPilot, TensorFlowModelError
     from drem_sim.learn.scrutineer import PASS_COMPLETION_PCT, track_for_event
-    from drem_sim.tracks import load_track
+    from drem_sim.learn.scrutiny_words import (
+        PlainFailure,
+        archive_unusable,
+        console_model_unusable,
+        model_stopped,
+        track_unavailable,
+    )
+    from drem_sim.tracks import TrackError, load_track
 
     event_track = track_for_event(track_type)
     base: dict[str, Any] = {"track": event_track.track, "track_type": event_track.track_type, "laps": laps}
+
+    def stopped(verdict: str, failure: PlainFailure) -> tuple[dict[str, Any], None, list[tuple[float, float]]]:
+        return {**base, "verdict": verdict, "message": failure.message, "detail": failure.detail}, None, []
+
+    try:
+        track = load_track(event_track.track)
+    except TrackError as error:
+        return stopped("cannot_scrutineer", track_unavailable(event_track.track, error))
     try:
         pilot = OnnxPilot.from_archive(folder)
     except TensorFlowModelError as error:
-        return {**base, "verdict": "cannot_scrutineer", "message": str(error)}, None, []
+        return stopped("cannot_scrutineer", console_model_unusable(str(error).removeprefix("cannot scrutineer: ")))
     except ArchiveError as error:
-        return {**base, "verdict": "invalid", "message": f"cannot scrutineer: {error}"}, None, []
-    track = load_track(event_track.track)
+        return stopped("invalid", archive_unusable(str(error)))
+    except Exception as error:  # onnxruntime refusing a racer's graph
+        return stopped("cannot_scrutineer", model_stopped(event_track.track, error))
     env = RecordingEnv(RaceEnv(track))
-    metrics = drive(env, lambda observation, _params: pilot.act(observation), laps, 0, folder.name,
-                    event_track.track)
+    try:
+        metrics = drive(env, lambda observation, _params: pilot.act(observation), laps, 0, folder.name,
+                        event_track.track)
+    except Exception as error:  # a graph that loads but fails on a frame
+        return stopped("cannot_scrutineer", model_stopped(event_track.track, error))
     passed = metrics.completion_pct >= PASS_COMPLETION_PCT
     lap = f", mean lap {metrics.mean_lap_time_s:.2f}s" if metrics.mean_lap_time_s is not None else ""
     note = f" ({event_track.note})" if event_track.note else ""

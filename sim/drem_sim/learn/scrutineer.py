@@ -11,6 +11,7 @@ from typing import Literal
 
 from pydantic import BaseModel
 
+from drem_sim.learn import scrutiny_words
 from drem_sim.learn.package import ArchiveError
 
 Verdict = Literal["passed", "failed", "cannot_scrutineer", "invalid"]
@@ -46,7 +47,8 @@ class ScrutineerReport(BaseModel):
     track: str
     laps: int
     verdict: Verdict
-    message: str
+    message: str  # a sentence for the racer (drem_sim.learn.scrutiny_words), never an exception's name
+    detail: str | None = None  # what the software said, for staff only
     track_type: str | None = None
     note: str | None = None
     completion_pct: float | None = None
@@ -55,6 +57,10 @@ class ScrutineerReport(BaseModel):
     mean_lap_time_s: float | None = None
     best_lap_time_s: float | None = None
     offtrack_count: int = 0
+
+
+def _words(failure: scrutiny_words.PlainFailure) -> dict[str, str]:
+    return {"message": failure.message, "detail": failure.detail}
 
 
 def scrutineer_for_event(archive: str | Path, track_type: str, laps: int = 3, seed: int = 0) -> ScrutineerReport:
@@ -67,16 +73,26 @@ def scrutineer_for_event(archive: str | Path, track_type: str, laps: int = 3, se
 def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) -> ScrutineerReport:
     from drem_sim.learn.evaluate import evaluate_model
     from drem_sim.learn.pilot import TensorFlowModelError
+    from drem_sim.tracks import TrackError, load_track
 
     if laps < 1:
         raise ValueError("scrutineering needs at least one lap")
     base = {"archive": Path(archive).name, "track": track, "laps": laps}
     try:
+        load_track(track)
+    except TrackError as error:
+        return ScrutineerReport(**base, verdict="cannot_scrutineer", **_words(scrutiny_words.track_unavailable(
+            track, error)))
+    try:
         metrics = evaluate_model(archive, track, laps, seed)
     except TensorFlowModelError as error:
-        return ScrutineerReport(**base, verdict="cannot_scrutineer", message=str(error))
+        return ScrutineerReport(**base, verdict="cannot_scrutineer", **_words(scrutiny_words.console_model_unusable(
+            str(error).removeprefix("cannot scrutineer: "))))
     except ArchiveError as error:
-        return ScrutineerReport(**base, verdict="invalid", message=f"cannot scrutineer: {error}")
+        return ScrutineerReport(**base, verdict="invalid", **_words(scrutiny_words.archive_unusable(str(error))))
+    except Exception as error:  # a racer's graph can fail in ways of its own: a sentence, never a traceback
+        return ScrutineerReport(**base, verdict="cannot_scrutineer", **_words(scrutiny_words.model_stopped(
+            track, error)))
     passed = metrics.completion_pct >= PASS_COMPLETION_PCT
     lap = f", mean lap {metrics.mean_lap_time_s:.2f}s" if metrics.mean_lap_time_s is not None else ""
     return ScrutineerReport(

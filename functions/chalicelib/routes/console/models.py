@@ -13,6 +13,7 @@ from chalicelib.domain.assignments import Assignment
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
+from chalicelib.domain.racer_models import MODEL_STAFF as MODEL_STAFF_ROLES
 from chalicelib.domain.racer_models import ListQuery, ModelRecord, ModelStatus
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted, submitted_list
 from drem_web import render
@@ -40,7 +41,7 @@ def models_page(principal: User) -> Response:
     listed = _listed(principal)
     query, errors, models = _filtered(listed)
     return render.page("console/models", status=400 if errors else 200, query=query, errors=errors, models=models,
-                       statuses=STATUSES, cars=_cars(), track_types=TRACK_TYPES,
+                       statuses=STATUSES, cars=_cars(), track_types=TRACK_TYPES, show_scrutiny_detail=True,
                        assignable=[m for m in listed if m.status is ModelStatus.AVAILABLE])
 
 
@@ -48,7 +49,7 @@ def models_page(principal: User) -> Response:
 def model_rows(principal: User) -> Response:
     query, errors, models = _filtered(_listed(principal))
     return render.fragment("console/model_rows", status=400 if errors else 200, errors=errors, models=models,
-                           track_types=TRACK_TYPES)
+                           track_types=TRACK_TYPES, show_scrutiny_detail=True)
 
 
 @route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
@@ -113,7 +114,7 @@ def _cars() -> list:
 def model_scrutiny(principal: User, model_id: str) -> Response:
     """The scrutineering box alone: the page polls it while the background drive is queued or driving."""
     return render.fragment("console/model_scrutiny", model=services.model_service().get(principal, model_id),
-                           track_types=TRACK_TYPES)
+                           track_types=TRACK_TYPES, show_scrutiny_detail=_is_model_staff(principal))
 
 
 @route(bp, "/console/models/{model_id}/scrutineer", methods=["POST"], allow=SIGNED_IN)
@@ -127,4 +128,9 @@ def scrutineer_model(principal: User, model_id: str) -> Response:
         model = services.model_service().get(principal, model_id)
         error, status = " ".join(field_errors(exc, "model_id").values()), error_status(exc)
     return render.fragment("console/model_scrutiny", status=status, model=model, scrutiny_error=error,
-                           track_types=TRACK_TYPES)
+                           track_types=TRACK_TYPES, show_scrutiny_detail=_is_model_staff(principal))
+
+
+def _is_model_staff(principal: User) -> bool:
+    """Staff see what the software said when a test drive stopped; racers see the sentence only."""
+    return bool(principal.roles & MODEL_STAFF_ROLES)
