@@ -7,14 +7,22 @@ VENV := .venv
 BIN := $(VENV)/bin
 TOOLS := .tools
 UV := $(TOOLS)/bin/uv
-# torch's CPU wheel is served from this directory on our machines (see requirements/pins.txt).
-WHEELS := /opt/wheels
-UV_INSTALL := $(UV) pip sync --quiet --python $(BIN)/python --require-hashes --find-links $(WHEELS)
-UV_COMPILE := $(UV) pip compile --quiet --generate-hashes --python-version 3.11 \
-	--python-platform x86_64-manylinux_2_28 --find-links $(WHEELS) --constraint requirements/pins.txt \
+# torch (the CPU build, only for training: the tests and the booth) comes from PyTorch's CPU wheel index, pinned with
+# its hash in requirements/torch-cpu.txt. A local folder holding that wheel is an optional speed-up: used when it
+# exists and has the wheel (`make up WHEELS=~/wheels`), never required. Nothing else comes from it.
+WHEELS ?= /opt/wheels
+TORCH_WHEEL_INDEX := https://download.pytorch.org/whl/cpu/torch/
+TORCH_SOURCE = $(if $(wildcard $(WHEELS)/torch-*+cpu-*.whl),--find-links $(WHEELS),--find-links $(TORCH_WHEEL_INDEX))
+UV_INSTALL := $(UV) pip sync --quiet --python $(BIN)/python --require-hashes
+UV_COMPILE = $(UV) pip compile --quiet --generate-hashes --python-version 3.11 \
+	--python-platform x86_64-manylinux_2_28 $(TORCH_SOURCE) --constraint requirements/pins.txt \
 	$(if $(UPGRADE),--upgrade,)
 RUNTIME_LOCK := requirements/runtime.txt
+# Everything the tests and lint need except torch, which requirements/torch-cpu.txt pins (its own source, above).
 DEV_LOCK := requirements/dev.txt
+TORCH_LOCK := requirements/torch-cpu.txt
+# What `make deploy` needs: the CLI (drem build, drem aws) and the CDK app's Python side; no torch, no test tools.
+DEPLOY_LOCK := requirements/deploy.txt
 HTMX := web/drem_web/static/vendor/htmx.min.js
 # Country flags as images (emoji flags show as letters on Windows and in the test Chromium).
 FLAGS := web/drem_web/static/vendor/flags/.installed
@@ -26,7 +34,8 @@ FONT_DEBS := fonts-noto-core fonts-droid-fallback
 TEST_DEBS := chromium poppler-utils $(FONT_DEBS)
 BENCH_DEBS := wrk nginx-light
 
-.PHONY: up demo test lint install install-test test-debs font-debs lock build bench clean-state deploy destroy
+.PHONY: up demo test lint install install-test install-deploy test-debs font-debs lock build bench clean-state deploy \
+	destroy aws-check
 
 ## make up: install everything, then start the local event stack on http://127.0.0.1:8000
 up: install
@@ -62,22 +71,39 @@ $(VENV)/bin/python: | $(UV)
 	$(UV) venv --quiet --python $(PYTHON) $(VENV)
 
 # Sync makes the venv hold exactly the lock (nothing more), then drem itself goes in editable, without deps
-# and without build isolation (its build backend comes from the lock too).
+# and without build isolation (its build backend comes from the lock too). The stamps say which lock the venv holds.
+INSTALL_DREM := $(UV) pip install --quiet --python $(BIN)/python --no-deps --no-build-isolation -e .
 $(VENV)/.installed-runtime: $(RUNTIME_LOCK) pyproject.toml | $(VENV)/bin/python
 	$(UV_INSTALL) $(RUNTIME_LOCK)
-	$(UV) pip install --quiet --python $(BIN)/python --no-deps --no-build-isolation -e .
-	rm -f $(VENV)/.installed-test
+	$(INSTALL_DREM)
+	rm -f $(VENV)/.installed-test $(VENV)/.installed-deploy
 	touch $@
 
-$(VENV)/.installed-test: $(DEV_LOCK) pyproject.toml | $(VENV)/bin/python
+$(VENV)/.installed-test: $(DEV_LOCK) $(TORCH_LOCK) pyproject.toml | $(VENV)/bin/python
 	$(UV_INSTALL) $(DEV_LOCK)
-	$(UV) pip install --quiet --python $(BIN)/python --no-deps --no-build-isolation -e .
-	rm -f $(VENV)/.installed-runtime
+	$(UV) pip install --quiet --python $(BIN)/python --require-hashes --no-deps $(TORCH_SOURCE) -r $(TORCH_LOCK)
+	$(INSTALL_DREM)
+	rm -f $(VENV)/.installed-runtime $(VENV)/.installed-deploy
 	touch $@
+
+$(VENV)/.installed-deploy: $(DEPLOY_LOCK) pyproject.toml | $(VENV)/bin/python
+	$(UV_INSTALL) $(DEPLOY_LOCK)
+	$(INSTALL_DREM)
+	rm -f $(VENV)/.installed-runtime $(VENV)/.installed-test
+	touch $@
+
+# The test venv holds everything deploying needs too: keep it rather than shrink it to the deploy lock.
+install-deploy: $(HTMX) $(FLAGS)
+	@[ -f $(VENV)/.installed-test ] && [ $(VENV)/.installed-test -nt $(DEV_LOCK) ] || $(MAKE) --no-print-directory \
+		$(VENV)/.installed-deploy
 
 ## make lock: re-resolve requirements/*.txt from pyproject.toml (keeps current pins; UPGRADE=1 takes the newest)
 lock: | $(UV)
-	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras -o $(DEV_LOCK)
+	$(UV_COMPILE) pyproject.toml requirements/build.in --all-extras --no-emit-package torch -o $(DEV_LOCK)
+	@# torch and its dependencies (pinned as in the dev lock): installed --no-deps from its own source (TORCH_SOURCE).
+	$(UV_COMPILE) requirements/torch-cpu.in --constraint $(DEV_LOCK) -o $(TORCH_LOCK)
+	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --extra convert --extra infra \
+		--constraint $(DEV_LOCK) -o $(DEPLOY_LOCK)
 	$(UV_COMPILE) pyproject.toml requirements/build.in --extra sim --extra car --extra convert --constraint $(DEV_LOCK) \
 		-o $(RUNTIME_LOCK)
 	@# Lambda's python3.11 runs on Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels only.
@@ -123,7 +149,8 @@ build: install
 ## make deploy STAGE=dev [BOOTH=1]: deploy to the AWS account of your default credentials (docs/deploy.md); prints the URL
 STAGE ?= dev
 CDK := infra_cdk/node_modules/.bin/cdk
-CDK_RUN := cd infra_cdk && JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION=20 node_modules/.bin/cdk
+# Node.js 22 LTS (drem aws check refuses others; docs/deploy.md): no end-of-life warning to silence.
+CDK_RUN := cd infra_cdk && node_modules/.bin/cdk
 DEPLOYED := .drem-aws/$(STAGE).json
 CDK_OUTPUTS := .drem-aws/$(STAGE).cdk-outputs.json
 CDK_CONTEXT := -c stage=$(STAGE) $(if $(DOMAIN),-c domain_name=$(DOMAIN) -c certificate_arn=$(CERTIFICATE_ARN),) \
@@ -139,7 +166,12 @@ $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund
 	touch $@
 
-deploy: $(VENV)/.installed-test $(HTMX) $(CDK)
+## make aws-check: what `make deploy` checks first (credentials, region, Node, Docker, fonts, flag images)
+aws-check: install-deploy font-debs
+	$(BIN)/drem aws check
+
+deploy: install-deploy font-debs $(CDK)
+	$(BIN)/drem aws check
 	$(BIN)/drem build
 	mkdir -p .drem-aws
 	$(CDK_RUN) bootstrap $(CDK_CONTEXT)

@@ -16,11 +16,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-os.environ.setdefault("JSII_SILENCE_WARNING_END_OF_LIFE_NODE_VERSION", "20")
+import aws_cdk as cdk
 
-import aws_cdk as cdk  # noqa: E402
-
-from drem_infra.stack import DremStack  # noqa: E402
+from drem_infra.stack import DremStack
 
 FUNCTIONS_DIR = Path(__file__).resolve().parent.parent / "functions"
 

@@ -1,5 +1,6 @@
 """`drem aws`: what `make deploy` does after `cdk deploy`, and what an organiser needs from a deployment.
 
+    drem aws check                                         # before deploying: credentials, region, Node, Docker, ...
     drem aws record --stage S --outputs cdk-outputs.json   # write .drem-aws/S.json from the stack outputs
     drem aws admin --stage S [--username admin --email E]  # create the first admin; prints its password once
     drem aws show --stage S [--env]                        # the public URL, names; --env: shell export lines
@@ -14,13 +15,16 @@ import shlex
 import sys
 from pathlib import Path
 
-HELP = "after `make deploy`: record the stack outputs, create the first admin, show the deployment"
+HELP = ("check this laptop can deploy (`make deploy` runs it first); after a deploy: record the stack outputs, create "
+        "the first admin, show the deployment")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dir", type=Path, default=Path(".drem-aws"),
                         help="where deployment records live (default .drem-aws)")
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    actions.add_parser("check", help="check credentials, region, Node.js, Docker, fonts and flag images before a "
+                       "deploy; one sentence for each problem (exit 1 if any)")
     record = actions.add_parser("record", help="write .drem-aws/STAGE.json from `cdk deploy --outputs-file` JSON")
     record.add_argument("--stage", required=True)
     record.add_argument("--outputs", type=Path, required=True, help="the CDK outputs file")
@@ -36,6 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from drem_local.deployment import Deployment, DeploymentError
 
+    if args.action == "check":
+        return _check()
     try:
         if args.action == "record":
             deployment = Deployment.from_cdk_outputs(_read_json(args.outputs), args.stage)
@@ -55,6 +61,21 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"public_url": deployment.public_url, "region": deployment.region,
                           "user_pool_id": deployment.user_pool_id, "tables": deployment.tables,
                           "buckets": deployment.buckets}, indent=2))
+    return 0
+
+
+def _check() -> int:
+    from drem_local.aws_preflight import run_checks
+
+    checks = run_checks()
+    for check in checks:
+        print(f"{'ok ' if check.ok else 'NO '} {check.name}: {check.sentence}")
+    problems = [check for check in checks if not check.ok]
+    if problems:
+        print(f"drem aws check: {len(problems)} problem{'s' if len(problems) > 1 else ''} to fix before deploying "
+              "(nothing was built or uploaded).", file=sys.stderr)
+        return 1
+    print("Ready to deploy.")
     return 0
 
 
