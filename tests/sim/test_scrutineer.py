@@ -128,3 +128,10 @@ def test_a_model_with_the_wrong_number_of_outputs_is_invalid_not_a_crash(tmp_pat
 
     assert report.verdict == "invalid"
     assert "must output 2 means" in report.message
+
+
+def test_a_track_type_without_a_twin_says_which_real_track_stood_in() -> None:
+    report = scrutineer_for_event(SAMPLE, "REINVENT_2022", laps=1)
+
+    assert report.verdict in ("passed", "failed") and report.track == "reinvent_base"
+    assert report.message.endswith("(no simulator track for REINVENT_2022; driven on reinvent_base)"), report.message

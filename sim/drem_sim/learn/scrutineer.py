@@ -67,7 +67,10 @@ def scrutineer_for_event(archive: str | Path, track_type: str, laps: int = 3, se
     """Scrutineer on the simulator twin of a DREM event's track type (e.g. ATOZ_SPEEDWAY)."""
     event_track = track_for_event(track_type)
     report = scrutineer(archive, event_track.track, laps, seed)
-    return report.model_copy(update={"track_type": event_track.track_type, "note": event_track.note})
+    message = f"{report.message} ({event_track.note})" if event_track.note and report.verdict in (
+        "passed", "failed") else report.message  # which real track stood in for one drem has no twin of
+    return report.model_copy(update={"track_type": event_track.track_type, "note": event_track.note,
+                                     "message": message})
 
 
 def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) -> ScrutineerReport:
