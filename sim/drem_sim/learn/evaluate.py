@@ -56,8 +56,10 @@ class EvalMetrics(BaseModel):
 
 def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_name: str,
           max_steps: int | None = None) -> EvalMetrics:
-    """Run ``policy`` until ``attempts`` lap attempts have ended. A lap counts only when the car drove it
-    without leaving the track: after an off-track the env is restarted where it put the car back."""
+    """Run ``policy`` until ``attempts`` lap attempts have ended. A lap counts only when the car drove it whole,
+    from the timing line (the standing start of an episode, or a crossing) to the next crossing, without leaving the
+    track; its time is crossing to crossing. After an off-track the env is restarted where it put the car back: the
+    stretch from there to the line is no lap and no attempt (the car never took the bend it left the track on)."""
     observation, info = env.reset(seed=seed)
     params: dict[str, Any] = dict(info.get("params", {})) if isinstance(info, dict) else {}
     step_seconds = float(getattr(env, "step_seconds", 1.0 / 15.0))
@@ -66,8 +68,11 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
     lap_times: list[float] = []
     steering: list[float] = []
     offtrack = 0
-    laps_before = _laps(info)
     resets_before = _resets(info)
+    # The running attempt left the timing line at sim time `line_t` (None: it started where the car was put back),
+    # when the env's distance from the episode's start read `line_progress` (laps × 100 + progress, in percent).
+    line_t: float | None = 0.0
+    line_progress = 0.0
     best_progress = 0.0
     steps = 0
     while len(progress_log) < attempts and steps < limit:
@@ -75,27 +80,27 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
         steering.append(float(action["steering_angle"]))
         observation, params, terminated, truncated, info = env.step(action)
         steps += 1
-        best_progress = max(best_progress, float(params.get("progress", 0.0)))
-        resets_now = _resets(info)
-        if resets_now > resets_before or params.get("is_offtrack"):
+        progress_now = 100.0 * _laps(info) + float(params.get("progress", 0.0))  # never wraps, even backing up
+        if line_t is not None:
+            best_progress = max(best_progress, progress_now - line_progress)
+        if _resets(info) > resets_before or params.get("is_offtrack"):
             offtrack += 1
-            progress_log.append(min(best_progress, 99.9))
-            best_progress = 0.0
-            # A fresh attempt from where the car was put back: the rest of this lap is not a lap.
+            if line_t is not None:
+                progress_log.append(min(best_progress, 99.9))
             observation, info = env.reset(options={"start_offset_m": float(params.get("projection_distance", 0.0))})
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
-            laps_before, resets_before = _laps(info), _resets(info)
+            resets_before, line_t, best_progress = _resets(info), None, 0.0
             continue
-        laps_now = _laps(info)
-        if laps_now > laps_before:
-            new_times = list(info.get("lap_times_s", info.get("lap_times", [])))[laps_before:laps_now]
-            lap_times.extend(float(t) for t in new_times)
-            progress_log.extend([100.0] * (laps_now - laps_before))
-            laps_before, best_progress = laps_now, 0.0
+        for event in info.get("strip_events", []) if isinstance(info, dict) else []:
+            crossed_s = float(event["timestamp_ms"]) / 1000.0
+            if line_t is not None and len(progress_log) < attempts:
+                lap_times.append(crossed_s - line_t)
+                progress_log.append(100.0)
+            line_t, line_progress, best_progress = crossed_s, progress_now, 0.0
         if terminated or truncated:
             observation, info = env.reset(seed=seed + len(progress_log) + 1)
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
-            laps_before, resets_before = _laps(info), _resets(info)
+            resets_before, line_t, line_progress, best_progress = _resets(info), 0.0, 0.0, 0.0
     if len(progress_log) < attempts:  # out of time: the unfinished attempt counts with what it reached
         progress_log.append(min(best_progress, 99.9))
     progress_log = progress_log[:attempts]

@@ -6,6 +6,7 @@ Averages over tracks flatter a model (a gentle track hides a tight one), so the 
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -50,12 +51,19 @@ def table(rows: Sequence[EvalMetrics], reference: dict[str, EvalMetrics] | None 
     return "\n".join(lines)
 
 
+def file_label(track: str) -> str:
+    """A track spec as one safe file-name part: `tracks/venue.npy:reverse` → `venue-reverse` (a path in the spec
+    must not become folders under --out)."""
+    base, _, direction = track.partition(":")
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(base).name.removesuffix(".npy").removesuffix(".yaml")) or "track"
+    return f"{name}-{direction}" if direction else name
+
+
 def write_suite(rows: Sequence[EvalMetrics], folder: Path) -> Path:
     """`folder/metrics-<track>.json` per row (each one the registry's evaluation upload reads) and `suite.json`."""
     folder.mkdir(parents=True, exist_ok=True)
     for row in rows:
-        safe = row.track.replace(":", "-")
-        (folder / f"metrics-{safe}.json").write_text(json.dumps(row.model_dump(), indent=2) + "\n")
+        (folder / f"metrics-{file_label(row.track)}.json").write_text(json.dumps(row.model_dump(), indent=2) + "\n")
     path = folder / "suite.json"
     path.write_text(json.dumps({"tracks": [row.model_dump() for row in rows]}, indent=2) + "\n")
     return path
