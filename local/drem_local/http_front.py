@@ -123,6 +123,8 @@ class FrontServer:
             "connection_limit": self.limits.connection_limit,
             "asyncore_use_poll": True,
             "expose_tracebacks": False,
+            # A phone that closes a tab mid-answer is normal on event day, not an error with a traceback.
+            "log_socket_errors": False,
         }
         if self.limits.trusted_proxy:
             options.update(trusted_proxy=self.limits.trusted_proxy, trusted_proxy_count=1,

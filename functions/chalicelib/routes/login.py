@@ -167,7 +167,8 @@ def _matching_new_password(form: dict[str, str]) -> str:
 
 def _new_session(tokens: Tokens, secure: bool) -> list[str]:
     """Session cookies plus a CSRF token bound to the new session (a token planted before sign-in stops working)."""
-    secret = tokens.refresh_token or tokens.access_token
+    sub = unverified_claim(tokens.access_token, "sub") or ""
+    secret = double_submit.session_secret(sub, unverified_claim(tokens.access_token, "origin_jti"), tokens.access_token)
     return [*cookies.session_cookies(tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure),
             double_submit.bound_cookie(secret, secure=secure)]
 
