@@ -30,10 +30,11 @@ _NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))
 
 
 def serve(port: int, host: str = "127.0.0.1") -> None:
-    """App-server mode: the real app (functions/app.py, every blueprint registered)."""
+    """App-server mode: the real app (functions/app.py, every blueprint registered) behind waitress."""
     from drem_local import appserver
 
-    appserver.make_server(host, port).serve_forever()
+    # With the storage gateway, as `drem up` runs it: presigned uploads and downloads go through /_storage.
+    appserver.make_server(host, port, storage_url=os.environ.get("AWS_ENDPOINT_URL")).serve_forever()
 
 
 @dataclass
@@ -47,6 +48,8 @@ class BenchStack:
     tmp: Path
     live_url: str = ""  # no live server: the pages poll the app
     live_port: int = 0
+    app_pid: int = 0
+    storage_pid: int = 0
 
 
 @contextmanager
@@ -74,7 +77,7 @@ def bench_stack(extra_env: dict[str, str] | None = None, live_workers: int = 1) 
             local_stack.wait_for_ok(config.app_url + local_stack.APP_HEALTH_PATH, app, 60)
             yield BenchStack(url=config.app_url, port=config.app_port, storage_url=config.storage_url, env=env,
                              admin_username="admin", admin_password=password, tmp=tmp, live_url=config.live_url,
-                             live_port=config.live_server_port)
+                             live_port=config.live_server_port, app_pid=app.pid, storage_pid=storage.pid)
         finally:
             if app is not None:
                 app.stop(10)

@@ -103,25 +103,36 @@ class Channels:
     """The open channels, capped in number."""
 
     def __init__(self, poll_s: float, executor: Executor, max_channels: int,
-                 is_newer: Callable[[str, str | None], bool]) -> None:
+                 is_newer: Callable[[str, str | None], bool], max_per_page: int | None = None) -> None:
         self.poll_s = poll_s
         self.is_newer = is_newer
         self.executor = executor
         self.max_channels = max_channels
+        self.max_per_page = max_per_page or max_channels
         self.sizes = MessageSizes()
         self._open: dict[Hashable, Channel] = {}
+        self._pages: dict[Hashable, Hashable] = {}  # channel key -> its page (kind, event)
 
     def __len__(self) -> int:
         return len(self._open)
 
     def join(self, key: Hashable, step: Callable[[Message | None], Message | None],
-             subscriber: Subscriber) -> Channel:
+             subscriber: Subscriber, page: Hashable | None = None) -> Channel:
+        """Subscribe to channel `key` (of `page`), opening it if there is room: joining an open one is always free.
+
+        A page (kind and event) may have at most `max_per_page` option sets open, so made-up option sets of one page
+        cannot take every channel of the server (issue 27: 4 addresses x 64 distinct queries took all 256)."""
         channel = self._open.get(key)
         if channel is None:
             if len(self._open) >= self.max_channels:
                 raise ChannelsFull(f"the live server already watches {self.max_channels} different pages")
+            same_page = sum(1 for other in self._pages.values() if other == page) if page is not None else 0
+            if page is not None and same_page >= self.max_per_page:
+                raise ChannelsFull(f"this page is already watched with {self.max_per_page} different options")
             channel = Channel(key, step, self.poll_s, self.executor, self.sizes, self.is_newer)
             self._open[key] = channel
+            if page is not None:
+                self._pages[key] = page
             channel.start()
         channel.subscribers.add(subscriber)
         return channel
@@ -130,6 +141,7 @@ class Channels:
         channel.subscribers.discard(subscriber)
         if not channel.subscribers and self._open.get(channel.key) is channel:
             del self._open[channel.key]
+            self._pages.pop(channel.key, None)
             channel.stop()
 
     def stop_all(self) -> None:

@@ -138,7 +138,8 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
         return refuse(400, f"Bad query: {problems}")
     client = client_address(request)
     streams = app[STREAMS]
-    refusal = streams.refusal(client)
+    key = code.channel_options(kind, event_id, query)
+    refusal = streams.refusal(client, key, len(app[CHANNELS]))
     if refusal:
         return refuse(503, f"{refusal}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
     if not await known_event(request, event_id):
@@ -152,14 +153,14 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
 
     subscriber = Subscriber()
     try:
-        channel = app[CHANNELS].join(code.channel_options(kind, event_id, query), step, subscriber)
+        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id))
     except ChannelsFull as exc:
         return refuse(503, f"{exc}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
-    streams.open(client)
+    streams.open(client, key)
     try:
         return await _write_stream(request, channel, subscriber)
     finally:
-        streams.close(client)
+        streams.close(client, key)
         app[CHANNELS].leave(channel, subscriber)
 
 
@@ -224,7 +225,8 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8) 
     app = web.Application(client_max_size=1024)
     app[CODE] = code
     app[EXECUTOR] = executor
-    app[CHANNELS] = Channels(poll_s, executor, limits.max_channels, token_is_newer)
+    app[CHANNELS] = Channels(poll_s, executor, limits.max_channels, token_is_newer,
+                             max_per_page=limits.max_channels_per_page)
     app[STREAMS] = StreamCount(limits)
     app[POLLS] = PollViews(read_view, poll_s, executor)
     app[KNOWN_EVENTS] = set()

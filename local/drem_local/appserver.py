@@ -1,10 +1,10 @@
 """Serve the Chalice app over HTTP for local use and integration tests (instead of `chalice local`).
 
-Fixes over stock `chalice local`: TCP_NODELAY (otherwise every request on a kept-alive connection waits ~40 ms
-for Nagle + delayed ACK), a deep listen backlog (a burst of browser and poller connections is queued, not reset),
-a URL no route matches answered by the app's own 404 (page or JSON) instead of API Gateway's 403 "Missing
-Authentication Token", and a browser tab closed mid-poll logged as one quiet line, not a BrokenPipe traceback.
-No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
+The app runs unchanged behind waitress, a production WSGI server (drem_local.http_front: bounded worker threads,
+header and idle timeouts, body limits enforced before a body is read, the real client address), through chalice's
+own LocalGateway (drem_local.chalice_wsgi). A URL no route matches is answered by the app's own 404 (page or JSON)
+instead of API Gateway's 403 "Missing Authentication Token". TCP_NODELAY and a deep listen backlog are waitress's
+defaults. No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
 A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
 finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
 within seconds of a restart even if no race changes (see `RaceService`, `UserService`).
@@ -15,66 +15,69 @@ With --storage-url it also forwards `/_storage/...` to the local storage server 
 presigned uploads and downloads work from the venue network while storage itself stays on loopback.
 
     python -m drem_local.appserver --host 127.0.0.1 --port 8000 [--stage local] [--storage-url URL]
+                                   [--threads N] [--trusted-proxy ADDRESS]
 """
 from __future__ import annotations
 
 import argparse
-import functools
 import logging
 import os
 import signal
-import socketserver
 import sys
 import threading
+from collections.abc import Callable, Iterable
+from dataclasses import replace
 from typing import Any
 
 from drem_local.app_source import FUNCTIONS_DIR as PROJECT_DIR
 from drem_local.app_source import use_app_source
+from drem_local.chalice_wsgi import ChaliceWSGI
+from drem_local.durable.guard import GATEWAY_PATH
+from drem_local.http_front import FrontLimits, FrontServer, WSGIApp
 
-REQUEST_QUEUE_SIZE = 1024
 SWEEP_INTERVAL_S = 2.0
 PURGE_INTERVAL_S = 10 * 60
 
 
-def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local", storage_url: str | None = None) -> Any:
-    """A `chalice.local.LocalDevServer` bound to host:port (port 0 picks a free one: see `.server.server_address`);
-    with `storage_url`, `/_storage/...` goes to that storage server instead of the app."""
+def make_server(host: str = "127.0.0.1", port: int = 8000, stage: str = "local", storage_url: str | None = None,
+                limits: FrontLimits | None = None) -> FrontServer:
+    """The Chalice app behind waitress (drem_local.http_front) on host:port (port 0 picks a free one: see
+    `.server_address`); with `storage_url`, `/_storage/...` goes to that storage server instead of the app."""
     from chalice import local
     from chalice.cli.factory import CLIFactory
 
     _put_project_on_path()
     _prefer_installed_packages()
-    local.ChaliceRequestHandler.disable_nagle_algorithm = True
-    local.ThreadedHTTPServer.request_queue_size = REQUEST_QUEUE_SIZE
-    local.ThreadedHTTPServer.daemon_threads = True
-    local.ThreadedHTTPServer.handle_error = _handle_error
     _answer_unknown_urls_with_404(local.LocalGateway)
-    # The request middleware already writes one JSON line per request; drop http.server's plain-text access log.
-    local.ChaliceRequestHandler.log_message = _quiet
     factory = CLIFactory(str(PROJECT_DIR))
     config = factory.create_config_obj(chalice_stage_name=stage)
-    # Chalice's local server logs every request at INFO through the root logger; ours are JSON already.
     logging.getLogger("botocore").setLevel(logging.WARNING)
-    server = factory.create_local_server(config.chalice_app, config, host, port)
+    # What `chalice local` does to the app object (chalice/local.py create_local_server): a per-thread
+    # current_request, since requests run on several worker threads at once.
+    app_object = config.chalice_app
+    local.CustomLocalChalice.__bases__ = (local.LocalChalice, app_object.__class__)
+    app_object.__class__ = local.CustomLocalChalice
+    app: WSGIApp = ChaliceWSGI(local.LocalGateway(app_object, config))
+    limits = limits or FrontLimits()
     if storage_url:
-        _add_storage_gateway(server, local.ChaliceRequestHandler, storage_url)
-    return server
+        from drem_local.durable.__main__ import DEFAULT_MAX_POST_BYTES
+        from drem_local.storage_gateway import StorageGateway
+
+        app = _with_gateway(app, StorageGateway(storage_url))
+        # An upload form: the model (at most the storage server's ceiling) plus the form's own fields.
+        limits = replace(limits, body_limit_by_prefix=((GATEWAY_PATH + "/", DEFAULT_MAX_POST_BYTES + 1024 * 1024),))
+    return FrontServer(app, host, port, limits, ident="drem")
 
 
-def _add_storage_gateway(server: Any, handler_class: type, storage_url: str) -> None:
-    from drem_local.storage_gateway import forward, is_gateway_path
+def _with_gateway(app: WSGIApp, gateway: WSGIApp) -> WSGIApp:
+    from drem_local.storage_gateway import is_gateway_path
 
-    class GatewayRequestHandler(handler_class):
-        def _route(self) -> None:
-            if is_gateway_path(self.path.split("?", 1)[0]):
-                forward(self, storage_url)
-            else:
-                self._generic_handle()
+    def dispatch(environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
+        if is_gateway_path(environ.get("PATH_INFO", "")):
+            return gateway(environ, start_response)
+        return app(environ, start_response)
 
-        do_GET = do_PUT = do_POST = do_HEAD = do_DELETE = do_PATCH = do_OPTIONS = _route
-
-    wrapped = server._wrapped_handler  # functools.partial(handler_class, app_object=..., config=...)
-    server.server.RequestHandlerClass = functools.partial(GatewayRequestHandler, *wrapped.args, **wrapped.keywords)
+    return dispatch
 
 
 def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
@@ -119,25 +122,6 @@ def _purge_stale_uploads(stopping: threading.Event) -> None:
             services.model_service().purge_stale_uploads()
         except Exception as exc:  # the next round tries again; serving must go on
             logs.log(logging.WARNING, "purging stale uploads failed", error=repr(exc))
-
-
-def _quiet(*_args: Any) -> None:
-    return None
-
-
-# A client that goes away before its answer is written (a tab closed or reloaded mid-poll) is normal on event day.
-_CLIENT_GONE = (BrokenPipeError, ConnectionResetError, ConnectionAbortedError, TimeoutError)
-
-
-def _handle_error(self: Any, request: Any, client_address: Any) -> None:
-    """socketserver prints a traceback for any error while serving a request; a vanished client is not an error."""
-    error = sys.exc_info()[1]
-    if isinstance(error, _CLIENT_GONE):
-        from chalicelib import logs
-
-        logs.log(logging.INFO, "client went away", client=str(client_address[0]), error=type(error).__name__)
-        return
-    socketserver.BaseServer.handle_error(self, request, client_address)
 
 
 def _answer_unknown_urls_with_404(gateway_class: Any) -> None:
@@ -199,6 +183,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stage", default=os.environ.get("DREM_STAGE", "local"))
     parser.add_argument("--storage-url", default=None,
                         help="forward /_storage/... (presigned uploads and downloads) to this storage server")
+    parser.add_argument("--threads", type=int, default=int(os.environ.get("DREM_APP_THREADS", "16")),
+                        help="worker threads running the app (connections are read and written by one I/O loop)")
+    parser.add_argument("--trusted-proxy", default=os.environ.get("DREM_TRUSTED_PROXY") or None,
+                        help="the address of a reverse proxy in front: only its X-Forwarded-For names the client "
+                             "(rate limits are per client address); without it the peer address is the client")
     parser.add_argument("--serve-only", action="store_true",
                         help="no repair sweeps (publishes, registrations, stale uploads): the learning booth's "
                              "container on AWS serves the booth's routes and does nothing else")
@@ -211,7 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     from chalicelib import logs
 
     logs.configure(sys.stderr)
-    server = make_server(args.host, args.port, args.stage, args.storage_url)
+    server = make_server(args.host, args.port, args.stage, args.storage_url,
+                         FrontLimits(threads=args.threads, trusted_proxy=args.trusted_proxy))
     stopping = threading.Event()
 
     def stop(signum: int, _frame: Any) -> None:
@@ -226,12 +216,11 @@ def main(argv: list[str] | None = None) -> int:
         threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper",
                          daemon=True).start()
         threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
-    host, port = server.server.server_address[:2]
+    host, port = server.server_address
     logs.log(logging.INFO, "app server listening", url=f"http://{host}:{port}", stage=args.stage)
     try:
-        server.server.serve_forever(poll_interval=0.2)
+        server.serve_forever(poll_interval=0.2)
     finally:
-        server.server.server_close()
         logs.log(logging.INFO, "app server stopped")
     return 0
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import socket
 import struct
-import time
 
 import pytest
 import requests
@@ -48,10 +47,8 @@ def test_a_tab_closed_mid_poll_leaves_no_traceback_in_the_app_log(live_stack):
         with socket.create_connection(("127.0.0.1", int(live_stack.url.rsplit(":", 1)[1])), timeout=5) as sock:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
             sock.sendall(request)
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and "client went away" not in log.read_text()[before:]:
-        time.sleep(0.2)
-    written = log.read_text()[before:]
-    assert "client went away" in written  # the resets did reach the server mid-answer
-    assert "Traceback" not in written and "BrokenPipeError" not in written.replace('"BrokenPipeError"', "")
+    # The app server (waitress) drops a vanished client's connection without logging it (log_socket_errors off):
+    # once it answers again, everything the resets could have written is in the log.
     assert requests.get(live_stack.url + "/healthz", timeout=10).status_code == 200
+    written = log.read_text()[before:]
+    assert "Traceback" not in written and "BrokenPipeError" not in written and "Socket error" not in written

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import secrets
+import stat
 from pathlib import Path
 
 import pytest
@@ -206,9 +207,14 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
     assert (first / "logo.png").read_bytes() == _logo(live_stack.url, eid).content
     capsys.readouterr()
 
+    # Issue 27: the folder holds e-mail addresses; it and everything in it are its owner's only.
+    assert all(stat.S_IMODE(path.stat().st_mode) == (0o700 if path.is_dir() else 0o600)
+               for path in [first, *first.rglob("*")]), "export folders 0700, files 0600"
+
     report_path = tmp_path / "report.json"
     assert _import(first, target_stack.config.state_dir, "--report", str(report_path)) == 0
     printed = capsys.readouterr().out
+    assert stat.S_IMODE(report_path.stat().st_mode) == 0o600
     report = json.loads(report_path.read_text())
     actions = {a["username"]: a["action"] for a in report["accounts"]}
     assert actions[source_event["racers"]["ada"]] == "created"
@@ -502,7 +508,31 @@ def _logo_pointing_at_another_file(folder: Path) -> str:
     return "field 'logo' must name a listed logo.png or logo.webp"
 
 
+def _model_record_without_its_id_pointer(folder: Path) -> str:
+    """Issue 27: a record reusing another racer's model id, without the MODELID# pointer by which the import sees
+    that the target has that model already, overwrote that racer's archive."""
+    def drop_pointer(document: dict) -> None:
+        document["items"] = [i for i in document["items"] if not i["pk"]["S"].startswith("MODELID#")]
+    _tamper_json(folder, "models.json", drop_pointer)
+    return "has no id pointer"
+
+
+def _object_key_of_another_racer(attribute: str, suffix: str):
+    """Issue 27: scrutineer_clip_key / converted_key naming another racer's objects let the importer download them."""
+    def tamper(folder: Path) -> str:
+        def point_elsewhere(document: dict) -> None:
+            record = next(i for i in document["items"] if i["pk"]["S"].startswith("OWNER#"))
+            record[attribute] = {"S": f"models/victim-sub/victim-model{suffix}"}
+        _tamper_json(folder, "models.json", point_elsewhere)
+        return f"{attribute} 'models/victim-sub/victim-model{suffix}' is not this model's place in the bucket"
+    return tamper
+
+
 TAMPERINGS = {
+    "a model record without its id pointer": (_model_record_without_its_id_pointer, None),
+    "a scrutineering clip key of another racer": (_object_key_of_another_racer("scrutineer_clip_key",
+                                                                               ".scrutineer.gif"), None),
+    "a converted model key of another racer": (_object_key_of_another_racer("converted_key", ".onnx"), None),
     "a script in place of the logo": (_script_in_place_of_the_logo, None),
     "the logo naming another file": (_logo_pointing_at_another_file, None),
     "board body edited apart from its rows": (_board_body_edited_apart_from_its_rows, None),

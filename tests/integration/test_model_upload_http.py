@@ -88,3 +88,32 @@ def test_the_storage_server_enforces_the_ticket_the_app_signed(admin_api: ApiCli
                          timeout=30)
     assert good.status_code in (200, 204), good.text
     assert admin_api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]["status"] == "AVAILABLE"
+
+
+def test_a_query_on_the_ticket_url_does_not_switch_the_policy_off(admin_api: ApiClient, live_stack) -> None:
+    """Issue 27, as reported: a racer's own ticket from POST /api/models, posted to `{url}?x=1` with another
+    racer's archive key, to `{url}?delete` with a <Delete> document, with 0 bytes or a redirect to another site."""
+    bucket = live_stack.outputs.buckets["models"]
+    storage = live_stack.client("s3")
+    victim_key = "models/victim-sub/victim-model.tar.gz"
+    storage.put_object(Bucket=bucket, Key=victim_key, Body=b"the victim's validated archive")
+    ticket = admin_api.post("/api/models", {"filename": "query_abuse.tar.gz"})
+    url, fields = ticket["upload"]["url"], ticket["upload"]["fields"]
+    delete_doc = f"<Delete><Object><Key>{victim_key}</Key></Object></Delete>".encode()
+
+    attempts = {
+        "other key via ?x=1": requests.post(f"{url}?x=1", data={**fields, "key": victim_key},
+                                            files={"file": ("x.tar.gz", b"overwritten")}, timeout=30),
+        "?delete": requests.post(f"{url}?delete", data=fields, files={"file": ("d.xml", delete_doc)}, timeout=30),
+        "0 bytes via ?x=1": requests.post(f"{url}?x=1", data=fields, files={"file": ("x.tar.gz", b"")}, timeout=30),
+        "redirect": requests.post(f"{url}?x=1", data={**fields, "success_action_redirect": "https://evil.example/"},
+                                  files={"file": ("x.tar.gz", b"x")}, timeout=30, allow_redirects=False),
+    }
+
+    for what, reply in attempts.items():
+        assert reply.status_code in (400, 403), (what, reply.status_code, reply.text)
+        assert "Location" not in reply.headers, what
+    assert storage.get_object(Bucket=bucket, Key=victim_key)["Body"].read() == b"the victim's validated archive"
+    with pytest.raises(ApiError) as not_arrived:
+        admin_api.post(f"/api/models/{ticket['model']['model_id']}/complete")
+    assert "has not arrived yet" in str(not_arrived.value)

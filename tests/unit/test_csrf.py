@@ -163,3 +163,36 @@ def test_same_origin_posts_with_the_right_token_pass(browser, users, aws_clients
 
     assert reply.status_code == 200, reply.body
     assert not _target_enabled(aws_clients, stack)
+
+
+def test_a_mixed_pair_of_session_cookies_does_not_carry_the_attackers_token(browser, client, users, aws_clients,
+                                                                           stack):
+    """Issue 27: the token was bound to the refresh cookie while the request ran as the access cookie's user. A page on
+    another port of the host plants the attacker's own refresh cookie and a token bound to it beside the admin's
+    access cookie; only the Origin check stopped that. Now the token must fit the session the request runs as."""
+    from tests.unit.conftest import Browser
+
+    _signed_in_admin(browser, users)
+    users.create("mallory", ("racer",))
+    mallory = Browser(client)
+    mallory.get("/login")
+    mallory.post("/login", {"username": "mallory", "password": PASSWORD, "csrf_token": mallory.csrf_token})
+    browser.cookies["drem_refresh"] = mallory.cookies["drem_refresh"]  # the admin's drem_session stays
+    browser.cookies["drem_csrf"] = mallory.csrf_token
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": mallory.csrf_token})  # no Origin, no Referer
+
+    assert reply.status_code == 403
+    assert _target_enabled(aws_clients, stack)
+
+
+def test_the_token_survives_the_access_token_being_renewed(browser, users, aws_clients, stack):
+    """Bound to the sign-in (origin_jti), not to one access token: a page loaded before renewal still posts."""
+    _signed_in_admin(browser, users)
+    token = browser.csrf_token
+    del browser.cookies["drem_session"]  # expired: the refresh cookie renews it on the next request
+
+    reply = browser.post("/api/users/target/disable", {"csrf_token": token})
+
+    assert reply.status_code == 200, reply.body
+    assert not _target_enabled(aws_clients, stack)

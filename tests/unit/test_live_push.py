@@ -153,3 +153,49 @@ class _Transport:
 
     def get_extra_info(self, name: str, default: object = None) -> object:
         return (self.peer, 40000) if name == "peername" else default
+
+
+def test_a_crowd_behind_one_address_is_not_capped_by_default() -> None:
+    """Issue 27: behind a venue's NAT every phone is one address; 64 streams per address turned spectators away."""
+    count = StreamCount(Limits(max_streams=5000))
+    board = ("leaderboard", "e1", "1")
+    for _ in range(1000):
+        assert count.refusal("203.0.113.7", board, 1) is None
+        count.open("203.0.113.7", board)
+    assert count.total == 1000
+
+
+def test_near_full_a_flooded_page_gets_no_more_than_its_fair_share() -> None:
+    """An attacker's 70 streams on one page cannot crowd out the spectators of another once the server is nearly
+    full: past 80% of the cap, a new stream goes only to a page under its share (cap / open pages)."""
+    count = StreamCount(Limits(max_streams=100))
+    flooded, board = ("overlay", "e1", "x"), ("leaderboard", "e1", "1")
+    for _ in range(70):
+        count.open("10.0.0.66", flooded)
+    for _ in range(10):
+        count.open("10.0.0.66", board)
+
+    assert "its share (50 viewers)" in (count.refusal("10.0.0.66", flooded, 2) or "")
+    assert count.refusal("10.0.0.66", board, 2) is None  # the spectators' page still admits
+    for _ in range(20):
+        count.open("10.0.0.66", board)
+    assert "full (100 viewers)" in (count.refusal("10.0.0.66", board, 2) or "")  # at the cap, all are shed alike
+
+
+def test_made_up_option_sets_of_one_page_cannot_take_every_channel() -> None:
+    """Issue 27: 4 addresses x 64 distinct query strings took all 256 channels; now one page holds at most its
+    per-page number of option sets, other pages still open, and joining an open option set is always free."""
+    async def run() -> None:
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(10, executor, max_channels=256, is_newer=token_is_newer, max_per_page=16)
+            page = ("overlay", "e1")
+            for n in range(16):
+                channels.join(("overlay", "e1", n), lambda _last: None, Subscriber(), page=page)
+            with pytest.raises(Exception, match="already watched with 16 different options"):
+                channels.join(("overlay", "e1", "made-up"), lambda _last: None, Subscriber(), page=page)
+            channels.join(("overlay", "e1", 3), lambda _last: None, Subscriber(), page=page)  # already open: joins
+            channels.join(("leaderboard", "e1", "1"), lambda _last: None, Subscriber(), page=("leaderboard", "e1"))
+            assert len(channels) == 17
+            channels.stop_all()
+
+    asyncio.run(run())

@@ -51,10 +51,15 @@ def ticket(key: str = KEY, maximum: int = LIMIT, expires_s: int = 300) -> dict:
                                       ExpiresIn=expires_s)
 
 
-def post(client: Client, fields: dict, data: bytes | None):
+def post(client: Client, fields: dict, data: bytes | None, query: str = "", headers: dict | None = None):
     files = {"file": ("model.tar.gz", data)} if data is not None else None
     prepared = requests.Request("POST", f"http://127.0.0.1:9/{BUCKET}", data=fields, files=files).prepare()
-    return client.post(f"/{BUCKET}", data=prepared.body, headers={"Content-Type": prepared.headers["Content-Type"]})
+    return client.post(f"/{BUCKET}{query}", data=prepared.body,
+                       headers={"Content-Type": prepared.headers["Content-Type"], **(headers or {})})
+
+
+def put(client: Client, key: str, data: bytes) -> None:
+    assert client.put(f"/{BUCKET}/{key}", data=data, headers={"Authorization": _S3_AUTH}).status_code == 200
 
 
 def stored(client: Client, key: str) -> bytes | None:
@@ -150,3 +155,120 @@ def test_a_body_over_the_server_ceiling_is_refused_from_its_length_unread(storag
 
     assert (reply.status_code, error_code(reply)) == (400, "EntityTooLarge")
     assert stored(client, KEY) is None
+
+
+# --- issue 27: a query string (or an operation header) no longer switches the policy off --------------------------
+
+VICTIM = "models/victim-sub/their-model.tar.gz"
+
+
+@pytest.mark.parametrize("query", ["?x=1", "?acl", "?uploads", f"?key={VICTIM}"])
+def test_another_racers_key_posted_to_the_url_with_a_query_is_refused(storage, query) -> None:
+    """The attack as reported: one's own ticket, posted to `{url}?x=1` with another racer's key, answered 204."""
+    _app, client = storage
+    put(client, VICTIM, b"their validated archive")
+
+    reply = post(client, {**ticket()["fields"], "key": VICTIM}, b"owned", query=query)
+
+    assert (reply.status_code, error_code(reply)) == (403, "AccessDenied")
+    assert stored(client, VICTIM) == b"their validated archive"
+
+
+def test_ones_own_ticket_posted_with_a_query_is_refused_too(storage) -> None:
+    _app, client = storage
+    reply = post(client, ticket()["fields"], b"x", query="?x=1")
+
+    assert (reply.status_code, error_code(reply)) == (403, "AccessDenied")
+    assert "without a query string" in reply.get_data(as_text=True)
+    assert stored(client, KEY) is None
+
+
+@pytest.mark.parametrize(("size", "code"), [(0, "EntityTooSmall"), (LIMIT + 1, "EntityTooLarge")])
+def test_empty_and_oversize_files_with_a_query_are_refused(storage, size, code) -> None:
+    _app, client = storage
+    reply = post(client, ticket()["fields"], b"x" * size, query="?x=1")
+
+    assert (reply.status_code, error_code(reply)) == (400, code)
+    assert stored(client, KEY) is None
+
+
+def test_a_delete_document_posted_to_the_url_with_delete_deletes_nothing(storage) -> None:
+    """DeleteObjects by form: a <Delete> document as the form's file, posted to `{url}?delete`."""
+    _app, client = storage
+    put(client, VICTIM, b"their validated archive")
+    delete = (f"<Delete><Object><Key>{VICTIM}</Key></Object><Object><Key>{KEY}</Key></Object></Delete>").encode()
+
+    for fields in (ticket()["fields"], {**ticket()["fields"], "key": VICTIM}, {"key": VICTIM}):
+        reply = post(client, fields, delete, query="?delete")
+        assert reply.status_code == 403, reply.get_data(as_text=True)
+        assert "<DeleteResult>" not in reply.get_data(as_text=True)
+
+    assert stored(client, VICTIM) == b"their validated archive"
+
+
+def test_a_form_naming_another_service_is_refused(storage) -> None:
+    _app, client = storage
+    reply = post(client, ticket()["fields"], b"x", headers={"X-Amz-Target": "DynamoDB_20120810.ListTables"})
+
+    assert reply.status_code == 403
+    assert stored(client, KEY) is None
+
+
+@pytest.mark.parametrize("target", ["https://evil.example/phish", "//evil.example/", "/\\evil.example",
+                                    "javascript:alert(1)"])
+@pytest.mark.parametrize("field", ["success_action_redirect", "redirect"])
+def test_a_redirect_to_another_origin_is_refused_even_when_signed(storage, field, target) -> None:
+    """Even a policy that allows the field cannot bounce a browser from drem's address to another site."""
+    _app, client = storage
+    s3 = boto3.session.Session(aws_access_key_id="testing", aws_secret_access_key="testing",
+                               region_name="us-east-1").client(
+        "s3", endpoint_url="http://127.0.0.1:9", config=Config(signature_version="s3v4",
+                                                               s3={"addressing_style": "path"}))
+    signed = s3.generate_presigned_post(Bucket=BUCKET, Key=KEY, Fields={field: target},
+                                        Conditions=[{field: target}, ["content-length-range", 1, LIMIT]])
+
+    reply = post(client, signed["fields"], b"x")
+
+    assert (reply.status_code, error_code(reply)) == (403, "AccessDenied")
+    assert "Location" not in reply.headers
+    assert stored(client, KEY) is None
+
+
+@pytest.mark.parametrize("query", ["?success_action_redirect=https://evil.example/",
+                                   "?redirect=https://evil.example/"])
+def test_a_redirect_in_the_query_is_refused(storage, query) -> None:
+    _app, client = storage
+    reply = post(client, ticket()["fields"], b"x", query=query)
+
+    assert reply.status_code == 403
+    assert "Location" not in reply.headers
+    assert stored(client, KEY) is None
+
+
+def test_a_redirect_to_a_path_on_this_site_is_allowed_when_signed(storage) -> None:
+    _app, client = storage
+    s3 = boto3.session.Session(aws_access_key_id="testing", aws_secret_access_key="testing",
+                               region_name="us-east-1").client(
+        "s3", endpoint_url="http://127.0.0.1:9", config=Config(signature_version="s3v4",
+                                                               s3={"addressing_style": "path"}))
+    signed = s3.generate_presigned_post(Bucket=BUCKET, Key=KEY, Fields={"success_action_redirect": "/done"},
+                                        Conditions=[{"success_action_redirect": "/done"},
+                                                    ["content-length-range", 1, LIMIT]])
+
+    reply = post(client, signed["fields"], b"x")
+
+    assert reply.status_code == 303
+    assert stored(client, KEY) == b"x"
+
+
+def test_a_ticket_for_another_bucket_is_refused(storage) -> None:
+    _app, client = storage
+    assert client.put("/drem-local-runs", headers={"Authorization": _S3_AUTH}).status_code == 200
+    fields = ticket()["fields"]
+    files = {"file": ("model.tar.gz", b"x")}
+    prepared = requests.Request("POST", "http://127.0.0.1:9/drem-local-runs", data=fields, files=files).prepare()
+    reply = client.post("/drem-local-runs", data=prepared.body,
+                        headers={"Content-Type": prepared.headers["Content-Type"]})
+
+    assert (reply.status_code, error_code(reply)) == (403, "AccessDenied")
+    assert "bucket" in reply.get_data(as_text=True)

@@ -306,7 +306,7 @@ def _handle(request: Request, declared: Allow, view: Callable[..., Any], params:
         scope.principal, scope.via = caller.principal, caller.via
         scope.set_cookies.extend(caller.set_cookies)
         logs.note_principal(caller.principal.id)
-        secret = double_submit.session_secret(cookies) if caller.via == "cookie" and caller.principal.is_user else None
+        secret = caller.csrf_secret if caller.via == "cookie" and caller.principal.is_user else None
         if browser and secret and not double_submit.fits(scope.csrf_token, secret):
             _issue_csrf_token(scope, secret, settings.cookie_secure)  # pages of this session get a bound token
         render.bind_request(htmx=htmx, principal=caller.principal, csrf_token=scope.csrf_token, base_path=base)

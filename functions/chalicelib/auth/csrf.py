@@ -7,9 +7,10 @@ site can make the browser send our cookies but cannot read the token to echo it.
 
 Plain double-submit is not enough: cookies ignore ports, so a page served from another port of the same host (or
 any site that can set a cookie for our host) can plant a `drem_csrf` of its choosing and echo it. So for a signed-in
-session the token is `nonce.HMAC(session secret, nonce)`, where the session secret is the HttpOnly refresh token
-(the access token when there is none): a planted token does not verify against the victim's session, and nobody
-who lacks the session can compute one. Signed-out forms carry a plain nonce (there is no session to ride).
+session the token is `nonce.HMAC(session secret, nonce)`, where the session secret names the sign-in the request runs
+as (`session_secret`: the verified access token's sub and origin_jti): a planted token does not verify against the
+victim's session, and nobody who lacks the session can compute one. Signed-out forms carry a plain nonce (there is
+no session to ride).
 
 On top, an unsafe request whose `Origin` (or, without it, `Referer`) names another origin than the one it was sent
 to is refused, whatever its token. Requests with an Authorization header carry no ambient credentials and are exempt.
@@ -23,7 +24,7 @@ import secrets
 from collections.abc import Mapping
 from urllib.parse import urlsplit
 
-from chalicelib.auth.cookies import CSRF_COOKIE, REFRESH_COOKIE, SESSION_COOKIE, set_cookie
+from chalicelib.auth.cookies import CSRF_COOKIE, set_cookie
 from chalicelib.domain.errors import CsrfRejected
 
 FORM_FIELD = "csrf_token"
@@ -35,9 +36,14 @@ _REJECTED = "This form has expired or was not sent from drem. Reload the page an
 _OTHER_ORIGIN = "This request came from another site, so drem refused it. Use drem's own pages."
 
 
-def session_secret(cookies: Mapping[str, str]) -> str | None:
-    """What a signed-in browser session's token is bound to (None when there is no session cookie)."""
-    return cookies.get(REFRESH_COOKIE) or cookies.get(SESSION_COOKIE) or None
+def session_secret(sub: str, origin_jti: str | None, access_token: str) -> str:
+    """What a signed-in browser session's token is bound to: the sign-in the request runs as.
+
+    `origin_jti` is shared by every token of one sign-in, refreshes included (Cognito), and is known only to whoever
+    holds that session's tokens; with the user's sub it names exactly the session whose user the request acts as.
+    (It was the refresh cookie, while the request ran as the access cookie's user: a planted refresh cookie with a
+    token bound to it, beside the victim's access cookie, fitted; only the Origin check stopped that mixed pair.)"""
+    return f"{sub}:{origin_jti}" if origin_jti else f"{sub}:{access_token}"
 
 
 def new_token(secret: str | None = None) -> str:

@@ -4,9 +4,11 @@ Counted per app process in memory (sliding windows). Locally there is one app pr
 On AWS each Lambda container counts for itself, so the effective limit is a multiple of these (Cognito throttles
 sign-in attempts on its own as well). Over a limit the caller gets 429 with `Retry-After` and a plain message.
 
-Why these numbers: a racer who mistypes a password a few times must never be locked out, a whole venue behind one
-NAT address (AWS) must be able to sign in at the start of the event, and a guesser must not get far: 10 wrong
-passwords per account per 5 minutes is ~3,000 guesses a day instead of 64 a second.
+Why these numbers and shapes: a racer who mistypes a password a few times must never be locked out, a whole venue
+behind one address (a NAT on AWS, or one phone among hundreds on the LAN) must be able to sign in at the start of the
+event whatever one guesser does, and a guesser must not get far: at most 10 password checks a minute per account
+from browsers new to it. A browser that signed in before (`auth.known_devices`) is checked first, so nobody can lock
+a chosen account (the admin's) out. The client address is the real peer address the app server reports.
 """
 from __future__ import annotations
 
@@ -65,6 +67,13 @@ class SlidingWindow:
         if wait is not None:
             raise RateLimited(f"Too many {self.limit.what}; try again in {_duration(wait)}.", retry_after=wait)
 
+    def record_then_require(self, key: str) -> None:
+        """Count one more event; raise RateLimited if the window was already full before it."""
+        wait = self.retry_after(key)
+        self.record(key)
+        if wait is not None:
+            raise RateLimited(f"Too many {self.limit.what}; try again in {_duration(wait)}.", retry_after=wait)
+
     def _pruned(self, key: str) -> deque[float]:
         events = self._events.setdefault(key, deque())
         horizon = self._clock() - self.limit.window_s
@@ -73,26 +82,42 @@ class SlidingWindow:
         return events
 
 
-SIGN_IN_FAILURES_PER_ACCOUNT = SlidingWindow(Limit(10, 300, "wrong passwords for this account"))
-SIGN_IN_FAILURES_PER_ADDRESS = SlidingWindow(Limit(30, 300, "wrong passwords from this device"))
+# A guesser's budget at one account, shared by every browser that has not signed in to it before (a legitimate
+# first-time sign-in of an account under attack shares it too: the trade-off docs/security.md describes).
+GUESSES_PER_ACCOUNT = SlidingWindow(Limit(10, 60, "wrong passwords for this account from new browsers"))
+# A browser that signed in to the account before only answers for its own mistakes.
+FAILURES_PER_KNOWN_DEVICE = SlidingWindow(Limit(10, 300, "wrong passwords from this browser"))
+# Password spraying from one address: past this, its wrong passwords are answered 429 (a right one still signs in,
+# or one phone could lock a whole venue out behind its NAT).
+FAILURES_PER_ADDRESS = SlidingWindow(Limit(30, 300, "wrong passwords from this network address"))
 SIGN_UPS_PER_ADDRESS = SlidingWindow(Limit(20, 600, "sign-ups from this device"))
 ACTIVATION_FAILURES_PER_ADDRESS = SlidingWindow(Limit(10, 600, "wrong activation codes from this device"))
-ALL = (SIGN_IN_FAILURES_PER_ACCOUNT, SIGN_IN_FAILURES_PER_ADDRESS, SIGN_UPS_PER_ADDRESS,
+ALL = (GUESSES_PER_ACCOUNT, FAILURES_PER_KNOWN_DEVICE, FAILURES_PER_ADDRESS, SIGN_UPS_PER_ADDRESS,
        ACTIVATION_FAILURES_PER_ADDRESS)
 
 
-def guarded_sign_in(sign_in: Callable[[], T], username: str, address: str) -> T:
+def guarded_sign_in(sign_in: Callable[[], T], username: str, address: str, known_device: str | None = None) -> T:
+    """Run `sign_in` unless the account's guess budget is spent; never refuse a known browser's right password.
+
+    `known_device` is the id of a browser that signed in to this account before (`auth.known_devices`): its password
+    is checked first, whatever anyone else did. Other attempts may check a password only while the account's
+    budget for new browsers lasts (10 wrong per minute: all a guesser gets, however many phones share an address).
+    A success does not reset the budget, or a guesser could wait for the owner to sign in and start over."""
     account = username.strip().casefold()
-    SIGN_IN_FAILURES_PER_ACCOUNT.require(account)
-    SIGN_IN_FAILURES_PER_ADDRESS.require(address)
+    if known_device is not None:
+        FAILURES_PER_KNOWN_DEVICE.require(known_device)
+        try:
+            return sign_in()
+        except InvalidCredentials:
+            FAILURES_PER_KNOWN_DEVICE.record(known_device)
+            raise
+    GUESSES_PER_ACCOUNT.require(account)
     try:
-        result = sign_in()
+        return sign_in()
     except InvalidCredentials:
-        SIGN_IN_FAILURES_PER_ACCOUNT.record(account)
-        SIGN_IN_FAILURES_PER_ADDRESS.record(address)
+        GUESSES_PER_ACCOUNT.record(account)
+        FAILURES_PER_ADDRESS.record_then_require(address)
         raise
-    SIGN_IN_FAILURES_PER_ACCOUNT.forget(account)
-    return result
 
 
 def guarded_sign_up(sign_up: Callable[[], T], address: str) -> T:
@@ -102,17 +127,17 @@ def guarded_sign_up(sign_up: Callable[[], T], address: str) -> T:
 
 
 def guarded_activation(activate: Callable[[], T], address: str) -> T:
-    ACTIVATION_FAILURES_PER_ADDRESS.require(address)
+    """A valid code always activates (it is 100 random bits, not guessable); wrong ones are limited per address."""
     try:
         return activate()
     except InvalidInput as exc:
         if exc.field == "code":  # a wrong or used code: what a guesser produces
-            ACTIVATION_FAILURES_PER_ADDRESS.record(address)
+            ACTIVATION_FAILURES_PER_ADDRESS.record_then_require(address)
         raise
 
 
 def client_address(request: object) -> str:
-    """The caller's address as API Gateway / `chalice local` report it ("unknown" if neither does)."""
+    """The caller's address as API Gateway or drem's app server report it (`sourceIp`; "unknown" if neither does)."""
     context = getattr(request, "context", None) or {}
     return str((context.get("identity") or {}).get("sourceIp") or "unknown")
 

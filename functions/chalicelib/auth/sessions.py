@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 from chalicelib import services
 from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
+from chalicelib.auth.csrf import session_secret
 from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.tokens import VerifiedToken, verify_token
@@ -19,6 +20,18 @@ class ResolvedCaller:
     # "header" (Bearer/Device: exempt from CSRF), "cookie" or "none"
     via: str
     set_cookies: list[str] = field(default_factory=list)
+    # For a cookie session: what its CSRF token is bound to (chalicelib.auth.csrf.session_secret), taken from the
+    # very access token the request runs as.
+    csrf_secret: str | None = None
+
+
+def _cookie_caller(token: VerifiedToken, raw: str, set_cookies: list[str] | None = None) -> ResolvedCaller:
+    secret = session_secret(token.sub, _text(token.claims.get("origin_jti")), raw)
+    return ResolvedCaller(user_from(token), "cookie", set_cookies or [], csrf_secret=secret)
+
+
+def _text(value: object) -> str | None:
+    return str(value) if value else None
 
 
 def user_from(token: VerifiedToken) -> User:
@@ -58,7 +71,7 @@ def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> Res
         return ResolvedCaller(ANONYMOUS, "none")
     if access:
         try:
-            return ResolvedCaller(user_from(current_token(access, settings)), "cookie")
+            return _cookie_caller(current_token(access, settings), access)
         except (TokenExpired, TokenRevoked):
             pass  # renew below (after a role change the refresh token brings the new groups)
         except NotAuthenticated:
@@ -67,11 +80,11 @@ def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> Res
         return _signed_out(settings)
     try:
         tokens = services.identity_provider(settings).refresh(refresh)
-        user = user_from(current_token(tokens.access_token, settings))
+        renewed_token = current_token(tokens.access_token, settings)
     except NotAuthenticated:
         return _signed_out(settings)
     renewed = session_cookies(tokens.access_token, None, tokens.expires_in, secure=settings.cookie_secure)
-    return ResolvedCaller(user, "cookie", renewed)
+    return _cookie_caller(renewed_token, tokens.access_token, renewed)
 
 
 def _signed_out(settings: Settings) -> ResolvedCaller:

@@ -9,7 +9,7 @@ from chalice import Blueprint, Response
 from pydantic import BaseModel, Field
 
 from chalicelib import services
-from chalicelib.auth import cookies
+from chalicelib.auth import cookies, known_devices
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
@@ -48,7 +48,7 @@ def login(principal: Principal) -> Response:
         return _login_form(exc, username=values.get("username", ""), next_path=next_path)
     if isinstance(result, NewPasswordChallenge):
         return redirect(_CHALLENGE_PATH, cookies=[_challenge_cookie(result, secure)])
-    return redirect(next_path, cookies=_new_session(result, secure))
+    return redirect(next_path, cookies=[*_new_session(result, secure), _device_cookie(credentials.username, secure)])
 
 
 @route(bp, _CHALLENGE_PATH, allow=PUBLIC)
@@ -75,7 +75,7 @@ def new_password(principal: Principal) -> Response:
         return _new_password_form(challenge, exc)
     store.forget_challenge(challenge_id)  # used once: the id cannot be replayed
     done = cookies.clear_cookie(cookies.CHALLENGE_COOKIE, secure=secure, path=_CHALLENGE_PATH, same_site="Strict")
-    return redirect("/", cookies=[*_new_session(tokens, secure), done])
+    return redirect("/", cookies=[*_new_session(tokens, secure), done, _device_cookie(challenge.username, secure)])
 
 
 @route(bp, "/logout", methods=["POST"], allow=PUBLIC)
@@ -127,8 +127,17 @@ def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
 
 
 def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
+    request = bp.current_request
+    known = known_devices.device_id(cookies.request_cookies(request.headers).get(known_devices.DEVICE_COOKIE),
+                                    credentials.username)
     return guarded_sign_in(lambda: services.identity_provider().sign_in(credentials.username, credentials.password),
-                           credentials.username, client_address(bp.current_request))
+                           credentials.username, client_address(request), known_device=known)
+
+
+def _device_cookie(username: str, secure: bool) -> str:
+    """This browser proved the password: its next right password is checked before anyone's guesses count."""
+    return cookies.set_cookie(known_devices.DEVICE_COOKIE, known_devices.issue(username), secure=secure,
+                              max_age=known_devices.MAX_AGE_S, same_site="Strict")
 
 
 def _no_store(answer: BaseModel) -> Response:
@@ -158,7 +167,8 @@ def _matching_new_password(form: dict[str, str]) -> str:
 
 def _new_session(tokens: Tokens, secure: bool) -> list[str]:
     """Session cookies plus a CSRF token bound to the new session (a token planted before sign-in stops working)."""
-    secret = tokens.refresh_token or tokens.access_token
+    sub = unverified_claim(tokens.access_token, "sub") or ""
+    secret = double_submit.session_secret(sub, unverified_claim(tokens.access_token, "origin_jti"), tokens.access_token)
     return [*cookies.session_cookies(tokens.access_token, tokens.refresh_token, tokens.expires_in, secure=secure),
             double_submit.bound_cookie(secret, secure=secure)]
 

@@ -18,6 +18,7 @@ import argparse
 import getpass
 import json
 import os
+import secrets
 import sys
 import time
 from datetime import UTC, datetime
@@ -55,27 +56,38 @@ def record_import(target: Any, result: Any) -> None:
 
 
 class FileImportJournal:
-    """The accounts an import is about to create, with their temporary passwords, in a 0600 file (fsynced)."""
+    """The accounts an import is about to create, with their temporary passwords, in a 0600 file (fsynced).
+
+    Each version is written to a new file of a random name (O_EXCL, never through a file or link someone else put
+    there) and renamed over the last; a resume file this user does not own, or that others may read or write, is
+    refused rather than trusted (its passwords could be someone else's choice)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
 
     def intended(self) -> dict[str, str]:
+        from chalicelib.formats import private_files
+
+        raw = private_files.read_own(self.path)
+        if raw is None:
+            return {}
         try:
-            data = json.loads(self.path.read_text())
-        except (FileNotFoundError, ValueError):
+            data = json.loads(raw)
+        except ValueError:
             return {}
         return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
     def intend(self, username: str, temporary_password: str) -> None:
+        from chalicelib.formats import private_files
+
         data = {**self.intended(), username: temporary_password}
-        temporary = self.path.with_name(self.path.name + ".tmp")
-        descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(descriptor, "w") as handle:
-            json.dump(data, handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, self.path)
+        temporary = self.path.with_name(f"{self.path.name}.{secrets.token_hex(8)}.tmp")
+        private_files.write_new(temporary, json.dumps(data).encode(), fsync=True)
+        try:
+            os.replace(temporary, self.path)
+        except OSError:
+            temporary.unlink(missing_ok=True)
+            raise
 
     def finished(self) -> None:
         self.path.unlink(missing_ok=True)
@@ -115,7 +127,12 @@ def run(args: argparse.Namespace) -> int:
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     report_path = args.report or args.folder.resolve().parent / f"{args.folder.resolve().name}.import-{stamp}.json"
     report = {**result.report(), "imported_at": stamp, "folder": str(args.folder.resolve())}
-    report_path.write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
+    from chalicelib.formats import private_files
+
+    try:  # it names every racer and their e-mail: 0600, created new
+        private_files.write_new(report_path, (json.dumps(report, indent=2, sort_keys=True) + "\n").encode())
+    except OSError as exc:
+        print(f"drem import: imported, but the report could not be written to {report_path}: {exc}", file=sys.stderr)
     written = ", ".join(f"{n} {table}" for table, n in result.written.items())
     print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
           f"{result.archives_written} model archives{', the logo' if result.logo_written else ''}.")

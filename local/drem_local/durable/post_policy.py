@@ -55,10 +55,15 @@ def _denied(message: str) -> Refusal:
 
 
 def is_form_upload(environ: Mapping[str, Any]) -> bool:
-    """A POST of multipart/form-data to a bucket (not a multipart-upload or DeleteObjects call, which use a query)."""
+    """Any POST of multipart/form-data, whatever its query string: S3 and MinIO treat it as POST Object.
+
+    MinIO's router (minio/minio `cmd/api-router.go`) sends every bucket POST whose Content-Type holds
+    multipart/form-data to `PostPolicyBucketHandler` before it looks at `?delete`, and S3's POST Object is the form
+    upload whatever else the URL carries. moto instead reads the query (and the form's fields) as the operation, so a
+    form posted to `{url}?x=1` or `{url}?delete` used to pass here unchecked; it is now always held to its policy.
+    """
     return (environ.get("REQUEST_METHOD", "").upper() == "POST"
-            and environ.get("CONTENT_TYPE", "").lower().startswith("multipart/form-data")
-            and not environ.get("QUERY_STRING"))
+            and "multipart/form-data" in environ.get("CONTENT_TYPE", "").lower())
 
 
 class PostPolicyGuard:
@@ -79,6 +84,15 @@ class PostPolicyGuard:
 
     def refusal(self, environ: Mapping[str, Any], body: bytes) -> Refusal | None:
         """None when S3 would accept this form upload; otherwise the error S3 would answer with."""
+        problem = self._policy_refusal(environ, body)
+        if problem is None and (environ.get("QUERY_STRING") or environ.get("HTTP_X_AMZ_TARGET")):
+            # moto would act on the query (`?delete` runs DeleteObjects on the form's file as its XML, `?uploads`
+            # starts a multipart upload); drem's forms never carry one, and DeleteObjects needs a signed request.
+            return _denied("A browser upload form is posted to the bucket's own address, without a query string; "
+                           "deleting objects or any other operation needs a signed request.")
+        return problem
+
+    def _policy_refusal(self, environ: Mapping[str, Any], body: bytes) -> Refusal | None:
         fields, file_size = _form(environ, body)
         if file_size is None:
             return Refusal("400 Bad Request", "InvalidArgument", "POST requires exactly one file upload per request.")
@@ -100,7 +114,7 @@ class PostPolicyGuard:
         if expiration.tzinfo is None or expiration <= self._now():
             return _denied("Invalid according to Policy: Policy expired.")
         fields = {**fields, "bucket": _bucket_of(environ)}
-        return _check_conditions(conditions, fields, file_size)
+        return _foreign_redirect(fields) or _check_conditions(conditions, fields, file_size)
 
     def _signature_problem(self, fields: Mapping[str, str], policy_b64: str) -> str | None:
         if fields.get("x-amz-algorithm") != "AWS4-HMAC-SHA256":
@@ -140,6 +154,21 @@ def _form(environ: Mapping[str, Any], body: bytes) -> tuple[dict[str, str], int 
     upload = uploads[0]
     upload.stream.seek(0, io.SEEK_END)
     return fields, upload.stream.tell()
+
+
+def _foreign_redirect(fields: Mapping[str, str]) -> Refusal | None:
+    """A redirect after upload may only name a path on this same site.
+
+    S3 sends the browser to `success_action_redirect` (or the older `redirect`) with a 303 when the policy allows it;
+    here the storage answers under the app's own address (/_storage), so any other origin would turn drem's address
+    into an open redirect. drem's own forms carry none; a relative path ("/..." but not "//host") stays allowed."""
+    for name in ("success_action_redirect", "redirect"):
+        target = fields.get(name)
+        if target is None:
+            continue
+        if not target.startswith("/") or target.startswith("//") or "\\" in target or not target.isprintable():
+            return _denied(f"Invalid according to Policy: {name} may only name a path on this site.")
+    return None
 
 
 def _bucket_of(environ: Mapping[str, Any]) -> str:

@@ -1,7 +1,8 @@
 """moto's WSGI app behind the write-ahead middleware, plus the snapshot timer and `/_drem/health`.
 
-Browser-form uploads (presigned POST) are also checked against their signed policy's conditions (`post_policy`:
-key, size range, extra fields), which moto ignores: a refused upload is answered as S3 would and never reaches the
+Browser-form uploads (presigned POST: any multipart/form-data POST, whatever its query) are also checked against
+their signed policy's conditions (`post_policy`: bucket, key, size range, extra fields, redirects), which moto
+ignores, and may carry no query or operation header: a refused upload is answered as S3 would and never reaches the
 journal or moto."""
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import Any
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
@@ -77,7 +78,8 @@ class DurableApp:
             return refuse(refusal, environ, start_response)
         service = service_of(environ)
         # After the signature check (which also strips the app's /_storage gateway prefix): the policy's conditions.
-        if form_upload and upload_guard and service == S3 and (broken := upload_guard.refusal(environ, body)):
+        # Every form upload, whichever service its headers or query name: moto would otherwise route on them.
+        if form_upload and upload_guard and (broken := upload_guard.refusal(environ, body)):
             return refusal_response(broken, start_response)
         changing = is_state_changing(environ)
         captured: dict[str, Any] = {}

@@ -91,12 +91,14 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
             plan.kept.append(f"profile of {item.get('username', {}).get('S') or sub} (the target's own is kept)")
             plan.skip_keys.add(("profiles", item["pk"]["S"], item["sk"]["S"]))
     models = bundle.items.get("models", [])
-    for item in models:
-        if item["pk"]["S"].startswith("MODELID#"):
-            model_id = item["pk"]["S"].removeprefix("MODELID#")
-            if target.get_item("models", item["pk"]["S"], "OWNER") is not None:
-                plan.kept.append(f"model {model_id} (the target already has it)")
-                plan.skip_archives.add(model_id)
+    # A model id the target already knows keeps the target's model, whether or not the export carries the id's
+    # pointer: a record reusing another racer's id without it would otherwise overwrite that racer's archive.
+    model_ids = sorted({item["pk"]["S"].removeprefix("MODELID#") if item["pk"]["S"].startswith("MODELID#")
+                        else item.get("model_id", {}).get("S", "") for item in models} - {""})
+    for model_id in model_ids:
+        if target.get_item("models", f"MODELID#{model_id}", "OWNER") is not None:
+            plan.kept.append(f"model {model_id} (the target already has it)")
+            plan.skip_archives.add(model_id)
     for item in models:
         model_id = item.get("model_id", {}).get("S") or item["pk"]["S"].removeprefix("MODELID#")
         if model_id in plan.skip_archives:

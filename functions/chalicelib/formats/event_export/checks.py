@@ -26,7 +26,13 @@ from chalicelib.auth.principals import Role
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
 from chalicelib.domain.profiles import anonymised_name
-from chalicelib.domain.racer_models import ModelStatus, model_key, upload_key
+from chalicelib.domain.racer_models import (
+    ModelStatus,
+    converted_key,
+    model_key,
+    scrutineer_clip_key,
+    upload_key,
+)
 from chalicelib.domain.races import RaceRecord
 from chalicelib.formats.event_export.records import EventBundle, InvalidExport, Item, archive_file
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
@@ -213,18 +219,37 @@ def _check_models(bundle: EventBundle) -> dict[str, Item]:
         status = _text(item, "status")
         if status not in {s.value for s in ModelStatus} or status == ModelStatus.DELETED.value:
             raise _invalid(f"{where}: status {status!r} cannot be imported.", field="status")
-        s3_key = _text(item, "s3_key")
-        if s3_key is not None and s3_key != model_key(owner, model_id):
-            raise _invalid(f"{where}: s3_key {s3_key!r} is not this model's place in the bucket "
-                           f"({model_key(owner, model_id)}).", field="s3_key")
-        if _text(item, "upload_key") != upload_key(owner, model_id):
-            raise _invalid(f"{where}: upload_key is not {upload_key(owner, model_id)}.", field="upload_key")
+        _check_object_keys(where, item, owner, model_id)
         records[model_id] = item
     for model_id, owner in pointers.items():
         if model_id not in records or records[model_id]["owner_sub"]["S"] != owner:
             raise _invalid(f"models.json: the id pointer of model {model_id} names an owner whose record is not in "
                            "the export.", field="owner_sub")
+    for model_id in records:
+        if model_id not in pointers:  # the import decides "the target has this model already" by its pointer
+            raise _invalid(f"models.json: model {model_id} has no id pointer (MODELID#{model_id}); every model "
+                           "drem exports carries one.", field="model_id")
     return records
+
+
+# Every bucket key a model record may hold, and the one place each may name: the model's own objects. A key naming
+# another racer's object would let the importing racer download it (a scrutineering clip, a converted model).
+_OWN_OBJECT_KEYS = {"s3_key": model_key, "converted_key": converted_key, "scrutineer_clip_key": scrutineer_clip_key}
+
+
+def _check_object_keys(where: str, item: Item, owner: str, model_id: str) -> None:
+    if _text(item, "upload_key") != upload_key(owner, model_id):
+        raise _invalid(f"{where}: upload_key is not {upload_key(owner, model_id)}.", field="upload_key")
+    for name in sorted(item):
+        if not name.endswith("_key") or name == "upload_key":
+            continue
+        own = _OWN_OBJECT_KEYS.get(name)
+        if own is None:
+            raise _invalid(f"{where}: {name} is not an attribute a model record has.", field=name)
+        value = _text(item, name)
+        if value is not None and value != own(owner, model_id):
+            raise _invalid(f"{where}: {name} {value!r} is not this model's place in the bucket "
+                           f"({own(owner, model_id)}); a model record may only name its own files.", field=name)
 
 
 def _check_archives(bundle: EventBundle, records: dict[str, Item], limits: ArchiveLimits) -> None:

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from chalicelib.domain.errors import InvalidInput
+from chalicelib.formats import private_files
 from chalicelib.formats.event_export.records import (
     ARCHIVES_FILE,
     FORMAT,
@@ -56,11 +57,13 @@ def write_export(bundle: EventBundle, out_dir: Path, exported_at: str) -> dict[s
                            field="out")
     files = render_files(bundle)
     manifest = manifest_for(bundle, files, exported_at)
+    # Accounts hold e-mail addresses: folders 0700, files 0600, each created new (private_files).
+    private_files.make_dir(out_dir)
     for path, data in files.items():
         target = out_dir / path
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_bytes(data)
-    (out_dir / MANIFEST).write_bytes(json_bytes(manifest))  # last: a folder without it is visibly unfinished
+        private_files.make_dir(target.parent)
+        private_files.write_new(target, data)
+    private_files.write_new(out_dir / MANIFEST, json_bytes(manifest))  # last: without it the folder is unfinished
     return manifest
 
 
