@@ -54,6 +54,11 @@ def disk_error(exc: OSError, where: Path, doing: str) -> StackError | OSError:
     return StackError(f"{doing}: {sentence(problem, where, 'run drem up again; nothing stored so far is lost.')}")
 
 
+def _data_dir_of(log_path: Path) -> Path:
+    """The state dir a child's log lives in (<state-dir>/logs/<name>.log), the path people know."""
+    return log_path.parent.parent if log_path.parent.name == LOG_DIR else log_path.parent
+
+
 def _disk_words(where: Path) -> str:
     """Why a child may have died: its disk, when that disk is full or read-only now; "" otherwise."""
     from drem_local.disk import disk_state, sentence
@@ -193,7 +198,7 @@ def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None
         log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
         log.flush()
     except OSError as exc:
-        raise disk_error(exc, log_path.parent, f"the {name} could not write its log {log_path}") from exc
+        raise disk_error(exc, _data_dir_of(log_path), f"the {name} could not write its log {log_path}") from exc
     popen = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                              start_new_session=True, preexec_fn=_child_setup)
     log.close()
@@ -287,7 +292,7 @@ def wait_for_ok(url: str, process: ManagedProcess, timeout: float = STALL_S,
         return wait.run()
     except ChildExited:
         raise StackError(f"the {process.name} exited with code {process.popen.returncode} before {url} "
-                         f"answered.{_disk_words(process.log_path.parent)} "
+                         f"answered.{_disk_words(_data_dir_of(process.log_path))} "
                          f"Last lines of {process.log_path}:\n{process.log_tail()}") from None
     except StillWaiting as exc:
         raise StackError(f"the {process.name} seems stuck: {exc}. "
