@@ -609,13 +609,21 @@ class ModelService:
                            status=ModelStatus.UPLOADED, uploaded_at=now, updated_at=now,
                            upload_key=upload_key(owner_sub, model_id))
 
-    def submit_archive(self, owner_sub: str, username: str, name: str, data: bytes) -> ModelRecord:
+    def submit_archive(self, owner_sub: str, username: str, name: str, data: bytes, *,
+                       model_id: str | None = None) -> ModelRecord:
         """A model made for a racer on the server (the booth's trainer): stored as their upload and judged by exactly
-        the same validation as one they uploaded themselves."""
+        the same validation as one they uploaded themselves. With `model_id` (recorded by the caller beforehand) the
+        submit is idempotent: a repeat returns the record already judged, or finishes one a crash left UPLOADED."""
         if len(data) > self.max_upload_bytes:
             raise InvalidInput(f"the archive is {_size(len(data))}; uploads are limited to "
                                f"{_size(self.max_upload_bytes)}", field="archive")
-        record = self._new_record(owner_sub, username, model_name_from_filename(f"{name}.tar.gz"), self._new_id())
+        if model_id is not None and (existing := self.store.get(owner_sub, model_id)) is not None:
+            if existing.status is not ModelStatus.UPLOADED:
+                return existing
+            self.files.put(existing.upload_key, data)
+            return self._finish(existing)
+        record = self._new_record(owner_sub, username, model_name_from_filename(f"{name}.tar.gz"),
+                                  model_id or self._new_id())
         self.store.create(record)
         self.files.put(record.upload_key, data)
         return self._finish(record)
