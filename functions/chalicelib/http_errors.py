@@ -28,12 +28,13 @@ _STATUS: tuple[tuple[type[Exception], int], ...] = (
     (e.PayloadTooLarge, 413),
     (e.RateLimited, 429),
     (e.UpstreamError, 502),
+    (e.StorageDiskFull, 507),
     (e.ServiceUnavailable, 503),
 )
 
 _TITLES = {400: "Check your input", 401: "Please sign in", 403: "Not allowed", 404: "Not found", 409: "Conflict",
            413: "Too large", 429: "Too many requests", 500: "Something went wrong", 502: "A service failed",
-           503: "Temporarily unavailable"}
+           503: "Temporarily unavailable", 507: "drem's disk needs attention"}
 
 
 def status_for(exc: Exception) -> int:

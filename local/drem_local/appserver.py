@@ -5,7 +5,8 @@ header and idle timeouts, body limits enforced before a body is read, the real c
 own LocalGateway (drem_local.chalice_wsgi). A URL no route matches is answered by the app's own 404 (page or JSON)
 instead of API Gateway's 403 "Missing Authentication Token". TCP_NODELAY and a deep listen backlog are waitress's
 defaults. No autoreloader: one process, which exits cleanly on SIGTERM/SIGINT. Logs are JSON lines on stderr.
-A sweeper thread repairs what a crash can leave half done: at start it finishes interrupted registrations, and it
+A sweeper thread repairs what a crash can leave half done: it finishes interrupted registrations (at start, then every
+`REGISTRATION_REPAIR_S`, so a storage-only crash needs no app restart), and it
 finishes board publishes left pending (at start, then every `SWEEP_INTERVAL_S`), so boards equal what the races say
 within seconds of a restart even if no race changes (see `RaceService`, `UserService`).
 Every PURGE_INTERVAL_S it also purges model uploads never completed (`ModelService.purge_stale_uploads`), which S3
@@ -25,6 +26,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from typing import Any
@@ -36,6 +38,10 @@ from drem_local.durable.guard import GATEWAY_PATH
 from drem_local.http_front import FrontLimits, FrontServer, WSGIApp
 
 SWEEP_INTERVAL_S = 2.0
+# Half-registered accounts (a crash between the account and its role group) are repaired this often while the app
+# runs, leaving alone those created in the last REGISTRATION_IN_FLIGHT_S (their registration may still be running).
+REGISTRATION_REPAIR_S = float(os.environ.get("DREM_REGISTRATION_REPAIR_S", "10"))
+REGISTRATION_IN_FLIGHT_S = float(os.environ.get("DREM_REGISTRATION_IN_FLIGHT_S", "30"))
 PURGE_INTERVAL_S = 10 * 60
 
 
@@ -85,7 +91,8 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
     from chalicelib import logs, services
     from chalicelib.domain.races import STALE_INTENT_MS
 
-    _finish_interrupted_registrations()
+    _finish_interrupted_registrations(0.0)  # at start nothing is in flight
+    next_registration_repair = time.monotonic() + REGISTRATION_REPAIR_S
     older_than_ms = 0  # at start nothing is in flight: every intent left is a crash's
     while True:
         try:
@@ -95,16 +102,20 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
                 logs.log(logging.WARNING, "finished board publishes a crash had left pending", count=finished)
         except Exception as exc:  # storage down or not set up yet: the intents stay, the next sweep tries again
             logs.log(logging.INFO, "publish sweep skipped", reason=str(exc)[:200])
+        if time.monotonic() >= next_registration_repair:
+            # Also while running: a storage-only crash leaves half-registered racers without any app restart.
+            _finish_interrupted_registrations(REGISTRATION_IN_FLIGHT_S)
+            next_registration_repair = time.monotonic() + REGISTRATION_REPAIR_S
         if stopping.wait(interval_s):
             return
 
 
-def _finish_interrupted_registrations() -> None:
-    """Once at start: accounts a crash left without profile or role group get them, and the log says who."""
+def _finish_interrupted_registrations(older_than_s: float) -> None:
+    """Accounts a crash left without profile or role group get them, and the log says who."""
     from chalicelib import logs, services
 
     try:
-        finished = services.user_service().finish_interrupted_registrations()
+        finished = services.user_service().finish_interrupted_registrations(older_than_s=older_than_s)
     except Exception as exc:
         logs.log(logging.WARNING, "could not check for interrupted registrations", reason=str(exc)[:200])
         return

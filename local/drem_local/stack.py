@@ -19,6 +19,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,34 @@ _SHELL_AWS_VARIABLES = ("AWS_PROFILE", "AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_K
 
 class StackError(RuntimeError):
     """The stack could not start; the message says why in plain words."""
+
+
+def disk_error(exc: OSError, where: Path, doing: str) -> StackError | OSError:
+    """A StackError in words when `exc` is a full or read-only disk (drem_local.disk); `exc` itself otherwise."""
+    from drem_local.disk import problem_of, sentence
+
+    problem = problem_of(exc)
+    if problem is None:
+        return exc
+    return StackError(f"{doing}: {sentence(problem, where, 'run drem up again; nothing stored so far is lost.')}")
+
+
+def _data_dir_of(log_path: Path) -> Path:
+    """The state dir a child's log lives in (<state-dir>/logs/<name>.log), the path people know."""
+    return log_path.parent.parent if log_path.parent.name == LOG_DIR else log_path.parent
+
+
+def _disk_words(where: Path) -> str:
+    """Why a child may have died: its disk, when that disk is full or read-only now; "" otherwise."""
+    from drem_local.disk import disk_state, sentence
+
+    try:
+        state = disk_state(where)
+    except OSError:
+        return ""
+    if state.problem is None:
+        return ""
+    return " " + sentence(state.problem, where, "run drem up again; nothing stored so far is lost.")
 
 
 @dataclass(frozen=True)
@@ -162,11 +191,14 @@ def _child_setup() -> None:
 
 
 def spawn(name: str, argv: list[str], log_path: Path, env: dict[str, str] | None = None) -> ManagedProcess:
-    log_path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-    log = os.fdopen(os.open(log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600), "ab")
-    log_start = log.tell()  # append mode starts at the end: this run's lines begin here
-    log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
-    log.flush()
+    try:
+        log_path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        log = os.fdopen(os.open(log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600), "ab")
+        log_start = log.tell()  # append mode starts at the end: this run's lines begin here
+        log.write(f"\n--- {time.strftime('%Y-%m-%d %H:%M:%S')} starting {' '.join(argv)}\n".encode())
+        log.flush()
+    except OSError as exc:
+        raise disk_error(exc, _data_dir_of(log_path), f"the {name} could not write its log {log_path}") from exc
     popen = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                              start_new_session=True, preexec_fn=_child_setup)
     log.close()
@@ -238,25 +270,39 @@ def http_get(url: str, timeout: float = 2.0) -> tuple[int, bytes] | None:
         return None
 
 
-def wait_for_ok(url: str, process: ManagedProcess, timeout: float) -> float:
-    """Poll `url` until it answers 200; seconds it took. Fails early, with the log tail, if the process dies."""
-    started = time.perf_counter()
-    deadline = started + timeout
-    while time.perf_counter() < deadline:
+# Seconds a starting child may go without any progress (no CPU time, no log line) before it counts as stuck. Not a
+# deadline: a child that keeps working may take as long as it needs (drem_local.readiness).
+STALL_S = 120.0
+
+
+def wait_for_ok(url: str, process: ManagedProcess, timeout: float = STALL_S,
+                say: Callable[[str], None] | None = None) -> float:
+    """Poll `url` until it answers 200; seconds it took. `timeout` bounds only a stall: the wait goes on as long as
+    the process keeps working (drem_local.readiness), and `say` hears every 10 s what it is waiting for. Fails early,
+    with the log tail, if the process dies."""
+    from drem_local.readiness import ChildExited, ReadinessWait, StillWaiting, process_progress
+
+    def answered() -> bool:
         answer = http_get(url, timeout=1.0)
-        if answer is not None and answer[0] == 200:
-            return time.perf_counter() - started
-        if not process.alive():
-            raise StackError(f"the {process.name} exited with code {process.popen.returncode} before {url} "
-                             f"answered. Last lines of {process.log_path}:\n{process.log_tail()}")
-        time.sleep(0.02)
-    raise StackError(f"the {process.name} did not answer {url} within {timeout:.0f}s. "
-                     f"Last lines of {process.log_path}:\n{process.log_tail()}")
+        return answer is not None and answer[0] == 200
+
+    wait = ReadinessWait(f"the {process.name} (pid {process.pid}) to answer {url}", answered, process.alive,
+                         lambda: process_progress(process.pid, process.log_path), stall_s=timeout, say=say)
+    try:
+        return wait.run()
+    except ChildExited:
+        raise StackError(f"the {process.name} exited with code {process.popen.returncode} before {url} "
+                         f"answered.{_disk_words(_data_dir_of(process.log_path))} "
+                         f"Last lines of {process.log_path}:\n{process.log_tail()}") from None
+    except StillWaiting as exc:
+        raise StackError(f"the {process.name} seems stuck: {exc}. "
+                         f"Last lines of {process.log_path}:\n{process.log_tail()}") from None
 
 
 # --- the three steps ------------------------------------------------------------------------------------------
 
-def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
+def start_storage(config: StackConfig, timeout: float = STALL_S,
+                  say: Callable[[str], None] | None = None) -> ManagedProcess:
     from drem_local.storage_keys import load_or_create
 
     _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
@@ -267,7 +313,7 @@ def start_storage(config: StackConfig, timeout: float = 30.0) -> ManagedProcess:
         "--snapshot-interval", str(config.snapshot_interval),
     ], config.log_dir / "storage.log", env=_child_env())
     try:
-        wait_for_ok(config.storage_url + HEALTH_PATH, process, timeout)
+        wait_for_ok(config.storage_url + HEALTH_PATH, process, timeout, say)
     except BaseException:
         process.stop(2)
         raise
@@ -304,14 +350,15 @@ def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
     return env
 
 
-def start_app(config: StackConfig, env: dict[str, str], timeout: float = 30.0) -> ManagedProcess:
+def start_app(config: StackConfig, env: dict[str, str], timeout: float = STALL_S,
+              say: Callable[[str], None] | None = None) -> ManagedProcess:
     _require_free_port(config.app_host, config.app_port, "app server", "--port")
     process = spawn("app server", [
         sys.executable, "-m", "drem_local.appserver", "--host", config.app_host, "--port", str(config.app_port),
         "--storage-url", config.storage_url,
     ], config.log_dir / "app.log", env=env)
     try:
-        wait_for_ok(config.app_local_url + APP_HEALTH_PATH, process, timeout)
+        wait_for_ok(config.app_local_url + APP_HEALTH_PATH, process, timeout, say)
     except BaseException:
         process.stop(2)
         raise
@@ -330,8 +377,8 @@ def start_scrutineer(config: StackConfig, env: dict[str, str]) -> ManagedProcess
                  config.log_dir / "scrutineer.log", env=env)
 
 
-def start_live(config: StackConfig, env: dict[str, str], timeout: float = 30.0, *,
-               wait: bool = True) -> ManagedProcess:
+def start_live(config: StackConfig, env: dict[str, str], timeout: float = STALL_S, *,
+               wait: bool = True, say: Callable[[str], None] | None = None) -> ManagedProcess:
     """The live server (drem_live), on the app's address; it reads storage with the app's settings. `wait=False`
     returns at once (then `wait_for_live`), so it can start while the app does."""
     _require_free_port(config.app_host, config.live_server_port, "live server", "--live-port")
@@ -340,13 +387,14 @@ def start_live(config: StackConfig, env: dict[str, str], timeout: float = 30.0, 
         "--workers", str(config.live_workers),
     ], config.log_dir / "live.log", env=env)
     if wait:
-        wait_for_live(config, process, timeout)
+        wait_for_live(config, process, timeout, say)
     return process
 
 
-def wait_for_live(config: StackConfig, process: ManagedProcess, timeout: float) -> None:
+def wait_for_live(config: StackConfig, process: ManagedProcess, timeout: float,
+                  say: Callable[[str], None] | None = None) -> None:
     try:
-        wait_for_ok(config.live_local_url + LIVE_HEALTH_PATH, process, timeout)
+        wait_for_ok(config.live_local_url + LIVE_HEALTH_PATH, process, timeout, say)
     except BaseException:
         process.stop(2)
         raise
@@ -381,25 +429,27 @@ class RunningStack:
     trainer: ManagedProcess | None = None
     scrutineer: ManagedProcess | None = None
 
-    def restart_storage(self, timeout: float = 30.0) -> None:
+    say: Callable[[str], None] | None = None  # hears what a restart is waiting for (drem up prints it)
+
+    def restart_storage(self, timeout: float = STALL_S) -> None:
         """Start the storage server again on the same state dir and port (it recovers from its journal)."""
-        self.storage = start_storage(self.config, timeout)
+        self.storage = start_storage(self.config, timeout, self.say)
         self._record_pids()
 
-    def restart_app(self, timeout: float = 30.0) -> None:
-        self.app = start_app(self.config, self.env, timeout)
+    def restart_app(self, timeout: float = STALL_S) -> None:
+        self.app = start_app(self.config, self.env, timeout, self.say)
         self._record_pids()
 
-    def restart_trainer(self, timeout: float = 30.0) -> None:
+    def restart_trainer(self, timeout: float = STALL_S) -> None:
         self.trainer = start_trainer(self.config, self.env)
         self._record_pids()
 
-    def restart_scrutineer(self, timeout: float = 30.0) -> None:
+    def restart_scrutineer(self, timeout: float = STALL_S) -> None:
         self.scrutineer = start_scrutineer(self.config, self.env)
         self._record_pids()
 
-    def restart_live(self, timeout: float = 30.0) -> None:
-        self.live = start_live(self.config, self.env, timeout)
+    def restart_live(self, timeout: float = STALL_S) -> None:
+        self.live = start_live(self.config, self.env, timeout, say=self.say)
         self._record_pids()
 
     def _record_pids(self) -> None:
@@ -427,7 +477,34 @@ class RunningStack:
 
 
 def start_stack(config: StackConfig, admin_username: str = "admin", admin_password: str | None = None,
-                *, timeout: float = 30.0) -> RunningStack:
+                *, timeout: float = STALL_S, say: Callable[[str], None] | None = None) -> RunningStack:
+    """Start everything in order. `timeout` bounds only a child that stops making progress (drem_local.readiness):
+    a slow app on a busy machine is waited for, with a line to `say` every 10 s, and never stops storage. A full or
+    read-only disk is a StackError in words (drem_local.disk), never a traceback."""
+    try:
+        return _start_stack(config, admin_username, admin_password, timeout, say)
+    except OSError as exc:
+        raise disk_error(exc, config.state_dir, "drem could not write to its state dir") from exc
+    except Exception as exc:
+        refusal = storage_disk_refusal(exc)
+        if refusal is None:
+            raise
+        raise StackError(f"the storage server refused to store the setup: {refusal}") from exc
+
+
+def storage_disk_refusal(exc: BaseException) -> str | None:
+    """The storage server's own words when `exc` is its refusal for a full or read-only disk (drem_local.durable)."""
+    from drem_local.durable.disk_guard import DISK_ERROR_CODES
+
+    response = getattr(exc, "response", None)
+    if not isinstance(response, dict):
+        return None
+    error = response.get("Error", {})
+    return str(error.get("Message", "")) if error.get("Code") in DISK_ERROR_CODES else None
+
+
+def _start_stack(config: StackConfig, admin_username: str, admin_password: str | None, timeout: float,
+                 say: Callable[[str], None] | None) -> RunningStack:
     refuse_if_running(config.state_dir)
     _require_free_port(config.host, config.storage_port, "storage (durable moto) server", "--storage-port")
     _require_free_port(config.app_host, config.app_port, "app server", "--port")
@@ -436,7 +513,7 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
 
     load_or_create(config.state_dir)  # the state dir 0700, its files 0600, the storage keys drawn once
     started = time.perf_counter()
-    storage = start_storage(config, timeout)
+    storage = start_storage(config, timeout, say)
     storage_ready = time.perf_counter()
     app = live = None
     try:
@@ -444,10 +521,10 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
         bootstrapped = time.perf_counter()
         env = app_environment(config, outputs)
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
-        app = start_app(config, env, timeout)
+        app = start_app(config, env, timeout, say)
         # After the app (not beside it: on two cores their imports would slow the app's start); until it answers the
         # pages poll the app, and their EventSource connects once it does.
-        live = start_live(config, env, timeout)
+        live = start_live(config, env, timeout, say=say)
         trainer = start_trainer(config, env) if config.trainer else None
     except BaseException:
         for process in (app, live):
@@ -461,7 +538,7 @@ def start_stack(config: StackConfig, admin_username: str = "admin", admin_passwo
                      trainer_pid=trainer.pid if trainer else None, scrutineer_pid=scrutineer.pid)
     timings = {"storage_s": storage_ready - started, "bootstrap_s": bootstrapped - storage_ready,
                "app_s": ready - bootstrapped, "total_s": ready - started}
-    return RunningStack(config, storage, app, outputs, admin, env, live, timings, trainer, scrutineer)
+    return RunningStack(config, storage, app, outputs, admin, env, live, timings, trainer, scrutineer, say)
 
 
 # --- stack.json -----------------------------------------------------------------------------------------------

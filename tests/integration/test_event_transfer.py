@@ -685,3 +685,72 @@ def test_an_import_cut_off_part_way_is_finished_by_running_it_again(live_stack, 
 def target_stack_event(target_stack, event_id: str) -> dict | None:
     location = StackLocation.from_state_dir(target_stack.config.state_dir)
     return connect(location).get_item("events", f"EVENT#{event_id}", "META")
+
+
+class _PowerCut(BaseException):
+    """kill -9 of `drem import`: nothing after this line of it runs (not even its own error handling)."""
+
+
+@pytest.mark.parametrize("kill_point", ["after an account is created", "after the event item",
+                                        "after the audit entry"])
+def test_an_import_killed_at_any_point_is_finished_by_running_it_again(kill_point: str, live_stack, target_stack,
+                                                                       source_event, tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """The re-run exits 0, gives the accounts their groups, shows the temporary passwords nobody saw, writes the
+    "Event imported" audit entry exactly once and deletes the resume file (plaintext passwords) at the end."""
+    from chalicelib.storage.audit import AUDIT_PREFIX
+    from chalicelib.storage.event_archive import StackStorage
+    from drem_local.commands.import_ import FileImportJournal
+
+    folder = tmp_path / "export"
+    assert _export(source_event["event_id"], folder, live_stack.state_dir) == 0
+    cognito = _cognito(target_stack.config.storage_url, target_stack.config.state_dir)
+    pool_id = target_stack.outputs.user_pool_id
+    racers = sorted(source_event["racers"].values())
+    for username in racers:  # other tests may have imported them here already: start without them
+        try:
+            cognito.admin_delete_user(UserPoolId=pool_id, Username=username)
+        except cognito.exceptions.UserNotFoundException:
+            pass
+    new_id = f"killed-{secrets.token_hex(3)}"
+    if kill_point == "after an account is created":
+        def account_only(self, account, temporary_password):  # type: ignore[no-untyped-def]
+            cognito.admin_create_user(UserPoolId=pool_id, Username=account.username,
+                                      TemporaryPassword=temporary_password, MessageAction="SUPPRESS")
+            raise _PowerCut()
+        monkeypatch.setattr(StackStorage, "create_account", account_only)
+    elif kill_point == "after the event item":
+        real_put = StackStorage.put_new_item
+
+        def put_then_die(self, table, item):  # type: ignore[no-untyped-def]
+            stored = real_put(self, table, item)
+            if table == "events":
+                raise _PowerCut()
+            return stored
+        monkeypatch.setattr(StackStorage, "put_new_item", put_then_die)
+    else:
+        monkeypatch.setattr(FileImportJournal, "finished", lambda self: (_ for _ in ()).throw(_PowerCut()))
+
+    with pytest.raises(_PowerCut):
+        _import(folder, target_stack.config.state_dir, "--event-id", new_id)
+    journal = tmp_path / f"export.import-{new_id}.resume.json"
+    assert journal.exists() and journal.stat().st_mode & 0o077 == 0
+    monkeypatch.undo()
+    capsys.readouterr()
+
+    assert _import(folder, target_stack.config.state_dir, "--event-id", new_id) == 0
+    printed = capsys.readouterr().out
+    assert not journal.exists()  # no plaintext temporary password left behind
+    assert target_stack_event(target_stack, new_id) is not None
+    storage = connect(StackLocation.from_state_dir(target_stack.config.state_dir))
+    audit = [i for i in storage.partition("races", f"EVENT#{new_id}", AUDIT_PREFIX) if i["action"]["S"] == "import"]
+    assert len(audit) == 1, audit
+    for username in racers:
+        groups = cognito.admin_list_groups_for_user(UserPoolId=pool_id, Username=username)["Groups"]
+        assert [g["GroupName"] for g in groups] == ["racer"], username
+        password = next(line.split("temporary password ")[1].split()[0] for line in printed.splitlines()
+                        if f"account {username}:" in line)
+        challenge = requests.post(f"{target_stack.config.app_url}/api/auth/token", timeout=30,
+                                  json={"username": username, "password": password}).json()
+        assert challenge["challenge"] == "NEW_PASSWORD_REQUIRED"  # the password shown again works

@@ -313,6 +313,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/console/models"): ADMIN_OPERATOR,
     ("GET", "/console/models/rows"): ADMIN_OPERATOR,
     ("POST", "/console/models/assign"): ADMIN_OPERATOR,
+    ("POST", "/console/models/{model_id}/check"): Case(allow("admin", "operator"), racer_a_model),
     ("POST", "/console/models/{model_id}/scrutineer"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("GET", "/console/models/{model_id}/scrutiny"): Case(allow("racer_a", "operator", "admin"), racer_a_model),
     ("GET", "/console/models/car-status"): Case(allow("admin", "operator"),

@@ -71,3 +71,39 @@ def test_the_progress_bar_becomes_progress_epoch_and_loss() -> None:
     stream.write("\repoch 1/2 [###########.........] loss 0.4900    3.1s")  # too soon after the last: not sent
     stream.write("\repoch 1/2 train 0.4500 val 0.5100    6.0s\n")  # an epoch's end is always sent
     assert reports.seen == [(0.225, 1, 0.5), (0.45, 1, 0.45)]
+
+
+class _PowerCut(BaseException):
+    """kill -9 of the trainer: nothing after this point of it runs, not even its own error handling."""
+
+
+@pytest.mark.parametrize("kill_point", ["after the version was submitted", "while the autonomous run drives"])
+def test_a_trainer_killed_midway_finishes_the_same_version_and_run_when_it_takes_the_job_again(
+        alice: ModelsApi, monkeypatch: pytest.MonkeyPatch, kill_point: str) -> None:
+    from chalicelib.domain.racer_models import ModelService
+
+    _, job_id = drive_and_queue(alice)
+    if kill_point == "after the version was submitted":
+        real_submit = ModelService.submit_archive
+
+        def submit_then_die(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+            real_submit(self, *args, **kwargs)
+            raise _PowerCut()
+        monkeypatch.setattr(ModelService, "submit_archive", submit_then_die)
+    else:
+        monkeypatch.setattr(Trainer, "_drive", lambda self, run, folder: (_ for _ in ()).throw(_PowerCut()))
+    with pytest.raises(_PowerCut):
+        Trainer(lambda line: None).work_once()
+    monkeypatch.undo()
+
+    restarted = Trainer(lambda line: None)  # what drem up's supervisor starts after the crash
+    assert [job.job_id for job in restarted.training.requeue_interrupted()] == [job_id]
+    assert restarted.work_once() is True
+
+    job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
+    assert job["status"] == "DONE" and job["model_name"] == "v0001", job
+    models = alice.call("GET", "/api/models").json_body["models"]
+    assert [(m["name"], m["status"]) for m in models] == [("v0001", "AVAILABLE")]  # no copy refused as a duplicate
+    assert models[0]["model_id"] == job["model_id"]
+    runs = [r for r in alice.call("GET", "/api/runs").json_body["runs"] if r.get("job_id") == job_id]
+    assert [(r["run_id"], r["status"]) for r in runs] == [(job["autonomous_run_id"], "FINALISED")]

@@ -107,7 +107,7 @@ def test_my_models_lists_status_and_reason_and_polls_only_while_uploaded(app: An
     assert "no-meta the archive has no model_metadata.json at its top level Not valid" in shown
     assert 'src="/static/upload.js"' in body(page)
     polling = racer.get(f"/console/my-models/{waiting['model_id']}/row")
-    assert 'hx-trigger="every 2s"' in body(polling) and "Checking…" in text(polling)
+    assert 'hx-trigger="every 2s"' in body(polling) and "Waiting to be checked…" in text(polling)
     settled = racer.get(f"/console/my-models/{good['model_id']}/row")
     assert f'hx-get="/console/my-models/{good["model_id"]}/row"' not in body(settled)
     assert "Ready to race" in text(settled)

@@ -156,3 +156,27 @@ def test_operator_gives_models_to_a_car_and_sees_its_progress(app: Any, users: A
     assert reported.status_code == 200
     status = operator.get(f"/console/models/car-status?device_id={car.device_id}")
     assert "ada-fast ada failed disk full" in text(status)
+
+
+def test_staff_see_a_check_a_crash_cut_short_and_start_it_again_now(app: Any, users: Any) -> None:
+    from chalicelib import services
+    from chalicelib.domain.racer_models import ModelStatus
+
+    operator = signed_in(app, users, "olga", "operator")
+    ada = ModelsApi(app, bearer(users.access_token("ada", ("racer",))))
+    uploaded = ada.upload("ada-cut.tar.gz", onnx_archive())
+    store = services.model_service().store
+    record = store.get_by_id(uploaded["model_id"])
+    # What a kill -9 of the app during the check leaves: UPLOADED, its check started long ago.
+    store.replace(record.model_copy(update={"check_started_at": "2026-01-01T09:00:00.000000Z", "check_attempts": 1}),
+                  expected_status=ModelStatus.UPLOADED)
+
+    rows = operator.get("/console/models/rows")
+    assert "ada-cut" in text(rows) and "Check interrupted; it restarts by itself" in text(rows)
+    assert 'data-testid="check-again"' in body(rows)
+    racer = signed_in(app, users, "bob", "racer")
+    assert post(racer, f"/console/models/{uploaded['model_id']}/check", htmx=True).status_code == 403
+
+    checked = post(operator, f"/console/models/{uploaded['model_id']}/check", htmx=True)
+    assert checked.status_code == 200 and "ada-cut Ready to race" in text(checked).replace("ada ", ""), text(checked)
+    assert store.get_by_id(uploaded["model_id"]).status is ModelStatus.AVAILABLE

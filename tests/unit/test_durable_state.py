@@ -137,3 +137,63 @@ def test_a_fresh_state_dir_is_pinned_to_the_running_moto(tmp_path):
     DurableState(tmp_path / "new").close()
 
     assert (tmp_path / "new" / "moto-version").read_text().strip() == running_moto_version()
+
+
+def test_a_read_only_disk_refuses_the_write_in_words_and_stores_nothing(tmp_path, fresh_moto):
+    """Linux refuses to remount a filesystem read-only while the journal is open for writing, so here the journal's
+    write fails as a disk that turned read-only under a running server does (EROFS; fault injection)."""
+    import errno
+
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+
+    def read_only(*_args, **_kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    original = app.state.journal.append
+    app.state.journal.append = read_only
+    response = client.post("/", data=json.dumps({
+        "TableName": TABLE, "Key": {"pk": {"S": "c"}}, "UpdateExpression": "ADD hits :one",
+        "ExpressionAttributeValues": {":one": {"N": "1"}}}), headers={
+        "X-Amz-Target": "DynamoDB_20120810.UpdateItem", "Content-Type": "application/x-amz-json-1.0",
+        "Authorization": _DDB_AUTH})
+    assert response.status_code == 507
+    error = json.loads(response.get_data())
+    assert error["__type"] == "DremDataDiskReadOnly"
+    assert error["message"].startswith(f"drem's data disk is read-only at {tmp_path.resolve()}: make it writable")
+    assert _hits(client) == 1  # moto never ran the refused write
+    app.state.journal.append = original
+    assert _add_hit(client) == 2  # and the sequence goes on where it was once the disk is back
+
+
+def test_a_users_sub_is_drawn_again_the_same_from_the_journal_alone(tmp_path, fresh_moto):
+    """No snapshot holds the user (a full disk refused them all): the replay of its journal record draws the same
+    sub the client was told, because moto's randomness is seeded from the record."""
+    app = DurableApp(_moto_app(), DurableState(tmp_path, fsync=False, seed_secret=b"k" * 32))
+    app.recover()
+    client = Client(app)
+    pool_id = _cognito(client, "CreateUserPool", {"PoolName": "racers"})["UserPool"]["Id"]
+    app.state.snapshots.write = _refuse_snapshot  # every snapshot from here on fails (ENOSPC)
+    created = _cognito(client, "AdminCreateUser", {"UserPoolId": pool_id, "Username": "ada",
+                                                   "MessageAction": "SUPPRESS"})
+    told = next(a["Value"] for a in created["User"]["Attributes"] if a["Name"] == "sub")
+    app.state.close()
+    BackendDict.reset()
+
+    again = DurableApp(_moto_app(), DurableState(tmp_path, fsync=False, seed_secret=b"k" * 32))
+    again.recover()
+    user = _cognito(Client(again), "AdminGetUser", {"UserPoolId": pool_id, "Username": "ada"})
+    assert next(a["Value"] for a in user["UserAttributes"] if a["Name"] == "sub") == told
+
+
+def _moto_app():
+    from moto.moto_server.werkzeug_app import DomainDispatcherApplication, create_backend_app
+
+    return DomainDispatcherApplication(create_backend_app)
+
+
+def _refuse_snapshot(*_args, **_kwargs):
+    import errno
+
+    raise OSError(errno.ENOSPC, "No space left on device")

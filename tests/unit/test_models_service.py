@@ -164,3 +164,71 @@ def test_deleting_a_pending_upload_removes_what_was_uploaded(stack: Any, aws_cli
     service.delete(ALICE, ticket.model.model_id)
 
     assert _objects(aws_clients, stack.buckets["models"]) == []
+
+
+class _PowerCut(BaseException):
+    """What a kill -9 of the app looks like to the code that was running: it never gets to its next line."""
+
+
+class _CutDuringCopy:
+    """The model files, with the app killed while the checked archive is copied into models/ (the check's last
+    step before its verdict is written)."""
+
+    def __init__(self, files: Any) -> None:
+        self._files = files
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._files, name)
+
+    def copy(self, source: str, destination: str) -> None:
+        raise _PowerCut()
+
+
+def test_a_check_cut_short_by_a_crash_is_finished_by_the_worker_and_the_row_says_so(stack: Any,
+                                                                                       aws_clients: Any) -> None:
+    from chalicelib.domain.racer_models import CHECK_STALE_AFTER_S
+
+    clock = SteppedClock()
+    service = services.model_service(clock=clock)
+    ticket = service.request_upload(ALICE, UploadRequest(filename="interrupted.tar.gz"))
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=onnx_archive())
+    assert service.store.get(ALICE.sub, ticket.model.model_id).check_state(clock()) == "waiting"
+
+    crashing = services.model_service(clock=clock)
+    crashing.files = _CutDuringCopy(crashing.files)
+    with pytest.raises(_PowerCut):
+        crashing.complete(ALICE, ticket.model.model_id)
+    left = service.store.get(ALICE.sub, ticket.model.model_id)
+    assert left.status is ModelStatus.UPLOADED and left.check_attempts == 1
+    assert left.check_state(clock()) == "checking"
+    assert service.resume_checks() == []  # a check that may still be running is left alone
+
+    clock.advance(seconds=CHECK_STALE_AFTER_S + 1)
+    assert left.check_state(clock()) == "interrupted"
+    assert service.purge_stale_uploads() == [left]  # never purged as "never completed": its file arrived
+    finished = service.resume_checks()
+
+    assert [(m.model_id, m.status) for m in finished] == [(ticket.model.model_id, ModelStatus.AVAILABLE)]
+    stored = service.store.get(ALICE.sub, ticket.model.model_id)
+    assert stored.status is ModelStatus.AVAILABLE and stored.check_attempts == 2 and stored.s3_key
+    assert ticket.model.upload_key not in _objects(aws_clients, stack.buckets["models"])
+
+
+def test_an_archive_whose_check_keeps_crashing_the_server_ends_not_valid_instead_of_looping(stack: Any,
+                                                                                            aws_clients: Any) -> None:
+    from chalicelib.domain.racer_models import CHECK_STALE_AFTER_S, MAX_CHECK_ATTEMPTS
+
+    clock = SteppedClock()
+    crashing = services.model_service(clock=clock)
+    crashing.files = _CutDuringCopy(crashing.files)
+    ticket = crashing.request_upload(ALICE, UploadRequest(filename="poison.tar.gz"))
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=onnx_archive())
+    for _attempt in range(MAX_CHECK_ATTEMPTS):
+        clock.advance(seconds=CHECK_STALE_AFTER_S + 1)
+        with pytest.raises(_PowerCut):
+            crashing.resume_checks()
+
+    clock.advance(seconds=CHECK_STALE_AFTER_S + 1)
+    [ended] = services.model_service(clock=clock).resume_checks()
+    assert ended.status is ModelStatus.NOT_VALID and "interrupted 3 times" in (ended.reason or "")
+    assert ticket.model.upload_key not in _objects(aws_clients, stack.buckets["models"])

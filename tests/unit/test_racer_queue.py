@@ -256,3 +256,42 @@ def test_a_model_that_has_not_passed_scrutineering_is_queued_only_after_staff_sa
 
     assert track.add("alice", confirmed=True).status_code == 200
     assert track.on_deck() == ["alice"]
+
+
+class _PowerCut(Exception):
+    """Storage killed when the race's record had reached the journal: the queue change never happens."""
+
+
+def _races_of(console, event_id: str, racer: str) -> list[dict]:
+    reply = console.desk.call("GET", f"/api/events/{event_id}/races")
+    assert reply.status_code == 200, reply.body
+    return [race for race in json.loads(reply.body)["races"] if race["username"] == racer]
+
+
+@pytest.mark.parametrize("then", ["start again", "look at the queue"])
+def test_a_start_cut_off_after_the_race_was_created_ends_as_one_race_and_a_shorter_queue(console, monkeypatch,
+                                                                                         then):
+    from chalicelib.domain.racer_queue import RacerQueueService
+
+    track = _track(console, "car-1", "car-2")
+    track.add("alice")
+    track.add("bob")
+    alice = track.entry_of("alice")
+    real_remove = RacerQueueService.remove
+
+    def cut_off(service, event_id, track_id, entry_id, *, missing_ok=False):
+        monkeypatch.setattr(RacerQueueService, "remove", real_remove)  # only this once
+        raise _PowerCut()
+
+    monkeypatch.setattr(RacerQueueService, "remove", cut_off)
+    crashed = console.post(f"{track.base}/queue/start", {"entry_id": alice}, htmx=True)
+    assert crashed.status_code == 500
+    assert len(_races_of(console, track.event_id, "alice")) == 1  # the race exists (READY) ...
+
+    if then == "start again":  # ... the timekeeper presses Start again: the race it made is the answer
+        again = console.post(f"{track.base}/queue/start", {"entry_id": alice}, htmx=True)
+        assert again.status_code == 200, again.body
+    assert track.on_deck() == ["bob"]  # the polled list no longer shows alice on deck
+    assert len(_races_of(console, track.event_id, "alice")) == 1  # never a second race for her
+    race = text_of(console.web.get(f"{track.base}/state").body.decode())
+    assert "alice" in race and "Ready to start" in race

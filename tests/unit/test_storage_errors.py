@@ -49,3 +49,17 @@ def test_a_failed_read_after_a_write_of_the_same_request_does_not_claim_nothing_
     logs._local.request = {"request_id": "req-2", "principal": "anonymous"}  # the next request starts clean
     assert type(translate_common(EndpointConnectionError(endpoint_url="x"), "The account service")) \
         is ServiceUnavailable
+
+
+def test_the_storage_servers_full_disk_refusal_reaches_the_user_as_507_in_its_own_words(in_a_request):
+    from botocore.exceptions import ClientError
+
+    from chalicelib.domain.errors import StorageDiskFull
+    from chalicelib.http_errors import status_for
+
+    words = "drem's data disk is full at /srv/drem: free space on that disk, then try again"
+    refused = ClientError({"Error": {"Code": "DremDataDiskFull", "Message": words},
+                           "ResponseMetadata": {"HTTPStatusCode": 507}}, "PutItem")
+    error = translate_common(refused, "The events table", write=True)
+    assert isinstance(error, StorageDiskFull) and error.message == words
+    assert status_for(error) == 507

@@ -248,3 +248,21 @@ def test_self_delete_also_erases_models_the_racer_had_already_deleted(client, us
     for model in (kept, binned):
         record = store.get(sub, model["model_id"])
         assert record.status is ModelStatus.DELETED and record.owner_username.startswith("Deleted racer ")
+
+
+def test_the_running_repair_leaves_a_registration_that_may_still_be_in_flight_and_repairs_it_later(
+        client, users, aws_clients, stack):
+    from datetime import UTC, datetime, timedelta
+
+    from chalicelib import services
+
+    users.create("complete", ("racer",))
+    _crash_after_the_account_step(aws_clients, stack, "storage-cut")  # a storage-only crash: the app never restarts
+    service = services.user_service()
+
+    assert service.finish_interrupted_registrations(older_than_s=30) == []  # created just now: maybe still running
+    later = datetime.now(UTC) + timedelta(seconds=31)
+    assert service.finish_interrupted_registrations(older_than_s=30, now=later) == ["storage-cut"]
+    groups = aws_clients.cognito.admin_list_groups_for_user(UserPoolId=stack.user_pool_id, Username="storage-cut")
+    assert [g["GroupName"] for g in groups["Groups"]] == ["racer"]
+    assert service.finish_interrupted_registrations(older_than_s=30, now=later) == []

@@ -5,7 +5,10 @@ takes one job at a time, oldest first: QUEUED (with its place in the queue) → 
 DONE (the model version it made) | FAILED (the reason, in words). The worker submits the archive through the same
 upload validation as any racer's upload (`ModelService.submit_archive`), so a trained model lands in "my models" as
 the next version and is judged exactly like one a racer uploaded. A job left RUNNING by a worker that died is queued
-again when a worker starts (`requeue_interrupted`): an acknowledged job is never lost.
+again when a worker starts (`requeue_interrupted`): an acknowledged job is never lost. Everything the job makes is
+keyed on it: the version's model id and name are recorded on the job before the submit (`plan_version`), and the
+submit with that id is idempotent; the autonomous run's id likewise (`plan_autonomous_run`). So a worker killed after
+any step finishes the same version and run when it takes the job again, never a second copy.
 """
 from __future__ import annotations
 
@@ -165,7 +168,8 @@ class TrainingService:
         return None
 
     def requeue_interrupted(self) -> list[TrainingJob]:
-        """Jobs left RUNNING by a worker that died: queued again (progress reset), in their original order."""
+        """Jobs left RUNNING by a worker that died: queued again (progress reset), in their original order. The
+        version and autonomous run the job had recorded stay on it, so taking it again finishes those."""
         requeued = []
         for job in self.store.all_jobs():
             if job.status is JobStatus.RUNNING:
@@ -177,6 +181,20 @@ class TrainingService:
                 except RecordChanged:
                     continue
         return requeued
+
+    def plan_version(self, job: TrainingJob, model_id: str, model_name: str) -> TrainingJob:
+        """Record on the job the model version it is about to submit (its id and name), before the submit: a worker
+        killed after the submit finds that version on the job when it takes the job again, and finishes it instead
+        of training and submitting a second copy (which the duplicate check would refuse, failing the job)."""
+        planned = job.model_copy(update={"model_id": model_id, "model_name": model_name})
+        self.store.replace_job(planned, expected_status=JobStatus.RUNNING.value)
+        return planned
+
+    def plan_autonomous_run(self, job: TrainingJob, run_id: str) -> TrainingJob:
+        """Record the autonomous run made for the job's version, so a restarted worker drives that one again."""
+        planned = job.model_copy(update={"autonomous_run_id": run_id})
+        self.store.replace_job(planned, expected_status=JobStatus.RUNNING.value)
+        return planned
 
     def report(self, job: TrainingJob, *, progress: float, epoch: int, loss: float | None,
                stage: str = "training") -> TrainingJob:

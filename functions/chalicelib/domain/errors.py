@@ -64,6 +64,11 @@ class ServiceUnavailable(DremError):
     """A backing service (storage, identity provider) cannot be reached or is not configured."""
 
 
+class StorageDiskFull(ServiceUnavailable):
+    """The storage server's disk is full or read-only: the change was not stored; the message (the storage
+    server's own, naming the path) says what to free, and that nothing stored before is lost."""
+
+
 class MaybeStored(ServiceUnavailable):
     """Storage went away during a write: the change may or may not have been stored (the message says how to
     find out, and whether a retry is safe)."""

@@ -9,6 +9,7 @@ FIRST in the car's list because a car drives the first assigned model that loads
 """
 from __future__ import annotations
 
+import uuid
 from typing import Any, Protocol
 
 from chalicelib.auth.principals import User
@@ -96,16 +97,38 @@ class OnDeck:
     def start_head(self, principal: User, event_id: str, track_id: str, entry_id: str, *,
                    raced_by_proxy: bool = False, override_max_runs: bool = False) -> dict[str, Any]:
         """Create the race for the queue's head on the car holding their model, take them off the queue, and give
-        the next racer's model to a free car. The race is created first: if it is refused, the queue is untouched."""
-        _require_head(self._queue.queue(event_id, track_id), entry_id)
+        the next racer's model to a free car. The race and the queue change are one outcome: the race's id is
+        recorded on the entry first, so a Start repeated after a crash (between the race and the queue change)
+        finds that race and only finishes the queue change. If the race is refused, the queue keeps the racer."""
+        head = _require_head(self._queue.queue(event_id, track_id), entry_id)
+        if head.starting_race_id and (started := self._races.existing_race(event_id, head.starting_race_id)):
+            return self._finish_start(principal, event_id, track_id, entry_id, started.race.race_id)
         # The car the model went to may have been racing then (one car), or given other models since: check again.
         head = _require_head(self.preload_head(principal, event_id, track_id), entry_id)
+        head = self._queue.mark_starting(event_id, track_id, entry_id, uuid.uuid4().hex)
+        assert head.starting_race_id is not None
         race = self._races.create_race(principal, event_id, CreateRaceInput(
             track_id=track_id, racer_username=head.racer_username, car=head.car, raced_by_proxy=raced_by_proxy,
-            override_max_runs=override_max_runs))
+            override_max_runs=override_max_runs), race_id=head.starting_race_id)
         self._queue.remove(event_id, track_id, entry_id, missing_ok=True)
         self.preload_head(principal, event_id, track_id)
         return race
+
+    def finish_interrupted_starts(self, principal: User, event_id: str, track_id: str) -> RacerQueue:
+        """Take off the queue a head whose race a crashed Start already created (the queue change never happened);
+        the queue pages call this before showing the queue, so nobody sees a racer on deck who is racing."""
+        queue = self._queue.queue(event_id, track_id)
+        head = queue.head
+        if head is None or not head.starting_race_id or not self._races.existing_race(event_id, head.starting_race_id):
+            return queue
+        self._queue.remove(event_id, track_id, head.entry_id, missing_ok=True)
+        return self.preload_head(principal, event_id, track_id)
+
+    def _finish_start(self, principal: User, event_id: str, track_id: str, entry_id: str,
+                      race_id: str) -> dict[str, Any]:
+        self._queue.remove(event_id, track_id, entry_id, missing_ok=True)
+        self.preload_head(principal, event_id, track_id)
+        return self._races.get_race(principal, event_id, race_id)
 
     def _give(self, principal: User, entry: QueueEntry, current: Assignment) -> None:
         others = [model_id for model_id in _model_ids(current) if model_id != entry.model_id]

@@ -41,6 +41,12 @@ STALE_UPLOAD_AFTER_S = UPLOAD_EXPIRES_S + 60 * 60
 # judges it, so an open-ended number would let one racer fill the disk.
 MAX_PENDING_UPLOADS = 5
 DOWNLOAD_EXPIRES_S = 5 * 60
+# A check runs for at most a minute or so (the console conversion's own bound is 60 s of wall clock); one started
+# longer ago than this was cut short (the app or storage was killed) and is started again.
+CHECK_STALE_AFTER_S = 180
+# Checks that were cut short this many times end the upload as NOT_VALID instead of trying forever: an archive
+# whose check brings the server down every time must not do so again at every restart.
+MAX_CHECK_ATTEMPTS = 3
 MODEL_ID_PATTERN = r"^[A-Za-z0-9_-]{1,80}$"
 # Who may see and act on every racer's models.
 MODEL_STAFF = frozenset({Role.ADMIN, Role.OPERATOR})
@@ -111,6 +117,22 @@ class ModelRecord(BaseModel):
     # the top-down clip of its last drive (models/...scrutineer.gif), served only to the owner and model staff.
     scrutineer_state: str | None = None
     scrutineer_clip_key: str | None = None
+    # The check of an arrived upload (inspection, the console conversion, the copy): when the latest attempt started
+    # and how many have started. Written before the check runs, so after a crash of the app or storage the record
+    # itself says a check was interrupted; the scrutineering worker resumes it (ModelService.resume_checks).
+    check_started_at: str | None = None
+    check_attempts: int = 0
+
+    def check_state(self, now: str) -> str:
+        """For an UPLOADED model: "waiting" (the file has not been checked yet), "checking" (a check started less
+        than CHECK_STALE_AFTER_S ago) or "interrupted" (one started longer ago and never finished: resumed by the
+        worker, and staff may start it again). Empty for any other status."""
+        if self.status is not ModelStatus.UPLOADED:
+            return ""
+        if self.check_started_at is None:
+            return "waiting"
+        started = _parse_time(self.check_started_at)
+        return "checking" if _parse_time(now) - started < timedelta(seconds=CHECK_STALE_AFTER_S) else "interrupted"
 
     @property
     def scrutiny_text(self) -> str:
@@ -119,6 +141,13 @@ class ModelRecord(BaseModel):
         if self.scrutiny == "ready" and self.model_kind == "tensorflow":
             return f"converted to ONNX (agrees with OpenVINO to {self.conversion_max_diff or 0:.1e})"
         return "ready" if self.status is ModelStatus.AVAILABLE else ""
+
+    @property
+    def check_text(self) -> str:
+        """What an UPLOADED model's row says, true to its record: not checked yet, being checked, or a check that a
+        crash cut short (restarted by the worker; staff may start it at once)."""
+        return {"waiting": "Waiting to be checked…", "checking": "Checking…",
+                "interrupted": "Check interrupted; it restarts by itself"}.get(self.check_state(utc_now()), "")
 
     @property
     def scrutineer_status(self) -> str:
@@ -303,6 +332,8 @@ class ModelService:
         self.scrutineer_queue = scrutineer_queue
         self._clock = clock
         self._new_id = new_id
+        # The worker's tests shorten it (DREM_CHECK_STALE_AFTER_S).
+        self.check_stale_after_s: float = CHECK_STALE_AFTER_S
 
     def now(self) -> str:
         return self._clock()
@@ -347,6 +378,9 @@ class ModelService:
         if record.status is not ModelStatus.UPLOADED:
             return record
         try:
+            record = self._mark_check_started(record)
+            if record.status is not ModelStatus.UPLOADED:
+                return record
             verdict = self._judge(record)
         except _AlreadyJudged as judged:
             return judged.record
@@ -363,6 +397,52 @@ class ModelService:
         logs.log(logging.INFO, "model judged", model_id=record.model_id, status=verdict.status.value,
                  reason=verdict.reason)
         return verdict
+
+    def _mark_check_started(self, record: ModelRecord) -> ModelRecord:
+        """Record that a check of the arrived upload starts now (the durable mark a crash leaves behind), or end an
+        upload whose checks were cut short MAX_CHECK_ATTEMPTS times. Returns the stored record."""
+        if self.files.size_of(record.upload_key) is None:
+            self._raise_not_arrived(record)
+        now = self._clock()
+        if record.check_attempts >= MAX_CHECK_ATTEMPTS:
+            ended = self._verdict(record, ModelStatus.NOT_VALID, reason=(
+                f"checking this archive was interrupted {record.check_attempts} times (the server stopped during the "
+                "check each time), so it was not added; upload it again, or ask staff to look at the server's log"))
+            try:
+                self.store.replace(ended, expected_status=ModelStatus.UPLOADED)
+            except ModelChanged:
+                return self._reread(record)
+            self.files.delete(record.upload_key)
+            return ended
+        marked = record.model_copy(update={"check_started_at": now, "check_attempts": record.check_attempts + 1,
+                                           "updated_at": now})
+        try:
+            self.store.replace(marked, expected_status=ModelStatus.UPLOADED)
+        except ModelChanged:
+            return self._reread(record)
+        return marked
+
+    def resume_checks(self) -> list[ModelRecord]:
+        """Finish the checks nobody is running: uploads whose check started more than CHECK_STALE_AFTER_S ago and
+        never ended (the app or storage was killed during it), and files that arrived but were never checked that
+        long after their ticket (the browser went away before it could ask). The scrutineering worker calls this
+        every little while, so no model stays "Checking…" after a crash. Returns the records it judged."""
+        now = _parse_time(self._clock())
+        stale = timedelta(seconds=self.check_stale_after_s)
+        finished: list[ModelRecord] = []
+        for record in self._all_records(None):
+            if record.status is not ModelStatus.UPLOADED:
+                continue
+            since = record.check_started_at or record.uploaded_at
+            if now - _parse_time(since) < stale or self.files.size_of(record.upload_key) is None:
+                continue
+            logs.log(logging.INFO, "resuming an interrupted model check", model_id=record.model_id,
+                     attempts=record.check_attempts)
+            try:
+                finished.append(self._finish(record))
+            except Conflict:
+                continue  # deleted or judged meanwhile
+        return finished
 
     def _judge(self, record: ModelRecord) -> ModelRecord:
         """Read the upload (bounded), inspect it and put the archive where its verdict says. Writes no record."""
@@ -477,8 +557,8 @@ class ModelService:
         for record in self._all_records(owner_sub):
             if record.status is not ModelStatus.UPLOADED:
                 continue
-            if _parse_time(record.uploaded_at) > cutoff:
-                pending.append(record)
+            if _parse_time(record.uploaded_at) > cutoff or record.check_started_at is not None:
+                pending.append(record)  # a file whose check started arrived: resume_checks finishes it, never this
                 continue
             purged = record.model_copy(update={
                 "status": ModelStatus.DELETED, "updated_at": self._clock(),
@@ -536,13 +616,21 @@ class ModelService:
                            status=ModelStatus.UPLOADED, uploaded_at=now, updated_at=now,
                            upload_key=upload_key(owner_sub, model_id))
 
-    def submit_archive(self, owner_sub: str, username: str, name: str, data: bytes) -> ModelRecord:
+    def submit_archive(self, owner_sub: str, username: str, name: str, data: bytes, *,
+                       model_id: str | None = None) -> ModelRecord:
         """A model made for a racer on the server (the booth's trainer): stored as their upload and judged by exactly
-        the same validation as one they uploaded themselves."""
+        the same validation as one they uploaded themselves. With `model_id` (recorded by the caller beforehand) the
+        submit is idempotent: a repeat returns the record already judged, or finishes one a crash left UPLOADED."""
         if len(data) > self.max_upload_bytes:
             raise InvalidInput(f"the archive is {_size(len(data))}; uploads are limited to "
                                f"{_size(self.max_upload_bytes)}", field="archive")
-        record = self._new_record(owner_sub, username, model_name_from_filename(f"{name}.tar.gz"), self._new_id())
+        if model_id is not None and (existing := self.store.get(owner_sub, model_id)) is not None:
+            if existing.status is not ModelStatus.UPLOADED:
+                return existing
+            self.files.put(existing.upload_key, data)
+            return self._finish(existing)
+        record = self._new_record(owner_sub, username, model_name_from_filename(f"{name}.tar.gz"),
+                                  model_id or self._new_id())
         self.store.create(record)
         self.files.put(record.upload_key, data)
         return self._finish(record)

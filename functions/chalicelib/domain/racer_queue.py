@@ -38,6 +38,9 @@ class QueueEntry(BaseModel):
     added_at_ms: int
     car: str | None = Field(default=None, description="the car given this racer's model (on deck), if any")
     preload_problem: str | None = Field(default=None, description="why the model could not be given to a car")
+    starting_race_id: str | None = Field(default=None, description=(
+        "the race Start is creating for this entry: written before the race, so after a crash the next Start (or "
+        "look at the queue) finds that race instead of creating a second one"))
 
 
 class RacerQueue(BaseModel):
@@ -157,6 +160,18 @@ class RacerQueueService:
             index = queue.index_of(entry_id)
             return [*queue.entries[:index], *queue.entries[index + 1:]]
         return self._change(event_id, track_id, removed)
+
+    def mark_starting(self, event_id: str, track_id: str, entry_id: str, race_id: str) -> QueueEntry:
+        """Record on the entry the race about to be created for it (kept if one is recorded already); returns the
+        entry as stored. Raises NotFound if the entry left the queue."""
+        def marked(queue: RacerQueue) -> list[QueueEntry]:
+            entry = queue.entries[queue.index_of(entry_id)]
+            if entry.starting_race_id:
+                return list(queue.entries)
+            return [e.model_copy(update={"starting_race_id": race_id}) if e.entry_id == entry_id else e
+                    for e in queue.entries]
+        queue = self._change(event_id, track_id, marked)
+        return queue.entries[queue.index_of(entry_id)]
 
     def set_car(self, event_id: str, track_id: str, entry_id: str, car: str | None,
                 problem: str | None = None) -> RacerQueue:

@@ -205,6 +205,9 @@ class RaceService:
             raise NotFound(f"There is no event {event_id}.", field="event_id")
         return event
 
+    def existing_race(self, event_id: str, race_id: str) -> RaceRecord | None:
+        return self._races.get(event_id, race_id)
+
     def record(self, event_id: str, race_id: str) -> RaceRecord:
         record = self._races.get(event_id, race_id)
         if record is None:
@@ -229,7 +232,10 @@ class RaceService:
 
     # --- race lifecycle ----------------------------------------------------------------------------------------
 
-    def create_race(self, principal: User, event_id: str, data: CreateRaceInput) -> dict[str, Any]:
+    def create_race(self, principal: User, event_id: str, data: CreateRaceInput, *,
+                    race_id: str | None = None) -> dict[str, Any]:
+        """Create the race (with `race_id`, when the caller recorded that id before, as the racer queue does, so
+        a repeat after a crash finds the race it created instead of making a second one)."""
         event = self.event(event_id)
         event.track(data.track_id)
         racer = self._racers.get_user(data.racer_username)
@@ -249,7 +255,7 @@ class RaceService:
                 raise Forbidden("Only an operator or admin may override the maximum number of runs.")
             override = MaxRunsOverride(by=principal.username, runs_used=used, max_runs=config.max_runs_per_racer or 0)
         now = self.clock_ms()
-        race = new_race(race_id=uuid.uuid4().hex, event_id=event_id, track_id=data.track_id,
+        race = new_race(race_id=race_id or uuid.uuid4().hex, event_id=event_id, track_id=data.track_id,
                         racer=Racer(sub=racer.sub, username=racer.username), config=config, now_ms=now,
                         raced_by_proxy=data.raced_by_proxy, car=data.car)
         record = RaceRecord(race=race, created_by=principal.id, max_runs_override=override)

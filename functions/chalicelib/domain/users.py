@@ -6,6 +6,7 @@ storage adapters stay the only code that talks to AWS.
 from __future__ import annotations
 
 import re
+from datetime import UTC, datetime, timedelta
 from typing import Annotated, Protocol
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
@@ -167,6 +168,7 @@ class UserDirectory(Protocol):
     def create_user(self, username: str, email: str, country_code: str, temporary_password: str) -> str: ...
     def get_user(self, username: str) -> DirectoryUser: ...
     def groups_of(self, username: str) -> list[str]: ...
+    def members_of(self, group: str) -> set[str]: ...
     def reset_temporary_password(self, username: str, temporary_password: str) -> None: ...
     def list_users(self, prefix: str | None, limit: int, next_token: str | None) -> UserPage: ...
     def set_only_group(self, username: str, group: str) -> None: ...
@@ -240,6 +242,13 @@ class ModelsEraser:
                 return erased
 
 
+def _created_before(user: DirectoryUser, cutoff: datetime) -> bool:
+    if not user.created_at:
+        return True  # no creation time to go by: old enough
+    created = datetime.fromisoformat(user.created_at.replace("Z", "+00:00"))
+    return (created if created.tzinfo else created.replace(tzinfo=UTC)) <= cutoff
+
+
 class UserService:
     def __init__(self, directory: UserDirectory, profiles: ProfileKeeper,
                  erasers: tuple[OwnedDataEraser, ...] = (), *, confirm_sign_ups: bool = False,
@@ -254,7 +263,8 @@ class UserService:
 
     # Registrations are three writes (account, profile, role group), in that order: an account is complete once it
     # has a group, so "no group" marks one a crash interrupted. Repeating the same registration finishes it
-    # (`_resume`), races refuse a racer without a group, and `finish_interrupted_registrations` repairs them at start.
+    # (`_resume`), races refuse a racer without a group, and `finish_interrupted_registrations` repairs them (at the
+    # app's start and every REGISTRATION_REPAIR_S after, in drem_local.appserver).
 
     def sign_up(self, form: SignUpForm) -> SignUpResult:
         resumed = False
@@ -297,14 +307,23 @@ class UserService:
         return RegisteredUser(username=form.username, sub=sub, email=form.email, country_code=form.country_code,
                               temporary_password=password, resumed=resumed)
 
-    def finish_interrupted_registrations(self) -> list[str]:
+    def finish_interrupted_registrations(self, *, older_than_s: float = 0.0, now: datetime | None = None) -> list[str]:
         """Accounts without a role group were cut off mid-registration: give them their profile and the racer
-        group. Returns their usernames (the caller says so in plain words)."""
+        group. Returns their usernames (the caller says so in plain words). The app runs this at start (`older_than_s`
+        0: nothing is in flight) and then every little while, skipping accounts created in the last `older_than_s`
+        seconds, whose registration may still be running. Cheap enough to repeat: one listing of each role group
+        and of the accounts, and a group lookup only for an account in none of them."""
+        grouped: set[str] = set()
+        for role in USER_ROLES:
+            grouped |= self._directory.members_of(role.value)
+        cutoff = (now or datetime.now(UTC)) - timedelta(seconds=older_than_s)
         finished, token = [], None
         while True:
             page = self._directory.list_users(None, MAX_PAGE, token)
             for user in page.users:
-                if not self._directory.groups_of(user.username):
+                if user.username in grouped or (older_than_s and not _created_before(user, cutoff)):
+                    continue
+                if not self._directory.groups_of(user.username):  # the listing is not a snapshot: ask again
                     self._finish(user.username, user.sub, user.country_code)
                     finished.append(user.username)
             token = page.next_token

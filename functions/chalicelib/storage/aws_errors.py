@@ -9,8 +9,18 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
 
 from chalicelib import logs
-from chalicelib.domain.errors import DremError, MaybeStored, RateLimited, ServiceUnavailable, UpstreamError
+from chalicelib.domain.errors import (
+    DremError,
+    MaybeStored,
+    RateLimited,
+    ServiceUnavailable,
+    StorageDiskFull,
+    UpstreamError,
+)
 
+# The local storage server's refusals when its disk is full or read-only (drem_local.durable.disk_guard); their
+# message names the path and what to do, so it is passed on as it is.
+_DISK_CODES = {"DremDataDiskFull", "DremDataDiskReadOnly"}
 _THROTTLING = {"TooManyRequestsException", "ThrottlingException", "ProvisionedThroughputExceededException",
                "LimitExceededException", "RequestLimitExceeded", "SlowDown"}
 
@@ -60,6 +70,8 @@ def translate_common(exc: Exception, service: str, *, write: bool = False) -> Dr
         code = error_code(exc)
         if code in _THROTTLING:
             return RateLimited(f"{service} is busy; try again in a moment.")
+        if code in _DISK_CODES:
+            return StorageDiskFull(exc.response.get("Error", {}).get("Message") or "drem's data disk is full.")
         return UpstreamError(f"{service} refused the request ({code or 'unknown error'}).")
     if isinstance(exc, (EndpointConnectionError, BotoCoreError)):
         if write or writes_sent():

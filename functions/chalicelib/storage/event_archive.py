@@ -214,6 +214,18 @@ class StackStorage:
             self._cognito_call(name, "admin_disable_user", UserPoolId=pool, Username=name)
         return _attributes(reply["User"]).get("sub", "")
 
+    def finish_account(self, account: Account) -> None:
+        """What `create_account` does after creating it, for an account an interrupted import created: the groups it
+        lacks are added and it is disabled if the export says so (both idempotent)."""
+        pool, name = self._location.user_pool_id, account.username
+        pages = self._cognito_call(name, "admin_list_groups_for_user", paginate=True, UserPoolId=pool, Username=name)
+        present = {g["GroupName"] for page in pages for g in page.get("Groups", [])}
+        for group in account.groups:
+            if group not in present:
+                self._cognito_call(name, "admin_add_user_to_group", UserPoolId=pool, Username=name, GroupName=group)
+        if not account.enabled:
+            self._cognito_call(name, "admin_disable_user", UserPoolId=pool, Username=name)
+
     def _account(self, raw: dict[str, Any]) -> Account:
         attributes = _attributes(raw)
         username = raw["Username"]

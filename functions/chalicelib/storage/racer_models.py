@@ -148,7 +148,7 @@ def decode_token(token: str, *, required: dict[str, str], key_names: tuple[str, 
 
 _FACT_FIELDS = ("reason", "model_kind", "model_md5", "metadata_md5", "archive_md5", "action_space_type",
                 "training_algorithm", "s3_key", "converted_key", "converted_md5", "scrutiny", "scrutiny_reason",
-                "conversion_max_diff", "scrutineer_state", "scrutineer_clip_key")
+                "conversion_max_diff", "scrutineer_state", "scrutineer_clip_key", "check_started_at")
 
 
 def _to_item(record: ModelRecord) -> dict[str, Any]:
@@ -166,6 +166,8 @@ def _to_item(record: ModelRecord) -> dict[str, Any]:
         "size_bytes": {"N": str(record.size_bytes)},
         "sensor": {"L": [{"S": sensor} for sensor in record.sensor]},
     }
+    if record.check_attempts:
+        item["check_attempts"] = {"N": str(record.check_attempts)}
     for name in _FACT_FIELDS:
         value = getattr(record, name)
         if value is not None:
@@ -188,6 +190,7 @@ def _from_item(item: dict[str, Any]) -> ModelRecord:
         "uploaded_at": item["uploaded_at"]["S"], "updated_at": item["updated_at"]["S"],
         "upload_key": item["upload_key"]["S"], "size_bytes": int(item["size_bytes"]["N"]),
         "sensor": [entry["S"] for entry in item.get("sensor", {}).get("L", [])],
+        "check_attempts": int(item.get("check_attempts", {}).get("N", "0")),
     }
     for name in _FACT_FIELDS:
         if name in item:

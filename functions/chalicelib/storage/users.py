@@ -101,6 +101,10 @@ class CognitoUserDirectory:
         pages = self._paginate(username, "admin_list_groups_for_user", UserPoolId=self._pool_id, Username=username)
         return sorted(group["GroupName"] for page in pages for group in page.get("Groups", []))
 
+    def members_of(self, group: str) -> set[str]:
+        pages = self._paginate("", "list_users_in_group", UserPoolId=self._pool_id, GroupName=group)
+        return {user["Username"] for page in pages for user in page.get("Users", [])}
+
     def set_only_group(self, username: str, group: str) -> None:
         """Add the new group before removing the others, so the user is never left with no role."""
         current = self.groups_of(username)

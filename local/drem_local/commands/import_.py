@@ -7,10 +7,13 @@ re-validated first (a tampered export is refused, naming the file), the boards a
 created accounts are racers unless --grant-roles applies the roles the export lists (reported either way). The
 report (sub mapping, roles, what was written and kept) goes next to the folder; it never holds passwords.
 
-An import cut off part-way (a crash, storage down) is finished by running the same command again: the event item is
-written last, so the event never shows half-imported, and the re-run matches what the first run wrote. The accounts it
-created are noted, with their temporary passwords, in `DIR.import-EVENT.resume.json` (0600, beside the folder) before
-each is created; the re-run shows those passwords again and deletes the file once the import is complete.
+An import cut off part-way (a crash, storage down, kill -9 at any point) is finished by running the same command
+again: the event item is written last, so the event never shows half-imported, and the re-run matches what the first
+run wrote. The import's resume record, `DIR.import-EVENT.resume.json` (0600, beside the folder), exists from before
+the first write until the audit entry is written: it holds the import's id and start, and each account about to be
+created with its temporary password (noted before the account is created). The re-run finishes what was cut off
+(an account's groups and disable included, and everything after the event item: the audit entry, written once),
+shows those passwords again and deletes the file once the import is complete.
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ import os
 import secrets
 import sys
 import time
+import uuid
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -44,19 +48,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_location_arguments(parser)
 
 
-def record_import(target: Any, result: Any) -> None:
-    """The import itself goes into the event's audit trail (who ran it, from which event, what it wrote)."""
+def record_import(target: Any, result: Any, journal: FileImportJournal) -> None:
+    """The import itself goes into the event's audit trail (who ran it, from which event, what it wrote). Its key
+    comes from the resume record (when the import began, its id), so a re-run after a crash that came after this
+    entry writes no second one."""
     from chalicelib.domain.audit import AuditEntry
     from chalicelib.storage.audit import audit_item
 
-    entry = AuditEntry(event_id=result.event_id, at_ms=time.time_ns() // 1_000_000,
+    import_id, started_ms = journal.identity()
+    entry = AuditEntry(entry_id=import_id, event_id=result.event_id, at_ms=started_ms,
                        by=f"drem import ({getpass.getuser()})", action="import",
                        after={"source_event_id": result.source_event_id, "written": result.written})
     target.put_new_item("races", audit_item(entry))
 
 
 class FileImportJournal:
-    """The accounts an import is about to create, with their temporary passwords, in a 0600 file (fsynced).
+    """The import's resume record, a 0600 file (fsynced) beside the export folder: when it began and its id, and the
+    accounts it is about to create with their temporary passwords. It exists from the first write until the import
+    is complete (the audit entry written), so a re-run after a crash at any point knows it is finishing this
+    import (even past the event item, its last write) and shows the passwords nobody saw.
 
     Each version is written to a new file of a random name (O_EXCL, never through a file or link someone else put
     there) and renamed over the last; a resume file this user does not own, or that others may read or write, is
@@ -65,7 +75,7 @@ class FileImportJournal:
     def __init__(self, path: Path) -> None:
         self.path = path
 
-    def intended(self) -> dict[str, str]:
+    def _read(self) -> dict[str, Any]:
         from chalicelib.formats import private_files
 
         raw = private_files.read_own(self.path)
@@ -75,12 +85,35 @@ class FileImportJournal:
             data = json.loads(raw)
         except ValueError:
             return {}
-        return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+        if not isinstance(data, dict):
+            return {}
+        if "accounts" not in data and "import_id" not in data:  # written before the record had an id: accounts
+            return {"accounts": data}
+        return data
+
+    def started(self) -> bool:
+        return bool(self._read().get("import_id"))
+
+    def begin(self) -> None:
+        """Note that the import begins now (kept as it is when an interrupted run already began it)."""
+        if not self.started():
+            self._write({**self._read(), "import_id": uuid.uuid4().hex, "started_at_ms": time.time_ns() // 1_000_000})
+
+    def identity(self) -> tuple[str, int]:
+        data = self._read()
+        return str(data.get("import_id") or uuid.uuid4().hex), int(data.get("started_at_ms") or time.time() * 1000)
+
+    def intended(self) -> dict[str, str]:
+        accounts = self._read().get("accounts") or {}
+        return {str(k): str(v) for k, v in accounts.items()} if isinstance(accounts, dict) else {}
 
     def intend(self, username: str, temporary_password: str) -> None:
+        data = self._read()
+        self._write({**data, "accounts": {**self.intended(), username: temporary_password}})
+
+    def _write(self, data: dict[str, Any]) -> None:
         from chalicelib.formats import private_files
 
-        data = {**self.intended(), username: temporary_password}
         temporary = self.path.with_name(f"{self.path.name}.{secrets.token_hex(8)}.tmp")
         private_files.write_new(temporary, json.dumps(data).encode(), fsync=True)
         try:
@@ -112,8 +145,9 @@ def run(args: argparse.Namespace) -> int:
         journal = journal_for(args.folder, args.event_id or bundle.event_id)
         plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,
                            grant_roles=args.grant_roles, journal=journal)
+        journal.begin()
         result = run_import(plan, target, journal)
-        record_import(target, result)
+        record_import(target, result, journal)
         journal.finished()
     except PartialImport as exc:
         print(f"drem import: {exc.message}", file=sys.stderr)

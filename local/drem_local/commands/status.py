@@ -57,7 +57,40 @@ def gather(state_dir: Path) -> dict:
     facts["app_answering"] = bool(app_answer and app_answer[0] == 200)
     live_url = urls.get("live_local")
     facts["live_health"] = _json_or_none(http_get(live_url + LIVE_HEALTH_PATH)) if live_url else None
+    facts["disk"] = _disk_facts(state_dir) if facts["exists"] else None
     return facts
+
+
+def _disk_facts(state_dir: Path) -> dict:
+    from drem_local.disk import disk_state
+
+    state = disk_state(state_dir)
+    return {"problem": state.problem, "free_bytes": state.free_bytes}
+
+
+_WRITES = {
+    "accepted": "accepted",
+    "journal-only": "still accepted, into the journal's reserved room ({room} left), but snapshots fail",
+    "refused": "REFUSED (the app answers 507 with this message)",
+}
+
+
+def _disk_line(facts: dict, health: dict | None) -> str:
+    """The disk, truthfully: what the running storage server can still do (its health), else what statvfs says."""
+    from drem_local.disk import sentence
+
+    disk = (health or {}).get("disk")
+    if disk:
+        if not disk["problem"]:
+            return f"Data disk: {_human(disk['free_bytes'])} free; writes are accepted."
+        writes = _WRITES[disk["writes"]].format(room=_human(disk["journal_room_bytes"]))
+        return f"{disk['message']} Writes right now: {writes}."
+    local = facts.get("disk")
+    if not local:
+        return "Data disk: unknown (the state dir does not exist yet)."
+    if local["problem"]:
+        return sentence(local["problem"], Path(facts["state_dir"]), "run drem up.")
+    return f"Data disk: {_human(local['free_bytes'])} free."
 
 
 def describe(facts: dict) -> str:
@@ -111,8 +144,7 @@ def describe(facts: dict) -> str:
     waiting = health["journal_records"] if health else facts["journal_records"]
     lines.append(f"Journal: {waiting} writes not yet in a snapshot"
                  + (" (they are replayed on the next start)." if not health and waiting else "."))
-    if health:
-        lines.append(f"State dir writable: {'yes' if health['writable'] else 'NO - writes will fail'}.")
+    lines.append(_disk_line(facts, health))
     if facts["admin_username"]:
         lines.append(f"Admin user: {facts['admin_username']}.")
     lines.append(f"Logs: {facts['logs_dir']}.")

@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, _raise_stop)
     print(f"Starting drem with its data in {config.state_dir.resolve()} ...", flush=True)
     try:
-        stack = start_stack(config, username, password)
+        # No deadline: each child is waited for while it makes progress, and every 10 s we say what we wait for.
+        stack = start_stack(config, username, password, say=lambda line: print(line, file=sys.stderr, flush=True))
     except StackError as exc:
         print(f"drem up: could not start. {exc}", file=sys.stderr)
         return 1

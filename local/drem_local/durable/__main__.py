@@ -19,6 +19,7 @@ STABLE_ID_ENV = {
     "MOTO_DISABLE_GLOBAL_CORS": "true",
 }
 EXIT_VERSION_MISMATCH = 3
+EXIT_DISK = 4  # the state dir's disk is full or read-only
 DEFAULT_MAX_POST_BYTES = 256 * 1024 * 1024  # above the app's 128 MiB model limit plus the form's own fields
 
 
@@ -36,6 +37,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def _cannot_start(exc: OSError, state_dir: Path) -> int:
+    """A full or read-only state dir, said in words (drem up quotes it); any other OSError stays a traceback."""
+    from drem_local.disk import problem_of, sentence
+
+    problem = problem_of(exc)
+    if problem is None:
+        raise exc
+    print(f"drem durable server: cannot start. {sentence(problem, state_dir, 'start drem again.')}", file=sys.stderr)
+    return EXIT_DISK
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.update(STABLE_ID_ENV)
@@ -51,12 +63,14 @@ def main(argv: list[str] | None = None) -> int:
     from drem_local.durable.state import DurableState, MotoVersionMismatch
     from drem_local.storage_keys import load_or_create
 
-    keys = load_or_create(args.state_dir)  # also makes the state dir 0700 and its files 0600
     try:
-        state = DurableState(args.state_dir, fsync=not args.no_fsync)
+        keys = load_or_create(args.state_dir)  # also makes the state dir 0700 and its files 0600
+        state = DurableState(args.state_dir, fsync=not args.no_fsync, seed_secret=keys.secret_access_key.encode())
     except MotoVersionMismatch as exc:
         print(f"drem durable server: refusing to start. {exc}", file=sys.stderr)
         return EXIT_VERSION_MISMATCH
+    except OSError as exc:
+        return _cannot_start(exc, args.state_dir)
 
     from moto.moto_server.werkzeug_app import DomainDispatcherApplication, MotoRequestHandler, create_backend_app
 
@@ -70,7 +84,10 @@ def main(argv: list[str] | None = None) -> int:
     upload_guard = PostPolicyGuard({keys.access_key_id: keys.secret_access_key}.get,
                                    max_body_bytes=args.max_post_bytes)
     app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys), upload_guard)
-    report = app.recover()
+    try:
+        report = app.recover()
+    except OSError as exc:
+        return _cannot_start(exc, args.state_dir)
     log.info("recovered state from %s: snapshot seq %d, %d journal records (%d replayed, %d already in snapshots, "
              "%d failed), torn tail %d bytes, %.2fs", args.state_dir, report.snapshot_seq, report.journal_records,
              report.replayed, report.skipped, report.failed, report.torn_bytes, report.seconds)
@@ -98,9 +115,13 @@ def main(argv: list[str] | None = None) -> int:
         server.serve_forever()
     finally:
         stopping.set()
-        app.snapshot_if_dirty()
+        try:
+            app.snapshot_if_dirty()
+            log.info("stopped; state snapshotted to %s", args.state_dir)
+        except OSError as exc:
+            log.warning("stopped without a final snapshot (%s); the journal holds every change and is replayed on the "
+                        "next start", exc.strerror or exc)
         state.close()
-        log.info("stopped; state snapshotted to %s", args.state_dir)
     return 0
 
 

@@ -75,7 +75,8 @@ def refuse(refusal: Refusal, environ: dict[str, Any], start_response: Callable[.
         body = (f"<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<Error><Code>{escape(refusal.code)}</Code>"
                 f"<Message>{escape(refusal.message)}</Message></Error>").encode()
         content_type = "application/xml"
-    reason = {400: "Bad Request", 403: "Forbidden", 404: "Not Found"}.get(refusal.status, "Error")
+    reason = {400: "Bad Request", 403: "Forbidden", 404: "Not Found", 507: "Insufficient Storage"}.get(refusal.status,
+                                                                                                     "Error")
     start_response(f"{refusal.status} {reason}", [("Content-Type", content_type),
                                                   ("Content-Length", str(len(body))),
                                                   ("x-amzn-ErrorType", refusal.code)])

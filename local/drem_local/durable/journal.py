@@ -135,6 +135,11 @@ class Journal:
         self.bytes += len(data)
         self.records += 1
 
+    @property
+    def room(self) -> int:
+        """Bytes of records that still fit in the space already allocated (no new disk blocks needed)."""
+        return max(0, self._capacity - self.bytes - 2 * _HEADER.size)
+
     def truncate(self) -> None:
         """Empty the journal (its records are now in a snapshot)."""
         assert self._fd is not None, "the journal is closed"

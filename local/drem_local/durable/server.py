@@ -15,7 +15,8 @@ from typing import Any
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.disk_guard import disk_refusal
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
@@ -90,7 +91,14 @@ class DurableApp:
 
         with self.lock:
             if changing and service in PERSISTED:
-                self.state.record(service, environ, body)
+                try:
+                    self.state.record(service, environ, body)
+                except OSError as exc:
+                    disk_full = disk_refusal(exc, self.state.state_dir)
+                    if disk_full is None:
+                        raise
+                    log.warning("refused a write: %s", disk_full.message)
+                    return refuse(disk_full, environ, start_response)
             app_iter = self.moto_app(environ, capture)
             try:
                 payload = b"".join(app_iter)
@@ -107,8 +115,9 @@ class DurableApp:
         try:
             self.state.snapshot_service(service)
         except Exception:
-            # The journal still holds the request, so nothing acknowledged is lost; only its random ids may change.
-            log.exception("immediate snapshot of %s failed", service)
+            # The journal holds the request and its randomness is seeded from its record (DurableState.record), so
+            # a replay draws the same ids: the answer may go out, and nothing acknowledged changes after a crash.
+            log.exception("immediate snapshot of %s failed; the journal holds the request", service)
 
     def _health(self, start_response: Callable[..., Any]) -> Iterable[bytes]:
         body = json.dumps(self.state.health()).encode()

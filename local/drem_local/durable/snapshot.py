@@ -57,11 +57,15 @@ def fsync_dir(path: Path) -> None:
 
 def write_atomically(path: Path, data: bytes) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    # 0600: snapshots hold every account's password (the state dir is 0700 as well).
-    with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
+    try:
+        # 0600: snapshots hold every account's password (the state dir is 0700 as well).
+        with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+    except OSError:
+        tmp.unlink(missing_ok=True)  # on a full disk a half-written file would take the last free space
+        raise
     os.replace(tmp, path)
 
 
@@ -92,15 +96,19 @@ class SnapshotStore:
     def write(self, manifest: Manifest, services: list[str], seq: int, *, full: bool) -> Manifest:
         """Pickle `services` as of journal `seq` and commit a new manifest. Caller holds the request lock."""
         files = dict(manifest.files)
-        for service in services:
-            data = pickle.dumps(_capture(service), protocol=pickle.HIGHEST_PROTOCOL)
-            name = f"{service}-{seq:012d}.pickle"
-            write_atomically(self.directory / name, data)
-            files[service] = {"file": name, "seq": seq, "bytes": len(data)}
-        new = Manifest(seq=seq if full else manifest.seq, files=files, written_at=time.time())
-        write_atomically(self.directory / MANIFEST, json.dumps(
-            {"seq": new.seq, "files": new.files, "written_at": new.written_at}, indent=1).encode())
-        fsync_dir(self.directory)
+        try:
+            for service in services:
+                data = pickle.dumps(_capture(service), protocol=pickle.HIGHEST_PROTOCOL)
+                name = f"{service}-{seq:012d}.pickle"
+                write_atomically(self.directory / name, data)
+                files[service] = {"file": name, "seq": seq, "bytes": len(data)}
+            new = Manifest(seq=seq if full else manifest.seq, files=files, written_at=time.time())
+            write_atomically(self.directory / MANIFEST, json.dumps(
+                {"seq": new.seq, "files": new.files, "written_at": new.written_at}, indent=1).encode())
+            fsync_dir(self.directory)
+        except OSError:
+            self._remove_unreferenced(manifest)  # the files of this failed attempt, so the disk gets its space back
+            raise
         self._remove_unreferenced(new)
         return new
 

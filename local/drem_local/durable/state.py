@@ -1,8 +1,11 @@
 """The state directory: moto version pin, journal, snapshots, dirty flags and recovery."""
 from __future__ import annotations
 
+import hashlib
+import hmac
 import io
 import logging
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -66,8 +69,12 @@ class RecoveryReport:
 class DurableState:
     """Everything the middleware does to the disk. Every method runs under the server's one request lock."""
 
-    def __init__(self, state_dir: Path, *, fsync: bool = True) -> None:
+    def __init__(self, state_dir: Path, *, fsync: bool = True, seed_secret: bytes | None = None) -> None:
+        """`seed_secret` keys the randomness moto draws for each journaled request (see `seed_randomness`); the
+        server passes the installation's storage secret, so a restart replays the same draws."""
         self.state_dir = state_dir
+        self.seed_secret = seed_secret if seed_secret is not None else os.urandom(32)
+        self.last_snapshot_error: str | None = None  # why the last snapshot failed (a full disk), until one succeeds
         self.state_dir.mkdir(parents=True, exist_ok=True)
         self.moto_version = running_moto_version()
         check_moto_version(state_dir, self.moto_version)
@@ -91,6 +98,7 @@ class DurableState:
                 skipped += 1
                 continue
             try:
+                self.seed_randomness(record.seq)
                 status = replay(record)
             except Exception:
                 log.exception("replaying journal record %d (%s) raised; skipped", record.seq, record.service)
@@ -109,25 +117,48 @@ class DurableState:
         return self.recovery
 
     def record(self, service: str, environ: dict[str, Any], body: bytes) -> None:
-        """Make a state-changing request durable before it runs."""
-        self.last_seq += 1
-        self.journal.append(JournalRecord(self.last_seq, service, journal_environ(environ), body))
+        """Make a state-changing request durable before it runs, and seed moto's randomness for it. Raises OSError
+        (nothing recorded) when the disk refuses the write."""
+        seq = self.last_seq + 1
+        self.journal.append(JournalRecord(seq, service, journal_environ(environ), body))
+        self.last_seq = seq
         self.dirty.add(service)
+        self.seed_randomness(seq)
+
+    def seed_randomness(self, seq: int) -> None:
+        """Seed moto's one source of randomness (`mock_random`: user subs, refresh tokens, sessions, S3 version ids)
+        from journal record `seq` and the installation's secret, so replaying that record after a crash draws the
+        same ids the client was told. An acknowledged identity never depends on a snapshot succeeding (a full disk
+        fails snapshots, never the journal's preallocated room). Keyed with the secret, so nobody can predict the
+        tokens from a sequence number."""
+        from moto.moto_api._internal import mock_random
+
+        mock_random.seed(hmac.new(self.seed_secret, b"drem-journal-seq:%d" % seq, hashlib.sha256).digest())
 
     def snapshot_service(self, service: str) -> None:
         """Right after an operation with a random result: persist that service now, keep the journal for the rest."""
-        self.manifest = self.snapshots.write(self.manifest, [service], self.last_seq, full=False)
+        self.manifest = self._noting_disk_errors(
+            lambda: self.snapshots.write(self.manifest, [service], self.last_seq, full=False))
         self.dirty.discard(service)
 
     def snapshot_all(self, *, force: bool = False) -> bool:
         """Snapshot every dirty service and empty the journal. False when there was nothing to do."""
         if not self.dirty and not force and self.journal.records == 0:
             return False
-        self.manifest = self.snapshots.write(self.manifest, sorted(self.dirty & set(PERSISTED)), self.last_seq,
-                                             full=True)
+        self.manifest = self._noting_disk_errors(lambda: self.snapshots.write(
+            self.manifest, sorted(self.dirty & set(PERSISTED)), self.last_seq, full=True))
         self.journal.truncate()
         self.dirty.clear()
         return True
+
+    def _noting_disk_errors(self, write: Callable[[], Manifest]) -> Manifest:
+        try:
+            manifest = write()
+        except OSError as exc:
+            self.last_snapshot_error = f"{exc.strerror or exc} ({time.strftime('%H:%M:%S')})"
+            raise
+        self.last_snapshot_error = None
+        return manifest
 
     def after_moto_api_call(self) -> None:
         """/moto-api/reset and friends touch every backend at once: mark all dirty and commit at once."""
@@ -136,10 +167,12 @@ class DurableState:
 
     def health(self) -> dict[str, Any]:
         snapshot_age = time.time() - self.manifest.written_at if self.manifest.written_at else None
+        disk = self.disk_health()
         return {
             "moto_version": self.moto_version,
             "state_dir": str(self.state_dir.resolve()),
-            "writable": _is_writable(self.state_dir),
+            "writable": disk["writes"] != "refused",
+            "disk": disk,
             "journal_bytes": self.journal.bytes,
             "journal_records": self.journal.records,
             "last_seq": self.last_seq,
@@ -149,6 +182,35 @@ class DurableState:
             "recovered_records": self.recovery.replayed if self.recovery else 0,
             "recovery_failed_records": self.recovery.failed if self.recovery else 0,
             "recovery_seconds": round(self.recovery.seconds, 3) if self.recovery else 0.0,
+        }
+
+    def disk_health(self) -> dict[str, Any]:
+        """What the disk lets the server do, truthfully: writes go to the journal's preallocated room first, so a
+        full disk still takes writes (until that room is used up) while snapshots fail; a read-only one takes none.
+        `writes`: "accepted", "journal-only" (snapshots fail; the journal holds everything) or "refused"."""
+        from drem_local.disk import FULL, READ_ONLY, disk_state, sentence
+
+        try:
+            state = disk_state(self.state_dir)
+            free, problem = state.free_bytes, state.problem
+        except OSError:
+            free, problem = 0, None
+        if problem is None and self.last_snapshot_error is not None:
+            problem = FULL  # statvfs sees room (root's reserve, a quota), but snapshots are refused
+        room = self.journal.room
+        if problem == READ_ONLY:
+            writes = "refused"
+        elif problem == FULL:
+            writes = "journal-only" if room >= _SMALLEST_WRITE_BYTES else "refused"
+        else:
+            writes = "accepted"
+        return {
+            "problem": problem,
+            "free_bytes": free,
+            "journal_room_bytes": room,
+            "writes": writes,
+            "last_snapshot_error": self.last_snapshot_error,
+            "message": sentence(problem, self.state_dir, _THEN[writes]) if problem else None,
         }
 
     def close(self) -> None:
@@ -185,11 +247,14 @@ def replay_environ(record: JournalRecord) -> dict[str, Any]:
     return environ
 
 
-def _is_writable(path: Path) -> bool:
-    probe = path / ".write-probe"
-    try:
-        probe.write_bytes(b"ok")
-        probe.unlink()
-        return True
-    except OSError:
-        return False
+# A journal record of the smallest write drem makes (its request headers dominate): with less room than this left,
+# every write is refused.
+_SMALLEST_WRITE_BYTES = 4096
+_THEN = {
+    "accepted": "nothing more is needed.",
+    "journal-only": "snapshots resume by themselves. Until then writes go on into the journal's reserved room "
+                    "(every acknowledged write survives a crash), and are refused with this message once it is "
+                    "used up.",
+    "refused": "writes resume by themselves; until then every change is refused with this message (nothing stored "
+               "before is lost).",
+}

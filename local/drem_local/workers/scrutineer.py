@@ -34,6 +34,8 @@ DRIVE_MODULE = "drem_local.workers.scrutineer_drive"
 NICENESS = 10  # below the app server (0): the live pages win every contest for the CPU
 _PR_SET_PDEATHSIG = 1
 LEASE_VARIABLE = "DREM_SCRUTINEER_LEASE_S"  # how long a taken job is the worker's (default 5 minutes)
+# How often the worker looks for model checks a crash cut short (uploads left UPLOADED); see resume_model_checks.
+RESUME_CHECKS_EVERY_S = float(os.environ.get("DREM_RESUME_CHECKS_EVERY_S", "30"))
 
 
 @dataclass(frozen=True)
@@ -158,6 +160,21 @@ def background_scrutineer(drive: Any) -> Any:
     return BackgroundScrutineer(services.scrutineer_service(), queue, drive)
 
 
+def resume_model_checks() -> None:
+    """Finish model checks a crash cut short (ModelService.resume_checks): uploads never stay "Checking…"."""
+    from chalicelib import logs, services
+
+    service = services.model_service()
+    if os.environ.get("DREM_CHECK_STALE_AFTER_S"):  # tests that kill the app mid-check wait less
+        service.check_stale_after_s = float(os.environ["DREM_CHECK_STALE_AFTER_S"])
+    try:
+        for record in service.resume_checks():
+            logs.log(logging.INFO, "model check resumed and finished", model_id=record.model_id,
+                     status=record.status.value)
+    except Exception as error:  # storage briefly away (restarting): the next round tries again
+        logs.log(logging.WARNING, "interrupted model checks could not be resumed yet", error=repr(error)[:300])
+
+
 def serve(poll_s: float, once: bool = False) -> int:
     use_app_source()
     from chalicelib import logs
@@ -169,8 +186,12 @@ def serve(poll_s: float, once: bool = False) -> int:
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
+    next_resume = 0.0
     try:
         while True:
+            if time.monotonic() >= next_resume:
+                resume_model_checks()
+                next_resume = time.monotonic() + RESUME_CHECKS_EVERY_S
             try:
                 job = worker.run_one()
             except Exception as error:  # storage briefly away (restarting): wait and take the queue again

@@ -139,15 +139,18 @@ class Trainer:
                  f"({model.status.value}), autonomous run {run_id}")
 
     def _train_and_submit(self, job: Any, folder: Path) -> tuple[Any, str | None]:
-        from chalicelib.auth.principals import User
-        from chalicelib.domain.booth_runs import NewRun, RunMode
-        from chalicelib.domain.model_scrutiny import ScrutineerRequest
         from chalicelib.settings import get_settings
         from chalicelib.storage import clients
         from drem_sim.learn.pipeline import train_to_archive
         from drem_sim.learn.train import TrainConfig
         from drem_sim.runs import download_run
 
+        models = self.services.model_service()
+        submitted = models.store.get(job.owner_sub, job.model_id) if job.model_id else None
+        if submitted is not None and submitted.status.value == "AVAILABLE":
+            # Taken again after a restart that came after the submit: that version is this job's (never a second).
+            self.say(f"trainer: job {job.job_id} had already submitted {submitted.name}; finishing it")
+            return self._race_version(job, submitted)
         bucket = get_settings().bucket("runs")
         job = self.training.report(job, progress=0.0, epoch=0, loss=None, stage="downloading the runs")
         run_dirs = []
@@ -156,17 +159,31 @@ class Trainer:
             if record is None:
                 raise RuntimeError(f"run {run_id} no longer exists")
             run_dirs.append(download_run(f"s3://{bucket}/{record.prefix}", folder / "runs", clients.s3()))
-        name = self.training.next_version_name(job.owner_sub)
+        name = job.model_name or self.training.next_version_name(job.owner_sub)
+        if not job.model_id:  # the version's key, on the job before anything is submitted under it
+            from chalicelib.domain.racer_models import new_model_id
+
+            job = self.training.plan_version(job, new_model_id(), name)
         progress = JobProgress(self.training, job)
         config = TrainConfig(epochs=job.epochs, seed=0, batch_size=32, num_threads=1)
         trained = train_to_archive(run_dirs, folder / "model", name, config, progress=cast(TextIO, progress),
                                    extra_lineage={"booth_job": job.job_id})
         job = self.training.report(progress.job, progress=0.9, epoch=progress.job.epoch, loss=progress.job.loss,
                                    stage="checking the model like an upload")
-        model = self.services.model_service().submit_archive(job.owner_sub, job.owner_username, name,
-                                                            trained.archive.read_bytes())
+        model = models.submit_archive(job.owner_sub, job.owner_username, name, trained.archive.read_bytes(),
+                                      model_id=job.model_id)
         if model.status.value != "AVAILABLE":
             raise RuntimeError(f"the trained model was not accepted: {model.reason}")
+        return self._race_version(job, model)
+
+    def _race_version(self, job: Any, model: Any) -> tuple[Any, str | None]:
+        """Scrutineer the job's version and drive its autonomous run (the one recorded on the job, if a restart
+        came after it was made), then finish the job."""
+        from chalicelib.auth.principals import User
+        from chalicelib.domain.booth_runs import NewRun, RunMode, RunStatus
+        from chalicelib.domain.model_scrutiny import ScrutineerRequest
+
+        name = model.name
         racer = User(sub=job.owner_sub, username=job.owner_username, groups=frozenset({"racer"}))
         job = self.training.report(job, progress=0.93, epoch=job.epoch, loss=job.loss,
                                    stage=f"scrutineering {name}")
@@ -174,11 +191,17 @@ class Trainer:
             self.services.scrutineer_service().scrutineer(racer, model.model_id, ScrutineerRequest(laps=1))
         except Exception as error:  # noqa: BLE001 - the version stays usable; scrutineering can be asked for again
             self.say(f"trainer: scrutineering {name} failed: {_reason(error)}")
-        run = self.runs.create(racer, NewRun(track_id=job.track_id, mode=RunMode.AUTONOMOUS, model_id=model.model_id),
-                               job_id=job.job_id)
+        run = self.runs.store.get_run(job.autonomous_run_id) if job.autonomous_run_id else None
+        if run is None:
+            run = self.runs.create(racer, NewRun(track_id=job.track_id, mode=RunMode.AUTONOMOUS,
+                                                 model_id=model.model_id), job_id=job.job_id)
+            job = self.training.plan_autonomous_run(job, run.run_id)
+        elif run.status is RunStatus.RUNNING:  # the worker that drove it died: drive it again from the start
+            run = self.runs.mark(run, RunStatus.QUEUED)
         job = self.training.report(job, progress=0.96, epoch=job.epoch, loss=job.loss,
                                    stage=f"{name} drives {job.track_id} on its own")
-        self.drive(run)
+        if run.status is RunStatus.QUEUED:
+            self.drive(run)
         self.training.finish(job, model, autonomous_run_id=run.run_id)
         return model, run.run_id
 

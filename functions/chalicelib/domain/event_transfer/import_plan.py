@@ -33,6 +33,7 @@ class ImportPlan:
     skip_keys: set[tuple[str, str, str]] = field(default_factory=set)  # (table, pk, sk) not to write
     skip_archives: set[str] = field(default_factory=set)  # model ids
     resuming: bool = False  # an earlier run of this import was cut off: its races are on the target already
+    event_written: bool = False  # it was cut off after the event item (its last write): only the ending is left
 
 
 def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_event_id: str | None = None,
@@ -51,6 +52,8 @@ def plan_import(bundle: EventBundle, target: StackReader | StackWriter, *, new_e
         raise InvalidInput("Use 1-64 letters, digits, '-' or '_' for the event id.", field="event_id")
     pk = f"EVENT#{event_id}"
     if target.get_item("events", pk, "META") is not None:
+        if journal is not None and journal.started():
+            return _ending_plan(bundle, target, event_id, journal, grant_roles)  # type: ignore[arg-type]
         raise Conflict(f"The target stack already has event {event_id}; nothing was written. Import under another "
                        "id with --event-id NEW, or delete that event first.", field="event_id")
     leftovers = target.partition("races", pk)
@@ -118,3 +121,25 @@ def _check_leftovers(plan: ImportPlan, leftovers: list[Item]) -> None:
         raise Conflict(f"The target stack already has races under event {plan.event_id} that this import did not "
                        f"write ({len(foreign)}, e.g. {foreign[0]}); nothing was written. Import under another id "
                        "with --event-id NEW, or delete that event first.", field="event_id")
+
+
+def _ending_plan(bundle: EventBundle, target: StackWriter, event_id: str, journal: ImportJournal,
+                 grant_roles: bool) -> ImportPlan:
+    """An import cut off after its event item was written (its last write): every item is on the target, so only its
+    ending is left: the accounts it created finished (groups, disable) and their passwords shown, the audit entry,
+    the resume file removed. Nothing else is written."""
+    interrupted = journal.intended()
+    actions: list[AccountAction] = []
+    for account in bundle.accounts:
+        existing = target.find_account(account.username)
+        if existing is None:
+            raise Conflict(f"The target stack has event {event_id}, but not the account {account.username} its "
+                           "import would have created; nothing was written. Import under another id with "
+                           "--event-id NEW, or delete that event first.", field="event_id")
+        if account.username in interrupted:
+            actions.append(AccountAction(account, "resume", existing.sub,
+                                         temporary_password=interrupted[account.username],
+                                         roles_granted=sorted(account.groups) if grant_roles else [RACER_ROLE]))
+        else:
+            actions.append(AccountAction(account, "match", existing.sub))
+    return ImportPlan(bundle=bundle, event_id=event_id, accounts=actions, resuming=True, event_written=True)

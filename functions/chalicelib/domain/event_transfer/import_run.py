@@ -50,13 +50,18 @@ def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | N
     try:
         sub_map: dict[str, str] = {}
         for action in plan.accounts:
+            account = action.account.model_copy(update={"groups": action.roles_granted})
             if action.action == "create":
                 if journal is not None:
                     journal.intend(action.account.username, action.temporary_password or "")
-                account = action.account.model_copy(update={"groups": action.roles_granted})
                 action.target_sub = target.create_account(account, action.temporary_password or "")
                 written.append(f"account {action.account.username}")
+            elif action.action == "resume":  # the interrupted run may have stopped between its account and groups
+                target.finish_account(account)
             sub_map[action.account.sub] = action.target_sub or action.account.sub
+        if plan.event_written:
+            return _result(plan, sub_map, {}, 0, sum(len(items) for items in plan.bundle.items.values()),
+                           logo_written=False)
         bundle = remap(plan.bundle, sub_map, plan.event_id)
         step = "uploading model archives"
         archives_written = 0
@@ -97,6 +102,11 @@ def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | N
         raise PartialImport(_partial_message(step, exc.message, written), written) from exc
     except Exception as exc:  # an unexpected failure still must say what is already on the target
         raise PartialImport(_partial_message(step, repr(exc), written), written) from exc
+    return _result(plan, sub_map, counts, archives_written, resumed, logo_written=bundle.logo is not None)
+
+
+def _result(plan: ImportPlan, sub_map: dict[str, str], counts: dict[str, int], archives_written: int,
+            resumed: int, *, logo_written: bool) -> ImportResult:
     actions = {"create": "created", "resume": "created (by the interrupted run)", "match": "matched existing"}
     accounts = [{"username": a.account.username, "old_sub": a.account.sub, "new_sub": a.target_sub or "",
                  "action": actions[a.action],
@@ -105,7 +115,7 @@ def run_import(plan: ImportPlan, target: StackWriter, journal: ImportJournal | N
                         accounts=accounts, written=counts, archives_written=archives_written, kept=plan.kept,
                         temporary_passwords={a.account.username: a.temporary_password or ""
                                              for a in plan.accounts if a.action in ("create", "resume")},
-                        already_written=resumed, logo_written=bundle.logo is not None)
+                        already_written=resumed, logo_written=logo_written)
 
 
 def _partial_message(step: str, reason: str, written: list[str]) -> str:

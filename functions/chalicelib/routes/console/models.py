@@ -52,6 +52,19 @@ def model_rows(principal: User) -> Response:
                            track_types=TRACK_TYPES, show_scrutiny_detail=True)
 
 
+@route(bp, "/console/models/{model_id}/check", methods=["POST"], allow=MODEL_STAFF)
+def check_model_again(principal: User, model_id: str) -> Response:
+    """Staff start a check a crash cut short at once (the scrutineering worker would within a few minutes)."""
+    errors: dict[str, str] = {}
+    try:
+        services.model_service().complete(principal, model_id)
+    except SHOWN_ON_FORM as exc:
+        errors = field_errors(exc, "model_id")
+    query, filter_errors, models = _filtered(_listed(principal))
+    return render.fragment("console/model_rows", status=200, errors=errors or filter_errors, models=models,
+                           track_types=TRACK_TYPES)
+
+
 @route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
 def assign_models(principal: User) -> Response:
     request = bp.current_request

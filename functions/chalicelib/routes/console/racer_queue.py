@@ -27,6 +27,10 @@ RACE_STARTED = {"HX-Trigger": "tk-race-started"}
 
 @route(bp, BASE, allow=QUEUE_STAFF)
 def queue_list(principal: User, event_id: str, track_id: str) -> Response:
+    try:  # a head whose race a crashed Start created leaves the queue here, so the list is true when it polls
+        services.on_deck().finish_interrupted_starts(principal, event_id, track_id)
+    except SHOWN_ON_FORM:
+        pass  # the list below shows the queue as stored; the next poll tries again
     return _list(event_id, track_id)
 
 

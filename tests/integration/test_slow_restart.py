@@ -1,0 +1,129 @@
+"""A power cut, then `drem up` on a machine so busy that the app needs far longer than it used to be allowed (a fixed
+30 s): drem up waits for it while it works, says what it is waiting for, never stops storage meanwhile, and the
+event created before the cut is there once it is ready.
+
+The load is the app's share of the CPU cut to a tenth: the test stops and continues the app process (SIGSTOP and
+SIGCONT) for as long as it starts, which slows only that process, whatever else the shared machine is doing.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from drem_local.api_client import ApiClient
+from drem_local.stack import free_port, read_stack_file
+from tests.stack_fixtures import read_until
+from tests.waiting import wait_until
+
+pytestmark = [pytest.mark.integration, pytest.mark.durability]
+
+PASSWORD = "Slow-Admin-Pass-1!"
+
+
+def _drem_up(cwd: Path, state_dir: Path, app_port: int, storage_port: int) -> subprocess.Popen:
+    drem = str(Path(sys.executable).with_name("drem"))
+    env = {**os.environ, "DREM_ADMIN_PASSWORD": PASSWORD}
+    return subprocess.Popen([drem, "up", "--state-dir", str(state_dir), "--port", str(app_port), "--storage-port",
+                             str(storage_port), "--live-port", str(free_port()), "--no-trainer", "--live-workers", "1"],
+                            cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+
+
+def _children_of(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat[stat.rindex(")") + 2:].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _power_cut(up: subprocess.Popen) -> None:
+    """kill -9 of drem up and every child at once, as a power cut leaves them."""
+    for pid in [up.pid, *_children_of(up.pid)]:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    up.wait(30)
+
+
+def _throttle(up_pid: int, stop: threading.Event) -> None:
+    """Let the starting app server run one tenth of the time until `stop` (a loaded laptop, for that process)."""
+    while not stop.is_set():
+        apps = [pid for pid in _children_of(up_pid) if "drem_local.appserver" in _cmdline(pid)]
+        for pid in apps:
+            try:
+                os.kill(pid, signal.SIGSTOP)
+            except ProcessLookupError:
+                pass
+        stop.wait(0.45)
+        for pid in apps:
+            try:
+                os.kill(pid, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+        stop.wait(0.05)
+
+
+def test_after_a_power_cut_drem_up_waits_for_a_slow_app_and_keeps_storage_running(tmp_path):
+    state_dir = tmp_path / "state"
+    app_port, storage_port = free_port(), free_port()
+    url = f"http://127.0.0.1:{app_port}"
+    up = _drem_up(tmp_path, state_dir, app_port, storage_port)
+    try:
+        read_until(up, "Press Ctrl-C", timeout=180)
+        admin = ApiClient(url)
+        admin.login("admin", PASSWORD)
+        event_id = admin.post("/api/events", {"name": "Power cut cup", "event_type": "OTHER", "date": "2026-07-01",
+                                              "country_code": "SE", "tracks": [{"track_id": "1"}]})["event_id"]
+    finally:
+        _power_cut(up)
+
+    stop = threading.Event()
+    again = _drem_up(tmp_path, state_dir, app_port, storage_port)
+    throttler = threading.Thread(target=_throttle, args=(again.pid, stop), daemon=True)
+    throttler.start()
+    started = time.monotonic()
+    try:
+        storage_pids: set[int] = set()
+
+        def storage_seen() -> bool:
+            storage_pids.update(pid for pid in _children_of(again.pid) if "drem_local.durable" in _cmdline(pid))
+            return bool(storage_pids)
+
+        wait_until(storage_seen, 120, "drem up to start the storage server")
+        said = read_until(again, "Press Ctrl-C", timeout=900)
+        took = time.monotonic() - started
+        stop.set()
+        throttler.join(10)
+        # It said what it was waiting for while the app crawled, and it kept the storage server it started first.
+        assert "still waiting for the app server" in said and "it is working" in said, said
+        assert "could not start" not in said
+        assert read_stack_file(state_dir)["pids"]["storage"] in storage_pids and len(storage_pids) == 1, said
+        admin = ApiClient(url)
+        admin.login("admin", PASSWORD)  # the first authenticated answer after the cut
+        assert event_id in {event["event_id"] for event in admin.get("/api/events")["events"]}
+        print(f"power-cut restart with the app at a tenth of the CPU: first answer after {took:.0f}s")
+    finally:
+        stop.set()
+        again.send_signal(signal.SIGTERM)
+        rest, _ = again.communicate(timeout=120)
+    assert again.returncode == 0 and "stopped cleanly" in rest, rest
