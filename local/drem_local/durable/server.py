@@ -15,7 +15,7 @@ from typing import Any
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
 from drem_local.durable.disk_guard import disk_refusal
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
