@@ -53,6 +53,7 @@ class CarAgent:
         self.revoked: str | None = None
         self.restart_requested = False
         self.last_heartbeat_ok: float | None = None
+        self._assignment: dict[str, Any] | None = None  # the last one the server gave
 
     # --- lifecycle ---
     def start(self) -> None:
@@ -215,9 +216,12 @@ class CarAgent:
         assert self.store is not None
         try:
             assignment = self.client.assignment()
+            self._assignment = assignment
         except Unreachable as exc:
             log.warning("assignment: %s", exc)
-            return
+            if self._assignment is None:
+                return
+            assignment = self._assignment  # the server is away, the car may not be: keep checking it
         assigned = assignment["models"]
         self.store.remove_except({m["model_id"] for m in assigned})
         installed: list[tuple[dict[str, Any], InstalledModel]] = []
@@ -231,9 +235,14 @@ class CarAgent:
         for _entry, model in installed:  # the first assigned model that loads is the one that drives
             if (model.model_id, model.archive_md5) in self._failed:
                 continue
+            reloading = False
             if self.loaded is not None and self.loaded.path == model.path:
-                self._report(model.model_id, "loaded", md5=model.archive_md5)
-                return
+                lost = self.driver.model_lost(model)  # the car's own state, not our memory of it
+                if lost is None:
+                    self._report(model.model_id, "loaded", md5=model.archive_md5)
+                    return
+                self.loaded, reloading = None, True
+                self._report(model.model_id, "verified", md5=model.archive_md5, reason=lost)
             try:
                 self.driver.load_model(model)
             except (ModelError, OSError) as exc:
@@ -241,6 +250,8 @@ class CarAgent:
                 self._report(model.model_id, "failed", reason=f"cannot load: {exc}")
                 continue
             self.loaded = model
+            if reloading:
+                self.driver.reloaded(model)
             self._report(model.model_id, "loaded", md5=model.archive_md5)
             return
 

@@ -405,3 +405,93 @@ def test_a_strange_battery_answer_is_a_fault_not_a_broken_heartbeat(fake: FakeCo
     fake.state.battery_level = "unknown"  # type: ignore[assignment]
     assert driver.battery_pct() is None
     assert driver.faults() == ["console: /api/get_battery_level: battery_level 'unknown' is not a number"]
+
+
+# --- a restarted car (every battery swap) ---
+
+def test_fake_restart_loses_sessions_and_the_loaded_model_and_keeps_the_folders(fake: FakeConsole,
+                                                                                 tmp_path: Path) -> None:
+    session, headers = logged_in_session(fake)
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.restart()
+    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).status_code == 401, "the login is gone"
+    session, headers = logged_in_session(fake)
+    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == "error"
+    listed = session.get(f"{fake.url}/api/uploaded_model_list", timeout=5).json()
+    assert [entry["name"] for entry in listed] == ["racer-fast"], "the model folders stay on the car's disk"
+    assert fake.state.mode == MANUAL and fake.state.loaded_model is None and fake.state.throttle_scale == 0.0
+
+
+def test_a_restarted_car_is_told_apart_from_another_login_and_refuses_to_start_without_a_model(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    fake.restart()
+    assert driver.battery_pct() == 70.0, "nobody else holds a restarted car: drem logs in again at once"
+    assert not any("someone else" in fault for fault in driver.faults())
+    assert driver.console.restarts == 1
+    with pytest.raises(ConsoleError, match="not started: the car has no model loaded"):
+        driver.start_car()
+    assert not fake.state.driving
+    lost = driver.model_lost(model)
+    assert lost is not None and "car restarted" in lost and "loading it again" in lost
+    uploads_before = paths(fake).count("PUT /api/uploadModels")
+    driver.load_model(model)
+    driver.reloaded(model)
+    assert paths(fake).count("PUT /api/uploadModels") == uploads_before, "the car kept the folder: load it only"
+    assert fake.state.loaded_model == "racer-fast" and driver.model_lost(model) is None
+    assert driver.battery_pct() == 70.0 and any("loaded again" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())
+    driver.start_car()
+    assert fake.state.driving
+
+
+class AssignmentClient(AckRecorder):
+    """The device API as the agent sees it: one assigned console model, downloads served from bytes."""
+
+    def __init__(self, archive: bytes) -> None:
+        super().__init__()
+        import hashlib
+
+        self.archive = archive
+        self.md5 = hashlib.md5(archive).hexdigest()
+        self.reports: list[dict] = []
+
+    def assignment(self) -> dict:
+        return {"models": [{"model_id": "m1", "name": "fast", "folder": "racer-fast", "md5": self.md5,
+                            "url": "https://api.example/m1"}]}
+
+    def download(self, url: str, handle) -> None:  # type: ignore[no-untyped-def]
+        handle.write(self.archive)
+
+    def report_model_status(self, body: dict) -> dict:
+        self.reports.append(body)
+        return {}
+
+
+def test_the_agent_reloads_the_model_a_restarted_car_lost_and_says_so(fake: FakeConsole, tmp_path: Path) -> None:
+    from drem_cars.agent import CarAgent
+    from drem_cars.model_store import ModelStore
+    from drem_cars.outbox import Outbox
+
+    client = AssignmentClient(car_archive({"agent/model.pb": b"frozen graph",
+                                           "model_metadata.json": json.dumps(METADATA).encode()}))
+    driver = make_driver(fake)
+    agent = CarAgent(client, driver, Outbox(tmp_path / "outbox.sqlite3"), ModelStore(tmp_path / "models"))  # type: ignore[arg-type]
+    agent.sync_models()
+    assert [r["status"] for r in client.reports][-1] == "loaded" and fake.state.loaded_model == "racer-fast"
+    fake.restart()
+    agent.run_command({"command_id": "c1", "type": "START_CAR"})
+    ok, message = client.acks["c1"]
+    assert not ok and "no model loaded" in message and not fake.state.driving
+    agent.sync_models()  # the next check asks the car, finds the model gone, loads it again
+    statuses = [(r["status"], r.get("reason", "")) for r in client.reports]
+    assert statuses[-2][0] == "verified" and "car restarted" in statuses[-2][1]
+    assert statuses[-1] == ("loaded", "")
+    assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
+    assert agent.telemetry()["model"]["name"] == "fast"
+    assert any("loaded again" in fault for fault in agent.telemetry()["faults"])
+    agent.run_command({"command_id": "c2", "type": "START_CAR"})
+    assert client.acks["c2"] == (True, "started") and fake.state.driving

@@ -41,9 +41,11 @@ _META_TAG = re.compile(r"<meta\s[^>]*>", re.I)
 _META_NAME = re.compile(r"""\bname\s*=\s*["']csrf-token["']""", re.I)
 _META_CONTENT = re.compile(r"""\bcontent\s*=\s*["']([^"']+)["']""", re.I)
 LOGIN_COOKIE = "deepracer_token"
+SESSION_COOKIE = "session"   # Flask's signed session cookie: it carries the CSRF secret
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
 FAULT_MAX = 120              # the heartbeat refuses longer fault lines
+EVENT_SHOWN_S = 600.0        # how long the Cars page keeps saying what happened to the car (a restart, a reload)
 
 
 class ConsoleError(RuntimeError):
@@ -76,6 +78,8 @@ class DeepRacerConsole:
         self.csrf_token: str | None = None
         self.logged_in_at: float | None = None
         self.held_by_other_since: float | None = None  # when a young login of ours was replaced by someone else's
+        self.restarts = 0  # restarts of the console noticed (it forgot our session); the driver re-checks the car
+        self.restarted_at: float | None = None
         # The agent calls from two threads (commands + heartbeat, model loads). Logins are serialised, requests are
         # not (an emergency stop must not wait for an upload).
         self._login_lock = threading.Lock()
@@ -141,10 +145,24 @@ class DeepRacerConsole:
         with self._login_lock:
             if self.csrf_token is not None and self._credentials_in_use() != sent:
                 return  # our other thread logged in meanwhile: retry with its login
-            if (refused is not None and refused.status_code == 401 and self.held_by_other_since is None
-                    and self._login_was_young()):
-                self.held_by_other_since = self._clock()
+            if refused is not None and self.held_by_other_since is None and self._login_was_young():
+                if self._console_forgot_our_session(refused):
+                    self.restarts += 1  # nobody else holds the car: log in at once, whatever the call
+                    self.restarted_at = self._clock()
+                    self.login()
+                    return
+                if refused.status_code == 401:
+                    self.held_by_other_since = self._clock()
             self._login_unless_held(take_back)
+
+    def _console_forgot_our_session(self, refused: requests.Response) -> bool:
+        """A young login refused: did the console restart, or did someone else log in? The console's Flask session
+        (which carries the CSRF secret) is signed with a key drawn at each start: after a restart it cannot read our
+        session cookie and hands out a new one with its page; after another client's login our session still reads
+        and no new cookie comes. A GET of the login page asks without logging anyone out."""
+        sent = _cookie_sent(refused, SESSION_COOKIE)
+        self._send("GET", "/login")
+        return sent is not None and self._http.cookies.get(SESSION_COOKIE) != sent
 
     def _authed(self, method: str, path: str, **kwargs: Any) -> requests.Response:
         headers = {**self._headers(), **kwargs.pop("headers", {})}
@@ -184,8 +202,9 @@ class DeepRacerConsole:
     def load_model(self, folder: str) -> dict[str, Any]:
         return self._api("PUT", f"/api/models/{folder}/model")  # the car's optimizer appends ".pb"
 
-    def model_loading_status(self) -> str:
-        return str(_field(self._api("GET", "/api/isModelLoading"), "isModelLoading", "/api/isModelLoading"))
+    def model_loading_status(self, *, take_back: bool = True) -> str:
+        return str(_field(self._api("GET", "/api/isModelLoading", take_back=take_back), "isModelLoading",
+                          "/api/isModelLoading"))
 
     def drive_mode(self, mode: str) -> dict[str, Any]:
         return self._api("PUT", "/api/drive_mode", json={"drive_mode": mode})
@@ -236,6 +255,9 @@ class DeepRacerConsoleDriver:
         self.started = False
         self.pending_tail_light: str | None = None
         self._faults: list[str] = []
+        self._uploaded: dict[str, str] = {}  # folder -> archive md5 this process uploaded (the car keeps folders)
+        self._restarts_seen = 0
+        self._event: tuple[float, str] | None = None  # what happened to the car lately, for staff (monotonic, text)
 
     # --- models ---
     def load_model(self, model: InstalledModel) -> None:
@@ -243,7 +265,7 @@ class DeepRacerConsoleDriver:
             raise ModelError(f"{model.name} has no agent/model.pb: a DeepRacer console runs TensorFlow models "
                              "only (this one is ONNX; run it with the drem car agent instead)")
         try:
-            self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
+            self.upload(model)
             self._stop()
             self.console.drive_mode("auto")
             self.console.load_model(model.folder)
@@ -253,6 +275,41 @@ class DeepRacerConsoleDriver:
             raise  # not the model's fault: the agent tries again on its next cycle
         except ConsoleError as exc:
             raise ModelError(str(exc)) from None
+
+    def upload(self, model: InstalledModel) -> None:
+        """Put the model's folder on the car unless this process already did and the car still lists it (a restarted
+        car keeps its folders, so a reload is the load call alone)."""
+        if self._uploaded.get(model.folder) == model.archive_md5 and model.folder in self.console.uploaded_models():
+            return
+        self._uploaded.pop(model.folder, None)
+        self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
+        self._uploaded[model.folder] = model.archive_md5
+
+    def model_lost(self, model: InstalledModel) -> str | None:
+        """None while the car still drives `model` (or cannot be asked now); otherwise what happened, in words. Asks
+        the car itself: a restarted car (battery swap) boots in manual mode with nothing loaded."""
+        try:
+            status = self.console.model_loading_status(take_back=False)
+        except (ConsoleHeld, ConsoleUnreachable):
+            return None  # someone else has the car for now, or it is off: asked again on the next check
+        if status in ("loaded", "loading"):
+            return None
+        if self.console.restarts > self._restarts_seen:
+            self._restarts_seen = self.console.restarts
+            text = f"car restarted {_utc_clock()} and lost {model.name[:30]}: loading it again"
+        else:
+            text = f"car no longer has {model.name[:30]} loaded (isModelLoading: {status[:20]}): loading it again"
+        self._note(text)
+        self.started = False
+        return text
+
+    def reloaded(self, model: InstalledModel) -> None:
+        """The model lost by the car is loaded again: say so for a while, then the note goes."""
+        if self._event is not None and "loading it again" in self._event[1]:
+            self._note(self._event[1].replace("loading it again", f"loaded again {_utc_clock()}"))
+
+    def _note(self, text: str) -> None:
+        self._event = (self._clock(), text[:FAULT_MAX])
 
     def _wait_until_loaded(self, folder: str) -> None:
         asked = self._clock()
@@ -280,11 +337,17 @@ class DeepRacerConsoleDriver:
         folders = self.console.uploaded_models()
         if folders:
             self.console.delete_models(folders)
+        self._uploaded.clear()
         return len(folders)
 
     # --- staff commands ---
     def start_car(self) -> None:
         self.console.drive_mode("auto")  # a no-op for the model; it also leaves calibration mode behind
+        status = self.console.model_loading_status()
+        if status != "loaded":
+            hint = " (it restarted and is being loaded again)" if self.console.restarts > 0 else ""
+            raise ConsoleError(f"not started: the car has no model loaded{hint}; its console says "
+                               f"isModelLoading {status!r}")
         self.console.max_nav_throttle(self.throttle_cap_pct)
         self.console.start_stop(True)
         self.started = True
@@ -347,6 +410,8 @@ class DeepRacerConsoleDriver:
             faults.append(held)
         if self.pending_tail_light is not None:
             faults.append(f"tail light {self.pending_tail_light} waits for the car to stop")
+        if self._event is not None and self._clock() - self._event[0] < EVENT_SHOWN_S:
+            faults.append(self._event[1])
         self._faults = faults
         return pct
 
@@ -358,6 +423,10 @@ class DeepRacerConsoleDriver:
 
     def inference_ms(self) -> float | None:
         return None
+
+
+def _utc_clock() -> str:
+    return time.strftime("%H:%M:%S UTC", time.gmtime())
 
 
 def _field(body: Any, key: str, path: str) -> Any:
@@ -372,6 +441,16 @@ def csrf_meta_token(page: str) -> str | None:
         content = _META_CONTENT.search(tag)
         if _META_NAME.search(tag) and content:
             return content.group(1)
+    return None
+
+
+def _cookie_sent(reply: requests.Response, name: str) -> str | None:
+    """The value of cookie `name` in the request that got `reply`."""
+    header = reply.request.headers.get("Cookie", "") if reply.request is not None else ""
+    for part in str(header).split(";"):
+        key, _, value = part.strip().partition("=")
+        if key == name:
+            return value
     return None
 
 
