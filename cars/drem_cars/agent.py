@@ -16,7 +16,7 @@ from typing import Any
 
 from drem_cars import __version__
 from drem_cars.client import DeviceClient, Rejected, Revoked, Unreachable
-from drem_cars.drivers import CarDriver
+from drem_cars.drivers import CarDriver, CarUnreachable
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import InstalledModel, ModelInstallError, ModelStore
 from drem_cars.outbox import MODEL_STATUS, STRIP_EVENT, Outbox, OutboxItem
@@ -245,6 +245,9 @@ class CarAgent:
                 self._report(model.model_id, "verified", md5=model.archive_md5, reason=lost)
             try:
                 self.driver.load_model(model)
+            except CarUnreachable as exc:
+                log.warning("loading %s: %s (trying again on the next check)", model.name, exc)
+                return
             except (ModelError, OSError) as exc:
                 self._failed.add((model.model_id, model.archive_md5))
                 self._report(model.model_id, "failed", reason=f"cannot load: {exc}")

@@ -45,6 +45,7 @@ import io
 import json
 import logging
 import os
+import ssl
 import tarfile
 import threading
 import time
@@ -466,26 +467,32 @@ def create_app(state: CarState) -> Flask:
 
 
 class FakeConsole:
-    def __init__(self, password: str = "car-password", *, load_seconds: float = 0.3, port: int = 0) -> None:
+    def __init__(self, password: str = "car-password", *, load_seconds: float = 0.3, port: int = 0,
+                 tls: ssl.SSLContext | None = None) -> None:
+        """`tls`: serve HTTPS with this context, as the car does (through nginx, with its self-signed certificate)."""
         logging.getLogger("werkzeug").setLevel(logging.WARNING)  # no access log in test output
         self.clock = ConsoleClock()
         self.state = CarState(password=password, clock=self.clock, load_seconds=load_seconds)
-        self.server = make_server("127.0.0.1", port, create_app(self.state), threaded=True)
+        self.tls = tls
+        self.server = make_server("127.0.0.1", port, create_app(self.state), threaded=True, ssl_context=tls)
         self.port = self.server.server_port
-        self.url = f"http://127.0.0.1:{self.port}"
+        self.url = f"{'https' if tls else 'http'}://127.0.0.1:{self.port}"
         self.thread = self._serving_thread()
         self._real_clock = itsdangerous.timed.time
 
     def _serving_thread(self) -> threading.Thread:
         return threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
 
-    def restart(self) -> None:
+    def restart(self, tls: ssl.SSLContext | None = None) -> None:
         """The car's console restarts (battery swap): a new web server process, sessions and logins lost, the nodes
-        at their power-on state, the model folders kept. Same address and port, as the car's."""
+        at their power-on state, the model folders kept. Same address and port, as the car's. `tls`: a new
+        certificate (a re-imaged car, or someone else answering at its address)."""
         self.server.shutdown()
         self.server.server_close()  # connection refused from here until the new process listens
         self.state.boot()
-        self.server = make_server("127.0.0.1", self.port, create_app(self.state), threaded=True)
+        self.tls = tls or self.tls
+        self.server = make_server("127.0.0.1", self.port, create_app(self.state), threaded=True,
+                                  ssl_context=self.tls)
         self.thread = self._serving_thread()
         self.thread.start()
 

@@ -11,6 +11,10 @@ from typing import Protocol
 from drem_cars.model_store import InstalledModel
 
 
+class CarUnreachable(RuntimeError):
+    """The car does not answer now (WiFi, switched off, restarting): try again on the next cycle, blame no model."""
+
+
 class CarDriver(Protocol):
     def load_model(self, model: InstalledModel) -> None: ...
     def model_lost(self, model: InstalledModel) -> str | None: ...  # the car no longer runs it: why, in words

@@ -34,6 +34,8 @@ from typing import Any
 
 import requests
 
+from drem_cars.car_tls import PinnedCertificateAdapter, changed_certificate_message
+from drem_cars.drivers import CarUnreachable
 from drem_cars.model_files import TENSORFLOW_FILES, ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 
@@ -52,7 +54,7 @@ class ConsoleError(RuntimeError):
     """The DeepRacer console refused or could not be reached; the message says which, in plain words."""
 
 
-class ConsoleUnreachable(ConsoleError):
+class ConsoleUnreachable(ConsoleError, CarUnreachable):
     """No answer from the car (WiFi, car off): worth trying again later, unlike a refusal."""
 
 
@@ -63,13 +65,19 @@ class ConsoleHeld(ConsoleError):
 class DeepRacerConsole:
     """The console's HTTP API: one session, logged in again when the car forgets it."""
 
-    def __init__(self, base_url: str, password: str, *, verify: bool | str = False, timeout_s: float = 30.0,
+    def __init__(self, base_url: str, password: str, *, fingerprint: str | None = None, timeout_s: float = 30.0,
                  upload_timeout_s: float = 300.0, yield_login_s: float = 120.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
+        """`fingerprint`: the SHA-256 of the car's self-signed certificate (drem_cars.car_tls), required for https."""
         self.base_url = base_url.rstrip("/")
+        if self.base_url.startswith("https://") and not fingerprint:
+            raise ConsoleError(f"{self.base_url}: drem talks https to a car only with its certificate pinned")
+        self.fingerprint = fingerprint
         self._password = password
         self._http = requests.Session()
-        self._http.verify = verify
+        self._http.verify = False  # the car signs its own certificate: it is pinned instead (no CA can vouch)
+        if fingerprint:
+            self._http.mount(self.base_url, PinnedCertificateAdapter(fingerprint))
         self._http.trust_env = False
         self.timeout_s = timeout_s
         self.upload_timeout_s = upload_timeout_s
@@ -112,6 +120,11 @@ class DeepRacerConsole:
     def _send(self, method: str, path: str, *, timeout: float | None = None, **kwargs: Any) -> requests.Response:
         try:
             reply = self._http.request(method, f"{self.base_url}{path}", timeout=timeout or self.timeout_s, **kwargs)
+        except requests.exceptions.SSLError as exc:
+            if self.fingerprint and "fingerprint" in str(exc).lower():
+                raise ConsoleError(changed_certificate_message(self.base_url, str(exc))) from None
+            raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} over TLS "
+                                     f"({_short(str(exc))})") from None
         except requests.RequestException as exc:
             raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} "
                                      f"({exc.__class__.__name__})") from None
