@@ -29,7 +29,7 @@ def _archive(path: Path, members: dict[str, bytes]) -> Path:
     return path
 
 
-def test_a_console_graph_openvino_cannot_read_is_reported_as_not_scrutineerable(tmp_path: Path) -> None:
+def test_a_console_graph_openvino_cannot_read_is_reported_invalid_for_any_car(tmp_path: Path) -> None:
     archive = _archive(tmp_path / "console-model.tar.gz", {
         "model_metadata.json": json.dumps(CONSOLE_METADATA).encode(),
         "agent/model.pb": b"\x0a\x0bfrozen-graph-bytes",
@@ -37,8 +37,10 @@ def test_a_console_graph_openvino_cannot_read_is_reported_as_not_scrutineerable(
 
     report = scrutineer(archive, "reinvent_base", laps=1)
 
-    assert report.verdict == "cannot_scrutineer"
-    assert report.message.startswith("cannot scrutineer: OpenVINO cannot read agent/model.pb")
+    assert report.verdict == "invalid"
+    assert report.message.startswith("cannot scrutineer: a stock car cannot load this model: its agent/model.pb is "
+                                     "damaged or incomplete")
+    assert "OpenVINO cannot read agent/model.pb" in report.message
     assert report.completion_pct is None
 
 

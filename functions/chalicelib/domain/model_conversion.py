@@ -28,7 +28,8 @@ from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extra
 
 GiB = 1024 ** 3
 WORKER_MODULE = "drem_sim.console.convert"
-Scrutiny = Literal["ready", "cannot_scrutineer"]
+# not_raceable: a stock car cannot load the model or would drive it wrongly (the upload becomes NOT_VALID)
+Scrutiny = Literal["ready", "cannot_scrutineer", "not_raceable"]
 
 
 class ConversionLimits(BaseModel):
@@ -40,14 +41,16 @@ class ConversionLimits(BaseModel):
 class ConversionOutcome(BaseModel):
     scrutiny: Scrutiny
     reason: str | None = None
+    detail: str | None = None  # for staff: the converter's own words (OpenVINO's message) behind `reason`
     max_abs_diff: float | None = None
     seconds: float | None = None
     onnx: bytes | None = None  # the converted graph when scrutiny is ready
 
 
 class _WorkerAnswer(BaseModel):
-    outcome: Literal["converted", "cannot_scrutineer"]
+    outcome: Literal["converted", "cannot_scrutineer", "not_raceable"]
     reason: str | None = None
+    detail: str | None = None
     max_abs_diff: float | None = None
     seconds: float = 0.0
 
@@ -81,6 +84,9 @@ class ConsoleConverter:
             answer = self._run_worker(extracted.model_path, extracted.metadata_path, out)
             if isinstance(answer, ConversionOutcome):
                 return answer
+            if answer.outcome == "not_raceable":
+                return ConversionOutcome(scrutiny="not_raceable", reason=answer.reason, detail=answer.detail,
+                                         seconds=answer.seconds)
             if answer.outcome != "converted" or not out.is_file():
                 return ConversionOutcome(scrutiny="cannot_scrutineer", reason=answer.reason,
                                          max_abs_diff=answer.max_abs_diff, seconds=answer.seconds)

@@ -5,8 +5,11 @@
 3. The same frames go through OpenVINO (on the original graph) and onnxruntime (on the converted file); the
    conversion counts only if they agree to `TOLERANCE`.
 
-Outcomes are plain data (`Conversion`): `converted`, or `cannot_scrutineer` with a reason a racer can read (a
-stereo or lidar network the simulator cannot feed, an unknown operation, a mismatch). Run as a module it is the
+Outcomes are plain data (`Conversion`): `converted`; `cannot_scrutineer` with a reason a racer can read (a
+stereo or lidar network the simulator cannot feed, an unknown operation, a mismatch: the car itself can still run
+it); or `not_raceable`, a model a stock car cannot load or would drive wrongly (a `.pb` OpenVINO, the car's own
+model optimizer, cannot read; a network whose outputs disagree with the metadata's action space), with the reason in
+plain words and OpenVINO's own message as `detail` for staff. Run as a module it is the
 worker the upload runs in a subprocess with time and memory limits (`python -m drem_sim.console.convert`): a
 hostile or enormous graph can crash or exhaust only that process.
 """
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -26,7 +30,7 @@ from drem_sim.console.heads import IMAGE_SHAPE, SINGLE_CAMERAS, input_node, outp
 
 TOLERANCE = 1e-4
 CHECK_FRAME_COUNT = 6
-Outcome = Literal["converted", "cannot_scrutineer"]
+Outcome = Literal["converted", "cannot_scrutineer", "not_raceable"]
 
 
 class Conversion(BaseModel):
@@ -37,10 +41,19 @@ class Conversion(BaseModel):
     seconds: float = 0.0
     input_name: str | None = None
     output_name: str | None = None
+    detail: str | None = None  # for staff: the runtime's own words behind `reason`
 
 
 class CannotScrutineer(ValueError):
     """The graph is fine for a car but not for the simulator (or the converter); the message says why."""
+
+
+class NotRaceable(ValueError):
+    """A stock car cannot load this model, or would drive it wrongly: the message says why in plain words."""
+
+    def __init__(self, reason: str, detail: str | None = None) -> None:
+        super().__init__(reason)
+        self.detail = detail
 
 
 def check_frames(count: int = CHECK_FRAME_COUNT, seed: int = 0) -> np.ndarray:
@@ -70,7 +83,10 @@ def read_graph(pb_path: Path, metadata: dict[str, Any]) -> Any:
     try:
         model = ov.Core().read_model(str(pb_path))
     except Exception as error:  # OpenVINO raises its own types for a graph it cannot read
-        raise CannotScrutineer(f"OpenVINO cannot read agent/model.pb: {_first_line(error)}") from None
+        raise NotRaceable("a stock car cannot load this model: its agent/model.pb is damaged or incomplete "
+                          "(OpenVINO, the model optimizer the car runs, cannot read it); download the model again "
+                          "and upload the whole archive",
+                          f"OpenVINO cannot read agent/model.pb: {openvino_message(error, pb_path)}") from None
     if len(model.inputs) != 1:
         names = ", ".join(p.get_any_name() for p in model.inputs)
         raise CannotScrutineer(f"the graph has {len(model.inputs)} inputs ({names}); the simulator feeds one camera")
@@ -100,7 +116,11 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
     names = {"input_name": input_node(algorithm, camera), "output_name": output_node(algorithm)}
     try:
         model = read_graph(pb_path, metadata)
+        actions_match(model, metadata)
         translated = openvino_to_onnx(model, names["input_name"], names["output_name"])
+    except NotRaceable as error:
+        return Conversion(outcome="not_raceable", reason=str(error), detail=error.detail,
+                          seconds=time.perf_counter() - started)
     except (CannotScrutineer, UnsupportedGraph) as error:
         return Conversion(outcome="cannot_scrutineer", reason=str(error), seconds=time.perf_counter() - started)
     frames = check_frames().astype(np.float32)
@@ -112,10 +132,6 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
     if expected.shape != actual.shape:
         return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
                           reason=f"the converted graph outputs {actual.shape[1:]} but OpenVINO {expected.shape[1:]}")
-    wanted = _output_size(metadata)
-    if wanted is not None and expected.shape[-1] != wanted:
-        return Conversion(outcome="cannot_scrutineer", seconds=time.perf_counter() - started,
-                          reason=f"the graph outputs {expected.shape[-1]} values but the action space needs {wanted}")
     difference = float(np.max(np.abs(expected.astype(np.float64) - actual)))
     result = Conversion(outcome="converted", max_abs_diff=difference, frames_checked=len(frames),
                         seconds=time.perf_counter() - started, **names)
@@ -125,6 +141,38 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
             "reason": f"the converted graph disagrees with OpenVINO by {difference:.1e} (more than {TOLERANCE:.0e})"})
     onnx.save(translated, str(onnx_path))
     return result
+
+
+def actions_match(model: Any, metadata: dict[str, Any]) -> None:
+    """The network must output what the metadata's action space says the car will read: one probability per
+    discrete action (the car maps the highest to action_space[index]), or the two continuous means. Otherwise the
+    car refuses the model or drives other actions than the racer trained."""
+    wanted = _output_size(metadata)
+    shape = model.outputs[0].get_partial_shape()
+    last = shape[shape.rank.get_length() - 1] if shape.rank.is_static and shape.rank.get_length() else None
+    if wanted is None or last is None or not last.is_static or last.get_length() == wanted:
+        return
+    outputs = last.get_length()
+    if metadata.get("action_space_type", "discrete") == "continuous":
+        said = (f"a continuous action space (the car reads 2 values: steering and speed) but its network outputs "
+                f"{outputs}")
+    else:
+        said = f"{wanted} actions in model_metadata.json but its network chooses among {outputs}"
+    raise NotRaceable(f"a stock car would drive this model wrongly: it has {said}. The model_metadata.json does not "
+                      "belong to this agent/model.pb; upload the archive the console gave you, unchanged",
+                      f"policy output shape {shape}, action space of {wanted}")
+
+
+def openvino_message(error: BaseException, pb_path: Path) -> str:
+    """OpenVINO's message without its source locations ("Exception from src/...cpp:84:") and with our temporary
+    path replaced by the archive's name: the lines that say what is wrong."""
+    lines = [line.strip() for line in str(error).splitlines()]
+    meaningful = [line for line in lines if line and not _SOURCE_LOCATION.match(line)]
+    text = " ".join(meaningful) or type(error).__name__
+    return text.replace(f'"{pb_path}"', "agent/model.pb").replace(str(pb_path), "agent/model.pb")[:600]
+
+
+_SOURCE_LOCATION = re.compile(r"^(Exception from |Check '.*' failed at )?\S+\.(cpp|hpp|h|cc):\d+:?$")
 
 
 def _output_size(metadata: dict[str, Any]) -> int | None:
@@ -145,11 +193,6 @@ def onnx_session(model: bytes | Path) -> Any:
     options.log_severity_level = 3
     return onnxruntime.InferenceSession(model if isinstance(model, bytes) else str(model), options,
                                         providers=["CPUExecutionProvider"])
-
-
-def _first_line(error: BaseException) -> str:
-    text = str(error).strip().splitlines()
-    return (text[0] if text else type(error).__name__)[:300]
 
 
 def main(argv: list[str] | None = None) -> int:

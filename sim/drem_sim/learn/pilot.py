@@ -126,6 +126,8 @@ def _converted(pb: bytes, metadata: dict[str, Any]) -> bytes:
         pb_path, onnx_path = Path(folder) / "model.pb", Path(folder) / "model.onnx"
         pb_path.write_bytes(pb)
         result = convert(pb_path, metadata, onnx_path)
+        if result.outcome == "not_raceable":  # not the simulator's limit: no car could run it either
+            raise ArchiveError(f"{result.reason} ({result.detail})" if result.detail else str(result.reason))
         if result.outcome != "converted":
             raise TensorFlowModelError(f"cannot scrutineer: {result.reason}")
         return onnx_path.read_bytes()
