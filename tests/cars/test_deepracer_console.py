@@ -495,3 +495,81 @@ def test_the_agent_reloads_the_model_a_restarted_car_lost_and_says_so(fake: Fake
     assert any("loaded again" in fault for fault in agent.telemetry()["faults"])
     agent.run_command({"command_id": "c2", "type": "START_CAR"})
     assert client.acks["c2"] == (True, "started") and fake.state.driving
+
+
+class QueueClient(AckRecorder):
+    """The device API for a car whose assignment staff change: two racers' console models; a waiting assignment
+    request is answered the moment the version changes, as the server's long poll does."""
+
+    def __init__(self, archives: dict[str, bytes]) -> None:
+        import hashlib
+        import threading
+
+        super().__init__()
+        self.archives = archives
+        self.md5 = {model_id: hashlib.md5(data).hexdigest() for model_id, data in archives.items()}
+        self.order: list[str] = []
+        self.version = 0
+        self.changed = threading.Condition()
+        self.reports: list[dict] = []
+        self.plain_polls = 0
+
+    def assign(self, order: list[str]) -> None:
+        with self.changed:
+            self.order, self.version = order, self.version + 1
+            self.changed.notify_all()
+
+    def assignment(self, *, wait_for_version: int | None = None, wait_s: float = 0.0) -> dict:
+        with self.changed:
+            if wait_for_version is None:
+                self.plain_polls += 1
+            else:
+                self.changed.wait_for(lambda: self.version != wait_for_version, timeout=wait_s)
+            return {"version": self.version, "models": [
+                {"model_id": model_id, "name": model_id, "folder": f"racer-{model_id}", "md5": self.md5[model_id],
+                 "url": f"https://api.example/{model_id}"} for model_id in self.order]}
+
+    def download(self, url: str, handle) -> None:  # type: ignore[no-untyped-def]
+        handle.write(self.archives[url.rsplit("/", 1)[1]])
+
+    def report_model_status(self, body: dict) -> dict:
+        self.reports.append(body)
+        return {}
+
+    def heartbeat(self, telemetry: dict) -> dict:
+        return {}
+
+    def commands(self) -> list:
+        return []
+
+
+def test_the_next_racers_model_waits_on_the_car_so_the_swap_is_the_load_alone(fake: FakeConsole,
+                                                                              tmp_path: Path) -> None:
+    from drem_cars.agent import AgentTiming, CarAgent
+    from drem_cars.model_store import ModelStore
+    from drem_cars.outbox import Outbox
+
+    archive = {name: car_archive({"agent/model.pb": f"graph of {name}".encode(),
+                                  "model_metadata.json": json.dumps(METADATA).encode()}) for name in ("ann", "bob")}
+    client = QueueClient(archive)
+    # The car check runs every 60 s here: only the long poll can bring a new assignment within the waits below.
+    agent = CarAgent(client, make_driver(fake), Outbox(tmp_path / "outbox.sqlite3"), ModelStore(tmp_path / "models"),
+                     AgentTiming(tick_s=0.1, assignment_poll_s=60.0, assignment_wait_s=20.0))  # type: ignore[arg-type]
+    agent.start()
+    try:
+        wait_until(lambda: client.plain_polls >= 1, 20, "the agent asks for its assignment")
+        client.assign(["ann", "bob"])  # ann races, bob is next in the queue
+        wait_until(lambda: fake.state.loaded_model == "racer-ann" and "racer-bob" in fake.state.artifacts, 20,
+                   "ann's model loaded and bob's already on the car")
+        assert fake.state.artifacts["racer-bob"]["model.pb"] == b"graph of bob"
+        uploads = paths(fake).count("PUT /api/uploadModels")
+        assert uploads == 2
+        client.assign(["bob", "ann"])  # the next race
+        wait_until(lambda: fake.state.loaded_model == "racer-bob" and fake.state.auto_loading_status == "loaded", 20,
+                   "bob's model loaded")
+        wait_until(lambda: any(r == {"model_id": "bob", "status": "loaded", "md5": client.md5["bob"]}
+                               for r in client.reports), 20, "staff see bob's model loaded")
+        assert paths(fake).count("PUT /api/uploadModels") == uploads, "the swap was the load call alone"
+        assert client.plain_polls == 1, "the assignment came by the long poll, not by polling"
+    finally:
+        agent.stop()

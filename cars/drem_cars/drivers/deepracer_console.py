@@ -255,7 +255,7 @@ class DeepRacerConsole:
 class DeepRacerConsoleDriver:
     """CarDriver over the console (see the module docstring for what the car does and what drem decided)."""
 
-    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.5,
+    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.2,
                  settle_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         self.console = console
@@ -297,6 +297,14 @@ class DeepRacerConsoleDriver:
         self._uploaded.pop(model.folder, None)
         self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
         self._uploaded[model.folder] = model.archive_md5
+
+    def preload(self, model: InstalledModel) -> None:
+        """A later racer's model goes onto the car while it drives (an upload does not touch the loaded model), once
+        per process: its load checks the car still lists the folder."""
+        if not any((model.path / name).is_file() for name in TENSORFLOW_FILES):
+            return  # ONNX only: its load says why the car cannot take it
+        if self._uploaded.get(model.folder) != model.archive_md5:
+            self.upload(model)
 
     def model_lost(self, model: InstalledModel) -> str | None:
         """None while the car still drives `model` (or cannot be asked now); otherwise what happened, in words. Asks

@@ -30,6 +30,8 @@ class LocalDriver:
 
     def reloaded(self, model: InstalledModel) -> None: ...
 
+    def preload(self, model: InstalledModel) -> None: ...  # the model store already holds it, unpacked
+
     def unload_models(self) -> None:
         self.pilot.unload()
 

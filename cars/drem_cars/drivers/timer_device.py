@@ -13,6 +13,8 @@ class TimerDriver:
 
     def reloaded(self, model: InstalledModel) -> None: ...
 
+    def preload(self, model: InstalledModel) -> None: ...  # the model store already holds it, unpacked
+
     def unload_models(self) -> None: ...
 
     def delete_all_models(self) -> int:
