@@ -246,7 +246,10 @@ class CarAgent:
         return False, f"this agent does not know the command {kind!r}"
 
     # --- models ---
-    def _report(self, model_id: str, status: str, *, md5: str | None = None, reason: str | None = None) -> None:
+    def _report(self, model_id: str, status: str, *, md5: str | None = None, reason: str | None = None,
+                now: bool = True) -> None:
+        """Queue a status report; `now` delivers it at once, else the control thread's next tick (0.25 s) does, so
+        a step on the way (downloading, verified) does not wait for the server before the next step starts."""
         if self._reported.get(model_id) == (status, md5):
             return
         self._reported[model_id] = (status, md5)
@@ -256,7 +259,8 @@ class CarAgent:
         if reason is not None:
             body["reason"] = reason[:300]
         self.outbox.enqueue(MODEL_STATUS, body)
-        self.flush_outbox()
+        if now:
+            self.flush_outbox()
 
     def sync_models(self) -> None:
         assert self.store is not None
@@ -297,6 +301,10 @@ class CarAgent:
                     return
                 self.loaded, reloading = None, True
                 self._report(model.model_id, "verified", md5=model.archive_md5, reason=lost)
+            if self.loaded is not None and self.loaded.model_id != model.model_id:
+                previous, self.loaded = self.loaded, None  # still assigned, behind this one: it stops driving
+                self._report(previous.model_id, "verified", md5=previous.archive_md5, now=False,  # before "loaded"
+                             reason="ready, waiting for its turn (the model before it in the assignment drives)")
             try:
                 self.driver.load_model(model)
             except CarUnreachable as exc:
@@ -336,13 +344,13 @@ class CarAgent:
         existing = self.store.find(model_id, md5)
         if existing is not None or (model_id, md5) in self._failed:
             return existing  # installed (maybe unloadable: the load loop skips those), or a failed download
-        self._report(model_id, "downloading")
+        self._report(model_id, "downloading", now=False)
         onnx = entry.get("onnx") if isinstance(entry.get("onnx"), dict) else None  # a console model's conversion
         try:
             return self.store.install(
                 model_id, entry["name"], entry.get("folder") or entry["name"], md5,
                 download=lambda handle: self.client.download(entry["url"], handle),
-                on_verified=lambda actual: self._report(model_id, "verified", md5=actual),
+                on_verified=lambda actual: self._report(model_id, "verified", md5=actual, now=False),
                 converted=(lambda handle: self.client.download(onnx["url"], handle), onnx["md5"]) if onnx else None)
         except Unreachable as exc:
             log.warning("model %s download: %s (will retry)", model_id, exc)

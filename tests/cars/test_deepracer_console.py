@@ -570,6 +570,22 @@ def test_the_next_racers_model_waits_on_the_car_so_the_swap_is_the_load_alone(fa
         wait_until(lambda: any(r == {"model_id": "bob", "status": "loaded", "md5": client.md5["bob"]}
                                for r in client.reports), 20, "staff see bob's model loaded")
         assert paths(fake).count("PUT /api/uploadModels") == uploads, "the swap was the load call alone"
+        ann = [r for r in client.reports if r["model_id"] == "ann"]
+        assert ann[-1]["status"] == "verified" and "waiting for its turn" in ann[-1]["reason"], \
+            "staff no longer see ann's model as the loaded one"
         assert client.plain_polls == 1, "the assignment came by the long poll, not by polling"
     finally:
         agent.stop()
+
+
+def test_a_model_folder_deleted_on_the_car_is_uploaded_again_when_its_load_is_refused(fake: FakeConsole,
+                                                                                      tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.preload(model)
+    assert "racer-fast" in fake.state.artifacts and fake.state.loaded_model is None, "on the car, not loaded"
+    with fake.state.lock:
+        del fake.state.artifacts["racer-fast"]  # someone deleted it on the car's own web page
+    driver.load_model(model)
+    assert fake.state.loaded_model == "racer-fast"
+    assert paths(fake).count("PUT /api/uploadModels") == 2

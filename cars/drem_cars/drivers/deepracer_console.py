@@ -278,10 +278,22 @@ class DeepRacerConsoleDriver:
             raise ModelError(f"{model.name} has no agent/model.pb: a DeepRacer console runs TensorFlow models "
                              "only (this one is ONNX; run it with the drem car agent instead)")
         try:
-            self.upload(model)
+            uploaded_before = self._uploaded.get(model.folder) == model.archive_md5
+            if not uploaded_before:
+                self.upload(model)
             self._stop()
             self.console.drive_mode("auto")
-            self.console.load_model(model.folder)
+            try:
+                self.console.load_model(model.folder)
+            except ConsoleUnreachable:
+                raise
+            except ConsoleError:
+                if not uploaded_before:
+                    raise
+                # The folder drem put there earlier is gone (deleted on the car's own page): upload it again, once.
+                self._uploaded.pop(model.folder, None)
+                self.upload(model)
+                self.console.load_model(model.folder)
             self._wait_until_loaded(model.folder)
             self.console.max_nav_throttle(self.throttle_cap_pct)
         except ConsoleUnreachable:
@@ -290,17 +302,15 @@ class DeepRacerConsoleDriver:
             raise ModelError(str(exc)) from None
 
     def upload(self, model: InstalledModel) -> None:
-        """Put the model's folder on the car unless this process already did and the car still lists it (a restarted
-        car keeps its folders, so a reload is the load call alone)."""
-        if self._uploaded.get(model.folder) == model.archive_md5 and model.folder in self.console.uploaded_models():
-            return
+        """Put the model's folder on the car (a later load of it is then the load call alone: the car keeps its
+        folders, across restarts too; one it no longer has is uploaded again when its load is refused)."""
         self._uploaded.pop(model.folder, None)
         self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
         self._uploaded[model.folder] = model.archive_md5
 
     def preload(self, model: InstalledModel) -> None:
         """A later racer's model goes onto the car while it drives (an upload does not touch the loaded model), once
-        per process: its load checks the car still lists the folder."""
+        per process; should the folder be gone by its turn, the car refuses the load and it is uploaded again."""
         if not any((model.path / name).is_file() for name in TENSORFLOW_FILES):
             return  # ONNX only: its load says why the car cannot take it
         if self._uploaded.get(model.folder) != model.archive_md5:
