@@ -138,3 +138,25 @@ def test_the_openvino_ir_some_tools_add_beside_the_pb_is_accepted(stack: Any, aw
     assert model.status is ModelStatus.AVAILABLE and model.model_kind == "tensorflow"
     files = console_fixture.members()
     assert model.model_md5 == hashlib.md5(files["agent/model.pb"]).hexdigest()  # the car's checksum.txt
+
+
+def test_a_spare_converter_worker_is_ready_before_the_upload_and_replaced_after_each_use() -> None:
+    import io
+
+    converter = ConsoleConverter(keep_spare=True)
+    converter.warm_up()  # what asking to upload does: the worker loads OpenVINO while the archive travels
+    spare = converter._spare
+    assert spare is not None and spare.poll() is None
+    archive = console_fixture.require_fixture().read_bytes()
+    first = converter.convert(io.BytesIO(archive))
+    assert first.scrutiny == "ready" and first.onnx, first.reason
+    assert spare.wait(timeout=30) == 0, "the spare did the conversion, in a process of its own, and ended"
+    replacement = converter._spare
+    assert replacement is not None and replacement is not spare and replacement.poll() is None
+    replacement.kill()  # a spare that died meanwhile: the next conversion starts a worker of its own
+    replacement.wait(timeout=30)
+    second = converter.convert(io.BytesIO(archive))
+    assert second.scrutiny == "ready" and second.onnx == first.onnx
+    if converter._spare is not None:  # no stray process left behind by the test
+        converter._spare.kill()
+        converter._spare.wait(timeout=30)

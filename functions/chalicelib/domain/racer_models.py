@@ -280,6 +280,7 @@ def _size(count: int) -> str:
 
 class Converter(Protocol):
     def convert(self, archive: IO[bytes]) -> ConversionOutcome: ...
+    def warm_up(self) -> None: ...  # an upload is on its way: get ready (a spare worker process)
 
 
 class ScrutinyEnqueuer(Protocol):
@@ -309,6 +310,8 @@ class ModelService:
 
     def request_upload(self, principal: Principal, request: UploadRequest) -> UploadTicket:
         owner_sub, username = _user_of(principal)
+        if self.converter is not None:
+            self.converter.warm_up()  # a console model's conversion will not wait for OpenVINO to load
         pending = self.purge_stale_uploads(owner_sub)
         if len(pending) >= MAX_PENDING_UPLOADS:
             raise RateLimited(f"You have {len(pending)} uploads that were never completed; finish or delete one "

@@ -196,14 +196,34 @@ def onnx_session(model: bytes | Path) -> Any:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Worker: convert PB (with METADATA) into OUT; print one JSON line (the Conversion) on stdout."""
+    """Worker: convert PB (with METADATA) into OUT; print one JSON line (the Conversion) on stdout.
+
+    `--wait`: a spare worker. It loads OpenVINO, onnx and onnxruntime first (seconds of imports), then waits for
+    one request on stdin, a JSON list [pb, metadata, out], converts it and exits; no request (stdin closed): it
+    exits quietly. The server keeps one spare ready, so a racer's upload does not wait for the imports."""
     parser = argparse.ArgumentParser(prog="python -m drem_sim.console.convert")
-    parser.add_argument("pb", type=Path)
-    parser.add_argument("metadata", type=Path)
-    parser.add_argument("out", type=Path)
+    parser.add_argument("--wait", action="store_true", help="load the converter, then read [pb, metadata, out]")
+    parser.add_argument("pb", type=Path, nargs="?")
+    parser.add_argument("metadata", type=Path, nargs="?")
+    parser.add_argument("out", type=Path, nargs="?")
     args = parser.parse_args(argv)
-    metadata = json.loads(args.metadata.read_text())
-    result = convert(args.pb, metadata if isinstance(metadata, dict) else {}, args.out)
+    if args.wait:
+        import onnx  # noqa: F401 - loaded now, before the request: that is the point of a spare
+        import onnxruntime  # noqa: F401
+        import openvino  # noqa: F401
+
+        import drem_sim.console.graph_to_onnx  # noqa: F401
+
+        line = sys.stdin.readline()
+        if not line.strip():
+            return 0
+        pb, metadata_path, out = (Path(part) for part in json.loads(line))
+    elif args.pb and args.metadata and args.out:
+        pb, metadata_path, out = args.pb, args.metadata, args.out
+    else:
+        parser.error("give PB METADATA OUT, or --wait")
+    metadata = json.loads(metadata_path.read_text())
+    result = convert(pb, metadata if isinstance(metadata, dict) else {}, out)
     sys.stdout.write(result.model_dump_json() + "\n")
     return 0
 
