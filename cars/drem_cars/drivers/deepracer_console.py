@@ -255,7 +255,7 @@ class DeepRacerConsole:
 class DeepRacerConsoleDriver:
     """CarDriver over the console (see the module docstring for what the car does and what drem decided)."""
 
-    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.2,
+    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.1,
                  settle_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         self.console = console
