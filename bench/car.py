@@ -268,8 +268,8 @@ def main() -> int:
         print(f"stock car      fake console, {STOCK_LOAD_S:.1f} s load: cold {len(cold)}x p50 {cold_p50:.2f} s "
               f"p95 {cold_p95:.2f} s; pre-uploaded {len(preloaded)}x p50 {pre_p50:.2f} s p95 {pre_p95:.2f} s "
               f"(= {pre_p50 / STOCK_LOAD_S:.2f}x the load)")
-        print(f"console upload {len(uploads)} uploads → AVAILABLE (conversion by a spare worker started when the upload was asked for): "
-              + ", ".join(f"{u:.2f} s" for u in uploads))
+        print(f"console upload {len(uploads)} uploads → AVAILABLE (conversion by a spare worker started when the "
+              "upload was asked for): " + ", ".join(f"{u:.2f} s" for u in uploads))
         print(f"machine        load average {os.getloadavg()[0]:.1f} after the stock-car rounds")
         stock_met = (cold_p95 <= GOAL_STOCK_COLD_P95_S and pre_p95 <= GOAL_STOCK_PRELOADED_P95_S
                      and upload_p95 <= GOAL_CONSOLE_UPLOAD_P95_S)
