@@ -16,6 +16,7 @@ hostile or enormous graph can crash or exhaust only that process.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 import sys
@@ -56,6 +57,22 @@ class NotRaceable(ValueError):
         self.detail = detail
 
 
+@functools.cache
+def openvino_core() -> Any:
+    """One OpenVINO Core per process (it loads its frontends and the CPU plugin once, on first use)."""
+    import openvino as ov
+
+    return ov.Core()
+
+
+def warm_openvino() -> None:
+    """What a spare worker does before its request: the Core, its TensorFlow frontend and its CPU plugin loaded."""
+    from openvino.frontend import FrontEndManager
+
+    FrontEndManager().load_by_framework("tf")
+    openvino_core().get_property("CPU", "FULL_DEVICE_NAME")
+
+
 def check_frames(count: int = CHECK_FRAME_COUNT, seed: int = 0) -> np.ndarray:
     """Frames that exercise the whole input range: black, white, a gradient and seeded noise (uint8 pixels)."""
     height, width, _ = IMAGE_SHAPE
@@ -81,7 +98,7 @@ def read_graph(pb_path: Path, metadata: dict[str, Any]) -> Any:
 
     sim_can_feed(metadata)
     try:
-        model = ov.Core().read_model(str(pb_path))
+        model = openvino_core().read_model(str(pb_path))
     except Exception as error:  # OpenVINO raises its own types for a graph it cannot read
         raise NotRaceable("a stock car cannot load this model: its agent/model.pb is damaged or incomplete "
                           "(OpenVINO, the model optimizer the car runs, cannot read it); download the model again "
@@ -106,7 +123,6 @@ def read_graph(pb_path: Path, metadata: dict[str, Any]) -> Any:
 def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Conversion:
     """Convert and verify; write `onnx_path` only for a conversion that passed."""
     import onnx
-    import openvino as ov
 
     from drem_sim.console.graph_to_onnx import UnsupportedGraph, openvino_to_onnx
 
@@ -124,7 +140,8 @@ def convert(pb_path: Path, metadata: dict[str, Any], onnx_path: Path) -> Convers
     except (CannotScrutineer, UnsupportedGraph) as error:
         return Conversion(outcome="cannot_scrutineer", reason=str(error), seconds=time.perf_counter() - started)
     frames = check_frames().astype(np.float32)
-    compiled = ov.Core().compile_model(model, "CPU", {"INFERENCE_NUM_THREADS": 1, "INFERENCE_PRECISION_HINT": "f32"})
+    compiled = openvino_core().compile_model(model, "CPU", {"INFERENCE_NUM_THREADS": 1,
+                                                            "INFERENCE_PRECISION_HINT": "f32"})
     expected = np.stack([compiled(frame[None])[0][0] for frame in frames])
     data = translated.SerializeToString()
     session = onnx_session(data)
@@ -214,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
 
         import drem_sim.console.graph_to_onnx  # noqa: F401
 
+        warm_openvino()
         line = sys.stdin.readline()
         if not line.strip():
             return 0
