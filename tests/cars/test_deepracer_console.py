@@ -589,3 +589,26 @@ def test_a_model_folder_deleted_on_the_car_is_uploaded_again_when_its_load_is_re
     driver.load_model(model)
     assert fake.state.loaded_model == "racer-fast"
     assert paths(fake).count("PUT /api/uploadModels") == 2
+
+
+def test_a_car_restarted_in_the_middle_of_a_load_is_loaded_again_not_blamed_on_the_model(fake: FakeConsole,
+                                                                                        tmp_path: Path) -> None:
+    from drem_cars.drivers import CarUnreachable
+
+    armed = [False]
+
+    def restart_once_while_waiting(seconds: float) -> None:  # the battery is swapped during the load
+        if armed[0]:
+            armed[0] = False
+            fake.restart()
+
+    driver = DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password"), poll_s=0.05, settle_s=1.0,
+                                    load_timeout_s=10.0, sleep=restart_once_while_waiting)
+    model = console_model(tmp_path)
+    driver.console.login()
+    armed[0] = True
+    with pytest.raises(CarUnreachable, match="restarted while loading racer-fast/model"):
+        driver.load_model(model)
+    driver.load_model(model)  # the agent's next check: the folder is on the car, the load is all it takes
+    assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
+    assert paths(fake).count("PUT /api/uploadModels") == 1

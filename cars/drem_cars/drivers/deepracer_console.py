@@ -345,8 +345,11 @@ class DeepRacerConsoleDriver:
     def _wait_until_loaded(self, folder: str) -> None:
         asked = self._clock()
         seen_loading = False
+        restarts = self.console.restarts
         while True:
             status = self.console.model_loading_status()
+            if self.console.restarts != restarts:  # a battery swap mid-load: not the model's fault, load it again
+                raise ConsoleUnreachable(f"the car restarted while loading {folder}/model; loading it again")
             seen_loading = seen_loading or status == "loading"
             settled = seen_loading or self._clock() - asked >= self.settle_s
             if settled and status == "loaded":
