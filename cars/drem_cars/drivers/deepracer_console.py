@@ -16,8 +16,14 @@ What the car does, read in its source (aws-deepracer/aws-deepracer-webserver-pkg
   `start_stop: start`. The tail light changes only in calibration mode (elsewhere the call "succeeds" and nothing
   happens), and entering calibration mode stops the car.
 
-drem's decisions: a model is reported loaded only when `isModelLoading` says `loaded`; the car is left stopped in
-autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR command and
+- A restart (every battery swap) voids every login and CSRF token (the web server draws a new session key) and boots
+  the car in manual mode with nothing loaded; the model folders stay on its disk.
+
+drem's decisions: a model is reported loaded only when `isModelLoading` says `loaded`, and the agent asks the car
+again every check (`model_lost`), reloading a model a restarted car lost; a refused young login is told apart from
+another client's by whether the console hands out a new session cookie (it restarted) or not; START_CAR is refused
+unless the car says `loaded`; HTTPS only with the car's certificate pinned (drem_cars.car_tls); the car is left
+stopped in autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR command and
 stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is stopped (briefly
 in calibration mode, then back to autonomous with the model still loaded); a colour asked for while the car is
 started is applied at its next stop. Polls (battery) do not take the login back from someone else for
