@@ -24,9 +24,9 @@ again every check (`model_lost`), reloading a model a restarted car lost; a refu
 another client's by whether the console hands out a new session cookie (it restarted) or not; START_CAR is refused
 unless the car says `loaded`; HTTPS only with the car's certificate pinned (drem_cars.car_tls); the car is left
 stopped in autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR
-command and stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is stopped (briefly
-in calibration mode, then back to autonomous with the model still loaded); a colour asked for while the car is
-started is applied at its next stop. Polls (battery) do not take the login back from someone else for
+command and stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is
+stopped (briefly in calibration mode, then back to autonomous with the model still loaded); a colour asked for while
+the car is started is applied at its next stop. Polls (battery) do not take the login back from someone else for
 `yield_login_s`; staff commands and model loads always do. Faults (heartbeat) say when someone else holds the car.
 """
 from __future__ import annotations
