@@ -612,3 +612,16 @@ def test_a_car_restarted_in_the_middle_of_a_load_is_loaded_again_not_blamed_on_t
     driver.load_model(model)  # the agent's next check: the folder is on the car, the load is all it takes
     assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
     assert paths(fake).count("PUT /api/uploadModels") == 1
+
+
+def test_the_check_puts_back_a_folder_deleted_on_the_car_without_stopping_it(fake: FakeConsole,
+                                                                             tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    driver.start_car()
+    with fake.state.lock:
+        del fake.state.artifacts["racer-fast"]  # deleted on the car's own page; the loaded model drives on
+    assert driver.model_lost(model) is None, "still loaded and driving: not a reason to stop the car"
+    assert fake.state.driving
+    assert fake.state.artifacts["racer-fast"]["model.pb"] == b"frozen graph", "put back for the next restart"

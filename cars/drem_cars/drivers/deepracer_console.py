@@ -240,8 +240,8 @@ class DeepRacerConsole:
     def set_led_color(self, red: int, green: int, blue: int) -> dict[str, Any]:
         return self._api("POST", "/api/set_led_color", json={"red": red, "green": green, "blue": blue})
 
-    def uploaded_models(self) -> list[str]:
-        entries = self._api("GET", "/api/uploaded_model_list")
+    def uploaded_models(self, *, take_back: bool = True) -> list[str]:
+        entries = self._api("GET", "/api/uploaded_model_list", take_back=take_back)
         if not isinstance(entries, list):
             raise ConsoleError("/api/uploaded_model_list: the console did not answer with a list")
         return [str(_field(entry, "name", "/api/uploaded_model_list")) for entry in entries]
@@ -324,12 +324,19 @@ class DeepRacerConsoleDriver:
 
     def model_lost(self, model: InstalledModel) -> str | None:
         """None while the car still drives `model` (or cannot be asked now); otherwise what happened, in words. Asks
-        the car itself: a restarted car (battery swap) boots in manual mode with nothing loaded."""
+        the car itself: its folders (`/api/uploaded_model_list`) and `isModelLoading` (a restarted car, after a
+        battery swap, boots in manual mode with nothing loaded). A folder drem put there that is gone is forgotten,
+        so it is uploaded again; the driving model's own is uploaded again at once (the car drives on meanwhile)."""
         try:
+            folders = set(self.console.uploaded_models(take_back=False))
             status = self.console.model_loading_status(take_back=False)
         except (ConsoleHeld, ConsoleUnreachable):
             return None  # someone else has the car for now, or it is off: asked again on the next check
+        for folder in [f for f in self._uploaded if f not in folders]:
+            del self._uploaded[folder]  # deleted on the car: the next racers' are put back by the agent's preload
         if status in ("loaded", "loading"):
+            if model.folder not in folders:
+                self.upload(model)  # a restart would otherwise find nothing to load
             return None
         if self.console.restarts > self._restarts_seen:
             self._restarts_seen = self.console.restarts
