@@ -1,8 +1,11 @@
 """The device agent: heartbeats, staff commands, model pulls and the outbox, next to the drive loop.
 
-Two background threads: `control` (every `tick_s`: deliver the outbox; heartbeat every `heartbeat_s`; fetch and carry
-out commands every `command_poll_s`) and `models` (watch the assignment every `assignment_poll_s`; download, verify,
-unpack, swap, load; every step reported through the outbox, so status reports survive network loss and restarts).
+Three background threads: `control` (every `tick_s`: deliver the outbox; heartbeat every `heartbeat_s`; fetch and carry
+out commands every `command_poll_s`), `assignment` (a long poll: the server answers the moment staff change the car's
+assignment, so a new racer's model reaches the car at once) and `models` (woken by a new assignment, and every
+`assignment_poll_s` anyway: check the car still runs its model, download, verify, unpack, swap, load, then put the
+other assigned models, the next racers', on the car so a swap is the load alone; every step reported through the
+outbox, so status reports survive network loss and restarts).
 A revoked credential (401) stops the agent cleanly: the car is stopped and `revoked` says why.
 """
 from __future__ import annotations
@@ -16,7 +19,7 @@ from typing import Any
 
 from drem_cars import __version__
 from drem_cars.client import DeviceClient, Rejected, Revoked, Unreachable
-from drem_cars.drivers import CarDriver
+from drem_cars.drivers import CarDriver, CarUnreachable
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import InstalledModel, ModelInstallError, ModelStore
 from drem_cars.outbox import MODEL_STATUS, STRIP_EVENT, Outbox, OutboxItem
@@ -29,7 +32,8 @@ class AgentTiming:
     tick_s: float = 0.25
     heartbeat_s: float = 3.0
     command_poll_s: float = 1.0
-    assignment_poll_s: float = 2.0
+    assignment_poll_s: float = 2.0  # the car check (and the fallback when the server does not long-poll)
+    assignment_wait_s: float = 20.0  # how long the server may hold an assignment request open
 
 
 class CarAgent:
@@ -53,22 +57,30 @@ class CarAgent:
         self.revoked: str | None = None
         self.restart_requested = False
         self.last_heartbeat_ok: float | None = None
+        self._assignment: dict[str, Any] | None = None  # the last one the server gave
+        self._assignment_lock = threading.Lock()
+        self._watching = False  # the assignment thread fetches; the models thread uses what it fetched
+        self._assignment_changed = threading.Event()
 
     # --- lifecycle ---
     def start(self) -> None:
         self._threads = [threading.Thread(target=self._loop, args=(self.control_tick, self.timing.tick_s),
                                           name="drem-agent-control", daemon=True)]
         if self.store is not None:
-            self._threads.append(threading.Thread(target=self._loop,
-                                                  args=(self.sync_models, self.timing.assignment_poll_s),
-                                                  name="drem-agent-models", daemon=True))
+            self._watching = True
+            self._threads += [threading.Thread(target=self._watch_assignment, name="drem-agent-assignment",
+                                               daemon=True),
+                              threading.Thread(target=self._models_loop, name="drem-agent-models", daemon=True)]
         for thread in self._threads:
             thread.start()
 
     def stop(self, timeout: float = 10.0) -> None:
         self._stop.set()
+        self._assignment_changed.set()
         for thread in self._threads:
-            if thread is not threading.current_thread():
+            # The assignment thread may sit in a long poll for 20 s; it writes nothing, so it is not waited for
+            # (a daemon thread: Ctrl-C stops the agent at once).
+            if thread is not threading.current_thread() and thread.name != "drem-agent-assignment":
                 thread.join(timeout)
 
     @property
@@ -88,6 +100,41 @@ class CarAgent:
             except Exception:  # one bad cycle must not kill the agent; the next cycle tries again
                 log.exception("agent cycle failed")
             self._stop.wait(period)
+
+    def _models_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.sync_models()
+            except Revoked as exc:
+                self._revoke(str(exc))
+                return
+            except Exception:  # one bad cycle must not kill the agent; the next cycle tries again
+                log.exception("agent cycle failed")
+            self._assignment_changed.wait(self.timing.assignment_poll_s)
+            self._assignment_changed.clear()
+
+    def _watch_assignment(self) -> None:
+        """Hold a long poll open on the assignment; wake the models thread the moment it changes."""
+        version: int | None = None
+        while not self._stop.is_set():
+            asked = self._clock()
+            try:
+                assignment = (self.client.assignment() if version is None else
+                              self.client.assignment(wait_for_version=version, wait_s=self.timing.assignment_wait_s))
+            except Revoked as exc:
+                self._revoke(str(exc))
+                return
+            except Exception as exc:  # unreachable, refused: asked again shortly, the models thread keeps checking
+                log.warning("assignment: %s", exc)
+                self._stop.wait(self.timing.assignment_poll_s)
+                continue
+            with self._assignment_lock:
+                self._assignment = assignment
+            fresh = assignment.get("version")
+            self._assignment_changed.set()  # new version, or fresh download links for the same one
+            if fresh == version and self._clock() - asked < self.timing.assignment_wait_s / 2:
+                self._stop.wait(self.timing.assignment_poll_s)  # a server that does not hold the request: poll
+            version = fresh if isinstance(fresh, int) else None
 
     def _revoke(self, reason: str) -> None:
         self.revoked = reason
@@ -199,7 +246,10 @@ class CarAgent:
         return False, f"this agent does not know the command {kind!r}"
 
     # --- models ---
-    def _report(self, model_id: str, status: str, *, md5: str | None = None, reason: str | None = None) -> None:
+    def _report(self, model_id: str, status: str, *, md5: str | None = None, reason: str | None = None,
+                now: bool = True) -> None:
+        """Queue a status report; `now` delivers it at once, else the control thread's next tick (0.25 s) does, so
+        a step on the way (downloading, verified) does not wait for the server before the next step starts."""
         if self._reported.get(model_id) == (status, md5):
             return
         self._reported[model_id] = (status, md5)
@@ -209,15 +259,26 @@ class CarAgent:
         if reason is not None:
             body["reason"] = reason[:300]
         self.outbox.enqueue(MODEL_STATUS, body)
-        self.flush_outbox()
+        if now:
+            self.flush_outbox()
 
     def sync_models(self) -> None:
         assert self.store is not None
-        try:
-            assignment = self.client.assignment()
-        except Unreachable as exc:
-            log.warning("assignment: %s", exc)
-            return
+        if self._watching:
+            with self._assignment_lock:
+                fetched = self._assignment  # the assignment thread's latest (kept while the server is away)
+            if fetched is None:
+                return
+            assignment = fetched
+        else:
+            try:
+                assignment = self.client.assignment()
+                self._assignment = assignment
+            except Unreachable as exc:
+                log.warning("assignment: %s", exc)
+                if self._assignment is None:
+                    return
+                assignment = self._assignment  # the server is away, the car may not be: keep checking it
         assigned = assignment["models"]
         self.store.remove_except({m["model_id"] for m in assigned})
         installed: list[tuple[dict[str, Any], InstalledModel]] = []
@@ -228,21 +289,51 @@ class CarAgent:
         if self.loaded is not None and self.loaded.model_id not in {m["model_id"] for m in assigned}:
             self.driver.unload_models()
             self.loaded = None
-        for _entry, model in installed:  # the first assigned model that loads is the one that drives
+        for position, (_entry, model) in enumerate(installed):  # the first assigned model that loads drives
             if (model.model_id, model.archive_md5) in self._failed:
                 continue
+            reloading = False
             if self.loaded is not None and self.loaded.path == model.path:
-                self._report(model.model_id, "loaded", md5=model.archive_md5)
-                return
+                lost = self.driver.model_lost(model)  # the car's own state, not our memory of it
+                if lost is None:
+                    self._report(model.model_id, "loaded", md5=model.archive_md5)
+                    self._preload([m for _e, m in installed[position + 1:]])
+                    return
+                self.loaded, reloading = None, True
+                self._report(model.model_id, "verified", md5=model.archive_md5, reason=lost)
+            if self.loaded is not None and self.loaded.model_id != model.model_id:
+                previous, self.loaded = self.loaded, None  # still assigned, behind this one: it stops driving
+                self._report(previous.model_id, "verified", md5=previous.archive_md5, now=False,  # before "loaded"
+                             reason="ready, waiting for its turn (the model before it in the assignment drives)")
             try:
                 self.driver.load_model(model)
+            except CarUnreachable as exc:
+                log.warning("loading %s: %s (trying again on the next check)", model.name, exc)
+                return
             except (ModelError, OSError) as exc:
                 self._failed.add((model.model_id, model.archive_md5))
                 self._report(model.model_id, "failed", reason=f"cannot load: {exc}")
                 continue
             self.loaded = model
+            if reloading:
+                self.driver.reloaded(model)
             self._report(model.model_id, "loaded", md5=model.archive_md5)
+            self._preload([m for _e, m in installed[position + 1:]])
             return
+
+    def _preload(self, following: list[InstalledModel]) -> None:
+        """The next racers' models (assigned after the driving one) go onto the car now, while it drives, so
+        swapping to one of them is the load call alone."""
+        for model in following:
+            if self._stop.is_set() or (model.model_id, model.archive_md5) in self._failed:
+                continue
+            try:
+                self.driver.preload(model)
+            except CarUnreachable as exc:
+                log.warning("putting %s on the car: %s (trying again on the next check)", model.name, exc)
+                return
+            except Exception as exc:  # noqa: BLE001 - its load will say why, in its report; the racer drives on
+                log.warning("putting %s on the car ahead of its turn: %s", model.name, exc)
 
     def _ensure_installed(self, entry: dict[str, Any]) -> InstalledModel | None:
         assert self.store is not None  # only the sync with a model store installs
@@ -253,13 +344,13 @@ class CarAgent:
         existing = self.store.find(model_id, md5)
         if existing is not None or (model_id, md5) in self._failed:
             return existing  # installed (maybe unloadable: the load loop skips those), or a failed download
-        self._report(model_id, "downloading")
+        self._report(model_id, "downloading", now=False)
         onnx = entry.get("onnx") if isinstance(entry.get("onnx"), dict) else None  # a console model's conversion
         try:
             return self.store.install(
                 model_id, entry["name"], entry.get("folder") or entry["name"], md5,
                 download=lambda handle: self.client.download(entry["url"], handle),
-                on_verified=lambda actual: self._report(model_id, "verified", md5=actual),
+                on_verified=lambda actual: self._report(model_id, "verified", md5=actual, now=False),
                 converted=(lambda handle: self.client.download(onnx["url"], handle), onnx["md5"]) if onnx else None)
         except Unreachable as exc:
             log.warning("model %s download: %s (will retry)", model_id, exc)

@@ -41,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--deepracer", metavar="URL", help="drive an AWS DeepRacer through its device console at URL")
     run.add_argument("--deepracer-password", default=os.environ.get("DEEPRACER_PASSWORD"),
                      help="device console password (or $DEEPRACER_PASSWORD)")
+    run.add_argument("--deepracer-cert", metavar="FILE",
+                     help="--deepracer: the car's certificate (PEM, or its SHA-256 fingerprint) to trust; by default "
+                          "drem trusts the one the car shows at first contact and refuses any other later")
     run.add_argument("--pwm", action="store_true",
                      help="drive a DIY car: OpenCV camera + steering servo and motor on Linux sysfs PWM")
     run.add_argument("--camera", default="0", help="--pwm: camera index (0 = /dev/video0), video file or URL")

@@ -106,11 +106,11 @@ class DeviceClient:
     def device_id(self) -> str:
         return self.credential.device_id
 
-    def request(self, method: str, path: str, body: Any = None, *, what: str = "") -> Any:
+    def request(self, method: str, path: str, body: Any = None, *, what: str = "", wait_s: float = 0.0) -> Any:
         headers = {"Authorization": f"Device {self.credential.credential}", "Accept": "application/json"}
         try:
             reply = self._http.request(method, f"{self.api}{path}", json=body, headers=headers,
-                                       timeout=self.timeout_s)
+                                       timeout=self.timeout_s + wait_s)
         except requests.RequestException as exc:
             raise Unreachable(f"{what or path}: cannot reach {self.api} ({exc.__class__.__name__})") from None
         if reply.status_code >= 400:
@@ -128,8 +128,12 @@ class DeviceClient:
         return self.request("POST", f"/api/devices/self/commands/{command_id}/ack",
                             {"result": "ok" if ok else "failed", "message": message[:1000]}, what="command ack")
 
-    def assignment(self) -> dict[str, Any]:
-        return self.request("GET", "/api/devices/self/assignment", what="assignment")
+    def assignment(self, *, wait_for_version: int | None = None, wait_s: float = 0.0) -> dict[str, Any]:
+        """The car's assignment; with `wait_for_version`, the server answers when it changes (or after wait_s)."""
+        if wait_for_version is None:
+            return self.request("GET", "/api/devices/self/assignment", what="assignment")
+        return self.request("GET", f"/api/devices/self/assignment?wait_for_version={int(wait_for_version)}"
+                                   f"&wait_s={wait_s:g}", what="assignment", wait_s=wait_s)
 
     def report_model_status(self, report: dict[str, Any]) -> dict[str, Any]:
         return self.request("POST", "/api/devices/self/assignment/status", report, what="model status")

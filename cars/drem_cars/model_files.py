@@ -26,15 +26,20 @@ class ActionSpace:
     steering: tuple[float, float] = (0.0, 0.0)     # continuous: low, high
     speed: tuple[float, float] = (0.0, 0.0)
 
+    # The car's own scales (aws-deepracer-navigation-pkg deepracer_navigation_node.py, set_action_space_scales):
+    # discrete, the largest |steering| and the largest |speed| of the actions; continuous, `high` of each, whatever
+    # `low` is. get_max_scaled_value divides by them; a scale <= 0 drives nothing (the node answers 0.0).
     @property
-    def max_abs_steering(self) -> float:
-        values = [abs(a[0]) for a in self.actions] if self.kind == "discrete" else [abs(v) for v in self.steering]
-        return max(values) or 1.0
+    def steering_scale(self) -> float:
+        if self.kind == "continuous":
+            return self.steering[1]
+        return max(abs(a[0]) for a in self.actions)
 
     @property
     def max_speed(self) -> float:
-        values = [a[1] for a in self.actions] if self.kind == "discrete" else [self.speed[1]]
-        return max(values) or 1.0
+        if self.kind == "continuous":
+            return self.speed[1]
+        return max(abs(a[1]) for a in self.actions)
 
 
 def action_space_of(metadata: dict[str, Any]) -> ActionSpace:

@@ -6,11 +6,14 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from drem_cars.agent import CarAgent
+from drem_cars.car_tls import CarTrust, CertificateProblem
 from drem_cars.client import DeviceClient
 from drem_cars.credentials import CredentialStore, NotActivated
+from drem_cars.drivers.deepracer_console import ConsoleError, ConsoleUnreachable, DeepRacerConsole
 from drem_cars.model_store import ModelStore
 from drem_cars.outbox import Outbox
 
@@ -43,7 +46,7 @@ def run_agent(args: argparse.Namespace) -> int:
     outbox, models = open_agent_files(store.directory)
     deadline = time.monotonic() + args.seconds if args.seconds else None
     if args.deepracer:
-        return _run_deepracer(args, client, outbox, models, deadline)
+        return _run_deepracer(args, client, outbox, models, deadline, store.directory)
     if args.pwm:
         return _run_pwm(args, client, outbox, models, deadline)
     if not args.sim:
@@ -123,21 +126,53 @@ def _stop_vehicle_when(agent: CarAgent, vehicle, deadline: float | None) -> None
 
 
 def _run_deepracer(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,
-                   deadline: float | None) -> int:
-    from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver
+                   deadline: float | None, config_dir: Path) -> int:
+    from drem_cars.drivers.deepracer_console import DeepRacerConsoleDriver
 
     if not args.deepracer_password:
         print("--deepracer needs --deepracer-password (or $DEEPRACER_PASSWORD)", file=sys.stderr)
         return 2
     try:
-        console = DeepRacerConsole(args.deepracer, args.deepracer_password)
-        console.login()
-    except ConsoleError as exc:
+        console = wait_for_car(args.deepracer, args.deepracer_password, CarTrust(config_dir),
+                               Path(args.deepracer_cert) if args.deepracer_cert else None, deadline)
+    except (ConsoleError, CertificateProblem) as exc:
         print(f"DeepRacer console: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        return 0
+    if console is None:  # the deadline passed while waiting
+        return 0
     agent = CarAgent(client, DeepRacerConsoleDriver(console), outbox, models)
     run_until_stopped(agent, deadline)
     return _finish(agent)
+
+
+def wait_for_car(url: str, password: str, trust: CarTrust, given_cert: Path | None, deadline: float | None,
+                 *, first_wait_s: float = 1.0, longest_wait_s: float = 10.0,
+                 sleep: Callable[[float], None] = time.sleep) -> DeepRacerConsole | None:
+    """Log in to the car's console, waiting (1, 2, 4 ... 10 s apart) while it is not up: at an event the laptop is
+    up before the cars. A refusal (password, certificate) is not waited out: the caller says why and stops."""
+    wait_s, said = first_wait_s, False
+    while True:
+        try:
+            fingerprint, trusted = trust.pin_for(url, given_cert)
+            console = DeepRacerConsole(url, password, fingerprint=fingerprint)
+            console.login()
+        except (ConsoleUnreachable, OSError) as exc:
+            if not said:
+                print(f"waiting for the DeepRacer console at {url} (not answering yet: {exc}); trying again until "
+                      "it does", file=sys.stderr, flush=True)
+                said = True
+        else:
+            if trusted:
+                print(trusted, file=sys.stderr, flush=True)
+            if said:
+                print(f"the DeepRacer console at {url} answers: driving it", file=sys.stderr, flush=True)
+            return console
+        if deadline is not None and time.monotonic() + wait_s >= deadline:
+            return None
+        sleep(wait_s)
+        wait_s = min(longest_wait_s, wait_s * 2)
 
 
 def _finish(agent: CarAgent) -> int:

@@ -9,6 +9,7 @@ Tests replace the clock with `monkeypatch.setattr(services, "now_ms", ...)`: eve
 """
 from __future__ import annotations
 
+import functools
 import importlib.util
 import time
 from datetime import UTC, datetime
@@ -221,10 +222,16 @@ def timing_service() -> TimingService:
 
 # --- models, cars and the league ------------------------------------------------------------------------------------
 
+@functools.cache
+def console_converter() -> ConsoleConverter:
+    """One per process: it keeps a spare conversion worker ready across requests (see ConsoleConverter)."""
+    return ConsoleConverter(keep_spare=True)
+
+
 def model_service(settings: Settings | None = None, **options: Any) -> ModelService:
     """The model service over the configured table and bucket (clients built lazily, on first use)."""
     settings = settings or get_settings()
-    options.setdefault("converter", ConsoleConverter())
+    options.setdefault("converter", console_converter())
     options.setdefault("scrutineer_queue", scrutiny_enqueuer(settings))
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
                         S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)

@@ -26,6 +26,14 @@ and what the community console (aws-deepracer-community/deepracer-custom-console
 common/helpers/api-helper.ts) expects: form field `password`, the answer "failure" and no cookie on a wrong
 password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls without the current token.
 
+A restart (`FakeConsole.restart()`, what a battery swap does): the web server process starts again with a new random
+SECRET_KEY ([webserver.py]), so every Flask session and with it every CSRF token is void, and the login token (held in
+the server's memory) is gone; the nodes boot as at power-on: manual mode, `modelLoadingStatus_ = "error"`, no model
+loaded, throttle_scale 0 ([ctrl_node.cpp] init(), [ctrl_state.hpp], [deepracer_navigation_node.py]). What is on disk
+stays: the model folders under /opt/aws/deepracer/artifacts, which `/api/uploaded_model_list` lists by reading that
+directory ([webserver models.py] get_uploaded_models_list, get_file_and_folder_info). While it restarts the car answers
+nothing (connection refused).
+
 Time: `FakeConsole.advance_clock(seconds)` moves the clock that Flask-WTF's token check (itsdangerous) and the
 login's cookie age read, so a test can pass the one-hour limits without waiting an hour.
 """
@@ -37,6 +45,7 @@ import io
 import json
 import logging
 import os
+import ssl
 import tarfile
 import threading
 import time
@@ -148,6 +157,18 @@ class CarState:
             self.auto_loading_status = "loaded" if found else "error"
             if found:
                 self.loaded_model = folder
+
+    def boot(self) -> None:
+        """Power-on state of the nodes (see the module docstring); the artifacts on disk are kept."""
+        with self.lock:
+            self.load_requests += 1  # a load still running in the old process never finishes
+            self.token, self.token_issued = None, 0.0
+            self.mode = MANUAL
+            self.active = {MANUAL: True, AUTONOMOUS: False, CALIBRATION: False}
+            self.auto_loading_status = "error"
+            self.loaded_model = None
+            self.throttle_scale = 0.0
+            self.led_pwm = (0, 0, 0)
 
     # --- systems_pkg model loader ---
     def install_upload(self, folder: str, archive_name: str, data: bytes) -> None:
@@ -412,6 +433,9 @@ def create_app(state: CarState) -> Flask:
     @app.get("/api/uploaded_model_list")
     @authenticated
     def uploaded_model_list():  # type: ignore[no-untyped-def]
+        """[webserver models.py] get_uploaded_models_list: one entry per folder of MODEL_DIRECTORY_PATH (whatever it
+        holds, installed or not), from get_file_and_folder_info: name, size (`du -sh`), creation_time, status and the
+        metadata's display names ("--" when unreadable)."""
         with state.lock:
             folders = {name: dict(files) for name, files in state.artifacts.items()}
         return jsonify([{"name": name, "size": f"{sum(len(v) for v in files.values()) // 1024}K",
@@ -443,15 +467,34 @@ def create_app(state: CarState) -> Flask:
 
 
 class FakeConsole:
-    def __init__(self, password: str = "car-password", *, load_seconds: float = 0.3) -> None:
+    def __init__(self, password: str = "car-password", *, load_seconds: float = 0.3, port: int = 0,
+                 tls: ssl.SSLContext | None = None) -> None:
+        """`tls`: serve HTTPS with this context, as the car does (through nginx, with its self-signed certificate)."""
         logging.getLogger("werkzeug").setLevel(logging.WARNING)  # no access log in test output
         self.clock = ConsoleClock()
         self.state = CarState(password=password, clock=self.clock, load_seconds=load_seconds)
-        self.server = make_server("127.0.0.1", 0, create_app(self.state), threaded=True)
-        self.url = f"http://127.0.0.1:{self.server.server_port}"
-        self.thread = threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05},
-                                       daemon=True)
+        self.tls = tls
+        self.server = make_server("127.0.0.1", port, create_app(self.state), threaded=True, ssl_context=tls)
+        self.port = self.server.server_port
+        self.url = f"{'https' if tls else 'http'}://127.0.0.1:{self.port}"
+        self.thread = self._serving_thread()
         self._real_clock = itsdangerous.timed.time
+
+    def _serving_thread(self) -> threading.Thread:
+        return threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+
+    def restart(self, tls: ssl.SSLContext | None = None) -> None:
+        """The car's console restarts (battery swap): a new web server process, sessions and logins lost, the nodes
+        at their power-on state, the model folders kept. Same address and port, as the car's. `tls`: a new
+        certificate (a re-imaged car, or someone else answering at its address)."""
+        self.server.shutdown()
+        self.server.server_close()  # connection refused from here until the new process listens
+        self.state.boot()
+        self.tls = tls or self.tls
+        self.server = make_server("127.0.0.1", self.port, create_app(self.state), threaded=True,
+                                  ssl_context=self.tls)
+        self.thread = self._serving_thread()
+        self.thread.start()
 
     def advance_clock(self, seconds: float) -> None:
         self.clock.offset += seconds

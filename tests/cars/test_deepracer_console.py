@@ -405,3 +405,223 @@ def test_a_strange_battery_answer_is_a_fault_not_a_broken_heartbeat(fake: FakeCo
     fake.state.battery_level = "unknown"  # type: ignore[assignment]
     assert driver.battery_pct() is None
     assert driver.faults() == ["console: /api/get_battery_level: battery_level 'unknown' is not a number"]
+
+
+# --- a restarted car (every battery swap) ---
+
+def test_fake_restart_loses_sessions_and_the_loaded_model_and_keeps_the_folders(fake: FakeConsole,
+                                                                                 tmp_path: Path) -> None:
+    session, headers = logged_in_session(fake)
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.restart()
+    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).status_code == 401, "the login is gone"
+    session, headers = logged_in_session(fake)
+    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == "error"
+    listed = session.get(f"{fake.url}/api/uploaded_model_list", timeout=5).json()
+    assert [entry["name"] for entry in listed] == ["racer-fast"], "the model folders stay on the car's disk"
+    assert fake.state.mode == MANUAL and fake.state.loaded_model is None and fake.state.throttle_scale == 0.0
+
+
+def test_a_restarted_car_is_told_apart_from_another_login_and_refuses_to_start_without_a_model(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    fake.restart()
+    assert driver.battery_pct() == 70.0, "nobody else holds a restarted car: drem logs in again at once"
+    assert not any("someone else" in fault for fault in driver.faults())
+    assert driver.console.restarts == 1
+    with pytest.raises(ConsoleError, match="not started: the car has no model loaded"):
+        driver.start_car()
+    assert not fake.state.driving
+    lost = driver.model_lost(model)
+    assert lost is not None and "car restarted" in lost and "loading it again" in lost
+    uploads_before = paths(fake).count("PUT /api/uploadModels")
+    driver.load_model(model)
+    driver.reloaded(model)
+    assert paths(fake).count("PUT /api/uploadModels") == uploads_before, "the car kept the folder: load it only"
+    assert fake.state.loaded_model == "racer-fast" and driver.model_lost(model) is None
+    assert driver.battery_pct() == 70.0 and any("loaded again" in fault for fault in driver.faults())
+    Telemetry(faults=driver.faults())
+    driver.start_car()
+    assert fake.state.driving
+
+
+class AssignmentClient(AckRecorder):
+    """The device API as the agent sees it: one assigned console model, downloads served from bytes."""
+
+    def __init__(self, archive: bytes) -> None:
+        super().__init__()
+        import hashlib
+
+        self.archive = archive
+        self.md5 = hashlib.md5(archive).hexdigest()
+        self.reports: list[dict] = []
+
+    def assignment(self) -> dict:
+        return {"models": [{"model_id": "m1", "name": "fast", "folder": "racer-fast", "md5": self.md5,
+                            "url": "https://api.example/m1"}]}
+
+    def download(self, url: str, handle) -> None:  # type: ignore[no-untyped-def]
+        handle.write(self.archive)
+
+    def report_model_status(self, body: dict) -> dict:
+        self.reports.append(body)
+        return {}
+
+
+def test_the_agent_reloads_the_model_a_restarted_car_lost_and_says_so(fake: FakeConsole, tmp_path: Path) -> None:
+    from drem_cars.agent import CarAgent
+    from drem_cars.model_store import ModelStore
+    from drem_cars.outbox import Outbox
+
+    client = AssignmentClient(car_archive({"agent/model.pb": b"frozen graph",
+                                           "model_metadata.json": json.dumps(METADATA).encode()}))
+    driver = make_driver(fake)
+    agent = CarAgent(client, driver, Outbox(tmp_path / "outbox.sqlite3"), ModelStore(tmp_path / "models"))  # type: ignore[arg-type]
+    agent.sync_models()
+    assert [r["status"] for r in client.reports][-1] == "loaded" and fake.state.loaded_model == "racer-fast"
+    fake.restart()
+    agent.run_command({"command_id": "c1", "type": "START_CAR"})
+    ok, message = client.acks["c1"]
+    assert not ok and "no model loaded" in message and not fake.state.driving
+    agent.sync_models()  # the next check asks the car, finds the model gone, loads it again
+    statuses = [(r["status"], r.get("reason", "")) for r in client.reports]
+    assert statuses[-2][0] == "verified" and "car restarted" in statuses[-2][1]
+    assert statuses[-1] == ("loaded", "")
+    assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
+    assert agent.telemetry()["model"]["name"] == "fast"
+    assert any("loaded again" in fault for fault in agent.telemetry()["faults"])
+    agent.run_command({"command_id": "c2", "type": "START_CAR"})
+    assert client.acks["c2"] == (True, "started") and fake.state.driving
+
+
+class QueueClient(AckRecorder):
+    """The device API for a car whose assignment staff change: two racers' console models; a waiting assignment
+    request is answered the moment the version changes, as the server's long poll does."""
+
+    def __init__(self, archives: dict[str, bytes]) -> None:
+        import hashlib
+        import threading
+
+        super().__init__()
+        self.archives = archives
+        self.md5 = {model_id: hashlib.md5(data).hexdigest() for model_id, data in archives.items()}
+        self.order: list[str] = []
+        self.version = 0
+        self.changed = threading.Condition()
+        self.reports: list[dict] = []
+        self.plain_polls = 0
+
+    def assign(self, order: list[str]) -> None:
+        with self.changed:
+            self.order, self.version = order, self.version + 1
+            self.changed.notify_all()
+
+    def assignment(self, *, wait_for_version: int | None = None, wait_s: float = 0.0) -> dict:
+        with self.changed:
+            if wait_for_version is None:
+                self.plain_polls += 1
+            else:
+                self.changed.wait_for(lambda: self.version != wait_for_version, timeout=wait_s)
+            return {"version": self.version, "models": [
+                {"model_id": model_id, "name": model_id, "folder": f"racer-{model_id}", "md5": self.md5[model_id],
+                 "url": f"https://api.example/{model_id}"} for model_id in self.order]}
+
+    def download(self, url: str, handle) -> None:  # type: ignore[no-untyped-def]
+        handle.write(self.archives[url.rsplit("/", 1)[1]])
+
+    def report_model_status(self, body: dict) -> dict:
+        self.reports.append(body)
+        return {}
+
+    def heartbeat(self, telemetry: dict) -> dict:
+        return {}
+
+    def commands(self) -> list:
+        return []
+
+
+def test_the_next_racers_model_waits_on_the_car_so_the_swap_is_the_load_alone(fake: FakeConsole,
+                                                                              tmp_path: Path) -> None:
+    from drem_cars.agent import AgentTiming, CarAgent
+    from drem_cars.model_store import ModelStore
+    from drem_cars.outbox import Outbox
+
+    archive = {name: car_archive({"agent/model.pb": f"graph of {name}".encode(),
+                                  "model_metadata.json": json.dumps(METADATA).encode()}) for name in ("ann", "bob")}
+    client = QueueClient(archive)
+    # The car check runs every 60 s here: only the long poll can bring a new assignment within the waits below.
+    agent = CarAgent(client, make_driver(fake), Outbox(tmp_path / "outbox.sqlite3"), ModelStore(tmp_path / "models"),
+                     AgentTiming(tick_s=0.1, assignment_poll_s=60.0, assignment_wait_s=20.0))  # type: ignore[arg-type]
+    agent.start()
+    try:
+        wait_until(lambda: client.plain_polls >= 1, 20, "the agent asks for its assignment")
+        client.assign(["ann", "bob"])  # ann races, bob is next in the queue
+        wait_until(lambda: fake.state.loaded_model == "racer-ann" and "racer-bob" in fake.state.artifacts, 20,
+                   "ann's model loaded and bob's already on the car")
+        assert fake.state.artifacts["racer-bob"]["model.pb"] == b"graph of bob"
+        uploads = paths(fake).count("PUT /api/uploadModels")
+        assert uploads == 2
+        client.assign(["bob", "ann"])  # the next race
+        wait_until(lambda: fake.state.loaded_model == "racer-bob" and fake.state.auto_loading_status == "loaded", 20,
+                   "bob's model loaded")
+        wait_until(lambda: any(r == {"model_id": "bob", "status": "loaded", "md5": client.md5["bob"]}
+                               for r in client.reports), 20, "staff see bob's model loaded")
+        assert paths(fake).count("PUT /api/uploadModels") == uploads, "the swap was the load call alone"
+        ann = [r for r in client.reports if r["model_id"] == "ann"]
+        assert ann[-1]["status"] == "verified" and "waiting for its turn" in ann[-1]["reason"], \
+            "staff no longer see ann's model as the loaded one"
+        assert client.plain_polls == 1, "the assignment came by the long poll, not by polling"
+    finally:
+        agent.stop()
+
+
+def test_a_model_folder_deleted_on_the_car_is_uploaded_again_when_its_load_is_refused(fake: FakeConsole,
+                                                                                      tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.preload(model)
+    assert "racer-fast" in fake.state.artifacts and fake.state.loaded_model is None, "on the car, not loaded"
+    with fake.state.lock:
+        del fake.state.artifacts["racer-fast"]  # someone deleted it on the car's own web page
+    driver.load_model(model)
+    assert fake.state.loaded_model == "racer-fast"
+    assert paths(fake).count("PUT /api/uploadModels") == 2
+
+
+def test_a_car_restarted_in_the_middle_of_a_load_is_loaded_again_not_blamed_on_the_model(fake: FakeConsole,
+                                                                                        tmp_path: Path) -> None:
+    from drem_cars.drivers import CarUnreachable
+
+    armed = [False]
+
+    def restart_once_while_waiting(seconds: float) -> None:  # the battery is swapped during the load
+        if armed[0]:
+            armed[0] = False
+            fake.restart()
+
+    driver = DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password"), poll_s=0.05, settle_s=1.0,
+                                    load_timeout_s=10.0, sleep=restart_once_while_waiting)
+    model = console_model(tmp_path)
+    driver.console.login()
+    armed[0] = True
+    with pytest.raises(CarUnreachable, match="restarted while loading racer-fast/model"):
+        driver.load_model(model)
+    driver.load_model(model)  # the agent's next check: the folder is on the car, the load is all it takes
+    assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
+    assert paths(fake).count("PUT /api/uploadModels") == 1
+
+
+def test_the_check_puts_back_a_folder_deleted_on_the_car_without_stopping_it(fake: FakeConsole,
+                                                                             tmp_path: Path) -> None:
+    driver = make_driver(fake)
+    model = console_model(tmp_path)
+    driver.load_model(model)
+    driver.start_car()
+    with fake.state.lock:
+        del fake.state.artifacts["racer-fast"]  # deleted on the car's own page; the loaded model drives on
+    assert driver.model_lost(model) is None, "still loaded and driving: not a reason to stop the car"
+    assert fake.state.driving
+    assert fake.state.artifacts["racer-fast"]["model.pb"] == b"frozen graph", "put back for the next restart"

@@ -69,6 +69,21 @@ def test_deepracer_speed_curve_and_steering_normalisation() -> None:
     assert mapping.run(10.0, 1.0) == (0.0, 0.0), "no model loaded: no motion"
 
 
+def test_continuous_steering_is_divided_by_high_as_the_cars_navigation_node_does() -> None:
+    """deepracer_navigation_node.py: the continuous scale is `high`, whatever `low` is; here |low| > |high|."""
+    from drem_cars.model_files import action_space_of
+
+    space = action_space_of({"action_space_type": "continuous",
+                             "action_space": {"steering_angle": {"low": -30, "high": 20}, "speed": {"low": 0.5,
+                                                                                                   "high": 2.0}}})
+    mapping = ActionToDrive(lambda: space)
+    assert mapping.run(10.0, 2.0) == (pytest.approx(0.5), pytest.approx(1.0)), "10 / high 20, not 10 / |low| 30"
+    assert mapping.run(-30.0, 1.0)[0] == -1.0, "-30 / 20 goes past full lock: held at the servo's -1"
+    discrete = action_space_of({"action_space": [{"steering_angle": -30, "speed": 1.0},
+                                                 {"steering_angle": 15, "speed": 2.0}]})
+    assert ActionToDrive(lambda: discrete).run(15.0, 1.0) == (pytest.approx(0.5), pytest.approx(0.8))
+
+
 def test_a_converted_console_model_drives_the_car_agent_like_the_console_graph(tmp_path: Path) -> None:
     """The real-structure console graph, converted: raw 0..255 frames in, argmax over its 9 actions out."""
     from drem_sim.console.convert import convert

@@ -152,7 +152,7 @@ def test_the_sample_model_drives_the_pwm_outputs_from_a_video_until_the_video_en
         seen.add(index)
         steering, speed, _ = reference.run(frames[index])
         assert (tick["steering"], tick["speed"]) == (steering, speed), "the car's pilot is the sample model"
-        servo = SERVO_DEFAULT.duty_ns(steering / space.max_abs_steering)
+        servo = SERVO_DEFAULT.duty_ns(steering / space.steering_scale)
         motor = MOTOR_DEFAULT.duty_ns(unit_throttle(speed, space.max_speed))
         assert (tick["servo_ns"], tick["motor_ns"]) == (servo, motor)
         assert (tick["servo_file"], tick["motor_file"]) == (servo, motor), "written to sysfs, in nanoseconds"

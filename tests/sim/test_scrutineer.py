@@ -37,9 +37,11 @@ def test_a_console_graph_openvino_cannot_read_is_reported_as_not_scrutineerable(
 
     report = scrutineer(archive, "reinvent_base", laps=1)
 
-    assert report.verdict == "cannot_scrutineer"
-    assert report.message.startswith("drem could not turn this console model into one its simulator can drive")
-    assert (report.detail or "").startswith("OpenVINO cannot read agent/model.pb")
+    assert report.verdict == "invalid"  # no car could load it either: not raceable
+    assert report.message.startswith("This model cannot race: a stock car cannot load this model: its "
+                                     "agent/model.pb is damaged or incomplete")
+    assert "OpenVINO" not in report.message and "Exception" not in report.message
+    assert "OpenVINO cannot read agent/model.pb" in (report.detail or "")
     assert report.completion_pct is None
 
 

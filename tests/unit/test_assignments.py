@@ -231,3 +231,58 @@ def test_a_console_model_reaches_a_drem_car_with_its_onnx_conversion(racer: Mode
     with pytest.raises(ModelInstallError, match="model.onnx md5"):
         store.install(entry["model_id"], entry["name"], "other", entry["md5"], download=fetch(entry["url"]),
                       converted=(fetch(entry["onnx"]["url"]), "0" * 32))
+
+
+class VersionsStore:
+    """An assignment store whose item changes version after `changes_after` reads (staff assigning meanwhile)."""
+
+    def __init__(self, changes_after: int | None) -> None:
+        self.reads = 0
+        self.changes_after = changes_after
+
+    def get(self, device_id: str):  # type: ignore[no-untyped-def]
+        from chalicelib.domain.assignments import Assignment
+
+        self.reads += 1
+        changed = self.changes_after is not None and self.reads > self.changes_after
+        return Assignment(device_id=device_id, version=2 if changed else 1)
+
+
+def _waiting_service(store: VersionsStore):  # type: ignore[no-untyped-def]
+    from chalicelib.domain.assignments import AssignmentService
+
+    now = [0.0]
+
+    def sleep(seconds: float) -> None:
+        now[0] += seconds
+
+    return AssignmentService(store, models=None, cars=None, monotonic=lambda: now[0], sleep=sleep), now  # type: ignore[arg-type]
+
+
+def test_a_waiting_car_gets_its_new_assignment_as_soon_as_staff_change_it() -> None:
+    from chalicelib.auth.principals import Device
+    from chalicelib.domain.assignments import WAIT_CHECK_S, AssignmentQuery
+
+    store = VersionsStore(changes_after=3)
+    service, now = _waiting_service(store)
+    answer = service.for_car(Device(device_id="car-1", device_kind="car"),
+                             AssignmentQuery(wait_for_version=1, wait_s=20))
+    assert answer["version"] == 2, "answered with the change, not at the end of the wait"
+    assert now[0] == pytest.approx(3 * WAIT_CHECK_S)
+
+    unchanged, now = _waiting_service(VersionsStore(changes_after=None))
+    answer = unchanged.for_car(Device(device_id="car-1", device_kind="car"), AssignmentQuery(wait_for_version=1,
+                                                                                            wait_s=2))
+    assert answer["version"] == 1 and 2.0 <= now[0] < 2.0 + WAIT_CHECK_S + 1e-9, "no change: the same, after wait_s"
+    answer = unchanged.for_car(Device(device_id="car-1", device_kind="car"), AssignmentQuery(wait_for_version=0,
+                                                                                            wait_s=20))
+    assert answer["version"] == 1, "a car behind the current version is answered at once"
+
+
+def test_the_car_route_takes_the_wait_and_refuses_a_wait_longer_than_the_gateway_allows(
+        car_x: tuple[str, ModelsApi]) -> None:
+    _device_id, car = car_x
+    view = car.call("GET", "/api/devices/self/assignment?wait_for_version=5&wait_s=0").json_body
+    assert view["version"] == 0 and view["models"] == []
+    refused = car.call("GET", "/api/devices/self/assignment?wait_for_version=0&wait_s=600")
+    assert refused.status_code == 400, refused.json_body

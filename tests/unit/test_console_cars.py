@@ -101,3 +101,25 @@ def test_moving_a_car_and_only_an_admin_may_deregister_it(console):
     assert "Deregister" in console.web.get("/console/cars").body.decode()
     assert console.post(f"/console/cars/{car}/deregister", {}).status_code == 303
     assert console.desk.call("GET", f"/api/devices/{car}").status_code == 404
+
+
+def test_a_model_the_car_lost_and_loads_again_says_why_on_the_cars_page(console):
+    """A restarted car's agent reports the model `verified` with what happened; staff read it on the car's row."""
+    from tests.unit.models_helpers import ModelsApi, bearer, device_headers, onnx_archive
+
+    fleet = console.desk.fleet()
+    credential = console.desk.device(fleet, "deepracer-07", kind="car")
+    racer = ModelsApi(console.desk.client, bearer(console.desk.token("rita", "racer")))
+    model = racer.upload_and_complete("fast.tar.gz", onnx_archive(0.25))
+    car = ModelsApi(console.desk.client, device_headers(credential))
+    device_id = json.loads(car.call("GET", "/api/devices/self/assignment").body)["device_id"]
+    assigned = console.desk.call("PUT", f"/api/cars/{device_id}/models", {"model_ids": [model["model_id"]]})
+    assert assigned.status_code == 200, assigned.body
+    why = "car restarted 10:58:12 UTC and lost fast: loading it again"
+    reported = car.call("POST", "/api/devices/self/assignment/status",
+                        {"model_id": model["model_id"], "status": "verified", "md5": model["archive_md5"],
+                         "reason": why})
+    assert reported.status_code == 200, reported.body
+    console.sign_in("op-web", "operator")
+    page = text_of(console.web.get("/console/cars").body.decode())
+    assert f"rita · fast (verified: {why})" in page, page

@@ -47,7 +47,7 @@ def test_a_console_model_is_available_converted_and_its_archive_untouched(stack:
     session = onnx_session(converted)
     frames = np.load(console_fixture.FRAMES).astype(np.float32)
     outputs = session.run(None, {session.get_inputs()[0].name: frames})[0]
-    assert np.max(np.abs(outputs[:4] - np.load(console_fixture.EXPECTED)[:4])) <= 1e-5
+    assert np.max(np.abs(outputs - np.load(console_fixture.EXPECTED))) <= 1e-5
     public = model.public()
     assert public["scrutiny"] == "ready" and "converted_key" not in public
     assert service.get(ALICE, model.model_id).scrutiny == "ready"  # stored, not just returned
@@ -62,6 +62,21 @@ def test_a_stereo_model_races_on_a_stock_car_but_cannot_be_scrutineered(stack: A
     assert model.scrutiny == "cannot_scrutineer"
     assert model.scrutiny_text.startswith("cannot be scrutineered: the model reads STEREO_CAMERAS")
     assert model.converted_key is None
+
+
+def test_a_console_model_a_stock_car_cannot_run_is_not_raceable_in_plain_words(stack: Any, aws_clients: Any) -> None:
+    whole = console_fixture.members()["agent/model.pb"]
+    _, truncated = _upload(aws_clients, stack, console_fixture.console_archive(pb=whole[: len(whole) // 2]), "cut")
+    assert truncated.status is ModelStatus.NOT_VALID, "not 'Ready to race'"
+    assert (truncated.reason or "").startswith("a stock car cannot load this model: its agent/model.pb is damaged")
+    assert "Unable to read the model" in (truncated.scrutiny_detail or ""), truncated.scrutiny_detail
+    assert "core.cpp" not in (truncated.scrutiny_detail or "")
+    two_actions = console_fixture.console_archive(metadata={"action_space": [
+        {"steering_angle": -30, "speed": 1.0, "index": 0}, {"steering_angle": 30, "speed": 1.0, "index": 1}]})
+    _, mismatched = _upload(aws_clients, stack, two_actions, "two-actions")
+    assert mismatched.status is ModelStatus.NOT_VALID
+    assert "2 actions in model_metadata.json but its network chooses among 9" in (mismatched.reason or "")
+    assert mismatched.s3_key is None, "nothing is kept for a car to receive"
 
 
 @pytest.mark.parametrize(("limits", "reason"), [
@@ -123,3 +138,25 @@ def test_the_openvino_ir_some_tools_add_beside_the_pb_is_accepted(stack: Any, aw
     assert model.status is ModelStatus.AVAILABLE and model.model_kind == "tensorflow"
     files = console_fixture.members()
     assert model.model_md5 == hashlib.md5(files["agent/model.pb"]).hexdigest()  # the car's checksum.txt
+
+
+def test_a_spare_converter_worker_is_ready_before_the_upload_and_replaced_after_each_use() -> None:
+    import io
+
+    converter = ConsoleConverter(keep_spare=True)
+    converter.warm_up()  # what asking to upload does: the worker loads OpenVINO while the archive travels
+    spare = converter._spare
+    assert spare is not None and spare.poll() is None
+    archive = console_fixture.require_fixture().read_bytes()
+    first = converter.convert(io.BytesIO(archive))
+    assert first.scrutiny == "ready" and first.onnx, first.reason
+    assert spare.wait(timeout=30) == 0, "the spare did the conversion, in a process of its own, and ended"
+    replacement = converter._spare
+    assert replacement is not None and replacement is not spare and replacement.poll() is None
+    replacement.kill()  # a spare that died meanwhile: the next conversion starts a worker of its own
+    replacement.wait(timeout=30)
+    second = converter.convert(io.BytesIO(archive))
+    assert second.scrutiny == "ready" and second.onnx == first.onnx
+    if converter._spare is not None:  # no stray process left behind by the test
+        converter._spare.kill()
+        converter._spare.wait(timeout=30)

@@ -16,11 +16,17 @@ What the car does, read in its source (aws-deepracer/aws-deepracer-webserver-pkg
   `start_stop: start`. The tail light changes only in calibration mode (elsewhere the call "succeeds" and nothing
   happens), and entering calibration mode stops the car.
 
-drem's decisions: a model is reported loaded only when `isModelLoading` says `loaded`; the car is left stopped in
-autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR command and
-stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is stopped (briefly
-in calibration mode, then back to autonomous with the model still loaded); a colour asked for while the car is
-started is applied at its next stop. Polls (battery) do not take the login back from someone else for
+- A restart (every battery swap) voids every login and CSRF token (the web server draws a new session key) and boots
+  the car in manual mode with nothing loaded; the model folders stay on its disk.
+
+drem's decisions: a model is reported loaded only when `isModelLoading` says `loaded`, and the agent asks the car
+again every check (`model_lost`), reloading a model a restarted car lost; a refused young login is told apart from
+another client's by whether the console hands out a new session cookie (it restarted) or not; START_CAR is refused
+unless the car says `loaded`; HTTPS only with the car's certificate pinned (drem_cars.car_tls); the car is left
+stopped in autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR
+command and stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is
+stopped (briefly in calibration mode, then back to autonomous with the model still loaded); a colour asked for while
+the car is started is applied at its next stop. Polls (battery) do not take the login back from someone else for
 `yield_login_s`; staff commands and model loads always do. Faults (heartbeat) say when someone else holds the car.
 """
 from __future__ import annotations
@@ -34,6 +40,8 @@ from typing import Any
 
 import requests
 
+from drem_cars.car_tls import PinnedCertificateAdapter, changed_certificate_message
+from drem_cars.drivers import CarUnreachable
 from drem_cars.model_files import TENSORFLOW_FILES, ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
 
@@ -41,16 +49,18 @@ _META_TAG = re.compile(r"<meta\s[^>]*>", re.I)
 _META_NAME = re.compile(r"""\bname\s*=\s*["']csrf-token["']""", re.I)
 _META_CONTENT = re.compile(r"""\bcontent\s*=\s*["']([^"']+)["']""", re.I)
 LOGIN_COOKIE = "deepracer_token"
+SESSION_COOKIE = "session"   # Flask's signed session cookie: it carries the CSRF secret
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
 FAULT_MAX = 120              # the heartbeat refuses longer fault lines
+EVENT_SHOWN_S = 600.0        # how long the Cars page keeps saying what happened to the car (a restart, a reload)
 
 
 class ConsoleError(RuntimeError):
     """The DeepRacer console refused or could not be reached; the message says which, in plain words."""
 
 
-class ConsoleUnreachable(ConsoleError):
+class ConsoleUnreachable(ConsoleError, CarUnreachable):
     """No answer from the car (WiFi, car off): worth trying again later, unlike a refusal."""
 
 
@@ -61,13 +71,19 @@ class ConsoleHeld(ConsoleError):
 class DeepRacerConsole:
     """The console's HTTP API: one session, logged in again when the car forgets it."""
 
-    def __init__(self, base_url: str, password: str, *, verify: bool | str = False, timeout_s: float = 30.0,
+    def __init__(self, base_url: str, password: str, *, fingerprint: str | None = None, timeout_s: float = 30.0,
                  upload_timeout_s: float = 300.0, yield_login_s: float = 120.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
+        """`fingerprint`: the SHA-256 of the car's self-signed certificate (drem_cars.car_tls), required for https."""
         self.base_url = base_url.rstrip("/")
+        if self.base_url.startswith("https://") and not fingerprint:
+            raise ConsoleError(f"{self.base_url}: drem talks https to a car only with its certificate pinned")
+        self.fingerprint = fingerprint
         self._password = password
         self._http = requests.Session()
-        self._http.verify = verify
+        self._http.verify = False  # the car signs its own certificate: it is pinned instead (no CA can vouch)
+        if fingerprint:
+            self._http.mount(self.base_url, PinnedCertificateAdapter(fingerprint))
         self._http.trust_env = False
         self.timeout_s = timeout_s
         self.upload_timeout_s = upload_timeout_s
@@ -76,6 +92,8 @@ class DeepRacerConsole:
         self.csrf_token: str | None = None
         self.logged_in_at: float | None = None
         self.held_by_other_since: float | None = None  # when a young login of ours was replaced by someone else's
+        self.restarts = 0  # restarts of the console noticed (it forgot our session); the driver re-checks the car
+        self.restarted_at: float | None = None
         # The agent calls from two threads (commands + heartbeat, model loads). Logins are serialised, requests are
         # not (an emergency stop must not wait for an upload).
         self._login_lock = threading.Lock()
@@ -108,6 +126,11 @@ class DeepRacerConsole:
     def _send(self, method: str, path: str, *, timeout: float | None = None, **kwargs: Any) -> requests.Response:
         try:
             reply = self._http.request(method, f"{self.base_url}{path}", timeout=timeout or self.timeout_s, **kwargs)
+        except requests.exceptions.SSLError as exc:
+            if self.fingerprint and "fingerprint" in str(exc).lower():
+                raise ConsoleError(changed_certificate_message(self.base_url, str(exc))) from None
+            raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} over TLS "
+                                     f"({_short(str(exc))})") from None
         except requests.RequestException as exc:
             raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} "
                                      f"({exc.__class__.__name__})") from None
@@ -141,10 +164,24 @@ class DeepRacerConsole:
         with self._login_lock:
             if self.csrf_token is not None and self._credentials_in_use() != sent:
                 return  # our other thread logged in meanwhile: retry with its login
-            if (refused is not None and refused.status_code == 401 and self.held_by_other_since is None
-                    and self._login_was_young()):
-                self.held_by_other_since = self._clock()
+            if refused is not None and self.held_by_other_since is None and self._login_was_young():
+                if self._console_forgot_our_session(refused):
+                    self.restarts += 1  # nobody else holds the car: log in at once, whatever the call
+                    self.restarted_at = self._clock()
+                    self.login()
+                    return
+                if refused.status_code == 401:
+                    self.held_by_other_since = self._clock()
             self._login_unless_held(take_back)
+
+    def _console_forgot_our_session(self, refused: requests.Response) -> bool:
+        """A young login refused: did the console restart, or did someone else log in? The console's Flask session
+        (which carries the CSRF secret) is signed with a key drawn at each start: after a restart it cannot read our
+        session cookie and hands out a new one with its page; after another client's login our session still reads
+        and no new cookie comes. A GET of the login page asks without logging anyone out."""
+        sent = _cookie_sent(refused, SESSION_COOKIE)
+        self._send("GET", "/login")
+        return sent is not None and self._http.cookies.get(SESSION_COOKIE) != sent
 
     def _authed(self, method: str, path: str, **kwargs: Any) -> requests.Response:
         headers = {**self._headers(), **kwargs.pop("headers", {})}
@@ -184,8 +221,9 @@ class DeepRacerConsole:
     def load_model(self, folder: str) -> dict[str, Any]:
         return self._api("PUT", f"/api/models/{folder}/model")  # the car's optimizer appends ".pb"
 
-    def model_loading_status(self) -> str:
-        return str(_field(self._api("GET", "/api/isModelLoading"), "isModelLoading", "/api/isModelLoading"))
+    def model_loading_status(self, *, take_back: bool = True) -> str:
+        return str(_field(self._api("GET", "/api/isModelLoading", take_back=take_back), "isModelLoading",
+                          "/api/isModelLoading"))
 
     def drive_mode(self, mode: str) -> dict[str, Any]:
         return self._api("PUT", "/api/drive_mode", json={"drive_mode": mode})
@@ -202,8 +240,8 @@ class DeepRacerConsole:
     def set_led_color(self, red: int, green: int, blue: int) -> dict[str, Any]:
         return self._api("POST", "/api/set_led_color", json={"red": red, "green": green, "blue": blue})
 
-    def uploaded_models(self) -> list[str]:
-        entries = self._api("GET", "/api/uploaded_model_list")
+    def uploaded_models(self, *, take_back: bool = True) -> list[str]:
+        entries = self._api("GET", "/api/uploaded_model_list", take_back=take_back)
         if not isinstance(entries, list):
             raise ConsoleError("/api/uploaded_model_list: the console did not answer with a list")
         return [str(_field(entry, "name", "/api/uploaded_model_list")) for entry in entries]
@@ -223,7 +261,7 @@ class DeepRacerConsole:
 class DeepRacerConsoleDriver:
     """CarDriver over the console (see the module docstring for what the car does and what drem decided)."""
 
-    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.5,
+    def __init__(self, console: DeepRacerConsole, *, load_timeout_s: float = 180.0, poll_s: float = 0.1,
                  settle_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         self.console = console
@@ -236,6 +274,9 @@ class DeepRacerConsoleDriver:
         self.started = False
         self.pending_tail_light: str | None = None
         self._faults: list[str] = []
+        self._uploaded: dict[str, str] = {}  # folder -> archive md5 this process uploaded (the car keeps folders)
+        self._restarts_seen = 0
+        self._event: tuple[float, str] | None = None  # what happened to the car lately, for staff (monotonic, text)
 
     # --- models ---
     def load_model(self, model: InstalledModel) -> None:
@@ -243,10 +284,22 @@ class DeepRacerConsoleDriver:
             raise ModelError(f"{model.name} has no agent/model.pb: a DeepRacer console runs TensorFlow models "
                              "only (this one is ONNX; run it with the drem car agent instead)")
         try:
-            self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
+            uploaded_before = self._uploaded.get(model.folder) == model.archive_md5
+            if not uploaded_before:
+                self.upload(model)
             self._stop()
             self.console.drive_mode("auto")
-            self.console.load_model(model.folder)
+            try:
+                self.console.load_model(model.folder)
+            except ConsoleUnreachable:
+                raise
+            except ConsoleError:
+                if not uploaded_before:
+                    raise
+                # The folder drem put there earlier is gone (deleted on the car's own page): upload it again, once.
+                self._uploaded.pop(model.folder, None)
+                self.upload(model)
+                self.console.load_model(model.folder)
             self._wait_until_loaded(model.folder)
             self.console.max_nav_throttle(self.throttle_cap_pct)
         except ConsoleUnreachable:
@@ -254,11 +307,62 @@ class DeepRacerConsoleDriver:
         except ConsoleError as exc:
             raise ModelError(str(exc)) from None
 
+    def upload(self, model: InstalledModel) -> None:
+        """Put the model's folder on the car (a later load of it is then the load call alone: the car keeps its
+        folders, across restarts too; one it no longer has is uploaded again when its load is refused)."""
+        self._uploaded.pop(model.folder, None)
+        self.console.upload_model(model.path / ARCHIVE_COPY, model.folder)
+        self._uploaded[model.folder] = model.archive_md5
+
+    def preload(self, model: InstalledModel) -> None:
+        """A later racer's model goes onto the car while it drives (an upload does not touch the loaded model), once
+        per process; should the folder be gone by its turn, the car refuses the load and it is uploaded again."""
+        if not any((model.path / name).is_file() for name in TENSORFLOW_FILES):
+            return  # ONNX only: its load says why the car cannot take it
+        if self._uploaded.get(model.folder) != model.archive_md5:
+            self.upload(model)
+
+    def model_lost(self, model: InstalledModel) -> str | None:
+        """None while the car still drives `model` (or cannot be asked now); otherwise what happened, in words. Asks
+        the car itself: its folders (`/api/uploaded_model_list`) and `isModelLoading` (a restarted car, after a
+        battery swap, boots in manual mode with nothing loaded). A folder drem put there that is gone is forgotten,
+        so it is uploaded again; the driving model's own is uploaded again at once (the car drives on meanwhile)."""
+        try:
+            folders = set(self.console.uploaded_models(take_back=False))
+            status = self.console.model_loading_status(take_back=False)
+        except (ConsoleHeld, ConsoleUnreachable):
+            return None  # someone else has the car for now, or it is off: asked again on the next check
+        for folder in [f for f in self._uploaded if f not in folders]:
+            del self._uploaded[folder]  # deleted on the car: the next racers' are put back by the agent's preload
+        if status in ("loaded", "loading"):
+            if model.folder not in folders:
+                self.upload(model)  # a restart would otherwise find nothing to load
+            return None
+        if self.console.restarts > self._restarts_seen:
+            self._restarts_seen = self.console.restarts
+            text = f"car restarted {_utc_clock()} and lost {model.name[:30]}: loading it again"
+        else:
+            text = f"car no longer has {model.name[:30]} loaded (isModelLoading: {status[:20]}): loading it again"
+        self._note(text)
+        self.started = False
+        return text
+
+    def reloaded(self, model: InstalledModel) -> None:
+        """The model lost by the car is loaded again: say so for a while, then the note goes."""
+        if self._event is not None and "loading it again" in self._event[1]:
+            self._note(self._event[1].replace("loading it again", f"loaded again {_utc_clock()}"))
+
+    def _note(self, text: str) -> None:
+        self._event = (self._clock(), text[:FAULT_MAX])
+
     def _wait_until_loaded(self, folder: str) -> None:
         asked = self._clock()
         seen_loading = False
+        restarts = self.console.restarts
         while True:
             status = self.console.model_loading_status()
+            if self.console.restarts != restarts:  # a battery swap mid-load: not the model's fault, load it again
+                raise ConsoleUnreachable(f"the car restarted while loading {folder}/model; loading it again")
             seen_loading = seen_loading or status == "loading"
             settled = seen_loading or self._clock() - asked >= self.settle_s
             if settled and status == "loaded":
@@ -280,11 +384,17 @@ class DeepRacerConsoleDriver:
         folders = self.console.uploaded_models()
         if folders:
             self.console.delete_models(folders)
+        self._uploaded.clear()
         return len(folders)
 
     # --- staff commands ---
     def start_car(self) -> None:
         self.console.drive_mode("auto")  # a no-op for the model; it also leaves calibration mode behind
+        status = self.console.model_loading_status()
+        if status != "loaded":
+            hint = " (it restarted and is being loaded again)" if self.console.restarts > 0 else ""
+            raise ConsoleError(f"not started: the car has no model loaded{hint}; its console says "
+                               f"isModelLoading {status!r}")
         self.console.max_nav_throttle(self.throttle_cap_pct)
         self.console.start_stop(True)
         self.started = True
@@ -347,6 +457,8 @@ class DeepRacerConsoleDriver:
             faults.append(held)
         if self.pending_tail_light is not None:
             faults.append(f"tail light {self.pending_tail_light} waits for the car to stop")
+        if self._event is not None and self._clock() - self._event[0] < EVENT_SHOWN_S:
+            faults.append(self._event[1])
         self._faults = faults
         return pct
 
@@ -358,6 +470,10 @@ class DeepRacerConsoleDriver:
 
     def inference_ms(self) -> float | None:
         return None
+
+
+def _utc_clock() -> str:
+    return time.strftime("%H:%M:%S UTC", time.gmtime())
 
 
 def _field(body: Any, key: str, path: str) -> Any:
@@ -372,6 +488,16 @@ def csrf_meta_token(page: str) -> str | None:
         content = _META_CONTENT.search(tag)
         if _META_NAME.search(tag) and content:
             return content.group(1)
+    return None
+
+
+def _cookie_sent(reply: requests.Response, name: str) -> str | None:
+    """The value of cookie `name` in the request that got `reply`."""
+    header = reply.request.headers.get("Cookie", "") if reply.request is not None else ""
+    for part in str(header).split(";"):
+        key, _, value = part.strip().partition("=")
+        if key == name:
+            return value
     return None
 
 

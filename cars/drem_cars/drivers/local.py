@@ -25,6 +25,13 @@ class LocalDriver:
     def load_model(self, model: InstalledModel) -> None:
         self.pilot.load(model.path)
 
+    def model_lost(self, model: InstalledModel) -> str | None:
+        return None  # our own drive loop holds the model in this process: it cannot lose it behind our back
+
+    def reloaded(self, model: InstalledModel) -> None: ...
+
+    def preload(self, model: InstalledModel) -> None: ...  # the model store already holds it, unpacked
+
     def unload_models(self) -> None:
         self.pilot.unload()
 

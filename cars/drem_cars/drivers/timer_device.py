@@ -8,6 +8,13 @@ class TimerDriver:
     def load_model(self, model: InstalledModel) -> None:
         raise RuntimeError("a timer does not run models")
 
+    def model_lost(self, model: InstalledModel) -> str | None:
+        return None
+
+    def reloaded(self, model: InstalledModel) -> None: ...
+
+    def preload(self, model: InstalledModel) -> None: ...  # the model store already holds it, unpacked
+
     def unload_models(self) -> None: ...
 
     def delete_all_models(self) -> int:

@@ -8,6 +8,7 @@ latest report per model, so the car's poll and the staff status table are single
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from enum import StrEnum
 from typing import Any, Literal, Protocol
@@ -100,6 +101,18 @@ class StatusReport(BaseModel):
         return self
 
 
+MAX_WAIT_S = 20.0  # under API Gateway's 29 s limit; the agent asks again at once
+WAIT_CHECK_S = 0.1  # how often a waiting car's assignment item is read (one GetItem: ~10 reads/s per waiting car)
+
+
+class AssignmentQuery(BaseModel):
+    """A car that already holds `wait_for_version` waits for the next one: the answer comes the moment staff change
+    its assignment (or after `wait_s`, unchanged), so it learns of a new racer at once without polling."""
+    model_config = ConfigDict(extra="forbid")
+    wait_for_version: int | None = Field(default=None, ge=0)
+    wait_s: float = Field(default=0.0, ge=0.0, le=MAX_WAIT_S)
+
+
 class StatusRow(BaseModel):
     device_id: str
     model_id: str | None
@@ -129,11 +142,14 @@ class AssignmentChanged(Exception):
 
 class AssignmentService:
     def __init__(self, store: AssignmentStore, models: ModelService, cars: CarDirectory,
-                 clock: Callable[[], str] = utc_now) -> None:
+                 clock: Callable[[], str] = utc_now, *, monotonic: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         self._store = store
         self._models = models
         self._cars = cars
         self._clock = clock
+        self._monotonic = monotonic
+        self._sleep = sleep
 
     def assign(self, principal: Principal, device_id: str, model_ids: list[str]) -> Assignment:
         self._cars.require_car(device_id)
@@ -158,10 +174,16 @@ class AssignmentService:
         self._cars.require_car(device_id)
         return self._store.get(device_id) or Assignment(device_id=device_id)
 
-    def for_car(self, device: Device) -> dict[str, Any]:
-        """The calling car's models with a short-lived download URL each (withdrawn models are left out)."""
+    def for_car(self, device: Device, query: AssignmentQuery | None = None) -> dict[str, Any]:
+        """The calling car's models with a short-lived download URL each (withdrawn models are left out); with
+        `wait_for_version`, once the assignment is another version than that one (or `wait_s` passed)."""
         car = _require_car_device(device)
         assignment = self._store.get(car.device_id) or Assignment(device_id=car.device_id)
+        if query is not None and query.wait_for_version is not None:
+            deadline = self._monotonic() + query.wait_s
+            while assignment.version == query.wait_for_version and self._monotonic() < deadline:
+                self._sleep(WAIT_CHECK_S)
+                assignment = self._store.get(car.device_id) or Assignment(device_id=car.device_id)
         models, withdrawn = [], []
         for model in assignment.models:
             record = self._models.store.get(model.owner_sub, model.model_id)

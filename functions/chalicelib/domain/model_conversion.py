@@ -11,12 +11,14 @@ for stock cars and are marked "cannot be scrutineered: the model converter is no
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import shutil
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Literal
@@ -28,7 +30,8 @@ from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extra
 
 GiB = 1024 ** 3
 WORKER_MODULE = "drem_sim.console.convert"
-Scrutiny = Literal["ready", "cannot_scrutineer"]
+# not_raceable: a stock car cannot load the model or would drive it wrongly (the upload becomes NOT_VALID)
+Scrutiny = Literal["ready", "cannot_scrutineer", "not_raceable"]
 
 
 class ConversionLimits(BaseModel):
@@ -40,14 +43,16 @@ class ConversionLimits(BaseModel):
 class ConversionOutcome(BaseModel):
     scrutiny: Scrutiny
     reason: str | None = None
+    detail: str | None = None  # for staff: the converter's own words (OpenVINO's message) behind `reason`
     max_abs_diff: float | None = None
     seconds: float | None = None
     onnx: bytes | None = None  # the converted graph when scrutiny is ready
 
 
 class _WorkerAnswer(BaseModel):
-    outcome: Literal["converted", "cannot_scrutineer"]
+    outcome: Literal["converted", "cannot_scrutineer", "not_raceable"]
     reason: str | None = None
+    detail: str | None = None
     max_abs_diff: float | None = None
     seconds: float = 0.0
 
@@ -61,9 +66,37 @@ def _cannot(reason: str) -> ConversionOutcome:
 
 
 class ConsoleConverter:
-    def __init__(self, limits: ConversionLimits | None = None, *, python: str = sys.executable) -> None:
+    """`keep_spare`: keep one worker process started ahead of time (OpenVINO loaded, waiting for a request), so a
+    conversion does not wait seconds for the imports. Each conversion still gets a process of its own, with its
+    limits (they count from the process's start, imports included); a new spare is started as one is taken."""
+
+    def __init__(self, limits: ConversionLimits | None = None, *, python: str = sys.executable,
+                 keep_spare: bool = False) -> None:
         self.limits = limits or ConversionLimits()
         self.python = python
+        self.keep_spare = keep_spare
+        self._spare: subprocess.Popen[bytes] | None = None
+        self._spare_lock = threading.Lock()
+
+    def warm_up(self) -> None:
+        """Start the spare worker now if there is none (an upload is on its way)."""
+        if not self.keep_spare or not converter_installed():
+            return
+        with self._spare_lock:
+            if self._spare is None or self._spare.poll() is not None:
+                self._spare = self._start_worker(["--wait"], cwd=Path(tempfile.gettempdir()))
+
+    def _take_worker(self) -> subprocess.Popen[bytes] | None:
+        with self._spare_lock:
+            spare, self._spare = self._spare, None
+        self.warm_up()  # the next one loads while this one converts
+        return spare if spare is not None and spare.poll() is None else None
+
+    def _start_worker(self, arguments: list[str], cwd: Path) -> subprocess.Popen[bytes]:
+        environment = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+        return subprocess.Popen([self.python, "-m", WORKER_MODULE, *arguments], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment, cwd=cwd,
+                                start_new_session=True, preexec_fn=_limit(self.limits))
 
     def convert(self, archive: IO[bytes]) -> ConversionOutcome:
         """Extract the (already judged AVAILABLE) archive into a sandbox and convert its `.pb` in a worker."""
@@ -81,6 +114,9 @@ class ConsoleConverter:
             answer = self._run_worker(extracted.model_path, extracted.metadata_path, out)
             if isinstance(answer, ConversionOutcome):
                 return answer
+            if answer.outcome == "not_raceable":
+                return ConversionOutcome(scrutiny="not_raceable", reason=answer.reason, detail=answer.detail,
+                                         seconds=answer.seconds)
             if answer.outcome != "converted" or not out.is_file():
                 return ConversionOutcome(scrutiny="cannot_scrutineer", reason=answer.reason,
                                          max_abs_diff=answer.max_abs_diff, seconds=answer.seconds)
@@ -91,12 +127,14 @@ class ConsoleConverter:
 
     def _run_worker(self, pb: Path, metadata: Path, out: Path) -> _WorkerAnswer | ConversionOutcome:
         limits = self.limits
-        environment = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
-        command = [self.python, "-m", WORKER_MODULE, str(pb), str(metadata), str(out)]
-        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
-                                   cwd=out.parent, start_new_session=True, preexec_fn=_limit(limits))
+        process = self._take_worker() if self.keep_spare else None
+        request: bytes | None = None
+        if process is not None:
+            request = (json.dumps([str(pb), str(metadata), str(out)]) + "\n").encode()
+        else:
+            process = self._start_worker([str(pb), str(metadata), str(out)], cwd=out.parent)
         try:
-            stdout, stderr = process.communicate(timeout=limits.wall_seconds)
+            stdout, stderr = process.communicate(input=request, timeout=limits.wall_seconds)
         except subprocess.TimeoutExpired:
             kill_group(process)
             process.communicate()

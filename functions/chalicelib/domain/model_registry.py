@@ -203,7 +203,8 @@ def verdict(model: ModelRecord) -> str:
         return text
     if model.status is ModelStatus.UPLOADED:
         return "waiting for the upload"
-    return f"{model.status.value.lower().replace('_', ' ')}: {model.reason or 'no reason given'}"
+    detail = f" ({model.scrutiny_detail})" if model.scrutiny_detail else ""  # staff see the converter's own words
+    return f"{model.status.value.lower().replace('_', ' ')}: {model.reason or 'no reason given'}{detail}"
 
 
 def lineage_from_archive(models: ModelService, limit: int) -> LineageReader:

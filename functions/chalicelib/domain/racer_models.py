@@ -111,6 +111,7 @@ class ModelRecord(BaseModel):
     converted_md5: str | None = None
     scrutiny: str | None = None
     scrutiny_reason: str | None = None
+    scrutiny_detail: str | None = None  # for staff: the converter's own message (OpenVINO's) behind the reason
     conversion_max_diff: float | None = None
     scrutineer_result: ScrutineerResult | None = None
     # The background test drive (domain/scrutineer_queue.py): "queued" or "driving" while it has a job, else None;
@@ -315,6 +316,7 @@ def _size(count: int) -> str:
 
 class Converter(Protocol):
     def convert(self, archive: IO[bytes]) -> ConversionOutcome: ...
+    def warm_up(self) -> None: ...  # an upload is on its way: get ready (a spare worker process)
 
 
 class ScrutinyEnqueuer(Protocol):
@@ -346,6 +348,8 @@ class ModelService:
 
     def request_upload(self, principal: Principal, request: UploadRequest) -> UploadTicket:
         owner_sub, username = _user_of(principal)
+        if self.converter is not None:
+            self.converter.warm_up()  # a console model's conversion will not wait for OpenVINO to load
         pending = self.purge_stale_uploads(owner_sub)
         if len(pending) >= MAX_PENDING_UPLOADS:
             raise RateLimited(f"You have {len(pending)} uploads that were never completed; finish or delete one "
@@ -482,6 +486,8 @@ class ModelService:
                           "that one is kept, so this copy was not added"})
         if report.model_kind == "tensorflow":
             facts.update(self._convert(record))
+            if facts.get("scrutiny") == "not_raceable":  # a stock car cannot load it, or would drive it wrongly
+                return self._verdict(record, ModelStatus.NOT_VALID, **{**facts, "reason": facts["scrutiny_reason"]})
         else:
             facts.update(scrutiny="ready")
         destination = model_key(record.owner_sub, record.model_id)
@@ -501,14 +507,15 @@ class ModelService:
         with download.body:
             outcome = self.converter.convert(download.body)
         facts: dict[str, Any] = {"scrutiny": outcome.scrutiny, "scrutiny_reason": outcome.reason,
-                                 "conversion_max_diff": outcome.max_abs_diff}
+                                 "scrutiny_detail": outcome.detail, "conversion_max_diff": outcome.max_abs_diff}
         if outcome.scrutiny == "ready" and outcome.onnx:
             key = converted_key(record.owner_sub, record.model_id)
             self.files.put(key, outcome.onnx)
             facts["converted_key"] = key
             facts["converted_md5"] = hashlib.md5(outcome.onnx, usedforsecurity=False).hexdigest()
         logs.log(logging.INFO, "console model converted", model_id=record.model_id, scrutiny=outcome.scrutiny,
-                 reason=outcome.reason, max_abs_diff=outcome.max_abs_diff, seconds=outcome.seconds)
+                 reason=outcome.reason, detail=outcome.detail, max_abs_diff=outcome.max_abs_diff,
+                 seconds=outcome.seconds)
         return facts
 
     def _verdict(self, record: ModelRecord, status: ModelStatus, **facts: Any) -> ModelRecord:

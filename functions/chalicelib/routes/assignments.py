@@ -10,7 +10,7 @@ from chalice import Blueprint
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, STAFF, route
 from chalicelib.auth.principals import Device, User
-from chalicelib.domain.assignments import AssignInput, StatusReport
+from chalicelib.domain.assignments import AssignInput, AssignmentQuery, StatusReport
 
 bp = Blueprint(__name__)
 
@@ -25,9 +25,10 @@ def car_models(principal: User, device_id: str) -> dict:
     return {"assignment": services.assignment_service().for_staff(device_id).public()}
 
 
-@route(bp, "/api/devices/self/assignment", allow={CAR})
-def own_assignment(principal: Device) -> dict:
-    return services.assignment_service().for_car(principal)
+@route(bp, "/api/devices/self/assignment", allow={CAR}, query=AssignmentQuery)
+def own_assignment(principal: Device, query: AssignmentQuery) -> dict:
+    """The car's models; `wait_for_version=N&wait_s=20` answers as soon as staff change them (a long poll)"""
+    return services.assignment_service().for_car(principal, query)
 
 
 @route(bp, "/api/devices/self/assignment/status", methods=["POST"], allow={CAR}, body=StatusReport)

@@ -85,8 +85,9 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
             state = progress.status.value if progress else "assigned"
             if progress and progress.status is CarModelStatus.LOADED:
                 loaded_by_progress = model.name
+            said = f": {progress.reason}" if progress and progress.reason else ""  # why it failed, or was reloaded
             assigned.append(AssignedLine(model_id=model.model_id,
-                                         text=f"{model.owner_username} · {model.name} ({state})"))
+                                         text=f"{model.owner_username} · {model.name} ({state}{said})"))
     commands = devices.device_commands(view.device_id)
     last, state = command_text(max(commands, key=lambda c: c.command_id) if commands else None, now_ms)
     return CarLine(

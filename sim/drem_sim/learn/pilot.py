@@ -14,6 +14,16 @@ class TensorFlowModelError(ArchiveError):
     """The archive holds a console (TensorFlow) model, which the simulator cannot run."""
 
 
+class NotRaceableModel(ArchiveError):
+    """A console model no stock car could load or would drive as its metadata says: `reason` in a racer's words,
+    `detail` what OpenVINO said (for staff)."""
+
+    def __init__(self, reason: str, detail: str | None = None) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.detail = detail
+
+
 class OnnxPilot:
     """Continuous action spaces rescale the [-1, 1] means to low..high; discrete ones take the argmax action."""
 
@@ -126,6 +136,8 @@ def _converted(pb: bytes, metadata: dict[str, Any]) -> bytes:
         pb_path, onnx_path = Path(folder) / "model.pb", Path(folder) / "model.onnx"
         pb_path.write_bytes(pb)
         result = convert(pb_path, metadata, onnx_path)
+        if result.outcome == "not_raceable":  # not the simulator's limit: no car could run it either
+            raise NotRaceableModel(str(result.reason), result.detail)
         if result.outcome != "converted":
             raise TensorFlowModelError(f"cannot scrutineer: {result.reason}")
         return onnx_path.read_bytes()

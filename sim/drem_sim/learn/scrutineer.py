@@ -75,7 +75,7 @@ def scrutineer_for_event(archive: str | Path, track_type: str, laps: int = 3, se
 
 def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) -> ScrutineerReport:
     from drem_sim.learn.evaluate import evaluate_model
-    from drem_sim.learn.pilot import TensorFlowModelError
+    from drem_sim.learn.pilot import NotRaceableModel, TensorFlowModelError
     from drem_sim.tracks import TrackError, load_track
 
     if laps < 1:
@@ -88,6 +88,9 @@ def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) ->
             track, error)))
     try:
         metrics = evaluate_model(archive, track, laps, seed)
+    except NotRaceableModel as error:
+        return ScrutineerReport(**base, verdict="invalid", **_words(scrutiny_words.not_raceable(error.reason,
+                                                                                              error.detail)))
     except TensorFlowModelError as error:
         return ScrutineerReport(**base, verdict="cannot_scrutineer", **_words(scrutiny_words.console_model_unusable(
             str(error).removeprefix("cannot scrutineer: "))))

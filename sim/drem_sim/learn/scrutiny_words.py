@@ -41,6 +41,13 @@ def console_model_unusable(reason: str) -> PlainFailure:
         reason)
 
 
+def not_raceable(reason: str, detail: str | None) -> PlainFailure:
+    return PlainFailure(
+        f"This model cannot race: {reason}. Fix it where you trained it, download it again, and upload the new "
+        "archive.",
+        detail or reason)
+
+
 def model_stopped(track: str, error: BaseException) -> PlainFailure:
     return PlainFailure(
         f"Your model stopped with an error while drem test-drove it on “{track}”, so it was not checked. Try “Drive "
