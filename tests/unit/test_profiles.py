@@ -45,7 +45,7 @@ def test_public_profile_shows_only_public_fields(client, users, aws_clients, sta
     call(client, "PUT", "/api/me/profile", {"highlight_colour": "#0000FF"}, token=token)
     status, body = call(client, "GET", "/api/profiles/KEI")
     assert status == 200
-    assert body == {"username": "kei", "country_code": "JP", "highlight_colour": "#0000FF",
+    assert body == {"username": "kei", "display_name": "kei", "country_code": "JP", "highlight_colour": "#0000FF",
                     "avatar_url": "/api/profiles/kei/avatar.svg", "deleted": False}
     assert call(client, "GET", "/api/profiles/nobody")[0] == 404
 

@@ -115,5 +115,5 @@ def _board(board_id: str, title: str, ranking: str, summaries: list[RaceSummary]
 
 
 def _racer_profile(profile: PublicProfile) -> RacerProfile:
-    return RacerProfile(username=profile.username, country_code=profile.country_code,
+    return RacerProfile(username=profile.display_name or profile.username, country_code=profile.country_code,
                         highlight_colour=profile.highlight_colour)

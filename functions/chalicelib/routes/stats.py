@@ -26,6 +26,6 @@ def stats(principal: Principal, query: StatsFilter) -> Response:
 
     def display_name(sub: str, username: str) -> str:
         public = profiles.public_by_sub(sub)
-        return public.username if public else username
+        return (public.display_name or public.username) if public else username
 
     return render.page("stats", view=stats_page(compute(data, query, display_name), query, staff=staff))

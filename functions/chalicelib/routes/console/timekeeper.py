@@ -35,6 +35,10 @@ class ProfileColours:
         public = self._profiles.public_by_sub(sub)
         return public.highlight_colour if public else None
 
+    def shown_name(self, sub: str, username: str) -> str:
+        public = self._profiles.public_by_sub(sub)
+        return (public.display_name or public.username) if public else username
+
 
 def desk() -> TimekeeperDesk:
     # The race service's clock, looked up per call, so the screen and the race agree on "now".
