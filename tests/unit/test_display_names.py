@@ -111,3 +111,7 @@ def test_boards_overlay_results_and_statistics_show_the_display_name(client, des
     summary = desk.call("GET", f"/api/events/{eid}/results/summary.pdf", headers={"Accept": "application/pdf"})
     text = pdf_text(summary.body, tmp_path)
     assert "山田太郎" in text and "yamada" not in text
+    # Named like the CSVs: after the event, not its id.
+    assert 'filename="summit-stockholm-2026-summary.pdf"' in summary.headers["Content-Disposition"]
+    laps_csv = desk.call("GET", f"/api/events/{eid}/export/summary.csv").body.decode()
+    assert "山田太郎" in laps_csv and "نور" in laps_csv and "yamada" not in laps_csv

@@ -368,7 +368,13 @@ class RaceService:
             raise InvalidInput("Export laps.csv or summary.csv.", field="file_name")
         event = self.event(event_id)
         races = [r.race for r in self._races.list_event(event_id)]
-        return export_csv(event.name, races, kinds[file_name], self.clock_ms())
+        # The CSVs name racers as the boards do: their display name (a deleted racer anonymised).
+        shown = {race.racer.sub: self._profiles.racer_profile(race.racer.sub, race.racer.username).username
+                 for race in races}
+        named = [race.model_copy(update={"racer": Racer(sub=race.racer.sub,
+                                                        username=shown[race.racer.sub] or race.racer.username)})
+                 for race in races]
+        return export_csv(event.name, named, kinds[file_name], self.clock_ms())
 
     # --- publishing --------------------------------------------------------------------------------------------
 
