@@ -19,12 +19,21 @@ from drem_web import render
 bp = Blueprint(__name__)
 
 TIMEKEEPERS = {ADMIN, OPERATOR}
-_PREFIX = re.compile(r"^[A-Za-z0-9_.@+-]{0,64}$")
+# The start of a sign-in name; anything else typed (a display name, a space) just finds nobody.
+_PREFIX = re.compile(r"^[A-Za-z0-9_.-]{0,64}$")
 
 
 class RacerSearch(BaseModel):
+    """The racer field's own value: htmx sends a GET's triggering input under its name (no script needed, so the
+    suggestions work under the site's `script-src 'self'`); `prefix` for API callers."""
     model_config = ConfigDict(extra="ignore")
-    prefix: str = Field(default="", pattern=_PREFIX.pattern)
+    prefix: str = Field(default="", max_length=256)
+    racer_username: str = Field(default="", max_length=256)
+    queue_racer: str = Field(default="", max_length=256)
+
+    @property
+    def typed(self) -> str:
+        return (self.prefix or self.racer_username or self.queue_racer).strip()
 
 
 class ProfileColours:
@@ -53,8 +62,11 @@ def choose_track_page(principal: User) -> Response:
 
 @route(bp, "/console/timekeeper/racers", allow=TIMEKEEPERS, query=RacerSearch)
 def racer_options(principal: User, query: RacerSearch) -> Response:
-    users = services.user_service().list_users(query.prefix or None, 20).users
-    return render.fragment("console/tk_racer_options", usernames=[u.username for u in users])
+    typed = query.typed
+    users = services.user_service().list_users(typed or None, 20).users if _PREFIX.match(typed) else []
+    shown = services.profile_service().public_by_subs([u.sub for u in users])
+    options = [(u.username, shown[u.sub].display_name if u.sub in shown else u.username) for u in users]
+    return render.fragment("console/tk_racer_options", options=options)
 
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}", allow=TIMEKEEPERS)
