@@ -26,6 +26,13 @@ def chromium() -> Iterator[Any]:
         browser.close()
 
 
+# Chromium logs every 4xx answer as "Failed to load resource"; these are drem's refusals that the page shows the
+# person (a form's 400/409, the not-allowed page's 403, a wrong password's 401, a rate limit's 429). A missing file
+# (404) or a server failure (5xx) still fails the test.
+_REFUSAL_SHOWN_ON_PAGE = re.compile(r"^Failed to load resource: the server responded with a status of "
+                                    r"(400|401|403|409|422|429) ")
+
+
 class BrowserErrors:
     """Every console error, uncaught page error and Content-Security-Policy violation seen in any browser context the
     test opens, from its first request to its last (typing, clicks and polls included, not only page loads).
@@ -45,6 +52,8 @@ class BrowserErrors:
         return context
 
     def _console(self, message: Any) -> None:
+        if _REFUSAL_SHOWN_ON_PAGE.search(message.text):
+            return
         if message.type == "error" or "Content Security Policy" in message.text:
             where = (message.location or {}).get("url", "")
             self.seen.append(f"console {message.type} at {where}: {message.text}")

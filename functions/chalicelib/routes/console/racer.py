@@ -147,9 +147,9 @@ def delete_my_model(principal: User, model_id: str) -> Response:
 
 @route(bp, "/console/my-races", allow=SIGNED_IN)
 def my_races(principal: User) -> Response:
-    event_names = {event.event_id: event.name for event in services.event_service().list_events()}
+    events = {event.event_id: event for event in services.event_service().list_events()}
     return render.page("console/my_races", races=list(reversed(services.race_service().my_races(principal))),
-                       event_names=event_names)
+                       events=events)
 
 
 @route(bp, "/console/my-races/{event_id}/{race_id}", allow=SIGNED_IN)

@@ -83,7 +83,8 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
     race = services.race_service().get_race(principal, event_id, race_id)
     laps = [{**lap, "seconds": f"{Decimal(lap['time_ms']) / 1000:.3f}", "time": clock_text(lap["time_ms"])}
             for lap in race["laps"]]
-    return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors,
+    track = services.race_service().event(event_id).track_name(race["track_id"])
+    return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors, track=track,
                        created=_when(race["created_at_ms"]), audit=_audit_rows(event_id, race_id),
                        flash=done_notice(bp.current_request) if status == 200 else "")
 
