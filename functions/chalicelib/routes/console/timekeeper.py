@@ -19,6 +19,7 @@ from drem_web import render
 bp = Blueprint(__name__)
 
 TIMEKEEPERS = {ADMIN, OPERATOR}
+_RACE_OVER = {"submit", "discard"}
 # The start of a sign-in name; anything else typed (a display name, a space) just finds nobody.
 _PREFIX = re.compile(r"^[A-Za-z0-9_.-]{0,64}$")
 
@@ -92,7 +93,8 @@ def start_race(principal: User, event_id: str, track_id: str) -> Response:
         errors = field_errors(exc, rename=lambda name: "racer_username" if name == "username" else name,
                               missing_object_field="racer_username")  # a racer nobody registered
         return _state(desk().screen(event_id, track_id), errors, values, error_status(exc))
-    services.on_deck().preload_head(principal, event_id, track_id)  # the car just taken may have held the next model
+    # Off the queue if they were in line; the car just taken may have held the next model.
+    services.on_deck().started_elsewhere(principal, event_id, track_id, str(data["racer_username"]))
     return _state(screen)
 
 
@@ -103,6 +105,8 @@ def press_button(principal: User, event_id: str, track_id: str) -> Response:
         screen = desk().press(principal, event_id, track_id, ScreenCommand.model_validate(values))
     except SHOWN_ON_FORM as exc:
         return _state(desk().screen(event_id, track_id), field_errors(exc), {}, error_status(exc))
+    if values.get("kind") in _RACE_OVER:  # the car is free again: the next racer's model goes to it now
+        services.on_deck().preload_head(principal, event_id, track_id)
     return _state(screen)
 
 
