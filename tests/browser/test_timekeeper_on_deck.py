@@ -19,7 +19,7 @@ pytestmark = pytest.mark.browser
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 BIG_SCREEN = {"width": 1920, "height": 1080}
 PHONE = {"width": 390, "height": 844}
-RACERS = ("deck-ann", "deck-ben", "deck-cy", "deck-dee")
+RACERS = ("deck-ann", "deck-ben", "deck-cy", "deck-dee", "deck-eve")
 
 
 def _upload_model(url: str, token: str, filename: str, archive: bytes) -> dict:
@@ -91,6 +91,9 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
         page.locator(f"[data-testid=queue-panel] strong:text-is('{racer}')").wait_for()
     assert _on_deck(page) == ["deck-ann", "deck-ben", "deck-cy"]
     assert "deck-dee" in page.get_by_test_id("queue-later").inner_text()
+    # Each racer after the three on deck has their own place (a flex row once numbered every one "3.").
+    later = [text.split(" ")[0] for text in page.get_by_test_id("later-row").all_inner_texts()]
+    assert later == ["4.", "5."]
     page.get_by_role("button", name="Move deck-cy up").click()
     page.wait_for_function("() => [...document.querySelectorAll('[data-testid=on-deck-row] .tk-deck-racer')]"
                            ".map(e => e.textContent).join() === 'deck-ann,deck-cy,deck-ben'")
@@ -128,3 +131,15 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
     assert small.evaluate("() => document.documentElement.scrollWidth") <= PHONE["width"]  # no sideways scrolling
     small.screenshot(path=str(ARTIFACTS / "timekeeper-queue-390x844.png"), full_page=True)
     phone.close()
+
+    # deck-ann's race is over; the timekeeper readies deck-dee, who is in line, through the Next race form instead
+    # of the queue: deck-dee leaves the line (the queue had kept them for a second race).
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.keyboard.press("e")
+    page.get_by_role("button", name="Submit race").click()
+    page.get_by_role("button", name="Ready race", exact=True).wait_for()
+    page.fill("#racer_username", "deck-dee")
+    page.get_by_role("button", name="Ready race", exact=True).click()
+    page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'deck-dee'")
+    page.wait_for_function("() => !document.querySelector('#tk-queue-list').textContent.includes('deck-dee')")
+    assert _on_deck(page) == ["deck-cy", "deck-ben", "deck-eve"]

@@ -90,13 +90,13 @@ def test_sign_in_works_in_either_case(browser, client) -> None:
 def test_boards_overlay_results_and_statistics_show_the_display_name(client, desk: Desk, scenario: Scenario,
                                                                        tmp_path: Path) -> None:
     staff = desk.token("desk", "registration")
-    for username, name in (("yamada", "山田太郎"), ("noor", "نور"), ("bjorn", "Björn_Andersson")):
+    for username, name in (("yamada", "山田太郎"), ("noor", "نور"), ("bjorn", "Björn_Andersson"), ("minjun", "김민준")):
         status, body = call(client, "POST", "/api/users", {"username": username, "email": f"{username}@example.test",
                                                            "country_code": "SE", "display_name": name}, token=staff)
         assert status == 201, body
     scenario.add_event()
     eid = scenario.event_id
-    for username, lap in (("yamada", 9_000), ("noor", 9_500)):
+    for username, lap in (("yamada", 9_000), ("noor", 9_500), ("minjun", 9_700)):
         scenario.submitted_race(username, [lap])
     scenario.add_race("bjorn", [12_000])  # live: on the overlay
     board = desk.board(eid)
@@ -110,7 +110,13 @@ def test_boards_overlay_results_and_statistics_show_the_display_name(client, des
     assert "山田太郎" in stats and ">yamada<" not in stats
     summary = desk.call("GET", f"/api/events/{eid}/results/summary.pdf", headers={"Accept": "application/pdf"})
     text = pdf_text(summary.body, tmp_path)
-    assert "山田太郎" in text and "yamada" not in text
+    assert "山田太郎" in text and "김민준" in text and "yamada" not in text
+    # Arabic is shaped (HarfBuzz): pdftotext reads the joined letters back in logical order.
+    assert "نور" in text
+    certificates = desk.call("GET", f"/api/events/{eid}/results/certificates.pdf?track=1",
+                             headers={"Accept": "application/pdf"})
+    (tmp_path / "certificates").mkdir()
+    assert "김민준" in pdf_text(certificates.body, tmp_path / "certificates")
     # Named like the CSVs: after the event, not its id.
     assert 'filename="summit-stockholm-2026-summary.pdf"' in summary.headers["Content-Disposition"]
     laps_csv = desk.call("GET", f"/api/events/{eid}/export/summary.csv").body.decode()
