@@ -92,7 +92,7 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
     assert _on_deck(page) == ["deck-ann", "deck-ben", "deck-cy"]
     assert "deck-dee" in page.get_by_test_id("queue-later").inner_text()
     # Each racer after the three on deck has their own place (a flex row once numbered every one "3.").
-    later = [text.split(" ")[0] for text in page.get_by_test_id("later-row").all_inner_texts()]
+    later = page.locator("[data-testid=later-row] .tk-later-pos").all_inner_texts()
     assert later == ["4.", "5."]
     page.get_by_role("button", name="Move deck-cy up").click()
     page.wait_for_function("() => [...document.querySelectorAll('[data-testid=on-deck-row] .tk-deck-racer')]"

@@ -115,6 +115,10 @@ def test_boards_overlay_results_and_statistics_show_the_display_name(client, des
     assert "نور" in text
     certificates = desk.call("GET", f"/api/events/{eid}/results/certificates.pdf?track=1",
                              headers={"Accept": "application/pdf"})
+    # Nobody here picked a colour: their certificate frame and avatar are the board's blue stripe, not grey.
+    from chalicelib.routes.results import load_results
+    board = load_results(eid).boards[0]
+    assert {entry.colour for entry in board.entries} == {"#0000ff"}
     (tmp_path / "certificates").mkdir()
     assert "김민준" in pdf_text(certificates.body, tmp_path / "certificates")
     # Named like the CSVs: after the event, not its id.

@@ -15,7 +15,7 @@ from chalicelib.domain.countries import normalise_country_code
 from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.names import check_display_name
 from chalicelib.domain.ownership import require_owner_or_role
-from chalicelib.views.avatars import identicon_svg
+from chalicelib.views.avatars import avatar_seed, identicon_svg
 from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.
@@ -181,7 +181,8 @@ class ProfileService:
         profile = self._by_username(username)
         if profile.avatar != "identicon":
             raise NotFound(f"{profile.username} has no avatar.", field="username")
-        return identicon_svg(profile.sub, profile.highlight_colour, profile.username or "")
+        return identicon_svg(avatar_seed(profile.username or profile.sub), profile.highlight_colour,
+                             profile.shown_name)
 
     def tombstone(self, sub: str, username: str) -> None:
         self._store.put(Profile(sub=sub, deleted=True, avatar="none", updated_at=_now()))
