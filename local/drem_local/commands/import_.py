@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     report_path = args.report or args.folder.resolve().parent / f"{args.folder.resolve().name}.import-{stamp}.json"
     report = {**result.report(), "imported_at": stamp, "folder": str(args.folder.resolve())}
     report_path.write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
-    written = ", ".join(f"{n} {table}" for table, n in result.written.items())
+    written = ", ".join(f"{n} {table.replace('_', ' ')}" for table, n in result.written.items())
     print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
           f"{result.archives_written} model archives{', the logo' if result.logo_written else ''}.")
     if result.already_written:
