@@ -77,6 +77,10 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
 
     page.set_viewport_size(BIG_SCREEN)
     sign_in(page, app_url, "deck-op")
+    # The Cars page, open on another tab all along: its model rows follow the queue's assignments live.
+    cars_page = page.context.new_page()
+    cars_page.goto(f"{app_url}/console/cars")
+    assert cars_page.get_by_test_id("models-car-b").get_by_test_id("assigned-models").inner_text() == "none assigned"
     page.goto(timekeeper)
     assert "Nobody in line" in page.get_by_test_id("queue-panel").inner_text()
 
@@ -120,6 +124,11 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
         "battery_pct": 88, "model": {"name": "deck-cy-fast", "md5": hashlib.md5(archives["deck-cy"]).hexdigest()}})
     page.wait_for_function("() => document.querySelector('[data-testid=preload]').dataset.state === 'loaded'")
     assert "loaded on car-b" in preload.inner_text()
+    # Without a reload the Cars tab shows what car-b was given and that it is the model the car has loaded.
+    cars_page.wait_for_function("() => document.querySelector('[data-testid=models-car-b] "
+                                "[data-testid=assigned-models]').textContent.includes('deck-cy-fast (loaded)')",
+                                timeout=20_000)
+    cars_page.close()
 
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "timekeeper-queue-1920x1080.png"))

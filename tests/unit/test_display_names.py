@@ -77,8 +77,14 @@ def test_sign_in_names_are_unique_whatever_their_case(client, users) -> None:
     assert status == 409 and body["error"]["field"] == "username"
 
 
-def test_sign_in_works_in_either_case(browser, client) -> None:
+def test_sign_in_works_in_either_case(browser, client, users) -> None:
     assert call(client, "POST", "/api/signup", sign_up_body("Mia.K"))[0] == 201
+    users.create("admin", ("admin",))  # made outside drem (as `drem up` makes the first admin): no profile yet
+    browser.get("/login")
+    reply = browser.post("/login", {"username": "ADMIN", "password": sign_up_body()["password"],
+                                    "csrf_token": browser.csrf_token})
+    assert reply.status_code == 303 and "Signed in as <strong>admin</strong>" in browser.get("/").body.decode()
+    browser.cookies.clear()
     for typed in ("mia.k", "MIA.K", "Mia.K"):
         browser.get("/login")
         reply = browser.post("/login", {"username": typed, "password": sign_up_body()["password"],

@@ -123,15 +123,6 @@ class ProfileService:
         self._store.link_username(username, sub)
         return profile
 
-    def ensure_for(self, sub: str, username: str, country_code: str | None) -> Profile:
-        """The profile and name link of an account made outside drem, leaving an existing profile as it is."""
-        existing = self._store.get(sub)
-        if existing is None:
-            return self.create_for(sub, username, country_code)
-        if self._store.sub_for_username(username) != sub and not existing.deleted:
-            self._store.link_username(username, sub)
-        return existing
-
     def account_name(self, username: str) -> str | None:
         """The sign-in name as the account spells it, for a name typed in any case; None when there is none."""
         sub = self._store.sub_for_username(username)

@@ -169,7 +169,6 @@ class UserDirectory(Protocol):
 class ProfileKeeper(Protocol):
     """What account changes need from profiles (satisfied by `chalicelib.domain.profiles.ProfileService`)."""
     def create_for(self, sub: str, username: str, country_code: str | None, display_name: str = "") -> object: ...
-    def ensure_for(self, sub: str, username: str, country_code: str | None) -> object: ...
     def account_name(self, username: str) -> str | None: ...
     def tombstone(self, sub: str, username: str) -> None: ...
 
@@ -303,8 +302,6 @@ class UserService:
                 if not self._directory.groups_of(user.username):
                     self._finish(user.username, user.sub, user.country_code)
                     finished.append(user.username)
-                else:  # an account made outside drem (the first admin): its name must be findable in any case
-                    self._profiles.ensure_for(user.sub, user.username, user.country_code)
             token = page.next_token
             if not token:
                 return finished
@@ -316,12 +313,18 @@ class UserService:
             raise Conflict(f"The user name '{username}' is taken.", field="username")
         return existing
 
-    def _not_taken_in_another_case(self, username: str) -> None:
-        """Sign-in names are unique whatever their case (Cognito's pool is case-insensitive; the local one is not):
-        'ADMIN' beside 'admin' would be two racers nobody can tell apart at the desk."""
+    def account_name(self, username: str) -> str | None:
+        """The account's own spelling of a sign-in name typed in any case (Cognito's pool is case-insensitive; the
+        local one is not): the profiles' case-folded index, else, for an account made outside drem without a
+        profile yet (the first admin), its lower-case spelling in the directory."""
         owner = self._profiles.account_name(username)
         if owner is None and username != username.lower():
             owner = self._existing_name(username.lower())
+        return owner
+
+    def _not_taken_in_another_case(self, username: str) -> None:
+        """'ADMIN' beside 'admin' would be two people nobody can tell apart at the desk."""
+        owner = self.account_name(username)
         if owner is not None and owner != username:
             raise Conflict(f"The user name '{username}' is taken.", field="username")
 

@@ -129,7 +129,7 @@ def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
 def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
     # Sign-in names are case-insensitive: "ADMIN" signs in as "admin" (Cognito's pool does this itself; the
     # local one is case-sensitive, so the account's own spelling is looked up first).
-    username = services.profile_service().account_name(credentials.username) or credentials.username
+    username = services.user_service().account_name(credentials.username) or credentials.username
     return guarded_sign_in(lambda: services.identity_provider().sign_in(username, credentials.password),
                            username, client_address(bp.current_request))
 
