@@ -29,7 +29,7 @@ FLAGS := web/drem_web/static/vendor/flags/.installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Fonts the result PDFs and labels embed (names in any script): Noto Sans + Noto Sans Arabic (OFL-1.1) and
 # Droid Sans Fallback for CJK (Apache-2.0). `drem build` copies the few files it needs into the Lambda bundle.
-FONT_DEBS := fonts-noto-core fonts-droid-fallback
+FONT_DEBS := fonts-noto-core fonts-droid-fallback fonts-nanum
 # Debian packages the tests and benches drive (apt pins them to the release's current, signed versions).
 TEST_DEBS := chromium poppler-utils $(FONT_DEBS)
 BENCH_DEBS := wrk nginx-light

@@ -93,14 +93,14 @@ def stats_without_storage(ids: list[str]) -> None:
     """The /stats work after the reads: aggregate the digests of 5,000 races, draw the charts and the map, render the
     page. The events and digests are read once and kept (module global), so this times drem's own code only."""
     from chalicelib import services
-    from chalicelib.domain.stats import StatsFilter, compute, visible_events
+    from chalicelib.domain.stats import ShownRacer, StatsFilter, compute, visible_events
     from chalicelib.views.stats_view import stats_page
     from drem_web import render
 
     global _READ
     if _READ is None:
         _READ = services.stats_digests().for_events(visible_events(services.event_store().list(), staff=False))
-    stats = compute(_READ, StatsFilter(), lambda sub, username: username)
+    stats = compute(_READ, StatsFilter(), lambda sub, username: ShownRacer(username))
     render.render_page("stats", htmx=False, view=stats_page(stats, StatsFilter(), staff=False))
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import sys
 import threading
 import time
 import uuid
@@ -112,6 +113,9 @@ class Outbox:
                 return settled
             except Rejected as exc:
                 self._finish(item, "rejected", str(exc))
+                # Said where the operator watches the agent, not only in `drem car status`: a refused crossing
+                # is a lap the board will not show.
+                print(f"drem car: the server refused {item.kind} #{item.seq}: {exc}", file=sys.stderr, flush=True)
             else:
                 self._finish(item, "delivered", json.dumps(answer)[:2000])
             settled += 1

@@ -45,6 +45,13 @@ def run_agent(args: argparse.Namespace) -> int:
         return 1
     outbox, models = open_agent_files(store.directory)
     deadline = time.monotonic() + args.seconds if args.seconds else None
+    driving = (f"the DeepRacer at {args.deepracer}" if args.deepracer else "camera + PWM" if args.pwm
+               else "the simulator" if args.sim else None)
+    if driving:  # the operator at the car sees at once that it started, and where it reports to
+        credential = client.credential
+        print(f"drem car run: {credential.hostname} ({credential.device_kind} {credential.device_id}) driving "
+              f"{driving}, reporting to {client.api}; {outbox.count()} crossing(s) waiting to be sent. "
+              "Ctrl-C stops.", flush=True)
     if args.deepracer:
         return _run_deepracer(args, client, outbox, models, deadline, store.directory)
     if args.pwm:

@@ -30,9 +30,10 @@ def running_stack_api(state_dir: str | os.PathLike[str] | None = None) -> str | 
     return url if url and pid_is_drem(info.get("pids", {}).get("app")) else None
 
 
-def default_api() -> str:
-    """$DREM_API, else the running local stack's own URL (whatever port `drem up --port` chose), else port 8000."""
-    return os.environ.get("DREM_API") or running_stack_api() or DEFAULT_API
+def api_url(args: argparse.Namespace) -> str:
+    """--api, else $DREM_API, else the URL of the stack running on --state-dir ($DREM_STATE_DIR, ./.drem)."""
+    given = getattr(args, "api", None) or os.environ.get("DREM_API")
+    return given or running_stack_api(getattr(args, "state_dir", None)) or DEFAULT_API
 
 
 class ApiError(Exception):
@@ -47,9 +48,12 @@ class ApiError(Exception):
 
 def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("connection")
-    group.add_argument("--api", default=default_api(),
+    # Resolved when the command runs (`api_url`): --state-dir names which running stack to ask.
+    group.add_argument("--api", default=None,
                        help=f"base URL of the drem API (default: $DREM_API, else the stack `drem up` runs with its "
-                            f"data in $DREM_STATE_DIR or ./.drem, else {DEFAULT_API})")
+                            f"data in --state-dir, $DREM_STATE_DIR or ./.drem, else {DEFAULT_API})")
+    group.add_argument("--state-dir", default=None,
+                       help="the data directory of the `drem up` to talk to (default: $DREM_STATE_DIR, else ./.drem)")
     group.add_argument("--token", default=os.environ.get("DREM_TOKEN"), help="an access token (or $DREM_TOKEN)")
     group.add_argument("--username", default=os.environ.get("DREM_USERNAME"), help="sign in as (or $DREM_USERNAME)")
     group.add_argument("--password", default=os.environ.get("DREM_PASSWORD"), help="password (or $DREM_PASSWORD)")
@@ -68,7 +72,7 @@ class ApiClient:
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> ApiClient:
-        client = cls(args.api, getattr(args, "token", None))
+        client = cls(api_url(args), getattr(args, "token", None))
         if not client.token:
             if not (args.username and args.password):
                 raise ApiError(0, "give --token, or --username and --password (or $DREM_USERNAME/$DREM_PASSWORD)")
@@ -129,4 +133,5 @@ def _api_error(reply: requests.Response) -> ApiError:
 
 
 def _unreachable(base_url: str, exc: Exception) -> ApiError:
-    return ApiError(0, f"cannot reach {base_url} ({exc.__class__.__name__}); is `drem up` running?")
+    return ApiError(0, f"cannot reach {base_url} ({exc.__class__.__name__}); is `drem up` running? If it keeps its "
+                       "data elsewhere, give that directory with --state-dir (or the URL with --api).")

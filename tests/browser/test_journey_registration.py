@@ -25,12 +25,14 @@ def choose_password(page, url: str, password: str) -> None:
     page.wait_for_url(url + "/")
 
 
-def create_at_desk(page, username: str) -> str:
+def create_at_desk(page, username: str, display_name: str = "") -> str:
     """Type a racer in, keyboard only (Enter submits); returns the temporary password shown. Like a person, it
     starts typing once the cursor is in the username field (autofocus on a fresh page, htmx's refocus after a
     swap): keys typed before that land nowhere."""
     page.wait_for_function("() => document.activeElement && document.activeElement.id === 'username'")
     page.keyboard.type(username)
+    page.keyboard.press("Tab")
+    page.keyboard.type(display_name)  # the name the racer goes by, in any script (empty: the sign-in name)
     page.keyboard.press("Tab")
     page.keyboard.type(f"{username}@example.test")
     page.fill("#country_code", "Germany")  # the country picker, by name
@@ -74,9 +76,9 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
     page.wait_for_url(app_url + "/console/registration")
     assert page.evaluate("document.activeElement.id") == "username"  # autofocus: type straight away
 
-    first_password = create_at_desk(page, first)
+    first_password = create_at_desk(page, first, "Siobhán Ó Sé")
     box = page.get_by_test_id("temporary-password-box")
-    assert f"Account {first} is ready." in box.inner_text()
+    assert f"Account {first} for Siobhán Ó Sé is ready." in box.inner_text()
     # The form is reset for the next racer, the cursor back in the username, the country kept.
     assert page.input_value("#username") == "" and page.input_value("#email") == ""
     assert page.input_value("#country_code") == "Germany (DE)"
@@ -85,6 +87,7 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
 
     # A taken name is refused next to the field, nothing typed is lost.
     page.keyboard.type(first)
+    page.keyboard.press("Tab")
     page.keyboard.press("Tab")
     page.keyboard.type("again@example.test")
     page.keyboard.press("Enter")

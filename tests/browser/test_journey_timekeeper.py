@@ -103,3 +103,36 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     rows = list(csv.DictReader(io.StringIO(download.text())))
     assert [(r["Username"], r["Lap #"], r["Resets"], r["Valid"]) for r in rows] == [
         ("keys-racer", "1", "0", "true"), ("keys-racer", "2", "1", "false"), ("keys-racer", "3", "0", "false")]
+
+
+def test_timekeeper_types_picks_a_suggested_racer_and_readies_the_race(live_stack, app_url, page, browser_errors):
+    """The suggestions under the site's CSP (`script-src 'self'`, no eval): typing the start of a name lists the
+    racers, shown by the name they go by; picking one and "Ready race" readies that racer. `browser_errors` fails
+    this on any CSP violation or console error while typing, not only on page load."""
+    create_user(live_stack, "pick-op", "operator")
+    create_user(live_stack, "pick-admin", "admin")
+    admin, token = access_token(live_stack, "pick-admin"), access_token(live_stack, "pick-op")
+    for username, name in (("mk-longname", "Mary-Kate Longname"), ("mk-other", "Zoë.Müller"), ("yamada-t", "山田太郎")):
+        call(app_url, "POST", "/api/users", token=admin, expect=201, body={
+            "username": username, "email": f"{username}@example.test", "country_code": "JP", "display_name": name})
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "Pick fleet"}, expect=201)
+    event = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Pick Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-07-01", "country_code": "JP",
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
+
+    sign_in(page, app_url, "pick-op")
+    page.goto(f"{app_url}/console/timekeeper/{event['event_id']}/1")
+    field = page.locator("#racer_username")
+    field.click()
+    page.keyboard.type("mk-")
+    suggestions = page.locator("#racers-list option")
+    page.wait_for_function("() => document.querySelectorAll('#racers-list option').length === 2")
+    assert [suggestions.nth(i).get_attribute("value") for i in range(2)] == ["mk-longname", "mk-other"]
+    assert suggestions.nth(1).get_attribute("label") == "Zoë.Müller (mk-other)"
+    # Picking a suggestion puts its value in the field (what choosing from the datalist does).
+    field.fill(suggestions.nth(1).get_attribute("value"))
+    page.get_by_role("button", name="Ready race").click()
+    page.get_by_test_id("race-status").wait_for()
+    assert page.get_by_test_id("race-status").inner_text() == "Ready to start"
+    assert page.get_by_test_id("racer").inner_text() == "Zoë.Müller"
+    assert browser_errors.seen == []

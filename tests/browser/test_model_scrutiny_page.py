@@ -40,6 +40,8 @@ def test_my_models_shows_the_background_drive_without_a_reload(live_stack, app_u
 
     row = page.locator('[data-testid="model-row"][data-model-name="clean-laps"]')
     row.locator('[data-testid="model-status"]', has_text="Ready to race").wait_for(timeout=60_000)
+    # The upload line says it in the table's words (it said "uploaded: AVAILABLE").
+    page.get_by_test_id("upload-list").get_by_text("uploaded: Ready to race").wait_for()
     # queued -> driving -> its verdict, each swapped in by the box's own polling (on re:Invent 2018 unless other
     # tests of the session created coming events with other track types: the verdict may then be "failed")
     box = row.locator('[data-testid="model-scrutiny"][data-scrutineer-status="passed"], '
@@ -60,6 +62,10 @@ def test_my_models_shows_the_background_drive_without_a_reload(live_stack, app_u
     page.screenshot(path=str(SCREENSHOTS / "model-scrutiny-1920x1080.png"))
     page.set_viewport_size({"width": 390, "height": 844})
     box.scroll_into_view_if_needed()
+    # On a phone each model is a card: the scrutineering result is on screen, not behind a sideways scroll.
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= 390
+    cell = row.get_by_test_id("my-model-scrutiny").bounding_box()
+    assert cell is not None and cell["x"] >= 0 and cell["x"] + cell["width"] <= 390, cell
     page.screenshot(path=str(SCREENSHOTS / "model-scrutiny-390x844.png"))
 
 

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.browser
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 BIG_SCREEN = {"width": 1920, "height": 1080}
 PHONE = {"width": 390, "height": 844}
-RACERS = ("deck-ann", "deck-ben", "deck-cy", "deck-dee")
+RACERS = ("deck-ann", "deck-ben", "deck-cy", "deck-dee", "deck-eve")
 
 
 def _upload_model(url: str, token: str, filename: str, archive: bytes) -> dict:
@@ -77,6 +77,10 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
 
     page.set_viewport_size(BIG_SCREEN)
     sign_in(page, app_url, "deck-op")
+    # The Cars page, open on another tab all along: its model rows follow the queue's assignments live.
+    cars_page = page.context.new_page()
+    cars_page.goto(f"{app_url}/console/cars")
+    assert cars_page.get_by_test_id("models-car-b").get_by_test_id("assigned-models").inner_text() == "none assigned"
     page.goto(timekeeper)
     assert "Nobody in line" in page.get_by_test_id("queue-panel").inner_text()
 
@@ -91,6 +95,9 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
         page.locator(f"[data-testid=queue-panel] strong:text-is('{racer}')").wait_for()
     assert _on_deck(page) == ["deck-ann", "deck-ben", "deck-cy"]
     assert "deck-dee" in page.get_by_test_id("queue-later").inner_text()
+    # Each racer after the three on deck has their own place (a flex row once numbered every one "3.").
+    later = page.locator("[data-testid=later-row] .tk-later-pos").all_inner_texts()
+    assert later == ["4.", "5."]
     page.get_by_role("button", name="Move deck-cy up").click()
     page.wait_for_function("() => [...document.querySelectorAll('[data-testid=on-deck-row] .tk-deck-racer')]"
                            ".map(e => e.textContent).join() === 'deck-ann,deck-cy,deck-ben'")
@@ -117,6 +124,11 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
         "battery_pct": 88, "model": {"name": "deck-cy-fast", "md5": hashlib.md5(archives["deck-cy"]).hexdigest()}})
     page.wait_for_function("() => document.querySelector('[data-testid=preload]').dataset.state === 'loaded'")
     assert "loaded on car-b" in preload.inner_text()
+    # Without a reload the Cars tab shows what car-b was given and that it is the model the car has loaded.
+    cars_page.wait_for_function("() => document.querySelector('[data-testid=models-car-b] "
+                                "[data-testid=assigned-models]').textContent.includes('deck-cy-fast (loaded)')",
+                                timeout=20_000)
+    cars_page.close()
 
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "timekeeper-queue-1920x1080.png"))
@@ -128,3 +140,15 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
     assert small.evaluate("() => document.documentElement.scrollWidth") <= PHONE["width"]  # no sideways scrolling
     small.screenshot(path=str(ARTIFACTS / "timekeeper-queue-390x844.png"), full_page=True)
     phone.close()
+
+    # deck-ann's race is over; the timekeeper readies deck-dee, who is in line, through the Next race form instead
+    # of the queue: deck-dee leaves the line (the queue had kept them for a second race).
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.keyboard.press("e")
+    page.get_by_role("button", name="Submit race").click()
+    page.get_by_role("button", name="Ready race", exact=True).wait_for()
+    page.fill("#racer_username", "deck-dee")
+    page.get_by_role("button", name="Ready race", exact=True).click()
+    page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'deck-dee'")
+    page.wait_for_function("() => !document.querySelector('#tk-queue-list').textContent.includes('deck-dee')")
+    assert _on_deck(page) == ["deck-cy", "deck-ben", "deck-eve"]

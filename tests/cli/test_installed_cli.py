@@ -173,3 +173,26 @@ def test_build_vendors_the_shared_packages_into_a_copy(outside: Path, tmp_path: 
     functions.mkdir()
     out = ok(drem("build", "--functions-dir", str(functions), cwd=outside))
     assert "vendored drem_leaderboard" in out and (functions / "vendor" / "drem_leaderboard").is_dir()
+
+
+def test_a_command_finds_the_stack_by_its_state_dir_and_registers_a_real_name(live_stack, outside: Path) -> None:
+    """Issue 31: with `--state-dir` and no $DREM_API/$DREM_STATE_DIR, `drem users` said "cannot reach
+    http://127.0.0.1:8000" while the stack ran on another port."""
+    env = {"DREM_API": "", "DREM_STATE_DIR": "", "DREM_USERNAME": live_stack.admin_username,
+           "DREM_PASSWORD": live_stack.admin_password}
+    created = ok(drem("users", "create", "cli-yamada", "--email", "yamada@example.com", "--country", "JP",
+                      "--display-name", "山田太郎", "--state-dir", str(live_stack.state_dir), cwd=outside, env=env))
+    assert "Created racer cli-yamada for 山田太郎 (JP)." in created
+
+
+def test_car_run_says_it_started_and_where_it_reports(live_stack, as_admin, outside: Path, tmp_path: Path) -> None:
+    """Issue 31: `drem car run` printed nothing when it started."""
+    fleet = json.loads(ok(drem("fleets", "--json", "create", "cli-run-fleet", cwd=outside, env=as_admin)))
+    code = json.loads(ok(drem("cars", "--json", "activate-code", "cli-run-car", "--fleet", fleet["fleet_id"],
+                              "--kind", "car", cwd=outside, env=as_admin)))
+    config = tmp_path / "car-config"
+    ok(drem("car", "--config-dir", str(config), "activate", "--code", code["code"], "--api", live_stack.url,
+            "--hostname", "cli-run-car", "--kind", "car", cwd=outside))
+    ran = ok(drem("car", "--config-dir", str(config), "run", "--sim", "--seconds", "1", cwd=outside))
+    first = ran.splitlines()[0]
+    assert first.startswith("drem car run: cli-run-car (car ") and f"reporting to {live_stack.url}" in first, ran

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import secrets
 import stat
 from pathlib import Path
@@ -83,9 +84,10 @@ def source_event(live_stack) -> dict:
 
     racers = {}
     cognito = _cognito(live_stack.storage_url, live_stack.state_dir)
-    for name, colour, country in (("ada", "#FF0000", "GB"), ("linus", "#0000FF", "FI")):
+    for name, colour, country, shown in (("ada", "#FF0000", "GB", "Zoë.Müller"), ("linus", "#0000FF", "FI", "김민준")):
         username = f"{name}{suffix}"
-        admin.post("/api/users", {"username": username, "email": f"{username}@example.com", "country_code": country})
+        admin.post("/api/users", {"username": username, "email": f"{username}@example.com", "country_code": country,
+                                  "display_name": shown})
         admin.put(f"/api/users/{username}/profile", {"highlight_colour": colour})
         racers[name] = username
 
@@ -227,11 +229,21 @@ def test_round_trip_to_a_fresh_stack(live_stack, target_stack, source_event, tmp
              if i["sk"]["S"].startswith("AUDIT#")]
     assert sorted(e["action"] for e in trail) == ["import", "lap_edit"]
     imported = next(e for e in trail if e["action"] == "import")
-    assert imported["by"].startswith("drem import") and imported["after"]["written"]["races"] == 3
+    # Counted as the export counted them (2 races and the lap edit's audit entry, not "3 races").
+    assert imported["by"].startswith("drem import") and imported["after"]["written"]["races"] == 2
+    assert imported["after"]["written"]["audit_entries"] == 1
+    assert re.search(r"\b2 races, 1 audit entries\b", printed), printed
     assert set(report["sub_map"].values()).isdisjoint(set(report["sub_map"]) - set(report["sub_map"].values()))
 
-    # The public board reads the same on both stacks, and shows the same logo at the same address.
+    # The public board reads the same on both stacks (the racers' display names included), and shows the same logo
+    # at the same address; the avatar is the same picture although the account's sub changed.
     assert _boards(target_stack.config.app_url, eid) == _boards(live_stack.url, eid)
+    assert "Zoë.Müller" in json.dumps(_boards(target_stack.config.app_url, eid)["1"], ensure_ascii=False)
+    ada_name = source_event["racers"]["ada"]
+    assert requests.get(f"{target_stack.config.app_url}/api/profiles/{ada_name}", timeout=30).json()[
+        "display_name"] == "Zoë.Müller"
+    assert requests.get(f"{target_stack.config.app_url}/api/profiles/{ada_name}/avatar.svg", timeout=30).content == \
+        requests.get(f"{live_stack.url}/api/profiles/{ada_name}/avatar.svg", timeout=30).content
     version = source_event["logo_version"]
     assert f"/event/{eid}/logo?v={version}" in requests.get(f"{target_stack.config.app_url}/leaderboard/{eid}",
                                                             timeout=30).text

@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from chalicelib.domain.names import USERNAME_LENGTH_MESSAGE
 from tests.unit.conftest import PASSWORD, Browser
 from tests.unit.models_helpers import ModelsApi, archive_without_metadata, bearer, onnx_archive
 from tests.unit.racer_console_helpers import body, field_error, post, sign_in, signed_in, text
@@ -25,7 +26,7 @@ def test_sign_up_shows_each_refusal_next_to_its_field_and_keeps_what_was_typed(a
     reply = post(visitor, "/signup", {"username": "a", "email": "ann@example.test", "country_code": "SE",
                                       "password": "Fast-Lap-2026"})
     assert reply.status_code == 400
-    assert field_error(reply, "username") == "A username has 2 to 20 characters."
+    assert field_error(reply, "username") == USERNAME_LENGTH_MESSAGE
     assert 'value="ann@example.test"' in body(reply) and 'value="Sweden (SE)"' in body(reply)
 
     reply = post(visitor, "/signup", {"username": "ann", "email": "ann@example.test", "country_code": "",

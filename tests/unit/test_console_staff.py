@@ -5,7 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from markupsafe import escape
 
+from chalicelib.domain.names import USERNAME_CHARS_MESSAGE, USERNAME_LENGTH_MESSAGE
 from tests.unit.models_helpers import (
     ModelsApi,
     activate_device,
@@ -72,8 +74,11 @@ def test_desk_refusals_sit_next_to_their_field(app: Any, users: Any) -> None:
     bad = post(desk, "/console/registration", {"username": "lee", "email": "not-an-email", "country_code": "SE"})
     assert bad.status_code == 400 and field_error(bad, "email").startswith("Enter a valid email address")
     spaced = post(desk, "/console/registration", {"username": "a b", "email": "ab@example.test", "country_code": "SE"})
-    assert field_error(spaced, "username") == ("A username may contain only letters, digits, &#39;.&#39;, "
-                                               "&#39;_&#39; and &#39;-&#39;.")
+    assert field_error(spaced, "username") == str(escape(USERNAME_CHARS_MESSAGE))
+    # The desk's length limit is sign-up's: a name sign-up would refuse is refused here too, with its message.
+    long = post(desk, "/console/registration", {"username": "Mary-Kate_Longname_Racer", "email": "mk@example.test",
+                                               "country_code": "SE"})
+    assert long.status_code == 400 and field_error(long, "username") == USERNAME_LENGTH_MESSAGE
 
 
 def test_admin_searches_changes_a_role_and_disables_a_user(app: Any, users: Any, aws_clients: Any,

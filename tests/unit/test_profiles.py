@@ -6,7 +6,7 @@ from xml.etree import ElementTree
 import pytest
 
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE
-from chalicelib.views.avatars import identicon_cells, identicon_svg
+from chalicelib.views.avatars import DEFAULT_COLOUR, avatar_seed, identicon_cells, identicon_svg
 from tests.unit.users_helpers import call, error_message
 
 pytestmark = pytest.mark.unit
@@ -45,7 +45,7 @@ def test_public_profile_shows_only_public_fields(client, users, aws_clients, sta
     call(client, "PUT", "/api/me/profile", {"highlight_colour": "#0000FF"}, token=token)
     status, body = call(client, "GET", "/api/profiles/KEI")
     assert status == 200
-    assert body == {"username": "kei", "country_code": "JP", "highlight_colour": "#0000FF",
+    assert body == {"username": "kei", "display_name": "kei", "country_code": "JP", "highlight_colour": "#0000FF",
                     "avatar_url": "/api/profiles/kei/avatar.svg", "deleted": False}
     assert call(client, "GET", "/api/profiles/nobody")[0] == 404
 
@@ -68,16 +68,24 @@ def test_only_admins_edit_someone_elses_profile(client, users):
 
 def test_avatar_is_a_deterministic_svg_in_the_highlight_colour(client, users):
     token = users.access_token("kei", ("racer",))
-    sub = call(client, "PUT", "/api/me/profile", {"highlight_colour": "#7CFC00"}, token=token)[1]["sub"]
+    call(client, "PUT", "/api/me/profile", {"highlight_colour": "#7CFC00"}, token=token)
     response = client.http.get("/api/profiles/kei/avatar.svg")
     assert response.status_code == 200
     assert response.headers["Content-Type"] == "image/svg+xml"
     svg = response.body.decode()
-    assert svg == identicon_svg(sub, "#7CFC00", "kei") and 'fill="#7CFC00"' in svg
+    # Drawn from the sign-in name, not the sub: the same avatar after export/import gives the account a new sub.
+    assert svg == identicon_svg(avatar_seed("kei"), "#7CFC00", "kei") and 'fill="#7CFC00"' in svg
     assert client.http.get("/api/profiles/kei/avatar.svg").body.decode() == svg
 
     call(client, "PUT", "/api/me/profile", {"avatar": "none"}, token=token)
     assert client.http.get("/api/profiles/kei/avatar.svg").status_code == 404
+
+
+def test_a_racer_who_never_picked_a_colour_has_the_boards_blue_avatar(client, users):
+    token = users.access_token("ida", ("racer",))
+    call(client, "GET", "/api/me/profile", token=token)  # the profile every sign-up and registration makes
+    svg = client.http.get("/api/profiles/ida/avatar.svg").body.decode()
+    assert f'fill="{DEFAULT_COLOUR}"' in svg and DEFAULT_COLOUR == "#0000FF"  # the stripe's blue, not grey
 
 
 def test_avatar_escapes_every_value_it_embeds():

@@ -101,7 +101,7 @@ def test_staff_username_rule_and_country_are_checked(client, users):
     admin = users.access_token("boss", ("admin",))
     status, body = _register(client, admin, "space name")
     assert status == 400 and body["error"]["field"] == "username"
-    assert "letters, digits, '.', '_' and '-'" in error_message(body)
+    assert "letters a–z and A–Z, digits, '.', '_' and '-'" in error_message(body)
     status, body = _register(client, admin, "ok-name", country_code="XX")
     assert status == 400 and body["error"]["field"] == "country_code"
 

@@ -12,6 +12,7 @@ DEFAULT_LANGUAGE = "en"
 
 CATALOGUE: dict[str, dict[str, str]] = {
     "en": {
+        "all_tracks": "All tracks",
         "leaderboard": "Leaderboard",
         "position": "Pos",
         "racer": "Racer",
@@ -55,6 +56,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "in_the_lead": "Leader",
     },
     "de": {
+        "all_tracks": "Alle Strecken",
         "leaderboard": "Bestenliste",
         "position": "Pos",
         "racer": "Fahrer",
@@ -98,6 +100,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "in_the_lead": "Führend",
     },
     "es": {
+        "all_tracks": "Todas las pistas",
         "leaderboard": "Clasificación",
         "position": "Pos",
         "racer": "Piloto",
@@ -141,6 +144,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "in_the_lead": "Líder",
     },
     "fr": {
+        "all_tracks": "Toutes les pistes",
         "leaderboard": "Classement",
         "position": "Pos",
         "racer": "Pilote",
@@ -184,6 +188,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "in_the_lead": "En tête",
     },
     "ja": {
+        "all_tracks": "全トラック",
         "leaderboard": "リーダーボード",
         "position": "順位",
         "racer": "レーサー",
@@ -227,6 +232,7 @@ CATALOGUE: dict[str, dict[str, str]] = {
         "in_the_lead": "トップ",
     },
     "sv": {
+        "all_tracks": "Alla banor",
         "leaderboard": "Topplista",
         "position": "Plac",
         "racer": "Förare",

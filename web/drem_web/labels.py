@@ -32,6 +32,10 @@ LABELS: dict[str, str] = {
     # model statuses
     "UPLOADED": "Checking…", "AVAILABLE": "Ready to race", "NOT_VALID": "Not valid", "QUARANTINED": "Quarantined",
     "DELETED": "Deleted",
+    # model sensors and training algorithms (the console's model_metadata.json values)
+    "FRONT_FACING_CAMERA": "Front camera", "STEREO_CAMERAS": "Stereo cameras", "LIDAR": "LiDAR",
+    "SECTOR_LIDAR": "Sector LiDAR", "DISCRETIZED_SECTOR_LIDAR": "Discretised sector LiDAR",
+    "clipped_ppo": "PPO", "sac": "SAC", "behaviour_cloning": "Behaviour cloning",
 }
 
 

@@ -162,6 +162,13 @@ class Event(BaseModel):
                 return candidate
         raise NotFound(f"Event {self.event_id} has no track {track_id!r}.", field="track_id")
 
+    def track_name(self, track_id: str) -> str:
+        """What staff and viewers call a track: its leaderboard title, else "Track 2"."""
+        if track_id == COMBINED_TRACK_ID:
+            return "All tracks"
+        found = next((t for t in self.tracks if t.track_id == track_id), None)
+        return (found.leaderboard_title if found else "") or f"Track {track_id}"
+
 
 class EventRepository(Protocol):
     def get(self, event_id: str) -> Event | None: ...

@@ -130,6 +130,16 @@ class OnDeck:
         self.preload_head(principal, event_id, track_id)
         return self._races.get_race(principal, event_id, race_id)
 
+    def started_elsewhere(self, principal: User, event_id: str, track_id: str, racer_username: str) -> RacerQueue:
+        """A race readied from the "Next race" form for a racer who was in line: they are off the queue, as if it
+        had been started from there, and the next racer's model goes to a free car."""
+        queue = self._queue.queue(event_id, track_id)
+        wanted = racer_username.casefold()
+        entry = next((e for e in queue.entries if e.racer_username.casefold() == wanted), None)
+        if entry is not None:
+            self._queue.remove(event_id, track_id, entry.entry_id, missing_ok=True)
+        return self.preload_head(principal, event_id, track_id)
+
     def _give(self, principal: User, entry: QueueEntry, current: Assignment) -> None:
         others = [model_id for model_id in _model_ids(current) if model_id != entry.model_id]
         try:

@@ -13,8 +13,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from chalicelib.auth.principals import Role, User
 from chalicelib.domain.countries import normalise_country_code
 from chalicelib.domain.errors import InvalidInput, NotFound
+from chalicelib.domain.names import check_display_name
 from chalicelib.domain.ownership import require_owner_or_role
-from chalicelib.views.avatars import identicon_svg
+from chalicelib.views.avatars import avatar_seed, identicon_svg
 from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.
@@ -40,11 +41,17 @@ class Profile(BaseModel):
     model_config = ConfigDict(frozen=True)
     sub: str
     username: str | None = None
+    # The racer's name as they write it (any script, NFC); None: the sign-in name is shown.
+    display_name: str | None = None
     country_code: str | None = None
     highlight_colour: str | None = None
     avatar: AvatarChoice = "identicon"
     deleted: bool = False
     updated_at: str | None = None
+
+    @property
+    def shown_name(self) -> str:
+        return self.display_name or self.username or anonymised_name(self.sub)
 
 
 class ProfileUpdate(BaseModel):
@@ -53,6 +60,12 @@ class ProfileUpdate(BaseModel):
     avatar: AvatarChoice | None = None
     # Shown next to the racer's name on boards and overlays; the account's sign-up country stays as it was.
     country_code: str | None = Field(default=None, max_length=64)
+    display_name: str | None = Field(default=None, max_length=200)
+
+    @field_validator("display_name")
+    @classmethod
+    def _display_name(cls, value: str | None) -> str | None:
+        return None if value is None else check_display_name(value)
 
     @field_validator("country_code")
     @classmethod
@@ -68,6 +81,8 @@ class ProfileUpdate(BaseModel):
 class PublicProfile(BaseModel):
     """The only profile fields anyone may see (leaderboards, overlays, GET /api/profiles/{username})."""
     username: str
+    # What boards, overlays, PDFs and statistics print: the racer's own spelling, else the sign-in name.
+    display_name: str = ""
     country_code: str | None = None
     highlight_colour: str | None = None
     avatar_url: str | None = None
@@ -76,9 +91,10 @@ class PublicProfile(BaseModel):
 
 def public_view(profile: Profile) -> PublicProfile:
     if profile.deleted or not profile.username:
-        return PublicProfile(username=anonymised_name(profile.sub), deleted=profile.deleted)
+        name = anonymised_name(profile.sub)
+        return PublicProfile(username=name, display_name=name, deleted=profile.deleted)
     avatar = f"/api/profiles/{profile.username}/avatar.svg" if profile.avatar == "identicon" else None
-    return PublicProfile(username=profile.username, country_code=profile.country_code,
+    return PublicProfile(username=profile.username, display_name=profile.shown_name, country_code=profile.country_code,
                          highlight_colour=profile.highlight_colour, avatar_url=avatar)
 
 
@@ -100,11 +116,18 @@ class ProfileService:
         self._store = store
         self._accounts = accounts
 
-    def create_for(self, sub: str, username: str, country_code: str | None) -> Profile:
-        profile = Profile(sub=sub, username=username, country_code=country_code, updated_at=_now())
+    def create_for(self, sub: str, username: str, country_code: str | None, display_name: str = "") -> Profile:
+        profile = Profile(sub=sub, username=username, display_name=display_name or None, country_code=country_code,
+                          updated_at=_now())
         self._store.put(profile)
         self._store.link_username(username, sub)
         return profile
+
+    def account_name(self, username: str) -> str | None:
+        """The sign-in name as the account spells it, for a name typed in any case; None when there is none."""
+        sub = self._store.sub_for_username(username)
+        profile = self._store.get(sub) if sub else None
+        return None if profile is None or profile.deleted else profile.username
 
     def own(self, caller: User) -> Profile:
         profile = self._store.get(caller.sub)
@@ -149,7 +172,8 @@ class ProfileService:
         profile = self._by_username(username)
         if profile.avatar != "identicon":
             raise NotFound(f"{profile.username} has no avatar.", field="username")
-        return identicon_svg(profile.sub, profile.highlight_colour, profile.username or "")
+        return identicon_svg(avatar_seed(profile.username or profile.sub), profile.highlight_colour,
+                             profile.shown_name)
 
     def tombstone(self, sub: str, username: str) -> None:
         self._store.put(Profile(sub=sub, deleted=True, avatar="none", updated_at=_now()))
@@ -186,5 +210,6 @@ class ProfilesForBoards:
         public = self._profiles.public_by_sub(sub)
         if public is None:
             return RacerProfile(username=fallback_username)
-        return RacerProfile(username=public.username, country_code=public.country_code,
+        # Boards key and show racers by the shown name; the avatar keeps the account's address.
+        return RacerProfile(username=public.display_name or public.username, country_code=public.country_code,
                             highlight_colour=public.highlight_colour, avatar_url=public.avatar_url)

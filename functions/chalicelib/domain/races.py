@@ -374,7 +374,13 @@ class RaceService:
             raise InvalidInput("Export laps.csv or summary.csv.", field="file_name")
         event = self.event(event_id)
         races = [r.race for r in self._races.list_event(event_id)]
-        return export_csv(event.name, races, kinds[file_name], self.clock_ms())
+        # The CSVs name racers as the boards do: their display name (a deleted racer anonymised).
+        shown = {race.racer.sub: self._profiles.racer_profile(race.racer.sub, race.racer.username).username
+                 for race in races}
+        named = [race.model_copy(update={"racer": Racer(sub=race.racer.sub,
+                                                        username=shown[race.racer.sub] or race.racer.username)})
+                 for race in races]
+        return export_csv(event.name, named, kinds[file_name], self.clock_ms())
 
     # --- publishing --------------------------------------------------------------------------------------------
 
@@ -386,14 +392,24 @@ class RaceService:
         the request: the change is acknowledged and the intent makes sure the board catches up."""
         try:
             board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race)
-            name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
-            self._boards.publish_overlay(race, now_ms, board, name)
+            if self._overlay_may_show(race):
+                name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
+                self._boards.publish_overlay(race, now_ms, board, name)
             if race.status in TERMINAL_STATUSES:  # only submitted races count: no stats work per lap of a live race
                 self._refresh_stats(event.event_id)
             self._finish(PublishIntent.of(race))
             self.complete_pending_publishes(STALE_INTENT_MS)
         except DremError as exc:
             _board_behind(race, exc)
+
+    def _overlay_may_show(self, race: Race) -> bool:
+        """The overlay (and the commentator) follow the track's current race: the live one, else the one it shows
+        now. A lap edit in race admin of an older race changes its board row but must not make it "current"."""
+        live = self._races.live_race_id(race.event_id, race.track_id)
+        if live is not None:
+            return live == race.race_id
+        shown = json.loads(self._boards.overlay(race.event_id, race.track_id).body).get("race_id")
+        return shown in (None, race.race_id)
 
     def complete_pending_publishes(self, older_than_ms: int = 0) -> int:
         """Rebuild every board row whose publish intent is still stored (a crash or outage came between a race write

@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict
 
 from chalicelib.domain.events import Event
 from chalicelib.domain.profiles import PublicProfile
-from chalicelib.views.avatars import NEUTRAL_COLOUR, identicon_cells
+from chalicelib.views.avatars import DEFAULT_COLOUR, NEUTRAL_COLOUR, avatar_seed, identicon_cells
 from chalicelib.views.public_views import gap_time, lap_time, safe_colour
 from drem_leaderboard.models import Race, RaceConfig, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, RacerProfile, rank
@@ -107,13 +107,18 @@ def _board(board_id: str, title: str, ranking: str, summaries: list[RaceSummary]
         avatar = profile is not None and profile.avatar_url is not None and not profile.deleted
         entries.append(ResultEntry(
             position=entry.position, username=entry.username, country_code=(entry.country_code or "").upper(),
-            colour=safe_colour(profile.highlight_colour if profile else None, NEUTRAL_COLOUR.lower()),
-            avatar_cells=tuple(identicon_cells(sub)) if avatar else None,
+            # The board's colours: a racer who never picked one has the default stripe (grey only for the deleted).
+            colour=safe_colour(profile.highlight_colour if profile else None, _unpicked_colour(profile)),
+            avatar_cells=tuple(identicon_cells(avatar_seed(profile.username))) if avatar and profile else None,
             time=lap_time(entry.time_ms), gap=gap_time(entry.gap_to_leader_ms),
             best_lap=lap_time(entry.fastest_lap_ms), valid_laps=entry.laps, is_dnf=entry.is_dnf))
     return ResultsBoard(track_id=board_id, title=title, ranking=ranking, entries=tuple(entries))
 
 
+def _unpicked_colour(profile: PublicProfile | None) -> str:
+    return (NEUTRAL_COLOUR if profile is None or profile.deleted else DEFAULT_COLOUR).lower()
+
+
 def _racer_profile(profile: PublicProfile) -> RacerProfile:
-    return RacerProfile(username=profile.username, country_code=profile.country_code,
+    return RacerProfile(username=profile.display_name or profile.username, country_code=profile.country_code,
                         highlight_colour=profile.highlight_colour)

@@ -17,10 +17,11 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from datetime import date
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from chalicelib.domain.countries import country_name
 from chalicelib.domain.events import Event, EventType, TrackDirection
 from chalicelib.domain.races import RaceRecord
 from chalicelib.views.public_views import lap_time
@@ -40,6 +41,12 @@ class StatsFilter(BaseModel):
     date_to: date | None = Field(default=None, alias="to")
 
 
+class ShownRacer(NamedTuple):
+    """How a lap's racer is shown: their display name (a deleted racer's tombstone name) and their own country."""
+    name: str
+    country_code: str | None = None
+
+
 class FastLap(BaseModel):
     model_config = ConfigDict(frozen=True)
     position: int
@@ -48,7 +55,9 @@ class FastLap(BaseModel):
     time_ms: int
     event_name: str
     event_date: date
+    # The racer's country (their profile's), not the event's.
     country_code: str
+    country: str
     direction: str
 
 
@@ -159,7 +168,7 @@ def _event_matches(event: Event, wanted: StatsFilter) -> bool:
 
 
 def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], wanted: StatsFilter,
-            display_name: Callable[[str, str], str]) -> Stats:
+            display_name: Callable[[str, str], ShownRacer]) -> Stats:
     """`events_and_races` holds the visible events only, each with its submitted races' digests;
     `display_name(sub, username)` is what a lap is shown under (a deleted racer's tombstone name)."""
     countries = tuple(sorted({e.country_code for e, _ in events_and_races}))
@@ -202,8 +211,8 @@ def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], want
         track_types=tuple(per_type), fastest=_top(candidates)(display_name), countries=countries)
 
 
-def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callable[[Callable[[str, str], str]],
-                                                                                   tuple[FastLap, ...]]:
+def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callable[
+        [Callable[[str, str], ShownRacer]], tuple[FastLap, ...]]:
     """The TOP_LAPS fastest laps, one per racer (their best), named only once chosen (a profile read each)."""
     best: list[tuple[int, str, str, Event, str, str]] = []
     seen: set[str] = set()
@@ -215,10 +224,14 @@ def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callabl
         if len(best) == TOP_LAPS:
             break
 
-    def named(display_name: Callable[[str, str], str]) -> tuple[FastLap, ...]:
-        return tuple(FastLap(position=i, username=display_name(sub, username), time=lap_time(ms), time_ms=ms,
-                             event_name=event.name, event_date=event.date, country_code=event.country_code,
-                             direction=DIRECTION_LABELS[direction])
-                     for i, (ms, sub, username, event, _type, direction) in enumerate(best, start=1))
+    def named(display_name: Callable[[str, str], ShownRacer]) -> tuple[FastLap, ...]:
+        laps = []
+        for i, (ms, sub, username, event, _type, direction) in enumerate(best, start=1):
+            racer = display_name(sub, username)
+            code = racer.country_code or ""
+            laps.append(FastLap(position=i, username=racer.name, time=lap_time(ms), time_ms=ms, event_name=event.name,
+                                event_date=event.date, country_code=code, country=country_name(code),
+                                direction=DIRECTION_LABELS[direction]))
+        return tuple(laps)
 
     return named

@@ -13,39 +13,16 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 
 from chalicelib.auth.principals import USER_ROLES, Role, User
 from chalicelib.domain.countries import normalise_country_code
-from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput
+from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
 from chalicelib.domain.identity import password_policy_text
+from chalicelib.domain.names import check_display_name, check_sign_in_name
 from drem_infra import resources
 
-# One character set for the registration desk and self sign-up: a racer the desk registered as "anna-b" could
-# otherwise never have signed up under that name herself (and the other way round for "anna.b").
-_USERNAME_CHARS = re.compile(r"^[a-zA-Z0-9._-]+$")
-_CHARS_MESSAGE = "A username may contain only letters, digits, '.', '_' and '-'."
 # Deliberately simple: the directory sends a code to it, which is the real check.
 _EMAIL = re.compile(r"^[^@\s<>\"']+@[^@\s<>\"']+\.[^@\s<>\"']+$")
 MAX_PAGE = 60
 # Cognito's status of a self sign-up whose emailed code has not been entered yet.
 UNCONFIRMED = "UNCONFIRMED"
-
-
-def check_sign_up_username(username: str) -> str:
-    """DREM's self sign-up rule, one message per broken rule."""
-    if not 2 <= len(username) <= 20:
-        raise InvalidInput("A username has 2 to 20 characters.", field="username")
-    if not _USERNAME_CHARS.match(username):
-        raise InvalidInput(_CHARS_MESSAGE, field="username")
-    if username[0] in "._-" or username[-1] in "._-":
-        raise InvalidInput("A username cannot start or end with '.', '_' or '-'.", field="username")
-    if re.search(r"[._-]{2}", username):
-        raise InvalidInput("A username cannot have two of '.', '_' or '-' in a row.", field="username")
-    return username
-
-
-def check_staff_username(username: str) -> str:
-    """The registration desk's rule: the characters self sign-up accepts, any length Cognito takes."""
-    if not 1 <= len(username) <= 128 or not _USERNAME_CHARS.match(username):
-        raise InvalidInput(_CHARS_MESSAGE, field="username")
-    return username
 
 
 def check_email(email: str) -> str:
@@ -78,11 +55,18 @@ class SignUpForm(BaseModel):
     email: EmailAddress
     country_code: CountryCode
     password: str = Field(max_length=256)
+    # The name boards and certificates show, in any script; empty: the sign-in name.
+    display_name: str = Field(default="", max_length=200)
 
     @field_validator("username")
     @classmethod
     def _username(cls, value: str) -> str:
-        return check_sign_up_username(value.strip())
+        return check_sign_in_name(value.strip())
+
+    @field_validator("display_name")
+    @classmethod
+    def _display_name(cls, value: str) -> str:
+        return check_display_name(value) if value.strip() else ""
 
     @field_validator("password")
     @classmethod
@@ -101,11 +85,17 @@ class StaffRegistrationForm(BaseModel):
     username: str = Field(max_length=128)
     email: EmailAddress
     country_code: CountryCode
+    display_name: str = Field(default="", max_length=200)
 
     @field_validator("username")
     @classmethod
     def _username(cls, value: str) -> str:
-        return check_staff_username(value.strip())
+        return check_sign_in_name(value.strip())
+
+    @field_validator("display_name")
+    @classmethod
+    def _display_name(cls, value: str) -> str:
+        return check_display_name(value) if value.strip() else ""
 
 
 class RoleChange(BaseModel):
@@ -154,6 +144,7 @@ class RegisteredUser(BaseModel):
     sub: str
     email: str
     country_code: str
+    display_name: str = ""
     role: Role = Role.RACER
     # Shown once: drem does not store it and Cognito will not return it again.
     temporary_password: str
@@ -179,7 +170,8 @@ class UserDirectory(Protocol):
 
 class ProfileKeeper(Protocol):
     """What account changes need from profiles (satisfied by `chalicelib.domain.profiles.ProfileService`)."""
-    def create_for(self, sub: str, username: str, country_code: str | None) -> object: ...
+    def create_for(self, sub: str, username: str, country_code: str | None, display_name: str = "") -> object: ...
+    def account_name(self, username: str) -> str | None: ...
     def tombstone(self, sub: str, username: str) -> None: ...
 
 
@@ -267,6 +259,7 @@ class UserService:
     # app's start and every REGISTRATION_REPAIR_S after, in drem_local.appserver).
 
     def sign_up(self, form: SignUpForm) -> SignUpResult:
+        self._not_taken_in_another_case(form.username)
         resumed = False
         try:
             sub = self._directory.sign_up(form.username, form.password, form.email, form.country_code)
@@ -278,7 +271,7 @@ class UserService:
             if self._directory.groups_of(existing.username) and not self._confirm_sign_ups:
                 raise
             username, sub, resumed = existing.username, existing.sub, True
-        self._finish(username, sub, form.country_code)
+        self._finish(username, sub, form.country_code, form.display_name)
         started = "This sign-up was already started. " if resumed else ""
         if self._confirm_sign_ups:
             self._directory.confirm_without_code(username)
@@ -295,6 +288,7 @@ class UserService:
         """Create the account, profile and racer group. Registering the same name and email again while the racer
         has never signed in finishes whatever is missing and shows a new temporary password (the answer of the
         first attempt may never have reached the desk)."""
+        self._not_taken_in_another_case(form.username)
         password = resources.USER_POOL.password_policy.random_password()
         resumed = False
         try:
@@ -303,9 +297,10 @@ class UserService:
             existing = self._resumable(form.username, form.email, status="FORCE_CHANGE_PASSWORD")
             self._directory.reset_temporary_password(existing.username, password)
             sub, resumed = existing.sub, True
-        self._finish(form.username, sub, form.country_code)
+        self._finish(form.username, sub, form.country_code, form.display_name)
         return RegisteredUser(username=form.username, sub=sub, email=form.email, country_code=form.country_code,
-                              temporary_password=password, resumed=resumed)
+                              display_name=form.display_name or form.username, temporary_password=password,
+                              resumed=resumed)
 
     def finish_interrupted_registrations(self, *, older_than_s: float = 0.0, now: datetime | None = None) -> list[str]:
         """Accounts without a role group were cut off mid-registration: give them their profile and the racer
@@ -337,8 +332,29 @@ class UserService:
             raise Conflict(f"The user name '{username}' is taken.", field="username")
         return existing
 
-    def _finish(self, username: str, sub: str, country_code: str | None) -> None:
-        self._profiles.create_for(sub, username, country_code)
+    def account_name(self, username: str) -> str | None:
+        """The account's own spelling of a sign-in name typed in any case (Cognito's pool is case-insensitive; the
+        local one is not): the profiles' case-folded index, else, for an account made outside drem without a
+        profile yet (the first admin), its lower-case spelling in the directory."""
+        owner = self._profiles.account_name(username)
+        if owner is None and username != username.lower():
+            owner = self._existing_name(username.lower())
+        return owner
+
+    def _not_taken_in_another_case(self, username: str) -> None:
+        """'ADMIN' beside 'admin' would be two people nobody can tell apart at the desk."""
+        owner = self.account_name(username)
+        if owner is not None and owner != username:
+            raise Conflict(f"The user name '{username}' is taken.", field="username")
+
+    def _existing_name(self, username: str) -> str | None:
+        try:
+            return self._directory.get_user(username).username
+        except NotFound:
+            return None
+
+    def _finish(self, username: str, sub: str, country_code: str | None, display_name: str = "") -> None:
+        self._profiles.create_for(sub, username, country_code, display_name)
         if not self._directory.groups_of(username):  # a role given meanwhile (say, operator) is kept
             self._directory.set_only_group(username, Role.RACER.value)
 

@@ -1,12 +1,14 @@
 """The fonts every drem PDF embeds, so a racer's name prints in whatever script they wrote it.
 
-Noto Sans (Latin, Greek, Cyrillic) is the main face; Noto Sans Arabic and Droid Sans Fallback (CJK) are fallbacks
-fpdf2 switches to per glyph. Text is shaped with HarfBuzz (uharfbuzz), which joins Arabic letters and orders
+Noto Sans (Latin, Greek, Cyrillic) is the main face; Noto Sans Arabic, Droid Sans Fallback (Chinese, Japanese) and
+Nanum Gothic (Korean Hangul, which Droid Sans Fallback lacks: 김민준 printed blank) are fallbacks fpdf2 switches to per
+glyph. Text is shaped with HarfBuzz (uharfbuzz), which joins Arabic letters and orders
 right-to-left runs. Shaping costs about 5 ms a line, so it is switched on only for the texts that need it (see
 `needs_shaping`); Latin and CJK print the same without it. The fallbacks are large (the CJK face is 4 MB), so they are added only when the document's text
 has a character Noto Sans lacks.
 
-The files come from Debian packages installed at setup (`make install`: fonts-noto-core, fonts-droid-fallback) and,
+The files come from Debian packages installed at setup (`make install`: fonts-noto-core, fonts-droid-fallback,
+fonts-nanum) and,
 in the Lambda bundle, from the `drem_fonts/` folder `drem build` copies them to. Nothing is committed to the repo.
 """
 from __future__ import annotations
@@ -28,12 +30,15 @@ FONT_FILES = {
     ("noto-arabic", ""): "NotoSansArabic-Regular.ttf",
     ("noto-arabic", "B"): "NotoSansArabic-Bold.ttf",
     ("droid-cjk", ""): "DroidSansFallbackFull.ttf",
+    ("nanum-kr", ""): "NanumGothic.ttf",
 }
-FALLBACKS = ("noto-arabic", "droid-cjk")
+# In this order: a Chinese or Japanese character takes Droid's glyph even though Nanum has Hanja too.
+FALLBACKS = ("noto-arabic", "droid-cjk", "nanum-kr")
 # Lambda bundle (vendor/ lands at the bundle root), a local `drem build`, then the Debian packages.
 _BUNDLE_ROOT = Path(__file__).resolve().parents[2]
 SEARCH_DIRS = (_BUNDLE_ROOT / "drem_fonts", _BUNDLE_ROOT / "vendor" / "drem_fonts",
-               Path("/usr/share/fonts/truetype/noto"), Path("/usr/share/fonts/truetype/droid"))
+               Path("/usr/share/fonts/truetype/noto"), Path("/usr/share/fonts/truetype/droid"),
+               Path("/usr/share/fonts/truetype/nanum"))
 
 
 def search_dirs() -> tuple[Path, ...]:
@@ -48,7 +53,7 @@ def font_path(file_name: str) -> Path:
         if candidate.is_file():
             return candidate
     raise ServiceUnavailable(f"The font {file_name} is not installed; run `make install` (Debian packages "
-                       "fonts-noto-core and fonts-droid-fallback).")
+                       "fonts-noto-core, fonts-droid-fallback and fonts-nanum).")
 
 
 @lru_cache(maxsize=1)

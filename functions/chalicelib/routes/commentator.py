@@ -48,7 +48,8 @@ def commentator_page(principal: User, event_id: str, query: CommentatorQuery) ->
     event = event_or_404(event_id)
     event.track(query.track)
     _token, context = commentator_live(event_id, query)
-    return render.page("commentator", title=event.name, track=query.track, tracks=[t.track_id for t in event.tracks],
+    tracks = [(t.track_id, event.track_name(t.track_id or "")) for t in event.tracks]
+    return render.page("commentator", title=event.name, track=query.track, tracks=tracks,
                        lang=i18n.resolve_language(query.lang), **context())
 
 

@@ -128,10 +128,13 @@ def refresh_token(principal: Principal, body: RefreshRequest) -> Response:
 
 def _sign_in(credentials: SignInForm) -> Tokens | NewPasswordChallenge:
     request = bp.current_request
+    # Sign-in names are case-insensitive: "ADMIN" signs in as "admin" (Cognito's pool does this itself; the
+    # local one is case-sensitive, so the account's own spelling is looked up first).
+    username = services.user_service().account_name(credentials.username) or credentials.username
     known = known_devices.device_id(cookies.request_cookies(request.headers).get(known_devices.DEVICE_COOKIE),
-                                    credentials.username)
-    return guarded_sign_in(lambda: services.identity_provider().sign_in(credentials.username, credentials.password),
-                           credentials.username, client_address(request), known_device=known)
+                                    username)
+    return guarded_sign_in(lambda: services.identity_provider().sign_in(username, credentials.password),
+                           username, client_address(request), known_device=known)
 
 
 def _device_cookie(username: str, secure: bool) -> str:

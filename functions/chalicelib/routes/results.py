@@ -12,6 +12,7 @@ from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.errors import NotFound
 from chalicelib.domain.results import EventResults, event_results
+from chalicelib.formats.race_export import slug
 from chalicelib.formats.results_pdf import render_document
 
 bp = Blueprint(__name__)
@@ -37,8 +38,10 @@ def load_results(event_id: str) -> EventResults:
        summary="The event's race summary, podium sheet or certificates as a PDF (summary.pdf, podium.pdf, "
                "certificates.pdf); ?track= for one board")
 def results_pdf(principal: User, event_id: str, file_name: str, query: ResultsQuery) -> Response:
-    body = render_document(load_results(event_id), file_name, query.track or None)
+    results = load_results(event_id)
+    body = render_document(results, file_name, query.track or None)
     suffix = f"-track-{query.track}" if query.track else ""
+    # Named like the CSV exports (the event's name, not its id), so one event's files sort together.
     return Response(body=body, status_code=200, headers={
         "Content-Type": "application/pdf", "Cache-Control": "no-store",
-        "Content-Disposition": f'attachment; filename="{event_id}{suffix}-{file_name}"'})
+        "Content-Disposition": f'attachment; filename="{slug(results.event_name)}{suffix}-{file_name}"'})

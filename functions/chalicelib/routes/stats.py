@@ -9,7 +9,7 @@ from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
 from chalicelib.auth.principals import Principal
-from chalicelib.domain.stats import StatsFilter, compute, visible_events
+from chalicelib.domain.stats import ShownRacer, StatsFilter, compute, visible_events
 from chalicelib.views.stats_view import stats_page
 from drem_web import render
 
@@ -24,8 +24,10 @@ def stats(principal: Principal, query: StatsFilter) -> Response:
     data = services.stats_digests().for_events(visible_events(services.event_store().list(), staff=staff))
     profiles = services.public_profiles()
 
-    def display_name(sub: str, username: str) -> str:
+    def display_name(sub: str, username: str) -> ShownRacer:
         public = profiles.public_by_sub(sub)
-        return public.username if public else username
+        if public is None:
+            return ShownRacer(username)
+        return ShownRacer(public.display_name or public.username, public.country_code)
 
     return render.page("stats", view=stats_page(compute(data, query, display_name), query, staff=staff))

@@ -9,7 +9,7 @@ from chalicelib.domain.profiles import Profile
 from chalicelib.storage.aws_errors import batch_items, call
 
 _SERVICE = "The profile store"
-_FIELDS = ("username", "country_code", "highlight_colour", "avatar", "updated_at")
+_FIELDS = ("username", "display_name", "country_code", "highlight_colour", "avatar", "updated_at")
 
 
 def _profile(sub: str, item: dict[str, Any]) -> Profile:

@@ -1,4 +1,6 @@
-"""Deterministic SVG identicons: a mirrored 5×5 grid drawn from a hash of the user's sub, in their highlight colour.
+"""Deterministic SVG identicons: a mirrored 5×5 grid drawn from a hash of the racer's sign-in name (`avatar_seed`:
+the same after `drem export`/`drem import`, which give the account a new sub), in their highlight colour, or the
+board's default colour for a racer who never picked one (so the avatar matches their row's stripe).
 
 Every value placed in the SVG is XML-escaped, even ones drem validated, because the SVG is served from our origin.
 """
@@ -7,10 +9,19 @@ from __future__ import annotations
 import hashlib
 from xml.sax.saxutils import escape
 
+from drem_leaderboard.ranking import DEFAULT_HIGHLIGHT_COLOUR
+
 _GRID = 5
 _CELL = 10
 _MARGIN = 5
 NEUTRAL_COLOUR = "#9E9E9E"
+# The board's stripe colour for a racer without one.
+DEFAULT_COLOUR = DEFAULT_HIGHLIGHT_COLOUR
+
+
+def avatar_seed(username: str) -> str:
+    """What a racer's identicon is drawn from: their sign-in name, case-folded (unique in any case)."""
+    return f"racer:{username.casefold()}"
 
 
 def identicon_cells(seed: str) -> list[tuple[int, int]]:
@@ -28,7 +39,7 @@ def identicon_cells(seed: str) -> list[tuple[int, int]]:
 
 def identicon_svg(seed: str, colour: str | None, title: str) -> str:
     size = _GRID * _CELL + 2 * _MARGIN
-    fill = _attribute(colour or NEUTRAL_COLOUR)
+    fill = _attribute(colour or DEFAULT_COLOUR)
     rects = "".join(
         f'<rect x="{_MARGIN + column * _CELL}" y="{_MARGIN + row * _CELL}" width="{_CELL}" height="{_CELL}"/>'
         for column, row in identicon_cells(seed))

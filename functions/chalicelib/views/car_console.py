@@ -80,12 +80,19 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
     loaded_by_progress = ""
     if view.kind is DeviceKind.CAR:
         assignment = assignments.for_staff(view.device_id)
+        running = telemetry.model if telemetry else None
         for model in assignment.models:
             progress = assignment.progress_of(model.model_id)
             state = progress.status.value if progress else "assigned"
             if progress and progress.status is CarModelStatus.LOADED:
-                loaded_by_progress = model.name
+                loaded_by_progress = loaded_by_progress or model.name
             said = f": {progress.reason}" if progress and progress.reason else ""  # why it failed, or was reloaded
+            # A car holds several models but drives one: "loaded" is the one its heartbeat names, the others it
+            # reported loaded are only "on the car".
+            if running is not None and model.archive_md5 and running.md5 == model.archive_md5:
+                state = "loaded"
+            elif running is not None and state == "loaded":
+                state = "on the car"
             assigned.append(AssignedLine(model_id=model.model_id,
                                          text=f"{model.owner_username} · {model.name} ({state}{said})"))
     commands = devices.device_commands(view.device_id)

@@ -7,6 +7,7 @@ from urllib.parse import quote, urlencode
 
 from pydantic import BaseModel, ConfigDict
 
+from chalicelib.domain.countries import country_name
 from chalicelib.domain.events import COMBINED_TRACK_ID, Event
 
 DIRECTIONS = {"counter_clockwise": "counter-clockwise", "clockwise": "clockwise"}
@@ -26,6 +27,7 @@ class LandingView(BaseModel):
     name: str
     date: str
     country_code: str
+    country: str
     sponsor: str
     tracks: tuple[TrackLinks, ...]
     combined_board: str | None
@@ -47,8 +49,8 @@ def landing_view(event: Event) -> LandingView:
         overlay_chroma=f"/overlay/{base}?{urlencode({'trackId': t.track_id, 'chroma': 'true'})}")
         for t in event.tracks)
     return LandingView(
-        name=event.name, date=event.date.isoformat(), country_code=event.country_code, sponsor=event.sponsor,
-        tracks=tracks,
+        name=event.name, date=event.date.isoformat(), country_code=event.country_code,
+        country=country_name(event.country_code), sponsor=event.sponsor, tracks=tracks,
         combined_board=f"/leaderboard/{base}?track={COMBINED_TRACK_ID}" if event.combined_board else None,
         links=tuple((link.name, link.href, link.description) for link in event.landing_page_links),
         stats=f"/stats?country={event.country_code}" if event.stats_visibility == "public" else None)

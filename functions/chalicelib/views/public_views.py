@@ -14,7 +14,6 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from functools import lru_cache
 from typing import Literal
-from urllib.parse import quote
 
 from pydantic import BaseModel, ConfigDict
 
@@ -213,13 +212,18 @@ def board_rows(board: BoardSnapshot, fmt: BoardFormat | None, t: Callable[[str],
     return rows
 
 
+# The only avatar address a board item may name: the profile route of a sign-in name (display names, which boards
+# show, may be in any script and are not addresses).
+_AVATAR_PATH = re.compile(r"^/api/profiles/[A-Za-z0-9._-]{1,128}/avatar\.svg$")
+
+
 def avatar_src(entry: LeaderboardEntry | None) -> str:
-    """The racer's identicon URL ("" when they chose none). Built from the shown name (URL-quoted) rather than copied
-    from the item; the colour in the query makes a changed highlight colour fetch a fresh image."""
-    if entry is None or not entry.avatar_url:
+    """The racer's identicon URL ("" when they chose none): the item's address, used only when it is a profile
+    route; the colour in the query makes a changed highlight colour fetch a fresh image."""
+    if entry is None or not entry.avatar_url or not _AVATAR_PATH.match(entry.avatar_url):
         return ""
     colour = safe_colour(entry.highlight_colour, DEFAULT_HIGHLIGHT_COLOUR.lower())
-    return f"/api/profiles/{quote(entry.username, safe='')}/avatar.svg?c={colour[1:]}"
+    return f"{entry.avatar_url}?c={colour[1:]}"
 
 
 def initial(name: str) -> str:

@@ -48,7 +48,9 @@ class LiveRacePointer(Protocol):
 
 
 class HighlightColours(Protocol):
+    """What the desk shows of a racer's profile: their colour and the name they go by."""
     def highlight_colour(self, sub: str) -> str | None: ...
+    def shown_name(self, sub: str, username: str) -> str: ...
 
 
 class ScreenCommand(BaseModel):
@@ -186,7 +188,8 @@ class TimekeeperDesk:
         fastest = race.fastest_valid_lap
         average = race.fastest_average
         return RaceScreen(
-            race_id=race.race_id, racer=race.racer.username, raced_by_proxy=race.raced_by_proxy, car=race.car,
+            race_id=race.race_id, racer=self._colours.shown_name(race.racer.sub, race.racer.username),
+            raced_by_proxy=race.raced_by_proxy, car=race.car,
             car_label=labels.get(race.car or "", race.car or "No car"), status=race.status.value,
             status_text=_STATUS_TEXT[race.status], toggle_label=_TOGGLE_LABEL.get(race.status, "Start"),
             running=race.status is RaceStatus.RUNNING,

@@ -167,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
         private_files.write_new(report_path, (json.dumps(report, indent=2, sort_keys=True) + "\n").encode())
     except OSError as exc:
         print(f"drem import: imported, but the report could not be written to {report_path}: {exc}", file=sys.stderr)
-    written = ", ".join(f"{n} {table}" for table, n in result.written.items())
+    written = ", ".join(f"{n} {table.replace('_', ' ')}" for table, n in result.written.items())
     print(f"Imported event {result.source_event_id} as {result.event_id}: {written}, "
           f"{result.archives_written} model archives{', the logo' if result.logo_written else ''}.")
     if result.already_written:

@@ -101,9 +101,9 @@ def with_sim_evaluation(export: Any, path: Any, track: str) -> Any:
 
 def _pull(args: argparse.Namespace) -> int:
     from chalicelib.domain.league import BOARD_COLUMNS
-    from drem_local.api_client import ApiClient
+    from drem_local.api_client import ApiClient, api_url
 
-    api = ApiClient(args.api, args.token)  # the board is public: no sign-in needed
+    api = ApiClient(api_url(args), args.token)  # the board is public: no sign-in needed
     params = {key: value for key in ("sort", "algorithm", "sensor", "since", "until")
               if (value := getattr(args, key))}
     board = api.get(f"/api/league/{args.track}", params=params)

@@ -23,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     create.add_argument("target", metavar="USERNAME")
     create.add_argument("--email", required=True)
     create.add_argument("--country", required=True, help="ISO 3166-1 alpha-2 code, e.g. GB")
+    create.add_argument("--display-name", default="",
+                        help="the racer's name as they write it, in any script (default: the sign-in name)")
     role = actions.add_parser("role", help="make ROLE the user's only role")
     role.add_argument("target", metavar="USERNAME")
     role.add_argument("role", choices=ROLES)
@@ -48,7 +50,8 @@ def _perform(client, args: argparse.Namespace) -> dict:
         return _all_pages(client, args.prefix)
     if args.action == "create":
         return client.request("POST", "/api/users",
-                              json={"username": args.target, "email": args.email, "country_code": args.country})
+                              json={"username": args.target, "email": args.email, "country_code": args.country,
+                                    "display_name": args.display_name})
     if args.action == "role":
         return client.request("PUT", f"/api/users/{user}/role", json={"role": args.role})
     return client.request("POST", f"/api/users/{user}/{args.action}")
@@ -73,7 +76,9 @@ def describe(action: str, answer: dict) -> str:
                 f"{'enabled' if u['enabled'] else 'DISABLED'}  {u.get('email') or ''}" for u in answer["users"]]
         return "\n".join(rows)
     if action == "create":
-        return (f"Created racer {answer['username']} ({answer['country_code']}).\n"
+        shown = answer.get("display_name") or answer["username"]
+        named = f" for {shown}" if shown != answer["username"] else ""
+        return (f"Created racer {answer['username']}{named} ({answer['country_code']}).\n"
                 f"Temporary password (shown once; they choose their own at first sign-in): "
                 f"{answer['temporary_password']}")
     if action == "role":

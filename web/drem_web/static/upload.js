@@ -88,7 +88,8 @@
         return apiPost(zone.dataset.requestUrl + "/" + encodeURIComponent(modelId) + "/complete");
       })
       .then(function (answer) {
-        state.textContent = "uploaded: " + answer.model.status;
+        var labels = JSON.parse(zone.dataset.statusLabels || "{}");
+        state.textContent = "uploaded: " + (labels[answer.model.status] || answer.model.status.toLowerCase());
         refreshRows();
       })
       .catch(function (error) {

@@ -23,8 +23,10 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from chalicelib.auth.principals import Role
+from chalicelib.domain.errors import DremError
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
+from chalicelib.domain.names import check_display_name
 from chalicelib.domain.profiles import anonymised_name
 from chalicelib.domain.racer_models import (
     ModelStatus,
@@ -166,11 +168,21 @@ def _check_board_body(where: str, item: Item, event_id: str, track: str, rows: l
 
 
 def _profile_names(bundle: EventBundle) -> dict[str, set[str]]:
+    """Every name a racer may be shown under (overlays carry the display name): the sign-in name and the display
+    name, which must be one drem itself would have stored (no text-direction controls slipped in by an edit)."""
     names: dict[str, set[str]] = {}
     for item in bundle.items["profiles"]:
-        sub, username = _text(item, "sub"), _text(item, "username")
+        sub, username, display_name = _text(item, "sub"), _text(item, "username"), _text(item, "display_name")
+        if display_name:
+            try:
+                valid = check_display_name(display_name) == display_name
+            except DremError:
+                valid = False
+            if not valid:
+                raise _invalid(f"profiles.json: the display name of {username or sub} is not one drem accepts.",
+                               field="display_name")
         if sub and username:
-            names.setdefault(sub, set()).add(username)
+            names.setdefault(sub, set()).update(name for name in (username, display_name) if name)
     return names
 
 

@@ -36,7 +36,7 @@ from drem_web import render
 
 bp = Blueprint(__name__)
 
-_SIGN_UP_FIELDS = ("username", "email", "country_code", "password")
+_SIGN_UP_FIELDS = ("display_name", "username", "email", "country_code", "password")
 _MY_MODELS_LIMIT = 100
 
 
@@ -105,12 +105,14 @@ def profile_page(principal: User) -> Response:
 @route(bp, "/console/profile", methods=["POST"], allow=SIGNED_IN)
 def update_profile(principal: User) -> Response:
     service = services.profile_service()
-    values = submitted(bp.current_request, "highlight_colour", "avatar", "country_code")
+    values = submitted(bp.current_request, "highlight_colour", "avatar", "country_code", "display_name")
+    if not values.get("display_name", "").strip():  # left empty: the name stays as it was
+        values.pop("display_name", None)
     try:
         saved = service.update_own(principal, ProfileUpdate.model_validate(with_country_code(values, required=False)))
     except SHOWN_ON_FORM as exc:
         return _profile_form(service.own(principal), field_errors(exc, "highlight_colour"), error_status(exc),
-                             typed_country=values.get("country_code", ""))
+                             typed_country=values.get("country_code", ""), typed_name=values.get("display_name", ""))
     return _profile_form(services.shown_on_boards(saved), notice="Your profile is saved; the leaderboards show it now.")
 
 
@@ -145,9 +147,9 @@ def delete_my_model(principal: User, model_id: str) -> Response:
 
 @route(bp, "/console/my-races", allow=SIGNED_IN)
 def my_races(principal: User) -> Response:
-    event_names = {event.event_id: event.name for event in services.event_service().list_events()}
+    events = {event.event_id: event for event in services.event_service().list_events()}
     return render.page("console/my_races", races=list(reversed(services.race_service().my_races(principal))),
-                       event_names=event_names)
+                       events=events)
 
 
 @route(bp, "/console/my-races/{event_id}/{race_id}", allow=SIGNED_IN)
@@ -183,8 +185,9 @@ def _password_form(errors: dict[str, str] | None = None, status: int = 200, noti
 
 
 def _profile_form(profile, errors: dict[str, str] | None = None, status: int = 200, notice: str = "",
-                  typed_country: str = "") -> Response:
+                  typed_country: str = "", typed_name: str = "") -> Response:
     return render.page("console/profile", status=status, profile=profile, palette=HIGHLIGHT_PALETTE, notice=notice,
+                       display_name=typed_name or profile.display_name or profile.username or "",
                        country=typed_country or profile.country_code or "", countries=COUNTRY_CHOICES,
                        # Before the first save the boards show the default colour: the form says so by selecting it.
                        shown_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR, errors=errors or {})

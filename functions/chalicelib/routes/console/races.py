@@ -2,6 +2,7 @@
 with confirmation, and the CSV downloads of the JSON API. Same `RaceService` as the JSON API."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from decimal import Decimal, InvalidOperation
 from typing import Any
@@ -15,6 +16,7 @@ from chalicelib.auth.principals import User
 from chalicelib.domain import audit
 from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
+from chalicelib.domain.profiles import PublicProfile
 from chalicelib.domain.races import LapEdit
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, redirect, submitted
 from chalicelib.routes.console.notices import done_notice
@@ -37,8 +39,9 @@ def races_page(principal: User, query: RaceFilter) -> Response:
     events = services.event_service().list_events()
     event = next((e for e in events if e.event_id == query.event_id), events[0] if events else None)
     races = services.race_service().list_races(event.event_id, query.track or None) if event else []
+    shown = services.profile_service().public_by_subs(list({r["racer_sub"] for r in races}))
     return render.page("console/races", events=events, event=event, track=query.track,
-                       races=[_race_row(r) for r in reversed(races)],
+                       races=[_race_row(r, shown) for r in reversed(races)],
                        audit=_audit_rows(event.event_id) if event else [], flash=done_notice(bp.current_request))
 
 
@@ -83,7 +86,11 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
     race = services.race_service().get_race(principal, event_id, race_id)
     laps = [{**lap, "seconds": f"{Decimal(lap['time_ms']) / 1000:.3f}", "time": clock_text(lap["time_ms"])}
             for lap in race["laps"]]
-    return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors,
+    track = services.race_service().event(event_id).track_name(race["track_id"])
+    profile = services.profile_service().public_by_sub(race["racer"]["sub"])
+    racer = profile.display_name if profile and profile.display_name else race["racer"]["username"]
+    return render.page("console/race_edit", status=status, race=race, laps=laps, errors=errors, track=track,
+                       racer=racer,
                        created=_when(race["created_at_ms"]), audit=_audit_rows(event_id, race_id),
                        flash=done_notice(bp.current_request) if status == 200 else "")
 
@@ -116,8 +123,10 @@ def _lap_edit(values: dict[str, str]) -> LapEdit:
     return LapEdit(time_ms=int(seconds * 1000), resets=resets, is_valid=checkbox(values, "is_valid"))
 
 
-def _race_row(race: dict[str, Any]) -> dict[str, Any]:
+def _race_row(race: dict[str, Any], shown: Mapping[str, PublicProfile]) -> dict[str, Any]:
+    profile = shown.get(race["racer_sub"])
     return {**race, "created": _when(race["created_at_ms"]),
+            "racer": profile.display_name if profile and profile.display_name else race["username"],
             "fastest": clock_text(race["fastest_lap_ms"]) if race["fastest_lap_ms"] is not None else "—"}
 
 

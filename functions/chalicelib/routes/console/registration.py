@@ -16,7 +16,7 @@ from drem_web import render
 bp = Blueprint(__name__)
 
 DESK_STAFF = {ADMIN, REGISTRATION}
-_FIELDS = ("username", "email", "country_code")
+_FIELDS = ("display_name", "username", "email", "country_code")
 
 
 @route(bp, "/console/registration", allow=DESK_STAFF)

@@ -19,12 +19,22 @@ from drem_web import render
 bp = Blueprint(__name__)
 
 TIMEKEEPERS = {ADMIN, OPERATOR}
-_PREFIX = re.compile(r"^[A-Za-z0-9_.@+-]{0,64}$")
+_RACE_OVER = {"submit", "discard"}
+# The start of a sign-in name; anything else typed (a display name, a space) just finds nobody.
+_PREFIX = re.compile(r"^[A-Za-z0-9_.-]{0,64}$")
 
 
 class RacerSearch(BaseModel):
+    """The racer field's own value: htmx sends a GET's triggering input under its name (no script needed, so the
+    suggestions work under the site's `script-src 'self'`); `prefix` for API callers."""
     model_config = ConfigDict(extra="ignore")
-    prefix: str = Field(default="", pattern=_PREFIX.pattern)
+    prefix: str = Field(default="", max_length=256)
+    racer_username: str = Field(default="", max_length=256)
+    queue_racer: str = Field(default="", max_length=256)
+
+    @property
+    def typed(self) -> str:
+        return (self.prefix or self.racer_username or self.queue_racer).strip()
 
 
 class ProfileColours:
@@ -34,6 +44,10 @@ class ProfileColours:
     def highlight_colour(self, sub: str) -> str | None:
         public = self._profiles.public_by_sub(sub)
         return public.highlight_colour if public else None
+
+    def shown_name(self, sub: str, username: str) -> str:
+        public = self._profiles.public_by_sub(sub)
+        return (public.display_name or public.username) if public else username
 
 
 def desk() -> TimekeeperDesk:
@@ -49,8 +63,11 @@ def choose_track_page(principal: User) -> Response:
 
 @route(bp, "/console/timekeeper/racers", allow=TIMEKEEPERS, query=RacerSearch)
 def racer_options(principal: User, query: RacerSearch) -> Response:
-    users = services.user_service().list_users(query.prefix or None, 20).users
-    return render.fragment("console/tk_racer_options", usernames=[u.username for u in users])
+    typed = query.typed
+    users = services.user_service().list_users(typed or None, 20).users if _PREFIX.match(typed) else []
+    shown = services.profile_service().public_by_subs([u.sub for u in users])
+    options = [(u.username, shown[u.sub].display_name if u.sub in shown else u.username) for u in users]
+    return render.fragment("console/tk_racer_options", options=options)
 
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}", allow=TIMEKEEPERS)
@@ -76,7 +93,8 @@ def start_race(principal: User, event_id: str, track_id: str) -> Response:
         errors = field_errors(exc, rename=lambda name: "racer_username" if name == "username" else name,
                               missing_object_field="racer_username")  # a racer nobody registered
         return _state(desk().screen(event_id, track_id), errors, values, error_status(exc))
-    services.on_deck().preload_head(principal, event_id, track_id)  # the car just taken may have held the next model
+    # Off the queue if they were in line; the car just taken may have held the next model.
+    services.on_deck().started_elsewhere(principal, event_id, track_id, str(data["racer_username"]))
     return _state(screen)
 
 
@@ -87,6 +105,8 @@ def press_button(principal: User, event_id: str, track_id: str) -> Response:
         screen = desk().press(principal, event_id, track_id, ScreenCommand.model_validate(values))
     except SHOWN_ON_FORM as exc:
         return _state(desk().screen(event_id, track_id), field_errors(exc), {}, error_status(exc))
+    if values.get("kind") in _RACE_OVER:  # the car is free again: the next racer's model goes to it now
+        services.on_deck().preload_head(principal, event_id, track_id)
     return _state(screen)
 
 
