@@ -28,6 +28,7 @@ from chalicelib.domain.events import EventService
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.leaderboards import LeaderboardPublisher
 from chalicelib.domain.league import LeagueService
+from chalicelib.domain.league_intake import LeagueIntake
 from chalicelib.domain.model_conversion import ConsoleConverter
 from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
 from chalicelib.domain.model_scrutiny import ScrutineerService, ScrutinyEnqueuer, upcoming_track_types
@@ -273,6 +274,10 @@ def assignment_service(settings: Settings | None = None) -> AssignmentService:
 def league_service(settings: Settings | None = None) -> LeagueService:
     settings = settings or get_settings()
     return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))
+
+
+def league_intake(settings: Settings | None = None) -> LeagueIntake:
+    return LeagueIntake(league_service(settings))
 
 
 # --- the racer queue (on deck) --------------------------------------------------------------------------------------

@@ -1,8 +1,11 @@
 """The virtual league: racers submit their model's evaluation on a track; the board ranks the latest submission of
 each racer by best lap or by average of completed laps.
 
-A submission carries its evaluation trials; the figures the board ranks by (best lap, average, laps completed) are
-always recomputed here from the trials, so a client cannot send a best lap its own trials do not show.
+Submissions are assembled on the server from the files the racer uploaded (domain/league_intake.py); the figures the
+board ranks by (best lap, average, laps completed) are recomputed here from the trials. Every submission passes the
+same checks, whatever tool wrote its logs: the track is one drem knows (domain/league_tracks.py); a lap with an
+off-track is not a completed lap; no lap is faster than the track's centre-line length driven at the action space's
+top speed; and an evaluation's log content belongs to the first racer who pushed it.
 
 Rules: a racer pushes only under their own username (admins may push for anyone); anyone may read; admins delete.
 """
@@ -17,7 +20,8 @@ from typing import Annotated, Any, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Forbidden, InvalidInput, NotFound
+from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.domain.league_tracks import TrackSet
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
 TRACK_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
@@ -40,11 +44,13 @@ class EvaluationTrial(BaseModel):
 
     @property
     def completed(self) -> bool:
-        return self.completion_pct >= LAP_COMPLETE
+        """A whole lap without leaving the track: the same rule for console, DRfC, DROA and drem laps (a console lap
+        that went off, was reset and finished still reports 100 %)."""
+        return self.completion_pct >= LAP_COMPLETE and self.off_track_count == 0
 
 
 class SubmissionInput(BaseModel):
-    """What `drem league push` sends (built by chalicelib.formats.league_assembler)."""
+    """One submission as the server assembled it from the uploaded export (chalicelib.formats.league_assembler)."""
     model_config = ConfigDict(extra="forbid")
 
     racer: str = Field(pattern=NAME_PATTERN)
@@ -61,6 +67,12 @@ class SubmissionInput(BaseModel):
     training_best_completion_pct: float | None = Field(default=None, ge=0, le=100, allow_inf_nan=False,
                                                        description="None when training has no episodes (cloning)")
     trials: list[EvaluationTrial] = Field(min_length=1, max_length=MAX_TRIALS)
+    # None only in submissions stored before the server assembled them (LeagueService.push requires both).
+    top_speed_m_s: float | None = Field(default=None, gt=0, le=20, allow_inf_nan=False,
+                                        description="the action space's top speed")
+    evidence_digest: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$",
+                                        description="SHA-256 of the evaluation's laps as logged (who pushed them "
+                                                    "first)")
 
 
 class BoardEntry(BaseModel):
@@ -176,9 +188,22 @@ def rank(entries: list[BoardEntry], sort: SortKey) -> list[RankedEntry]:
 
 class LeagueStore(Protocol):
     def board(self, track: str) -> dict[str, BoardEntry]: ...
-    def record(self, submission: Submission) -> None: ...
+    def record(self, submission: Submission) -> None:
+        """Store the submission and its board entry, and claim its evidence digest for its racer; raises
+        EvidenceTaken (storing nothing) when another racer claimed the digest first."""
+    def evidence_owner(self, digest: str) -> str | None: ...
     def submission(self, track: str, racer: str, submission_id: str) -> Submission | None: ...
     def remove_racer(self, track: str, racer: str) -> int: ...
+
+
+class EvidenceTaken(Conflict):
+    """The evaluation's log content was already pushed by another racer."""
+
+    def __init__(self, owner: str) -> None:
+        super().__init__(f"This evaluation's laps were already pushed by {owner}: the same log content counts once, "
+                         "for the racer who pushed it first. Push the logs of your own model's evaluation.",
+                         field="evaluation")
+        self.owner = owner
 
 
 def utc_now() -> str:
@@ -186,18 +211,39 @@ def utc_now() -> str:
 
 
 class LeagueService:
-    def __init__(self, store: LeagueStore, *, clock: Callable[[], str] = utc_now) -> None:
+    def __init__(self, store: LeagueStore, tracks: TrackSet | None = None, *,
+                 clock: Callable[[], str] = utc_now) -> None:
         self.store = store
+        self.tracks = tracks or TrackSet()
         self._clock = clock
+
+    def pusher(self, principal: Principal, racer: str | None) -> str:
+        """The racer a push is for: the caller, or (admins only) the racer they name."""
+        username = getattr(principal, "username", None)
+        if not principal.is_user or not username:
+            raise Forbidden("Only signed-in racers push league submissions.")
+        racer = racer or username
+        if racer != username and Role.ADMIN not in principal.roles:
+            raise Forbidden(f"You may push submissions only as yourself ({username}), not as {racer}.")
+        return racer
+
+    def track_length_m(self, track: str) -> float:
+        """The known track's centre-line length; an unknown name is refused (it never creates a board)."""
+        length = self.tracks.length_m(checked_track(track))
+        if length is None:
+            raise NotFound(f"{track!r} is not a track drem knows. Use the DeepRacer world name of the track (e.g. "
+                           f"reinvent_base, Spain_track), or ask the staff to register the track.", field="track")
+        return length
 
     def push(self, principal: Principal, track: str, body: SubmissionInput) -> Submission:
         if body.track != checked_track(track):
             raise InvalidInput(f"The submission is for {body.track!r} but was pushed to {track!r}.", field="track")
-        username = getattr(principal, "username", None)
-        if not principal.is_user or not username:
-            raise Forbidden("Only signed-in racers push league submissions.")
-        if body.racer != username and Role.ADMIN not in principal.roles:
-            raise Forbidden(f"You may push submissions only as yourself ({username}), not as {body.racer}.")
+        self.pusher(principal, body.racer)
+        username = str(getattr(principal, "username", ""))
+        check_lap_times(body, self.track_length_m(track))
+        owner = self.store.evidence_owner(str(body.evidence_digest))
+        if owner is not None and owner != body.racer:
+            raise EvidenceTaken(owner)
         submitted_at = self._clock()
         submission = Submission(**body.model_dump(), submitted_at=submitted_at, submitted_by=username,
                                 submission_id=submitted_at)
@@ -224,6 +270,19 @@ class LeagueService:
         if not removed:
             raise NotFound(f"{racer} has no submission on {track}.", field="racer")
         return removed
+
+
+def check_lap_times(body: SubmissionInput, track_length_m: float) -> None:
+    """No completed lap is faster than the track's centre line driven at the action space's top speed all the way."""
+    if body.top_speed_m_s is None or body.evidence_digest is None:
+        raise InvalidInput("the submission has no top speed or evidence digest (assemble it from an export)")
+    fastest_s = track_length_m / body.top_speed_m_s
+    for index, trial in enumerate(body.trials):
+        if trial.completed and trial.time_s < fastest_s:
+            raise InvalidInput(
+                f"trial {trial.trial} claims a {trial.time_s:.3f} s lap, but {body.track} is {track_length_m:.2f} m "
+                f"long and the model's top speed is {body.top_speed_m_s:g} m/s: no lap can take less than "
+                f"{fastest_s:.3f} s", field=f"trials[{index}].time_s")
 
 
 def checked_track(track: str) -> str:

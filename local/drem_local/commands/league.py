@@ -1,11 +1,14 @@
 """`drem league`: push a model export to the virtual league, pull a track's board.
 
-    drem league push PATH --track TRACK [--racer NAME] [--model-name NAME] [--dry-run]
+    drem league push PATH [PATH ...] --track TRACK [--racer NAME] [--model-name NAME] [--dry-run]
     drem league pull --track TRACK [--sort best|avg] [--algorithm A] [--sensor S] [--since DAY] [--until DAY]
                      [--csv FILE | --json]
 
-PATH is a model export folder or .tar.gz in any real layout (old/new console export, DeepRacer-for-Cloud model
-prefix, a drem sim run); the assembler reads it locally, in memory, and sends one JSON submission.
+Each PATH is a folder or .tar.gz the racer has, as their tool wrote it: a console or DROA logs download, a
+DeepRacer-for-Cloud model prefix, the console's model download (it holds model_metadata.json), a drem model. The CLI
+only packs the files the server reads (metadata, hyperparameters, params, logs, metrics, evaluation sim-traces; never
+the model graph, checkpoints or training sim-traces) into one .tar.gz and uploads it; the server assembles the
+submission and checks it.
 """
 from __future__ import annotations
 
@@ -13,9 +16,12 @@ import argparse
 import csv
 import io
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any
+
+PACK_FILE_MIB = 32  # the CLI packs every file the server reads, each at most this big (a long robomaker log)
 
 HELP = "push a model export to the virtual league; pull a track's board (table, CSV or JSON)"
 
@@ -25,12 +31,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     add_api_arguments(parser)
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    push = actions.add_parser("push", help="assemble a submission from a model export and push it")
-    push.add_argument("path", type=Path, help="export folder or .tar.gz")
+    push = actions.add_parser("push", help="upload a model export's files; the server assembles the submission")
+    push.add_argument("path", type=Path, nargs="+",
+                      help="export folders or .tar.gz files (e.g. the logs download and the model download)")
     push.add_argument("--track", required=True, help="the track the model was evaluated on, e.g. reinvent_base")
     push.add_argument("--racer", help="racer name (default: the signed-in username; admins may name another)")
     push.add_argument("--model-name", help="default: the export's folder or archive name")
-    push.add_argument("--dry-run", action="store_true", help="print the submission, send nothing")
+    push.add_argument("--dry-run", action="store_true", help="list the files that would be uploaded, send nothing")
     pull = actions.add_parser("pull", help="a track's board")
     pull.add_argument("--track", required=True)
     pull.add_argument("--sort", choices=("best", "avg"), default="best", help="best lap (default) or average lap")
@@ -58,24 +65,35 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _push(args: argparse.Namespace) -> int:
-    from chalicelib.formats.league_assembler import assemble
-    from chalicelib.formats.league_export import read_export
+    from chalicelib.domain.league_intake import MAX_UPLOAD_BYTES
+    from chalicelib.formats.league_export import ExportLimits, MiB, pack_exports, read_export
     from drem_local.api_client import ApiClient
 
-    export = with_sim_evaluation(read_export(args.path), args.path, args.track)
+    limits = ExportLimits(max_file_bytes=PACK_FILE_MIB * MiB, max_total_read_bytes=3 * PACK_FILE_MIB * MiB)
+    exports = [with_sim_evaluation(read_export(path, limits=limits), path, args.track) for path in args.path]
+    upload = pack_exports(exports)
+    model_name = args.model_name or safe_model_name(exports[0].source_name)
+    names = sorted({name for export in exports for name in export.files})
     if args.dry_run:
-        racer = args.racer or args.username or "racer"
-        print(assemble(export, racer=racer, track=args.track, model_name=args.model_name).model_dump_json(indent=2))
+        print("\n".join(names))
+        print(f"{len(names)} files, {len(upload)} bytes packed, for {model_name} on {args.track}")
         return 0
+    if len(upload) > MAX_UPLOAD_BYTES:
+        raise OSError(f"the packed files take {len(upload)} bytes, more than the {MAX_UPLOAD_BYTES} the server "
+                      f"takes; leave out old evaluations' logs and sim-traces")
     api = ApiClient.from_args(args)
-    racer = args.racer or api.get("/api/me")["username"]
-    submission = assemble(export, racer=racer, track=args.track, model_name=args.model_name)
-    reply = api.post(f"/api/league/{args.track}/submissions", json=submission.model_dump(mode="json"))
-    entry = reply["entry"]
+    params = {"model_name": model_name, **({"racer": args.racer} if args.racer else {})}
+    reply = api.post_bytes(f"/api/league/{args.track}/submissions", upload, "application/gzip", params=params)
+    entry, layout = reply["entry"], reply["submission"]["layout"]
     best = f"{entry['best_lap_s']:.3f} s" if entry["best_lap_s"] is not None else "no completed lap"
-    print(f"pushed {entry['model_name']} for {entry['racer']} on {args.track} ({submission.layout} export): "
+    print(f"pushed {entry['model_name']} for {entry['racer']} on {args.track} ({layout} export): "
           f"{entry['laps_completed']}/{entry['trials']} laps, best {best}")
     return 0
+
+
+def safe_model_name(source_name: str) -> str:
+    """The export's folder or archive name as the board shows it (letters, digits, '_', '.', '-')."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", source_name).strip("-.")[:80] or "model"
 
 
 def with_sim_evaluation(export: Any, path: Any, track: str) -> Any:
