@@ -62,7 +62,7 @@ from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.racer_queue import DynamoQueueStore
 from chalicelib.storage.races import DynamoRaceStore
-from chalicelib.storage.scrutineer_queue import DynamoJobStore
+from chalicelib.storage.scrutineer_queue import LEAGUE_QUEUE_PK, DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
 
@@ -276,8 +276,20 @@ def league_service(settings: Settings | None = None) -> LeagueService:
     return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))
 
 
+def league_verify_queue(settings: Settings | None = None) -> ScrutineerQueue | None:
+    """drem's re-drives of league models, where a worker can drive them (as for scrutineering); None elsewhere, and
+    a push that brings its model is told the server cannot re-drive it."""
+    settings = settings or get_settings()
+    if importlib.util.find_spec("drem_sim") is None and not settings.scrutineering_worker:
+        return None
+    return ScrutineerQueue(DynamoJobStore(clients.dynamodb(), settings.table("league"), queue_pk=LEAGUE_QUEUE_PK),
+                           now_ms)
+
+
 def league_intake(settings: Settings | None = None) -> LeagueIntake:
-    return LeagueIntake(league_service(settings))
+    settings = settings or get_settings()
+    queue = league_verify_queue(settings)
+    return LeagueIntake(league_service(settings), scrutineer_service(settings) if queue else None, queue)
 
 
 # --- the racer queue (on deck) --------------------------------------------------------------------------------------

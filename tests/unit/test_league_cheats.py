@@ -96,7 +96,8 @@ def test_a_json_submission_with_a_zero_lap_is_not_taken(client: Any, tokens: dic
               "training_episodes": 1, "trials": [{"trial": 1, "time_s": 0.0, "completion_pct": 100}]}
     reply = client.http.post(f"/api/league/{REINVENT}/submissions", body=json.dumps(forged),
                              headers={**bearer(tokens["alice"]), "Content-Type": "application/json"})
-    assert reply.status_code == 415  # the server assembles submissions; it takes no ready-made JSON
+    assert reply.status_code == 400  # the server assembles submissions; it takes no ready-made JSON
+    assert "not a .tar.gz" in _error(reply)["message"]
     folder = drem_sim_export(tmp_path / "zero", track=REINVENT, progress=[100], lap_times=[0.0])
     reply = _push(client, tokens["alice"], _upload(folder))
     assert reply.status_code == 400 and "0.000 s lap" in _error(reply)["message"]

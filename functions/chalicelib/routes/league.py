@@ -12,7 +12,7 @@ from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, body_bytes, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.league import Board, BoardQuery, Submission
+from chalicelib.domain.league import Board, BoardQuery, LeaguePolicy, Submission
 from chalicelib.domain.league_intake import UPLOAD_CONTENT_TYPES, PushOptions
 from chalicelib.views.league_views import board_view, submission_view
 from drem_web import render
@@ -39,6 +39,13 @@ def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
 def latest_submission(principal: Principal, track: str, racer: str) -> dict:
     """A racer's latest submission on a track, with every hyperparameter"""
     return {"submission": services.league_service().latest(track, racer).model_dump(mode="json")}
+
+
+@route(bp, "/api/league/{track}/policy", methods=["PUT"], allow={ADMIN}, body=LeaguePolicy, response=LeaguePolicy,
+       tags=("league",))
+def set_policy(principal: User, track: str, body: LeaguePolicy) -> dict:
+    """Choose what the board does with self-reported entries: shown, below_verified or refused (admins)"""
+    return services.league_service().set_policy(principal, track, body).model_dump(mode="json")
 
 
 @route(bp, "/api/league/{track}/racers/{racer}", methods=["DELETE"], allow={ADMIN}, tags=("league",))

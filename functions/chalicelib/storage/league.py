@@ -6,6 +6,7 @@ Items:
 * `TRACK#{track}` / `RACER#{racer}#SUB#{submittedAt}`: every submission in full (hyperparameters, trials), kept as
   history; the hyperparameters "on demand" are one GetItem of the latest one.
 
+* `TRACK#{track}` / `POLICY`: what the organiser does with self-reported entries (`self_reported`);
 * `EVIDENCE#{digest}` / `OWNER`: which racer first pushed an evaluation's log content (`racer`).
 
 A push writes all three in one transaction, the board guarded by its version (optimistic: the loser re-reads and
@@ -18,7 +19,7 @@ import json
 from typing import Any
 
 from chalicelib.domain.errors import Conflict
-from chalicelib.domain.league import BoardEntry, EvidenceTaken, Submission
+from chalicelib.domain.league import BoardEntry, EvidenceTaken, LeaguePolicy, Submission
 from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The league store"
@@ -67,6 +68,32 @@ class DynamoLeagueStore:
             if owner is not None and owner != submission.racer:
                 raise EvidenceTaken(owner)  # another racer's push of the same logs won the race
         raise Conflict("The league board is busy; push again in a moment.")
+
+    def replace(self, submission: Submission) -> bool:
+        """The submission rewritten (drem's re-drive), and the board entry while it is still the racer's latest."""
+        key = {"pk": _pk(submission.track), "sk": _history_sk(submission.racer, submission.submission_id)}
+        for _ in range(_ATTEMPTS):
+            entries, version = self._board(submission.track)
+            items: list[dict[str, Any]] = [{"Put": {
+                "TableName": self._table, "Item": {**key, "body": {"S": submission.model_dump_json()}},
+                "ConditionExpression": "attribute_exists(pk)"}}]
+            latest = entries.get(submission.racer)
+            if latest is not None and latest.submission_id == submission.submission_id:
+                entries[submission.racer] = submission.entry()
+                items.append(self._board_put(submission.track, entries, version))
+            if write_if(self._client, "transact_write_items", _SERVICE, TransactItems=items):
+                return True
+            if self.submission(submission.track, submission.racer, submission.submission_id) is None:
+                return False  # deleted meanwhile (an admin removed the racer)
+        raise Conflict("The league board is busy; the re-drive's result is stored on the next try.")
+
+    def policy(self, track: str) -> LeaguePolicy:
+        reply = self._call("get_item", TableName=self._table, Key={"pk": _pk(track), "sk": {"S": "POLICY"}})
+        return LeaguePolicy.model_validate_json(reply["Item"]["body"]["S"]) if "Item" in reply else LeaguePolicy()
+
+    def set_policy(self, track: str, policy: LeaguePolicy) -> None:
+        self._call("put_item", TableName=self._table,
+                   Item={"pk": _pk(track), "sk": {"S": "POLICY"}, "body": {"S": policy.model_dump_json()}})
 
     def evidence_owner(self, digest: str) -> str | None:
         reply = self._call("get_item", TableName=self._table, ConsistentRead=True, Key=_evidence_key(digest))

@@ -8,7 +8,9 @@ Each PATH is a folder or .tar.gz the racer has, as their tool wrote it: a consol
 DeepRacer-for-Cloud model prefix, the console's model download (it holds model_metadata.json), a drem model. The CLI
 only packs the files the server reads (metadata, hyperparameters, params, logs, metrics, evaluation sim-traces; never
 the model graph, checkpoints or training sim-traces) into one .tar.gz and uploads it; the server assembles the
-submission and checks it.
+submission and checks it. A PATH that is a model archive (a console model download with agent/model.pb, a drem model
+with model.onnx) is also uploaded as a model (as `drem models upload` does), so drem re-drives it on the track and
+ranks what it measured ("verified by drem"); --self-reported leaves it at the logs.
 """
 from __future__ import annotations
 
@@ -38,6 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     push.add_argument("--racer", help="racer name (default: the signed-in username; admins may name another)")
     push.add_argument("--model-name", help="default: the export's folder or archive name")
     push.add_argument("--dry-run", action="store_true", help="list the files that would be uploaded, send nothing")
+    push.add_argument("--self-reported", action="store_true",
+                      help="do not upload the model archive for drem to re-drive; rank the logs alone")
     pull = actions.add_parser("pull", help="a track's board")
     pull.add_argument("--track", required=True)
     pull.add_argument("--sort", choices=("best", "avg"), default="best", help="best lap (default) or average lap")
@@ -83,12 +87,47 @@ def _push(args: argparse.Namespace) -> int:
                       f"takes; leave out old evaluations' logs and sim-traces")
     api = ApiClient.from_args(args)
     params = {"model_name": model_name, **({"racer": args.racer} if args.racer else {})}
+    archive = None if args.self_reported else model_archive(args.path, exports)
+    if archive is not None:
+        params["model_id"] = upload_model(api, archive)
     reply = api.post_bytes(f"/api/league/{args.track}/submissions", upload, "application/gzip", params=params)
     entry, layout = reply["entry"], reply["submission"]["layout"]
     best = f"{entry['best_lap_s']:.3f} s" if entry["best_lap_s"] is not None else "no completed lap"
     print(f"pushed {entry['model_name']} for {entry['racer']} on {args.track} ({layout} export): "
           f"{entry['laps_completed']}/{entry['trials']} laps, best {best}")
+    if archive is not None:
+        print(f"drem re-drives {archive.name} on {args.track} in the background; the board then ranks what it "
+              "measured (verified by drem)")
     return 0
+
+
+def model_archive(paths: list[Path], exports: list[Any]) -> Path | None:
+    """The PATH that is a model archive drem can drive (.tar.gz with agent/model.pb or model.onnx)."""
+    for path, export in zip(paths, exports, strict=True):
+        if path.is_file() and {"agent/model.pb", "model.onnx"} & set(export.names):
+            return path
+    return None
+
+
+def upload_model(api: Any, path: Path) -> str:
+    """Upload the model archive as `drem models upload` does; its id once the server accepted it."""
+    import requests
+
+    from drem_local.api_client import ApiError
+
+    ticket = api.post("/api/models", {"filename": path.name})
+    if path.stat().st_size > ticket["max_bytes"]:
+        raise ApiError(413, f"{path.name} is larger than the {ticket['max_bytes']} byte model limit")
+    with path.open("rb") as handle:
+        posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
+                               files={"file": (path.name, handle)}, timeout=600)
+    if posted.status_code not in (200, 201, 204):
+        raise ApiError(posted.status_code, f"storage refused {path.name} (HTTP {posted.status_code})")
+    model = api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
+    if model["status"] != "AVAILABLE":
+        raise ApiError(400, f"{path.name} was not accepted as a model ({model['status']}: {model.get('reason')}); "
+                            "push with --self-reported to rank the logs alone")
+    return str(model["model_id"])
 
 
 def safe_model_name(source_name: str) -> str:
