@@ -151,3 +151,21 @@ def test_an_upload_that_is_not_an_archive(client: Any, tokens: dict[str, str]) -
         archive.addfile(info, io.BytesIO(b"{}"))
     reply = _push(client, tokens["alice"], buffer.getvalue())
     assert reply.status_code == 400 and _error(reply)["field"] == "model/model_metadata.json"
+
+
+def test_staff_register_a_track_drems_set_lacks(client: Any, tokens: dict[str, str], tmp_path: Path) -> None:
+    folder = drem_sim_export(tmp_path / "bc", track="venue_figure8", progress=[100], lap_times=[12.0])
+    assert _push(client, tokens["alice"], _upload(folder), "venue_figure8").status_code == 404
+
+    def register(token: str, track: str, length_m: float) -> Any:
+        return client.http.put(f"/api/league-tracks/{track}", body=json.dumps({"length_m": length_m}),
+                               headers={**bearer(token), "Content-Type": "application/json"})
+
+    assert register(tokens["alice"], "venue_figure8", 21.5).status_code == 403
+    assert register(tokens["root"], "reinvent_base", 5.0).status_code == 400  # drem's own length stays
+    assert register(tokens["root"], "venue_figure8", 21.5).status_code == 200
+    assert _push(client, tokens["alice"], _upload(folder), "venue_figure8").status_code == 201
+    assert _board(client, "venue_figure8")[0]["best_lap_s"] == 12.0
+    too_fast = drem_sim_export(tmp_path / "fast", track="venue_figure8", progress=[100], lap_times=[10.0])
+    reply = _push(client, tokens["alice"], _upload(too_fast), "venue_figure8")
+    assert reply.status_code == 400 and "venue_figure8 is 21.50 m long" in _error(reply)["message"]

@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.auth.principals import Principal, Role
 from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
-from chalicelib.domain.league_tracks import TrackSet
+from chalicelib.domain.league_tracks import DREM_TRACK_LENGTHS_M, RegisteredTrack, TrackSet
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
 TRACK_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
@@ -276,6 +276,8 @@ class LeagueStore(Protocol):
         """Rewrite a stored submission (its verification); its board entry too while it is the racer's latest.
         False when the submission is gone."""
     def policy(self, track: str) -> LeaguePolicy: ...
+    def registered_tracks(self) -> dict[str, RegisteredTrack]: ...
+    def register_track(self, name: str, track: RegisteredTrack) -> None: ...
     def set_policy(self, track: str, policy: LeaguePolicy) -> None: ...
     def submission(self, track: str, racer: str, submission_id: str) -> Submission | None: ...
     def remove_racer(self, track: str, racer: str) -> int: ...
@@ -299,7 +301,7 @@ class LeagueService:
     def __init__(self, store: LeagueStore, tracks: TrackSet | None = None, *,
                  clock: Callable[[], str] = utc_now) -> None:
         self.store = store
-        self.tracks = tracks or TrackSet()
+        self.tracks = tracks or TrackSet(store)
         self._clock = clock
 
     def now(self) -> str:
@@ -347,6 +349,15 @@ class LeagueService:
         policy = self.store.policy(track).self_reported
         kept = [entry for entry in self.store.board(track).values() if query.keeps(entry) and shown(entry, policy)]
         return Board(track=track, sort=query.sort, entries=rank(kept, query.sort, policy))
+
+    def register_track(self, principal: Principal, track: str, body: RegisteredTrack) -> RegisteredTrack:
+        """Staff add a track drem's set lacks (a venue's own layout); drem's own tracks keep their measured length."""
+        if Role.ADMIN not in principal.roles:
+            raise Forbidden("Only admins register league tracks.")
+        if checked_track(track) in DREM_TRACK_LENGTHS_M:
+            raise InvalidInput(f"{track} is one of drem's own tracks; its length is drem's.", field="track")
+        self.store.register_track(track, body)
+        return body
 
     def set_policy(self, principal: Principal, track: str, policy: LeaguePolicy) -> LeaguePolicy:
         if Role.ADMIN not in principal.roles:

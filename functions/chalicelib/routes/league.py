@@ -14,6 +14,7 @@ from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, body_bytes, route
 from chalicelib.auth.principals import Principal, User
 from chalicelib.domain.league import Board, BoardQuery, LeaguePolicy, Submission
 from chalicelib.domain.league_intake import UPLOAD_CONTENT_TYPES, PushOptions
+from chalicelib.domain.league_tracks import RegisteredTrack
 from chalicelib.views.league_views import board_view, submission_view
 from drem_web import render
 
@@ -39,6 +40,13 @@ def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
 def latest_submission(principal: Principal, track: str, racer: str) -> dict:
     """A racer's latest submission on a track, with every hyperparameter"""
     return {"submission": services.league_service().latest(track, racer).model_dump(mode="json")}
+
+
+@route(bp, "/api/league-tracks/{track}", methods=["PUT"], allow={ADMIN}, body=RegisteredTrack,
+       response=RegisteredTrack, tags=("league",))
+def register_track(principal: User, track: str, body: RegisteredTrack) -> dict:
+    """Register a track drem's set lacks, by its centre-line length (admins)"""
+    return services.league_service().register_track(principal, track, body).model_dump(mode="json")
 
 
 @route(bp, "/api/league/{track}/policy", methods=["PUT"], allow={ADMIN}, body=LeaguePolicy, response=LeaguePolicy,

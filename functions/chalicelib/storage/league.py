@@ -7,6 +7,7 @@ Items:
   history; the hyperparameters "on demand" are one GetItem of the latest one.
 
 * `TRACK#{track}` / `POLICY`: what the organiser does with self-reported entries (`self_reported`);
+* `LEAGUE#TRACKS` / `TRACK#{name}`: a track staff registered (`length_m`), beside drem's own set;
 * `EVIDENCE#{digest}` / `OWNER`: which racer first pushed an evaluation's log content (`racer`).
 
 A push writes all three in one transaction, the board guarded by its version (optimistic: the loser re-reads and
@@ -20,6 +21,7 @@ from typing import Any
 
 from chalicelib.domain.errors import Conflict
 from chalicelib.domain.league import BoardEntry, EvidenceTaken, LeaguePolicy, Submission
+from chalicelib.domain.league_tracks import RegisteredTrack
 from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The league store"
@@ -86,6 +88,16 @@ class DynamoLeagueStore:
             if self.submission(submission.track, submission.racer, submission.submission_id) is None:
                 return False  # deleted meanwhile (an admin removed the racer)
         raise Conflict("The league board is busy; the re-drive's result is stored on the next try.")
+
+    def registered_tracks(self) -> dict[str, RegisteredTrack]:
+        items = all_items(self._client, "query", _SERVICE, TableName=self._table,
+                          KeyConditionExpression="pk = :pk", ExpressionAttributeValues={":pk": {"S": "LEAGUE#TRACKS"}})
+        return {item["sk"]["S"].removeprefix("TRACK#"): RegisteredTrack.model_validate_json(item["body"]["S"])
+                for item in items}
+
+    def register_track(self, name: str, track: RegisteredTrack) -> None:
+        self._call("put_item", TableName=self._table, Item={
+            "pk": {"S": "LEAGUE#TRACKS"}, "sk": {"S": f"TRACK#{name}"}, "body": {"S": track.model_dump_json()}})
 
     def policy(self, track: str) -> LeaguePolicy:
         reply = self._call("get_item", TableName=self._table, Key={"pk": _pk(track), "sk": {"S": "POLICY"}})
