@@ -56,9 +56,9 @@ app.register_middleware(security_headers_middleware, "http")
 # viewer whatever the viewer's Accept header says (the stack sets the API's own binary media types to */*:
 # infra_cdk/drem_infra/stack.py). Printed results and labels are PDFs; a model's scrutineering clip is a GIF; an
 # event's logo is stored as PNG or WebP and uploaded as any of logo_image.UPLOAD_TYPES; a form with a file input is
-# multipart; /favicon.ico is an icon.
+# multipart; /favicon.ico is an icon; a league push uploads a .tar.gz.
 for binary_type in ("application/pdf", *sorted({"image/gif", *logo_image.CONTENT_TYPES, *logo_image.UPLOAD_TYPES}),
-                    "multipart/form-data", favicon.CONTENT_TYPE):
+                    "multipart/form-data", favicon.CONTENT_TYPE, "application/gzip", "application/x-gzip"):
     app.api.binary_types.append(binary_type)
 
 for blueprint_module in (pages, health, login, accounts, users, profiles, events, fleets, devices, racer_models,

@@ -29,6 +29,7 @@ from chalicelib.domain.events import EventService
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.leaderboards import LeaderboardPublisher
 from chalicelib.domain.league import LeagueService
+from chalicelib.domain.league_intake import LeagueIntake
 from chalicelib.domain.model_conversion import ConsoleConverter
 from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
 from chalicelib.domain.model_scrutiny import ScrutineerService, ScrutinyEnqueuer, upcoming_track_types
@@ -62,7 +63,7 @@ from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.racer_queue import DynamoQueueStore
 from chalicelib.storage.races import DynamoRaceStore
-from chalicelib.storage.scrutineer_queue import DynamoJobStore
+from chalicelib.storage.scrutineer_queue import LEAGUE_QUEUE_PK, DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
 
@@ -280,6 +281,22 @@ def assignment_service(settings: Settings | None = None) -> AssignmentService:
 def league_service(settings: Settings | None = None) -> LeagueService:
     settings = settings or get_settings()
     return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))
+
+
+def league_verify_queue(settings: Settings | None = None) -> ScrutineerQueue | None:
+    """drem's re-drives of league models, where a worker can drive them (as for scrutineering); None elsewhere, and
+    a push that brings its model is told the server cannot re-drive it."""
+    settings = settings or get_settings()
+    if importlib.util.find_spec("drem_sim") is None and not settings.scrutineering_worker:
+        return None
+    return ScrutineerQueue(DynamoJobStore(clients.dynamodb(), settings.table("league"), queue_pk=LEAGUE_QUEUE_PK),
+                           now_ms)
+
+
+def league_intake(settings: Settings | None = None) -> LeagueIntake:
+    settings = settings or get_settings()
+    queue = league_verify_queue(settings)
+    return LeagueIntake(league_service(settings), scrutineer_service(settings) if queue else None, queue)
 
 
 # --- the racer queue (on deck) --------------------------------------------------------------------------------------

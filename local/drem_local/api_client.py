@@ -109,14 +109,20 @@ class ApiClient:
     def delete(self, path: str) -> Any:
         return self.request("DELETE", path)
 
+    def post_bytes(self, path: str, data: bytes, content_type: str, params: dict[str, Any] | None = None) -> Any:
+        """POST a file's bytes as the body (a league upload)."""
+        return self.request("POST", path, data=data, params=params, content_type=content_type)
+
     def request(self, method: str, path: str, *, json: Any = None, params: dict[str, Any] | None = None,
-                authenticated: bool = True) -> Any:
+                authenticated: bool = True, data: bytes | None = None, content_type: str | None = None) -> Any:
         headers = {"Accept": "application/json"}
+        if content_type:
+            headers["Content-Type"] = content_type
         if self.token and authenticated:
             headers["Authorization"] = f"Bearer {self.token}"
         try:
-            reply = self._http.request(method, f"{self.base_url}{path}", json=json, params=params, headers=headers,
-                                       timeout=self.timeout_s)
+            reply = self._http.request(method, f"{self.base_url}{path}", json=json, data=data, params=params,
+                                       headers=headers, timeout=self.timeout_s)
         except requests.RequestException as exc:
             raise _unreachable(self.base_url, exc) from None
         if reply.status_code >= 400:

@@ -18,8 +18,9 @@ pytestmark = pytest.mark.browser
 def _push(url: str, username: str, path: Path, track: str) -> int:
     from drem_local.commands import league
 
-    args = argparse.Namespace(action="push", api=url, token=None, username=username, password=PASSWORD, path=path,
-                              track=track, racer=None, model_name=None, dry_run=False)
+    args = argparse.Namespace(action="push", api=url, token=None, username=username, password=PASSWORD, path=[path],
+                              track=track, racer=None, model_name=None, dry_run=False,
+                              self_reported=True)
     return league.run(args)
 
 

@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -66,9 +67,21 @@ def test_league_push_takes_drems_own_sample_model(live_stack, tmp_path):
                "--password", live_stack.admin_password, cwd=tmp_path, env={"DREM_STATE_DIR": str(live_stack.state_dir)},
                timeout=240)
     assert ran.returncode == 0, ran.stderr
-    assert "pushed drem-bc-oval" in ran.stdout
-    board = requests.get(live_stack.url + "/api/league/drem_oval", timeout=10).json()
-    assert any(ranked["entry"]["model_name"].startswith("drem-bc-oval") for ranked in board["entries"]), board
+    assert "pushed drem-bc-oval" in ran.stdout and "drem re-drives drem-bc-oval.tar.gz on drem_oval" in ran.stdout
+    # The model came with the push: the scrutineering worker re-drives it on drem_oval and the board then ranks what
+    # drem measured, marked verified.
+    deadline = time.monotonic() + 240
+    while True:
+        board = requests.get(live_stack.url + "/api/league/drem_oval", timeout=10).json()
+        entry = next(ranked["entry"] for ranked in board["entries"]
+                     if ranked["entry"]["model_name"].startswith("drem-bc-oval"))
+        if entry["verification"] != "pending" or time.monotonic() > deadline:
+            break
+        time.sleep(1)
+    assert entry["verification"] == "verified", entry
+    assert entry["laps_completed"] >= 1 and entry["best_lap_s"] is not None
+    page = requests.get(live_stack.url + "/league/drem_oval", timeout=10).text
+    assert "verified by drem" in page
 
 
 def test_car_run_sim_works_in_a_fresh_clone_without_the_shared_track_files(live_stack, tmp_path):

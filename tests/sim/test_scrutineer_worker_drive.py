@@ -93,3 +93,13 @@ def test_a_graph_onnxruntime_refuses_is_told_in_words_with_the_detail_for_staff(
     assert report.verdict in ("cannot_scrutineer", "invalid")
     assert not CODE_NAMES.search(report.message), report.message
     assert report.detail, "staff get what the software said"
+
+
+def test_a_league_re_drive_names_the_track_it_drives(tmp_path: Path) -> None:
+    """The league's re-drive (domain/league_intake.LeagueVerifier) drives the board's track by its name."""
+    outcome = BoundedClipDrive()(_model_folder(tmp_path), [], 1, track="reinvent_base")
+
+    assert outcome.failure is None and len(outcome.reports) == 1
+    report = outcome.reports[0]
+    assert report.track == "reinvent_base" and report.track_type == "LEAGUE"
+    assert report.verdict == "passed" and report.laps_completed == 1 and report.best_lap_time_s is not None

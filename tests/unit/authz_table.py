@@ -366,6 +366,8 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/api/league/{track}/submissions"): SIGNED_IN,
     ("GET", "/api/league/{track}"): PUBLIC,
     ("GET", "/api/league/{track}/racers/{racer}"): PUBLIC,
+    ("PUT", "/api/league/{track}/policy"): ADMIN_ONLY,
+    ("PUT", "/api/league-tracks/{track}"): ADMIN_ONLY,
     ("DELETE", "/api/league/{track}/racers/{racer}"): ADMIN_ONLY,
     ("GET", "/league/{track}"): PUBLIC,
     ("GET", "/league/{track}/racers/{racer}"): PUBLIC,

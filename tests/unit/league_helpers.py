@@ -8,8 +8,12 @@ import tarfile
 from pathlib import Path
 from typing import Any
 
+from chalicelib.domain.league_tracks import DREM_TRACK_LENGTHS_M
+
+# Like deepracer-utils' sample-drfc-1-logs/model/model_metadata.json: each steering angle at 1.0 and 2.0 m/s.
 DISCRETE_METADATA = {
-    "action_space": [{"steering_angle": s, "speed": 0.6, "index": i} for i, s in enumerate((-30, -15, 0, 15, 30))],
+    "action_space": [{"steering_angle": s, "speed": v, "index": 2 * i + j}
+                     for i, s in enumerate((-30, -15, 0, 15, 30)) for j, v in enumerate((1.0, 2.0))],
     "sensor": ["FRONT_FACING_CAMERA"], "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
     "training_algorithm": "clipped_ppo", "action_space_type": "discrete", "version": "5",
 }
@@ -24,6 +28,21 @@ HYPERPARAMETERS = {"batch_size": 64, "beta_entropy": 0.01, "discount_factor": 0.
                    "term_cond_avg_score": 350.0, "term_cond_max_episodes": 1000}
 SIMTRACE_HEADER = ("episode,steps,X,Y,yaw,steer,throttle,action,reward,done,all_wheels_on_track,progress,"
                    "closest_waypoint,track_len,tstamp,episode_status,pause_duration\n")
+
+
+def simtrace(world: str, laps: list[tuple[int, int]], *, track_len: float | None = None) -> str:
+    """An evaluation sim-trace as the simapp writes it (deepracer-utils sample-drfc-1-logs/evaluation-20220709200242/
+    evaluation-simtrace/0-iteration.csv): one row per step, `track_len` the track's centre-line length, `tstamp` sim
+    seconds; here the first and last step of each trial, the trial lasting its `elapsed_time_in_milliseconds`."""
+    length = track_len if track_len is not None else DREM_TRACK_LENGTHS_M.get(world, 30.0)
+    rows, start = [], 6.978
+    for episode, (ms, completion) in enumerate(laps):
+        status = "lap_complete" if completion == 100 else "off_track"
+        rows.append(f"{episode},1.0,3.2,0.68,0.17,-20.0,1.0,2,0.0,False,True,0.79,1,{length},{start:.3f},prepare,0.0")
+        rows.append(f"{episode},200.0,3.1,0.70,0.10,0.0,2.0,5,1.0,True,{completion == 100},{completion},1,{length},"
+                    f"{start + ms / 1000:.3f},{status},0.0")
+        start += ms / 1000 + 0.1
+    return SIMTRACE_HEADER + "\n".join(rows) + "\n"
 
 
 def training_metrics(completions: list[int], *, version: bool = True) -> dict[str, Any]:
@@ -73,6 +92,8 @@ def console_old_export(root: Path, *, world: str, laps: list[tuple[int, int]],
         "metrics/evaluation/evaluation-20201021101010-XyXyXyXyXyXyXyXyXyXyXy.json": evaluation_metrics(laps),
         "sim-trace/training/training-simtrace/0-iteration.csv":
             SIMTRACE_HEADER + "1,1,0,0,0,0,0.6,2,1,False,True,1,1,17.7,0.06,in_progress,0\n",
+        "sim-trace/evaluation/20201021101010-XyXyXyXyXyXyXyXyXyXyXy/evaluation-simtrace/0-iteration.csv":
+            simtrace(world, laps),
         "model/model_metadata.json": metadata or DISCRETE_METADATA,
         "ip/hyperparameters.json": HYPERPARAMETERS,
     })
@@ -85,19 +106,22 @@ def console_new_export(root: Path, *, world: str, laps: list[tuple[int, int]],
         f"logs/training/{stamp}-my-model-simulation.log": f"WORLD_NAME: {world}\nRACE_TYPE: TIME_TRIAL\n",
         f"metrics/training/{stamp}-my-model/training-metrics.json": training_metrics([30, 100, 100]),
         f"metrics/evaluation/{stamp}-my-model-eval/evaluation-metrics.json": evaluation_metrics(laps),
-        f"sim-trace/evaluation/{stamp}-my-model-eval/evaluation-simtrace/0-iteration.csv": SIMTRACE_HEADER,
+        f"sim-trace/evaluation/{stamp}-my-model-eval/evaluation-simtrace/0-iteration.csv": simtrace(world, laps),
         "model/model_metadata.json": metadata or DISCRETE_METADATA,
         "ip/hyperparameters.json": HYPERPARAMETERS,
     })
 
 
 def drfc_export(root: Path, *, world: str, laps: list[tuple[int, int]], metadata: dict | None = None,
-                eval_world: str | None = None) -> Path:
+                eval_world: str | None = None, params: bool = True) -> Path:
+    """DRfC's model prefix; `params=False` as in deepracer-utils' sample-drfc-1-logs (no params YAML: the
+    evaluation's sim-trace is the only track evidence)."""
+    yamls = {"training_params.yaml": training_yaml(world),
+             "evaluation_params.yaml": training_yaml(eval_world or world, "EVALUATION")} if params else {}
     return _write(root, {
-        "training_params.yaml": training_yaml(world),
-        "evaluation_params.yaml": training_yaml(eval_world or world, "EVALUATION"),
+        **yamls,
         "training-simtrace/0-iteration.csv": SIMTRACE_HEADER,
-        "evaluation-20240102030405/evaluation-simtrace/0-iteration.csv": SIMTRACE_HEADER,
+        "evaluation-20240102030405/evaluation-simtrace/0-iteration.csv": simtrace(eval_world or world, laps),
         "metrics/TrainingMetrics.json": training_metrics([5, 55, 100, 100, 88]),
         "metrics/EvaluationMetrics-20240101010101.json": evaluation_metrics([(99_000, 100)]),  # older, ignored
         "metrics/EvaluationMetrics-20240102030405.json": evaluation_metrics(laps),

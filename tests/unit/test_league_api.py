@@ -1,5 +1,6 @@
-"""League round trip over the real app (Chalice test client, moto, real Cognito tokens): push three racers'
-exports on two tracks, pull the boards sorted both ways, and read the CSV/JSON outputs back."""
+"""League round trip over the real app (Chalice test client, moto, real Cognito tokens): upload three racers'
+exports on two tracks (the server assembles them), pull the boards sorted both ways, and read the CSV/JSON outputs
+back."""
 from __future__ import annotations
 
 import csv
@@ -11,25 +12,26 @@ from typing import Any
 import pytest
 
 from chalicelib.domain.league import BOARD_COLUMNS
-from chalicelib.formats.league_assembler import assemble
-from chalicelib.formats.league_export import read_export
+from chalicelib.formats.league_export import pack_exports, read_export
 from drem_local.commands.league import rows_of, table, to_csv
 from tests.unit.conftest import bearer
 from tests.unit.league_helpers import console_old_export, drem_sim_export, drfc_export
 
 pytestmark = pytest.mark.unit
 
-REINVENT, OVAL = "reinvent_base", "Oval_track"
+REINVENT, OVAL = "reinvent_base", "drem_oval"
 
 
-def _submission(path: Path, racer: str, track: str) -> dict[str, Any]:
-    return assemble(read_export(path), racer=racer, track=track).model_dump(mode="json")
+def _upload(*paths: Path) -> bytes:
+    """What `drem league push PATH ...` sends: the export's files, packed."""
+    return pack_exports([read_export(path) for path in paths])
 
 
-def _push(client: Any, token: str, submission: dict[str, Any], track: str | None = None) -> Any:
-    return client.http.post(f"/api/league/{track or submission['track']}/submissions",
-                            headers={**bearer(token), "Content-Type": "application/json"},
-                            body=json.dumps(submission))
+def _push(client: Any, token: str, upload: bytes, track: str, *, racer: str | None = None,
+          model_name: str | None = None) -> Any:
+    query = "&".join(f"{key}={value}" for key, value in (("racer", racer), ("model_name", model_name)) if value)
+    return client.http.post(f"/api/league/{track}/submissions{'?' + query if query else ''}",
+                            headers={**bearer(token), "Content-Type": "application/gzip"}, body=upload)
 
 
 @pytest.fixture
@@ -40,11 +42,11 @@ def pushed(client: Any, users: Any, tmp_path: Path) -> dict[str, str]:
         ("alice", REINVENT, console_old_export(tmp_path / "a1", world=REINVENT, laps=[(15000, 100), (18000, 100)])),
         ("bob", REINVENT, drfc_export(tmp_path / "b1", world=REINVENT, laps=[(15500, 100), (15600, 100)])),
         ("carol", REINVENT, drem_sim_export(tmp_path / "c1", track=REINVENT, progress=[80.0, 60.0], lap_times=[])),
-        ("alice", OVAL, console_old_export(tmp_path / "a2", world=OVAL, laps=[(9000, 100)])),
-        ("carol", OVAL, drem_sim_export(tmp_path / "c2", track=OVAL, progress=[100, 100], lap_times=[8.5, 8.7])),
+        ("alice", OVAL, console_old_export(tmp_path / "a2", world=OVAL, laps=[(10000, 100)])),
+        ("carol", OVAL, drem_sim_export(tmp_path / "c2", track=OVAL, progress=[100, 100], lap_times=[9.5, 9.7])),
     ]
     for racer, track, path in exports:
-        reply = _push(client, tokens[racer], _submission(path, racer, track))
+        reply = _push(client, tokens[racer], _upload(path), track, model_name=path.name)
         assert reply.status_code == 201, reply.body
     return tokens
 
@@ -79,7 +81,7 @@ def test_filters(pushed: dict[str, str], client: Any) -> None:
 def test_a_new_push_replaces_the_board_entry_and_keeps_history(pushed: dict[str, str], client: Any,
                                                               tmp_path: Path) -> None:
     faster = console_old_export(tmp_path / "a3", world=REINVENT, laps=[(14000, 100)])
-    assert _push(client, pushed["alice"], _submission(faster, "alice", REINVENT)).status_code == 201
+    assert _push(client, pushed["alice"], _upload(faster), REINVENT, model_name="a3").status_code == 201
     entries = _board(client, REINVENT)["entries"]
     assert [e["entry"]["racer"] for e in entries].count("alice") == 1
     assert entries[0]["entry"]["best_lap_s"] == 14.0 and entries[0]["entry"]["model_name"] == "a3"
@@ -101,29 +103,31 @@ def test_csv_and_json_outputs_parse_back_to_the_same_rows(pushed: dict[str, str]
 
 
 def test_racers_push_only_as_themselves(pushed: dict[str, str], client: Any, users: Any, tmp_path: Path) -> None:
-    forged = _submission(console_old_export(tmp_path / "f", world=REINVENT, laps=[(1000, 100)]), "bob", REINVENT)
-    reply = _push(client, pushed["alice"], forged)
+    forged = _upload(console_old_export(tmp_path / "f", world=REINVENT, laps=[(12000, 100)]))
+    reply = _push(client, pushed["alice"], forged, REINVENT, racer="bob")
     assert reply.status_code == 403
     assert _board(client, REINVENT)["entries"][1]["entry"]["best_lap_s"] == 15.5  # bob's entry untouched
     admin = users.access_token("root", ("admin",))
-    assert _push(client, admin, forged).status_code == 201
-    anonymous = client.http.post(f"/api/league/{REINVENT}/submissions", headers={"Content-Type": "application/json"},
-                                 body=json.dumps(forged))
+    assert _push(client, admin, forged, REINVENT, racer="bob").status_code == 201
+    anonymous = client.http.post(f"/api/league/{REINVENT}/submissions", headers={"Content-Type": "application/gzip"},
+                                 body=forged)
     assert anonymous.status_code == 401
 
 
-def test_push_to_a_different_track_than_the_submission(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
-    submission = _submission(console_old_export(tmp_path / "x", world=REINVENT, laps=[(1000, 100)]), "alice", REINVENT)
-    reply = _push(client, pushed["alice"], submission, track=OVAL)
-    assert reply.status_code == 400 and json.loads(reply.body)["error"]["field"] == "track"
+def test_push_to_a_different_track_than_the_evaluation(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
+    upload = _upload(console_old_export(tmp_path / "x", world=REINVENT, laps=[(14000, 100)]))
+    reply = _push(client, pushed["alice"], upload, "Spain_track")
+    assert reply.status_code == 400 and "track_len" in json.loads(reply.body)["error"]["field"]
+    assert _board(client, "Spain_track")["entries"] == []
 
 
-def test_invalid_submission_names_the_field(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
-    submission = _submission(console_old_export(tmp_path / "x", world=REINVENT, laps=[(1000, 100)]), "alice", REINVENT)
-    submission["trials"][0]["completion_pct"] = 150
-    reply = _push(client, pushed["alice"], submission)
+def test_invalid_export_names_the_file_and_field(pushed: dict[str, str], client: Any, tmp_path: Path) -> None:
+    folder = console_old_export(tmp_path / "x", world=REINVENT, laps=[(14000, 100)])
+    path = next((folder / "metrics/evaluation").glob("*.json"))
+    path.write_text(path.read_text().replace('"completion_percentage": 100', '"completion_percentage": -5'))
+    reply = _push(client, pushed["alice"], _upload(folder), REINVENT)
     assert reply.status_code == 400
-    assert "trials" in json.loads(reply.body)["error"]["field"]
+    assert json.loads(reply.body)["error"]["field"].endswith("metrics[0].completion_percentage")
     assert _board(client, REINVENT)["entries"][0]["entry"]["best_lap_s"] == 15.0  # nothing half-written
 
 

@@ -6,7 +6,7 @@ Five inputs, found by where each layout puts them (deepracer-formats.md §5):
 |---------------------|-----------------------------------------|-----------------------------------|-------------------------|
 | model metadata      | model/model_metadata.json               | model/model_metadata.json         | model_metadata.json     |
 | hyperparameters     | ip/hyperparameters.json                 | ip/hyperparameters.json           | lineage.json            |
-| training params     | training_params.yaml, else the WORLD_NAME the training log prints | training_params.yaml | lineage.json (dataset) |
+| training params     | training_params.yaml, else the training log's WORLD_NAME, else none (shown only) | training_params.yaml, else none | lineage.json (dataset) |
 | training metrics    | metrics/training/**.json                | metrics/TrainingMetrics.json      | lineage.json (losses)   |
 | evaluation metrics  | metrics/evaluation/**.json (newest)     | metrics/EvaluationMetrics-*.json (newest) | metrics.json   |
 
@@ -15,6 +15,9 @@ knows what to fix; nothing is built from a half-read export.
 """
 from __future__ import annotations
 
+import csv
+import hashlib
+import io
 import json
 import re
 from typing import Any
@@ -43,6 +46,33 @@ _ISO_PREFIX = re.compile(r"^\d{4}-\d{2}-\d{2}T[\d:.-]+Z?-")
 _DRFC_TRAINING_METRICS = re.compile(r"(^|/)metrics/TrainingMetrics(_\d+)?\.json$")
 _MODEL_NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 _MAX_YAML_BYTES = 256 * 1024
+_SIMTRACE = re.compile(r"(^|/)evaluation-simtrace/[^/]+\.csv$")
+# A lap's time in the metrics and the span of its episode in the sim-trace are the same clock (simapp
+# metrics/s3_metrics.py: elapsed = metric_time - start_time, both sim time; the sim-trace's tstamp is sim time too):
+# they differ by a step or two (15 Hz) and the reset, never by more than this.
+SIMTRACE_TIME_SLACK_S = 0.5
+TRACK_LENGTH_TOLERANCE = 0.01  # sim-trace track_len vs drem's length of the track: 1 %
+
+# Where each tool writes the file that is missing, so a racer knows what to add (deepracer-formats.md §1.2, §5.1).
+MISSING_METADATA = ("missing: the export has no model metadata. The console's model download (“Download model”, a "
+                    ".tar.gz) holds model_metadata.json at its root; DeepRacer-for-Cloud writes it to the model "
+                    "prefix as model/model_metadata.json; DROA's car archives hold it at their root. Push it with the "
+                    "logs: drem league push LOGS MODEL.tar.gz")
+MISSING_HYPERPARAMETERS = ("missing: the export has no hyperparameters. The console's logs download holds "
+                           "ip/hyperparameters.json; DeepRacer-for-Cloud writes it to the model prefix as "
+                           "ip/hyperparameters.json")
+MISSING_TRAINING_METRICS = ("missing: the export has no training metrics. The console's logs download holds "
+                            "metrics/training/*.json; DeepRacer-for-Cloud writes metrics/TrainingMetrics.json "
+                            "(TrainingMetrics_1.json, … for more workers) in the model prefix")
+MISSING_EVALUATION_METRICS = ("missing: the export has no evaluation. The console's logs download of an evaluated "
+                              "model holds metrics/evaluation/*.json; DeepRacer-for-Cloud's dr-start-evaluation "
+                              "writes metrics/EvaluationMetrics-<time>.json in the model prefix; drem writes "
+                              "metrics.json with `drem sim eval --out DIR`")
+MISSING_TRACK_EVIDENCE = ("nothing in the export says which track the evaluation ran on. Push the evaluation's log "
+                          "(console: logs/evaluation/*-robomaker.log or logs/leaderboard/*; DROA: "
+                          "logs/evaluation/*-simulation.log) or DeepRacer-for-Cloud's evaluation sim-trace "
+                          "(evaluation-<time>/evaluation-simtrace/0-iteration.csv) or evaluation_params.yaml")
+MISSING_LINEAGE = "missing: drem writes training/lineage.json into every model archive it trains (drem sim train)"
 
 
 class ExportProblem(InvalidInput):
@@ -64,23 +94,42 @@ def detect_layout(files: ExportFiles) -> str:
     return LAYOUT_CONSOLE_OLD
 
 
-def assemble(files: ExportFiles, *, racer: str, track: str, model_name: str | None = None) -> SubmissionInput:
+def assemble(files: ExportFiles, *, racer: str, track: str, track_length_m: float,
+             model_name: str | None = None) -> SubmissionInput:
+    """One submission from the export; `track_length_m` is the centre-line length drem knows for `track`, which the
+    export's own evidence (sim-trace `track_len`) must agree with."""
     layout = detect_layout(files)
     metadata_file = _first(files, ["model/model_metadata.json", "model_metadata.json", "agent/model_metadata.json"],
-                           suffix="/model_metadata.json", what="model metadata (model_metadata.json)")
+                           suffix="/model_metadata.json", missing=MISSING_METADATA)
     metadata = _metadata(files, metadata_file)
     if layout == LAYOUT_DREM:
         parts = _drem_parts(files, track)
     else:
-        parts = _deepracer_parts(files, track)
+        parts = _deepracer_parts(files, track, track_length_m)
     name = model_name or _MODEL_NAME_UNSAFE.sub("-", files.source_name).strip("-.") or "model"
     try:
         return SubmissionInput(racer=racer, track=track, model_name=name[:80], layout=layout,
                                sensor=list(metadata.sensor), algorithm=metadata.training_origin,
                                action_space_type=metadata.action_space_type.value,
-                               action_space=action_space_summary(metadata), **parts)
+                               action_space=action_space_summary(metadata), top_speed_m_s=top_speed(metadata),
+                               **parts)
     except ValueError as error:  # pydantic: a value out of range (e.g. a negative lap time)
         raise InvalidInput(f"the export gives a value the league cannot accept: {error}") from None
+
+
+def top_speed(metadata: ModelMetadata) -> float:
+    """The fastest the action space lets the car go (m/s): no lap is quicker than the track at this speed."""
+    space = metadata.action_space
+    if isinstance(space, list):
+        return max(action.speed for action in space)
+    return space.speed.high
+
+
+def evidence_digest(entries: list[dict[str, Any]]) -> str:
+    """The fingerprint of an evaluation's laps: the same log content pushed again (by another racer, or with its
+    file renamed or re-indented) has the same digest."""
+    canonical = json.dumps(entries, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.sha256(canonical.encode()).hexdigest()
 
 
 def action_space_summary(metadata: ModelMetadata) -> str:
@@ -96,9 +145,9 @@ def action_space_summary(metadata: ModelMetadata) -> str:
 
 # -- DeepRacer console / DRfC ------------------------------------------------------------------------------------------
 
-def _deepracer_parts(files: ExportFiles, track: str) -> dict[str, Any]:
+def _deepracer_parts(files: ExportFiles, track: str, track_length_m: float) -> dict[str, Any]:
     hyper_file = _first(files, ["ip/hyperparameters.json", "hyperparameters.json"], suffix="/hyperparameters.json",
-                        what="hyperparameters (ip/hyperparameters.json)")
+                        missing=MISSING_HYPERPARAMETERS)
     hyperparameters = _hyperparameters(files, hyper_file)
     training_track = _training_world(files)
     training: list[tuple[str, dict[str, Any]]] = []
@@ -107,9 +156,12 @@ def _deepracer_parts(files: ExportFiles, track: str) -> dict[str, Any]:
         in_training = [e for e in episodes if e.get("phase", "training") == "training"] or episodes
         training += [(training_file, e) for e in in_training]
     evaluation_file = _newest(files, r"(^|/)metrics/EvaluationMetrics[^/]*\.json$|(^|/)metrics/evaluation/.+\.json$",
-                              "evaluation metrics (metrics/EvaluationMetrics-*.json or metrics/evaluation/*.json)")
-    _check_evaluation_world(files, track, evaluation_file)
+                              "metrics/evaluation/*.json", MISSING_EVALUATION_METRICS)
     entries = _metric_entries(files, evaluation_file, ("completion_percentage", "elapsed_time_in_milliseconds"))
+    named = _check_evaluation_world(files, track, evaluation_file)
+    traced = _check_simtraces(files, track, track_length_m, evaluation_file, entries)
+    if not (named or traced):
+        raise ExportProblem(evaluation_file, MISSING_TRACK_EVIDENCE)
     trials = [EvaluationTrial(
         trial=_int(evaluation_file, entry, "trial", index, default=index + 1),
         time_s=round(_number(evaluation_file, entry, "elapsed_time_in_milliseconds", index) / 1000.0, 3),
@@ -120,7 +172,7 @@ def _deepracer_parts(files: ExportFiles, track: str) -> dict[str, Any]:
         status=str(entry.get("episode_status", ""))[:40]) for index, entry in enumerate(entries)]
     best = max(_number(name, e, "completion_percentage", i) for i, (name, e) in enumerate(training))
     return dict(hyperparameters=hyperparameters, training_track=training_track, training_episodes=len(training),
-                training_best_completion_pct=min(best, 100.0), trials=trials)
+                training_best_completion_pct=min(best, 100.0), trials=trials, evidence_digest=evidence_digest(entries))
 
 
 def _metadata(files: ExportFiles, name: str) -> ModelMetadata:
@@ -151,13 +203,13 @@ def _training_metric_files(files: ExportFiles) -> list[str]:
     workers = sorted(n for n in files.files if _DRFC_TRAINING_METRICS.search(n))
     if workers:
         return workers
-    return [_newest(files, r"(^|/)metrics/training/.+\.json$",
-                    "training metrics (metrics/TrainingMetrics.json or metrics/training/*.json)")]
+    return [_newest(files, r"(^|/)metrics/training/.+\.json$", "metrics/training/*.json", MISSING_TRAINING_METRICS)]
 
 
-def _training_world(files: ExportFiles) -> str:
+def _training_world(files: ExportFiles) -> str | None:
     """The track the model trained on, from the training params or the training log (console and DROA exports have
-    no params file: their simulation logs print the world name)."""
+    no params file: their simulation logs print the world name); None when the export has neither (DRfC's model
+    prefix holds no params file): it is shown, never ranked."""
     yaml_name = _matching(files, r"(^|/)training[-_]params\.ya?ml$")
     if yaml_name:
         return _world_name(files, yaml_name)
@@ -167,8 +219,7 @@ def _training_world(files: ExportFiles) -> str:
         if world is None:
             raise ExportProblem(log_name, "the training log does not say which track (no WORLD_NAME)")
         return world
-    raise ExportProblem("training_params.yaml", "missing (no training params YAML and no training log that names "
-                        "the track)")
+    return None
 
 
 def _world_in_log(files: ExportFiles, name: str) -> str | None:
@@ -176,17 +227,19 @@ def _world_in_log(files: ExportFiles, name: str) -> str | None:
     return found.group(1) if found else None
 
 
-def _check_evaluation_world(files: ExportFiles, track: str, evaluation_file: str) -> None:
+def _check_evaluation_world(files: ExportFiles, track: str, evaluation_file: str) -> bool:
     """Every place the export names the track of the evaluation whose laps are submitted must say `track`: the
     evaluation params YAML (DRfC) and the evaluation's own simulation log (console: logs/evaluation or
     logs/leaderboard; DROA: logs/evaluation/*-simulation.log). Real console/DROA exports have no params YAML, so the
     log is what tells. The log of that evaluation is the one that mentions its metrics file's job name; when no log
     does, every evaluation log in the export must name `track` (an export cannot hide a foreign evaluation)."""
+    named = False
     yaml_name = _matching(files, r"(^|/)eval(uation)?[-_]params\.ya?ml$")
     if yaml_name:
         world = _world_name(files, yaml_name)
         if world != track:
             raise ExportProblem(yaml_name, f"the evaluation ran on {world!r}, not on {track!r}", field="WORLD_NAME")
+        named = True
     logs = sorted(n for n in files.files if _EVALUATION_LOG.search(n))
     job = _ISO_PREFIX.sub("", evaluation_file.rsplit("/", 1)[-1].removesuffix(".json"))
     texts = {name: files.read(name).decode("utf-8", "replace") for name in logs}
@@ -196,6 +249,78 @@ def _check_evaluation_world(files: ExportFiles, track: str, evaluation_file: str
         if found and found.group(1) != track:
             raise ExportProblem(name, f"the evaluation ran on {found.group(1)!r}, not on {track!r}",
                                 field="WORLD_NAME")
+        named = named or found is not None
+    return named
+
+
+def _evaluation_job(evaluation_file: str) -> str:
+    """What ties a metrics file to its sim-trace folder: DRfC `EvaluationMetrics-20220709200242.json` ↔
+    `evaluation-20220709200242/`; console `evaluation-20201021101010-Xy….json` ↔ `sim-trace/evaluation/
+    20201021101010-Xy…/`; a generically named file (`evaluation-metrics.json`) ↔ the name of its own folder."""
+    folder, _, stem = evaluation_file.rpartition("/")
+    stem = stem.removesuffix(".json").removeprefix("EvaluationMetrics-").removeprefix("evaluation-")
+    return folder.rsplit("/", 1)[-1] if stem in ("metrics", "evaluation") else stem
+
+
+def _check_simtraces(files: ExportFiles, track: str, track_length_m: float, evaluation_file: str,
+                     entries: list[dict[str, Any]]) -> bool:
+    """DeepRacer writes every step of an evaluation to its sim-trace, with the track's centre-line length
+    (`track_len`, simapp markov/metrics/s3_metrics.py). Every evaluation sim-trace must be of a track that long; the
+    submitted evaluation's own sim-trace (its folder named after the metrics file's job) also bounds each lap: a lap
+    claimed faster than its episode lasted in the sim-trace is an edited metrics file."""
+    traces = sorted(n for n in files.files if _SIMTRACE.search(n))
+    job = _evaluation_job(evaluation_file)
+    for name in traces:
+        episodes = _simtrace_episodes(files, name)
+        for episode in episodes.values():
+            for length in episode.lengths:
+                if abs(length - track_length_m) > TRACK_LENGTH_TOLERANCE * track_length_m:
+                    raise ExportProblem(name, f"the evaluation ran on a track {length:.2f} m long; {track} is "
+                                              f"{track_length_m:.2f} m", field="track_len")
+        folder = name.split("/evaluation-simtrace/")[0].rsplit("/", 1)[-1]
+        if len(job) >= 8 and (folder == job or folder.removeprefix("evaluation-") == job):
+            _check_lap_times(name, episodes, evaluation_file, entries)
+    return bool(traces)
+
+
+class _Episode:
+    def __init__(self) -> None:
+        self.first_s = float("inf")
+        self.last_s = float("-inf")
+        self.lengths: set[float] = set()
+
+    @property
+    def span_s(self) -> float:
+        return max(0.0, self.last_s - self.first_s)
+
+
+def _simtrace_episodes(files: ExportFiles, name: str) -> dict[int, _Episode]:
+    text = files.read(name).decode("utf-8", "replace")
+    reader = csv.DictReader(io.StringIO(text))
+    if not reader.fieldnames or not {"episode", "tstamp", "track_len"} <= set(reader.fieldnames):
+        raise ExportProblem(name, "is not a DeepRacer sim-trace (no episode, tstamp and track_len columns)")
+    episodes: dict[int, _Episode] = {}
+    for line, row in enumerate(reader, start=2):
+        try:
+            episode = episodes.setdefault(int(float(row["episode"])), _Episode())
+            stamp, length = float(row["tstamp"]), float(row["track_len"])
+        except (TypeError, ValueError):
+            raise ExportProblem(name, f"line {line} is not a sim-trace row (episode, tstamp, track_len must be "
+                                      "numbers)") from None
+        episode.first_s, episode.last_s = min(episode.first_s, stamp), max(episode.last_s, stamp)
+        episode.lengths.add(round(length, 3))
+    return episodes
+
+
+def _check_lap_times(trace: str, episodes: dict[int, _Episode], evaluation_file: str,
+                     entries: list[dict[str, Any]]) -> None:
+    ordered = [episodes[key] for key in sorted(episodes)]
+    for index, (entry, episode) in enumerate(zip(entries, ordered, strict=False)):
+        claimed = _number(evaluation_file, entry, "elapsed_time_in_milliseconds", index) / 1000.0
+        if claimed + SIMTRACE_TIME_SLACK_S < episode.span_s:
+            raise ExportProblem(evaluation_file, f"claims {claimed:.3f} s, but its sim-trace ({trace}) shows the "
+                                                 f"trial lasted {episode.span_s:.3f} s",
+                                field=f"metrics[{index}].elapsed_time_in_milliseconds")
 
 
 def _world_name(files: ExportFiles, name: str) -> str:
@@ -235,6 +360,8 @@ def _metric_entries(files: ExportFiles, name: str, required: tuple[str, ...]) ->
 
 def _drem_parts(files: ExportFiles, track: str) -> dict[str, Any]:
     lineage_name = "training/lineage.json" if "training/lineage.json" in files else "lineage.json"
+    if lineage_name not in files:
+        raise ExportProblem(lineage_name, MISSING_LINEAGE)
     lineage = _json(files, lineage_name)
     if not isinstance(lineage, dict):
         raise ExportProblem(lineage_name, "must hold a JSON object")
@@ -272,7 +399,7 @@ def _drem_parts(files: ExportFiles, track: str) -> dict[str, Any]:
                                       status="Lap complete" if completed else "Off track"))
     return dict(hyperparameters=hyperparameters, training_track="+".join(tracks)[:64] or None,
                 training_episodes=int(hyperparameters["epochs_run"]), training_best_completion_pct=None,
-                trials=trials)
+                trials=trials, evidence_digest=evidence_digest([metrics]))
 
 
 # -- small readers -----------------------------------------------------------------------------------------------------
@@ -309,14 +436,14 @@ def _int(file: str, entry: dict[str, Any], key: str, index: int, *, default: int
     return int(_number(file, entry, key, index))
 
 
-def _first(files: ExportFiles, exact: list[str], *, suffix: str, what: str) -> str:
+def _first(files: ExportFiles, exact: list[str], *, suffix: str, missing: str) -> str:
     for name in exact:
         if name in files:
             return name
     candidates = sorted((n for n in files.files if n.endswith(suffix)), key=lambda n: (n.count("/"), n))
     if candidates:
         return candidates[0]
-    raise ExportProblem(exact[0], f"missing: the export has no {what}")
+    raise ExportProblem(exact[0], missing)
 
 
 def _matching(files: ExportFiles, pattern: str) -> str | None:
@@ -324,10 +451,10 @@ def _matching(files: ExportFiles, pattern: str) -> str | None:
     return found[-1] if found else None
 
 
-def _newest(files: ExportFiles, pattern: str, what: str) -> str:
+def _newest(files: ExportFiles, pattern: str, shown: str, missing: str) -> str:
     found = _matching(files, pattern)
     if found is None:
-        raise ExportProblem(what.split(" (")[1].rstrip(")").split(" or ")[0], f"missing: the export has no {what}")
+        raise ExportProblem(shown, missing)
     return found
 
 

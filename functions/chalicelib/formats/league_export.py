@@ -9,6 +9,7 @@ names, "..", backslashes, control or bidi characters, links, devices) is skipped
 from __future__ import annotations
 
 import gzip
+import io
 import os
 import tarfile
 import zlib
@@ -52,9 +53,32 @@ class ExportFiles:
 
 
 def wanted_file(name: str) -> bool:
-    """The files the assembler may read: small text documents, never models, checkpoints or sim-traces."""
+    """The files the assembler may read: text documents and the evaluations' sim-traces (their `track_len` and
+    step times are the evaluation's evidence), never models, checkpoints or training sim-traces."""
     lowered = name.lower()
-    return lowered.endswith((".json", ".yaml", ".yml", ".log"))
+    return (lowered.endswith((".json", ".yaml", ".yml", ".log"))
+            or "/evaluation-simtrace/" in f"/{lowered}" and lowered.endswith(".csv"))
+
+
+def pack_exports(exports: list[ExportFiles]) -> bytes:
+    """The files of one or more exports (a logs download and the model download, say) as one .tar.gz, for the
+    server to assemble: names kept as each export has them; the same name in two exports is refused."""
+    merged: dict[str, bytes] = {}
+    for export in exports:
+        for name, data in export.files.items():
+            if name in merged and merged[name] != data:
+                raise InvalidInput(f"{name} is in two of the exports with different content; push them one at a "
+                                   "time", field="path")
+            merged[name] = data
+    buffer = io.BytesIO()
+    with gzip.GzipFile(fileobj=buffer, mode="wb", mtime=0) as compressed, \
+            tarfile.open(fileobj=compressed, mode="w", format=tarfile.PAX_FORMAT) as archive:
+        for name in sorted(merged):
+            info = tarfile.TarInfo(name)
+            info.size = len(merged[name])
+            info.mode = 0o644
+            archive.addfile(info, io.BytesIO(merged[name]))
+    return buffer.getvalue()
 
 
 def read_export(path: str | Path, *, limits: ExportLimits = DEFAULT_LIMITS,

@@ -3,7 +3,9 @@
 The one set of rules for every reader of archives and export folders (model uploads, league exports, event
 exports). A name is refused if extracting it anywhere could write outside the target folder or make it display as
 something it is not: NUL, control, bidi-override and other invisible format characters, names that are not valid
-UTF-8, backslashes, absolute paths, drive letters or ':' and '..' parts. A member is refused if it is anything but
+UTF-8, backslashes, absolute paths, drive letters and '..' parts. A ':' elsewhere in a name is harmless on the
+systems drem reads and writes on (Linux, macOS) and real exports need it: DeepRacer-on-AWS names every log and metrics
+file after an ISO-8601 time (`2026-03-07T17:52:00.898Z-…-simulation.log`). A member is refused if it is anything but
 a regular file or a folder (links, device files, fifos). Each caller decides what a refusal means: the model
 validator quarantines the upload, the league reader skips the member, the event import refuses the folder.
 """
@@ -17,6 +19,8 @@ import unicodedata
 from pathlib import Path
 
 _CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
+# `C:` at the start of a path part is a Windows drive (`C:/x`, `a/C:x` on Windows extraction tools): refused.
+_DRIVE_LETTER = re.compile(r"(^|/)[A-Za-z]:")
 # Unicode categories a file name never needs and a reviewer cannot see: C1 controls (Cc), format characters such as
 # the bidi overrides U+202E/U+2066-2069 and zero-width joiners (Cf, the "Trojan Source" trick: `model\u202egnp.pb`
 # shows as `modelbp.png`), and line/paragraph separators (Zl, Zp).
@@ -62,8 +66,8 @@ def vet_member_name(raw: str, *, max_length: int = DEFAULT_MAX_NAME_LENGTH, max_
         raise HostileMember(f"member name {raw!r} contains a backslash (a Windows path trick)")
     if raw.startswith("/"):
         raise HostileMember(f"member {raw!r} has an absolute path")
-    if ":" in raw:
-        raise HostileMember(f"member name {raw!r} contains a drive letter or ':'")
+    if _DRIVE_LETTER.search(raw):
+        raise HostileMember(f"member name {raw!r} starts a path part with a drive letter")
     parts = raw.split("/")
     if ".." in parts:
         raise HostileMember(f"member {raw!r} climbs out of the archive with '..'")

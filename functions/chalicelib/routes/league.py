@@ -1,28 +1,31 @@
 """The virtual league: the JSON API `drem league push|pull` talks to, and the public board page `/league/{track}`.
 
 Who may call: anyone reads boards and a racer's latest submission (hyperparameters included: "what did the leader
-use?"); any signed-in user pushes, but only under their own username (admins may push for anyone, decided in
-chalicelib.domain.league); only admins delete a racer's submissions on a track.
+use?"); any signed-in user pushes the files of an export (a .tar.gz the server reads and assembles), but only under
+their own username (admins may push for anyone, decided in chalicelib.domain.league); only admins delete a racer's
+submissions on a track.
 """
 from __future__ import annotations
 
 from chalice import Blueprint, Response
 
 from chalicelib import services
-from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
+from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, body_bytes, route
 from chalicelib.auth.principals import Principal, User
-from chalicelib.domain.league import Board, BoardQuery, Submission, SubmissionInput
+from chalicelib.domain.league import Board, BoardQuery, LeaguePolicy, Submission
+from chalicelib.domain.league_intake import UPLOAD_CONTENT_TYPES, PushOptions
+from chalicelib.domain.league_tracks import RegisteredTrack
 from chalicelib.views.league_views import board_view, submission_view
 from drem_web import render
 
 bp = Blueprint(__name__)
 
 
-@route(bp, "/api/league/{track}/submissions", methods=["POST"], allow=SIGNED_IN, body=SubmissionInput,
-       response=Submission, status_code=201, tags=("league",))
-def push_submission(principal: User, track: str, body: SubmissionInput) -> Response:
-    """Push a submission (your own; admins may push for any racer)"""
-    submission = services.league_service().push(principal, track, body)
+@route(bp, "/api/league/{track}/submissions", methods=["POST"], allow=SIGNED_IN, query=PushOptions,
+       content_types=UPLOAD_CONTENT_TYPES, response=Submission, status_code=201, tags=("league",))
+def push_submission(principal: User, track: str, query: PushOptions) -> Response:
+    """Push an export's files as a .tar.gz (yours; admins may push for any racer); the server assembles them"""
+    submission = services.league_intake().push_upload(principal, track, body_bytes(bp.current_request), query)
     return Response(body={"submission": submission.model_dump(mode="json"),
                           "entry": submission.entry().model_dump(mode="json")}, status_code=201)
 
@@ -37,6 +40,20 @@ def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
 def latest_submission(principal: Principal, track: str, racer: str) -> dict:
     """A racer's latest submission on a track, with every hyperparameter"""
     return {"submission": services.league_service().latest(track, racer).model_dump(mode="json")}
+
+
+@route(bp, "/api/league-tracks/{track}", methods=["PUT"], allow={ADMIN}, body=RegisteredTrack,
+       response=RegisteredTrack, tags=("league",))
+def register_track(principal: User, track: str, body: RegisteredTrack) -> dict:
+    """Register a track drem's set lacks, by its centre-line length (admins)"""
+    return services.league_service().register_track(principal, track, body).model_dump(mode="json")
+
+
+@route(bp, "/api/league/{track}/policy", methods=["PUT"], allow={ADMIN}, body=LeaguePolicy, response=LeaguePolicy,
+       tags=("league",))
+def set_policy(principal: User, track: str, body: LeaguePolicy) -> dict:
+    """Choose what the board does with self-reported entries: shown, below_verified or refused (admins)"""
+    return services.league_service().set_policy(principal, track, body).model_dump(mode="json")
 
 
 @route(bp, "/api/league/{track}/racers/{racer}", methods=["DELETE"], allow={ADMIN}, tags=("league",))

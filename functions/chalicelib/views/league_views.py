@@ -24,6 +24,8 @@ class BoardRowView:
     submitted: str
     detail_url: str
     detail_id: str
+    source: str  # "verified by drem" or "self-reported from logs"
+    verified: bool
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,9 @@ def board_view(board: Board, query: BoardQuery) -> BoardView:
         action_space=e.action_space, best_lap=seconds(e.best_lap_s), average_lap=seconds(e.average_lap_s),
         laps=f"{e.laps_completed}/{e.trials}", completion=f"{e.average_completion_pct:.1f} %",
         off_track=e.off_track_total, resets=e.reset_total, submitted=e.submitted_at[:16].replace("T", " "),
-        detail_url=f"/league/{board.track}/racers/{e.racer}", detail_id=f"detail-{ranked.rank}")
+        detail_url=f"/league/{board.track}/racers/{e.racer}", detail_id=f"detail-{ranked.rank}",
+        source=e.source + (" (drem's re-drive pending)" if e.verification == "pending" else ""),
+        verified=e.verified)
         for ranked in board.entries for e in [ranked.entry]]
     shown = query.model_dump(mode="json", exclude_none=True)
     return BoardView(track=board.track, sort=board.sort.value,
@@ -68,6 +72,7 @@ class SubmissionView:
     training: str
     hyperparameters: list[tuple[str, str]]
     trials: list[dict[str, str]]
+    verification: str
 
 
 def submission_view(submission: Submission) -> SubmissionView:
@@ -84,4 +89,15 @@ def submission_view(submission: Submission) -> SubmissionView:
                          for key, value in sorted(submission.hyperparameters.items())],
         trials=[{"trial": str(t.trial), "time": seconds(t.time_s) if t.completed else "–",
                  "completion": f"{t.completion_pct:.0f} %", "off_track": str(t.off_track_count),
-                 "resets": str(t.reset_count), "status": t.status} for t in submission.trials])
+                 "resets": str(t.reset_count), "status": t.status} for t in submission.trials],
+        verification=verification_text(submission))
+
+
+def verification_text(submission: Submission) -> str:
+    words = {"self_reported": "Self-reported from logs (no model pushed for drem to re-drive).",
+             "pending": "Self-reported from logs until drem has re-driven the model (queued).",
+             "verified": "Verified by drem: ranked on drem's re-drive; the logs' laps below are evidence only.",
+             "disputed": "Not shown on the board: the logs do not agree with drem's re-drive.",
+             "not_verified": "Self-reported from logs: drem could not re-drive the model."}
+    note = f" {submission.verification_note}" if submission.verification_note else ""
+    return words.get(submission.verification, "") + note

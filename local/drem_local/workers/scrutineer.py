@@ -54,13 +54,14 @@ class BoundedClipDrive:
         self.python = python
         self.process: subprocess.Popen[bytes] | None = None
 
-    def __call__(self, folder: Path, track_types: list[str], laps: int) -> Any:
+    def __call__(self, folder: Path, track_types: list[str], laps: int, *, track: str | None = None) -> Any:
         from chalicelib.domain.model_scrutiny import DriveOutcome
 
         limits = self.limits
         clip = folder / "clip.gif"
+        where = ["--track", track] if track else [arg for kind in track_types for arg in ("--track-type", kind)]
         command = [self.python, "-m", DRIVE_MODULE, "--folder", str(folder), "--laps", str(laps),
-                   "--clip", str(clip), *[arg for track in track_types for arg in ("--track-type", track)]]
+                   "--clip", str(clip), *where]
         environment = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1",
                        "DREM_SIM_THREADS": "1"}
         process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
@@ -175,6 +176,20 @@ def resume_model_checks() -> None:
         logs.log(logging.WARNING, "interrupted model checks could not be resumed yet", error=repr(error)[:300])
 
 
+def league_verifier(drive: BoundedClipDrive) -> Any:
+    """The league's re-drives, taken when no scrutineering job waits; None where the server has no such queue."""
+    from chalicelib import services
+    from chalicelib.domain.league_intake import LeagueVerifier
+
+    queue = services.league_verify_queue()
+    if queue is None:
+        return None
+    if os.environ.get(LEASE_VARIABLE):
+        queue.lease_ms = int(float(os.environ[LEASE_VARIABLE]) * 1000)
+    return LeagueVerifier(services.league_service(), services.scrutineer_service(), queue,
+                          lambda folder, track, laps: drive(folder, [], laps, track=track))
+
+
 def serve(poll_s: float, once: bool = False) -> int:
     use_app_source()
     from chalicelib import logs
@@ -183,6 +198,7 @@ def serve(poll_s: float, once: bool = False) -> int:
     lowest_priority()
     drive = BoundedClipDrive()
     worker = background_scrutineer(drive)
+    league = league_verifier(drive)
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
@@ -194,6 +210,8 @@ def serve(poll_s: float, once: bool = False) -> int:
                 next_resume = time.monotonic() + RESUME_CHECKS_EVERY_S
             try:
                 job = worker.run_one()
+                if job is None and league is not None and league.run_one() is not False:
+                    job = "league"  # a league re-drive ran: look at both queues again at once
             except Exception as error:  # storage briefly away (restarting): wait and take the queue again
                 logs.log(logging.WARNING, "scrutineering worker could not take a job", error=repr(error)[:300])
                 job = None

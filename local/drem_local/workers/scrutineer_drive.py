@@ -3,6 +3,7 @@ simulator twins of some event track types, print the reports as one JSON line, a
 on the first track.
 
     python -m drem_local.workers.scrutineer_drive --folder DIR --track-type REINVENT_2018 [--laps 2] [--clip out.gif]
+    python -m drem_local.workers.scrutineer_drive --folder DIR --track reinvent_base [--laps 3]   (a league re-drive)
 
 The folder holds model_metadata.json and model.onnx (the worker wrote them there). Verdicts are those of
 drem_sim.learn.scrutineer (a lap with an off-track is no completed lap); the clip is drawn with the simulator's own
@@ -45,13 +46,14 @@ class RecordingEnv:
         return answer
 
 
-def drive_track(folder: Path, track_type: str, laps: int) -> tuple[dict[str, Any], Any, list[tuple[float, float]]]:
-    """(report, track, driven path) for one track type."""
+def drive_track(folder: Path, track_type: str, laps: int, *,
+                track_name: str | None = None) -> tuple[dict[str, Any], Any, list[tuple[float, float]]]:
+    """(report, track, driven path) for one track type, or for the track named `track_name` (a league board's)."""
     from drem_sim.env import RaceEnv
     from drem_sim.learn.evaluate import drive
     from drem_sim.learn.package import ArchiveError
     from drem_sim.learn.pilot import OnnxPilot, TensorFlowModelError
-    from drem_sim.learn.scrutineer import PASS_COMPLETION_PCT, track_for_event
+    from drem_sim.learn.scrutineer import PASS_COMPLETION_PCT, EventTrack, track_for_event
     from drem_sim.learn.scrutiny_words import (
         PlainFailure,
         archive_unusable,
@@ -61,7 +63,7 @@ def drive_track(folder: Path, track_type: str, laps: int) -> tuple[dict[str, Any
     )
     from drem_sim.tracks import TrackError, load_track
 
-    event_track = track_for_event(track_type)
+    event_track = EventTrack(track_type="LEAGUE", track=track_name) if track_name else track_for_event(track_type)
     base: dict[str, Any] = {"track": event_track.track, "track_type": event_track.track_type, "laps": laps}
 
     def stopped(verdict: str, failure: PlainFailure) -> tuple[dict[str, Any], None, list[tuple[float, float]]]:
@@ -144,10 +146,17 @@ def bounded_clip(track: Any, path: list[tuple[float, float]]) -> bytes | None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drem_local.workers.scrutineer_drive")
     parser.add_argument("--folder", type=Path, required=True)
-    parser.add_argument("--track-type", action="append", required=True)
+    parser.add_argument("--track-type", action="append", default=[])
+    parser.add_argument("--track", default=None, help="drive this track by name (a league board's) instead")
     parser.add_argument("--laps", type=int, default=2)
     parser.add_argument("--clip", type=Path, default=None)
     args = parser.parse_args(argv)
+    if args.track:
+        report, _track, _path = drive_track(args.folder, "", max(1, min(args.laps, 3)), track_name=args.track)
+        print(json.dumps({"reports": [report]}))
+        return 0
+    if not args.track_type:
+        parser.error("give --track-type (one or more) or --track")
     reports = []
     for index, track_type in enumerate(args.track_type):
         report, track, path = drive_track(args.folder, track_type, max(1, min(args.laps, 3)))
