@@ -14,6 +14,7 @@ import time
 from datetime import UTC, datetime
 from typing import Any
 
+from chalicelib import live_wake
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignments import AssignmentService
@@ -185,7 +186,8 @@ def race_store() -> DynamoRaceStore:
 
 
 def publisher() -> LeaderboardPublisher:
-    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms)
+    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms,
+                                on_change=live_wake.waker(get_settings().live_wake_dir))
 
 
 def uncached_publisher() -> LeaderboardPublisher:

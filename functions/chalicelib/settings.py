@@ -38,6 +38,8 @@ class Settings(BaseModel):
     # The live server (drem_live) the public pages' live regions subscribe to: its origin locally
     # (http://host:8002); unset on AWS, where CloudFront routes /live/* to it on the pages' own origin.
     live_url: str | None = None
+    # Where the live server's processes listen for "this event changed" (chalicelib.live_wake); "" = it only polls.
+    live_wake_dir: str = ""
     # A scrutineering worker drives queued models although this process has no simulator: on AWS, the learning booth's
     # task runs one (drem_infra.booth_service), so the functions queue new models for it.
     scrutineering_worker: bool = False
@@ -59,6 +61,7 @@ class Settings(BaseModel):
             "state_dir": state_dir,
             "token_key_file": token_key_file,
             "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
+            "live_wake_dir": env.get("DREM_LIVE_WAKE_DIR") or "",
             "scrutineering_worker": env.get(resources.SCRUTINEERING_WORKER_ENV) == "1",
         }
         settings = cls.model_validate(values)

@@ -15,6 +15,7 @@ import subprocess
 import sys
 
 DEFAULT_POLL_MS = 100
+WOKEN_POLL_MS = 250
 _PR_SET_PDEATHSIG = 1
 
 
@@ -59,8 +60,10 @@ def _serve(host: str, port: int, *, reuse_port: bool) -> None:
     from drem_live.limits import env_limits
     from drem_live.server import make_app
 
-    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or DEFAULT_POLL_MS)
-    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits())
+    wake_dir = os.environ.get("DREM_LIVE_WAKE_DIR") or ""
+    # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
+    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
+    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits(), wake_dir=wake_dir)
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
     web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,

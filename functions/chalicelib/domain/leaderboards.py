@@ -209,8 +209,11 @@ def empty_board_body(event_id: str, track_id: str) -> str:
 
 class LeaderboardPublisher:
     def __init__(self, boards: BoardRepository, clock_ms: Callable[[], int], *,
-                 cache: PublicViewCache | None = PROCESS_CACHE) -> None:
-        """`cache=None` reads the table on every poll; the default shares this process's cache."""
+                 cache: PublicViewCache | None = PROCESS_CACHE,
+                 on_change: Callable[[str], None] | None = None) -> None:
+        """`cache=None` reads the table on every poll; the default shares this process's cache. `on_change(event_id)`
+        is told after every write (the live server's wake-up)."""
+        self._on_change = on_change
         self._boards = boards
         self._clock_ms = clock_ms
         self._cache = cache
@@ -339,6 +342,8 @@ class LeaderboardPublisher:
                 self._boards.put(event_id, sort_key, Materialised(version=version, etag=etag, body=body, state=state,
                                                                   pages=pages),
                                  expected_version=current.version if current else None)
+                if self._on_change is not None:
+                    self._on_change(event_id)
                 return
             except StaleBoard:
                 continue
