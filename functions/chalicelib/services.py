@@ -42,8 +42,8 @@ from chalicelib.domain.scrutineer_queue import ScrutineerQueue
 from chalicelib.domain.stats import StatsDigests
 from chalicelib.domain.timing import TimingService
 from chalicelib.domain.users import ModelsEraser, OwnedDataEraser, UserService
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients, health
+from chalicelib.settings import Settings, get_settings, use_parameter_reader
+from chalicelib.storage import clients, health, parameters
 from chalicelib.storage.assignments import DynamoAssignmentStore, FleetCarDirectory
 from chalicelib.storage.audit import DynamoAuditLog
 from chalicelib.storage.booth import DynamoBoothStore
@@ -65,6 +65,9 @@ from chalicelib.storage.races import DynamoRaceStore
 from chalicelib.storage.scrutineer_queue import DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
+
+# On AWS the public URL may live in the stack's SSM parameter (chalicelib.settings.get_settings reads it).
+use_parameter_reader(parameters.read_parameter)
 
 
 def now_ms() -> int:

@@ -57,6 +57,9 @@ COGNITO_CALLS_WITHOUT_IAM: frozenset[str] = frozenset({
     "RespondToAuthChallenge", "SignUp",
 })
 
+# The functions read the stack's public URL from its one SSM parameter (chalicelib.storage.parameters).
+PARAMETER_ACTIONS: tuple[str, ...] = ("ssm:GetParameter",)
+
 # Lambda writes its logs through these, into log groups the stack creates (with retention) and names.
 LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
 

@@ -29,6 +29,7 @@ from pydantic import ValidationError
 from drem_live.app_code import AppCode, etag_matches, token_is_newer
 from drem_live.channels import Channels, ChannelsFull, Subscriber
 from drem_live.limits import Limits, StreamCount
+from drem_live.metrics import publish_streams
 from drem_live.polls import PollViews
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, clock_message
 from drem_live.wake import WAKE, listen_for_wakes
@@ -219,7 +220,8 @@ def poll_handler(kind: str) -> Handler:
 
 
 def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
-             wake_dir: str = "") -> web.Application:
+             wake_dir: str = "", metrics: tuple[str, str] | None = None) -> web.Application:
+    """`metrics` (namespace, stage): publish the open streams to CloudWatch (drem_live.metrics)."""
     executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="drem-live")
 
     def read_view(kind: str, event_id: str, track: str) -> tuple[int, str]:
@@ -236,6 +238,8 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
     app[UNKNOWN_EVENTS] = {}
     if wake_dir:
         listen_for_wakes(app, wake_dir, app[CHANNELS])
+    if metrics is not None:
+        publish_streams(app, *metrics, streams=lambda: app[STREAMS].total)
     app.router.add_get("/live/healthz", healthz)
     for kind in ("leaderboard", "overlay"):
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))
