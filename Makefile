@@ -161,6 +161,8 @@ CDK_CONTEXT += $(if $(SES_FROM)$(SES_IDENTITY_ARN),-c ses_from='$(SES_FROM)' -c 
 CDK_CONTEXT += $(if $(ALARM_EMAIL),-c alarm_email='$(ALARM_EMAIL)',)
 # BOOTH=1 adds the learning booth's Fargate task (docs/deploy.md, "The learning booth"): about 2.4 USD a day, always on.
 CDK_CONTEXT += $(if $(BOOTH),-c booth=true,)
+# UPLOAD_CONCURRENCY=0 on a new account (Lambda concurrency quota below 102): the upload checker's reserved concurrency.
+CDK_CONTEXT += $(if $(UPLOAD_CONCURRENCY),-c upload_concurrency=$(UPLOAD_CONCURRENCY),)
 
 $(CDK): infra_cdk/package.json infra_cdk/package-lock.json
 	cd infra_cdk && npm ci --no-audit --no-fund
@@ -176,14 +178,9 @@ deploy: install-deploy font-debs $(CDK)
 	mkdir -p .drem-aws
 	$(CDK_RUN) bootstrap $(CDK_CONTEXT)
 	$(CDK_RUN) deploy drem-$(STAGE) $(CDK_CONTEXT) --require-approval never --outputs-file ../$(CDK_OUTPUTS)
+	@# One pass: the functions read the public URL from the stack's SSM parameter (CloudFront's domain is known
+	@# only once the distribution exists), so neither the first deploy nor a redeploy serves a fallback URL.
 	$(BIN)/drem aws record --stage $(STAGE) --outputs $(CDK_OUTPUTS)
-	@# CloudFront's domain is known only now; the functions need it as their public URL (QR codes, Secure cookies).
-	@url=$$($(BIN)/python -c "import json;print(json.load(open('$(DEPLOYED)'))['public_url'])"); \
-	if ! grep -q '"PublicUrl": "https' $(CDK_OUTPUTS); then \
-		echo "Second deploy: telling the app its public URL $$url"; \
-		($(CDK_RUN) deploy drem-$(STAGE) $(CDK_CONTEXT) -c public_url=$$url --require-approval never \
-			--outputs-file ../$(CDK_OUTPUTS)) && $(BIN)/drem aws record --stage $(STAGE) --outputs $(CDK_OUTPUTS); \
-	fi
 	$(BIN)/drem aws admin --stage $(STAGE)
 	@echo "drem $(STAGE) is deployed: $$($(BIN)/python -c "import json;print(json.load(open('$(DEPLOYED)'))['public_url'])")"
 

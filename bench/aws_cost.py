@@ -7,8 +7,12 @@ big screen and stream overlay and everyone's phones (the phones spread evenly ov
     fragment when it did), each Lambda read going to DynamoDB unless the instance's 250 ms cache has it.
 (b) push: CloudFront carries page loads and one Server-Sent-Events request per (re)connection to the live server on
     Fargate behind an ALB; each update is gzipped once and delivered to every viewer of its channel (data transfer
-    out), the server reads DynamoDB on a fixed poll per channel whatever the number of viewers.
-Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the timers' laps, the staff consoles).
+    out), the server reads DynamoDB on a fixed poll per channel whatever the number of viewers: on AWS every
+    drem_live DEFAULT_POLL_MS (100 ms; the functions cannot wake the tasks, so there is no wake-up there), per task.
+Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the timers' laps, the staff consoles) and
+the same DynamoDB writes and writer reads per lap (the race transaction, the track board, the combined board and the
+overlay, each read consistently before it is rewritten: `lap_writes`). Tasks: spectators / the live pages' scaling
+target per task (drem_infra.live_pages.STREAMS_TARGET_PER_TASK, not yet a measured capacity).
 
 The message sizes are measured, not guessed: a 50-racer board and a racing overlay are built by the real publisher,
 rendered by the live-region builders (chalicelib.views.live_regions, shared by the app and the live server) and
@@ -27,6 +31,8 @@ List prices, us-east-1 (CloudFront: United States edge), read on 2026-11-24 thro
 - DynamoDB on-demand $0.125 per million read request units: airbyte.com/data-engineering-resources/dynamodb-pricing
   (the January 2025 on-demand price cut: aws.amazon.com/blogs/aws/amazon-dynamodb-on-demand-no-capacity-planning-and-
   pay-per-request-pricing); an eventually consistent read of up to 4 KB is half a unit, a strongly consistent one one.
+- DynamoDB on-demand $0.625 per million write request units (same source); a write of up to 1 KB is one unit, a
+  transactional write two (aws.amazon.com/dynamodb/pricing/provisioned, "Key terms", read through a mirror).
 - CloudFront data transfer out $0.085 per GB (first 10 TB, United States): aws.amazon.com/cloudfront/pricing;
   HTTPS requests $0.0100 per 10,000 (HTTP $0.0075): same page's request table, and github.com/vreutova/
   infracost-idem-support/pull/15 (infracost's CloudFront rates); origin fetches from an ALB are free (same page).
@@ -38,7 +44,8 @@ List prices, us-east-1 (CloudFront: United States edge), read on 2026-11-24 thro
 - Public IPv4 addresses $0.005 per hour each (the ALB has one per subnet, the task one): nwobodo.me/notes/
   aws-extra-ipv4-cost-per-hour; vishalvyas.com/understand-aws-public-ipv4-address-usage-and-pricing
 
-Run: .venv/bin/python bench/aws_cost.py [--spectators N] [--hours H]
+Goals (issue #34): push <= $20 per 8-hour day at 2,000 spectators and <= $100 at 20,000.
+Run: .venv/bin/python bench/aws_cost.py [--spectators N,N] [--hours H]
 """
 from __future__ import annotations
 
@@ -52,7 +59,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 REGION = "us-east-1"
 PRICES_READ_ON = "2026-11-24"
-GOAL_DOLLARS = 20.0
+GOALS_DOLLARS = {2_000: 20.0, 20_000: 100.0}
 GB = 1_000_000_000
 
 
@@ -62,6 +69,7 @@ class Prices:
     lambda_per_million: float = 0.20
     lambda_per_gb_second: float = 0.0000166667
     dynamodb_per_million_rru: float = 0.125
+    dynamodb_per_million_wru: float = 0.625
     cloudfront_per_10k_https: float = 0.0100
     cloudfront_per_gb_out: float = 0.085
     alb_per_hour: float = 0.0225
@@ -86,8 +94,9 @@ class Profile:
     phone_page_loads: int = 2  # the event page once, the board once more later (a reload, a second track)
     static_files_per_page: int = 7  # CSS, JS, favicon, fonts, the event's logo: CloudFront cache hits (requests only)
     heartbeat_every_s: float = 15.0
-    # The live server re-reads each channel's items on this fixed poll (per task, whatever the viewers).
-    server_poll_every_s: float = 0.5
+    # The live server re-reads each channel's items on this fixed poll (per task, whatever the viewers): its real
+    # default on AWS (drem_live.__main__.DEFAULT_POLL_MS).
+    server_poll_every_s: float = 0.1
     # Lambda: 512 MB (functions/.chalice/config.json); a poll answered 204 or from the render cache takes ~10 ms.
     lambda_memory_gb: float = 0.5
     lambda_poll_ms: float = 10.0
@@ -96,10 +105,10 @@ class Profile:
     # Non-live traffic, the same in both designs: a lap POST per lap per track, staff consoles refreshing.
     staff: int = 12
     staff_request_every_s: float = 5.0
-    # Fargate: the task size and how many streams one task carries (an assumption until live-push measures it).
+    # Fargate: the task size and how many streams one task carries (the scaling target, STREAMS_TARGET_PER_TASK).
     task_vcpu: float = 0.5
     task_memory_gb: float = 1.0
-    viewers_per_task: int = 4_000
+    viewers_per_task: int = 2_000
     alb_public_ips: int = 2  # one per subnet/AZ
     infrastructure_hours: float = 24.0
     framing_bytes: int = 40  # per delivered message: HTTP/2 DATA frame + TLS record overhead
@@ -155,12 +164,33 @@ class Sizes:
     overlay_item: int
     race_item: int
     page_html: int
+    combined_item: int = 0  # the combined board of all tracks (its body; no ranking state)
+    outcome_item: int = 400  # a strip event's stored answer (idempotency record)
     poll_204: int = 350  # status line and headers of an unchanged poll
 
 
 def read_units(item_bytes: int, *, consistent: bool) -> float:
     units = math.ceil(item_bytes / 4096)
     return units if consistent else units / 2
+
+
+def write_units(item_bytes: int, *, transactional: bool = False) -> float:
+    units = math.ceil(item_bytes / 1024)
+    return 2 * units if transactional else units
+
+
+def lap_writes(p: Profile, s: Sizes) -> tuple[float, float]:
+    """(write units, read units) one lap costs the writer: the strip event reads the live pointer and the race, writes
+    its answer and the race in one transaction; publishing reads and rewrites the track board (body + state), reads
+    every track's board to rewrite the combined board, reads and rewrites the overlay, and deletes the publish
+    intent."""
+    wru = (write_units(s.outcome_item, transactional=True) + write_units(s.race_item, transactional=True)
+           + write_units(s.board_item) + write_units(s.combined_item or s.board_item) + write_units(s.overlay_item)
+           + 1)
+    rru = (read_units(256, consistent=True) + read_units(s.race_item, consistent=True)
+           + read_units(s.board_item, consistent=True) * (1 + p.tracks)
+           + read_units(s.combined_item or s.board_item, consistent=True) + read_units(s.overlay_item, consistent=True))
+    return wru, rru
 
 
 @dataclass(frozen=True)
@@ -172,6 +202,7 @@ class Usage:
     lambda_requests: float = 0
     lambda_gb_seconds: float = 0
     dynamodb_rru: float = 0
+    dynamodb_wru: float = 0
     alb_hours: float = 0
     alb_lcu_hours: float = 0
     fargate_vcpu_hours: float = 0
@@ -186,9 +217,11 @@ def non_live(p: Profile, s: Sizes) -> Usage:
     page_loads = p.phones * p.phone_page_loads + p.screens + p.overlays
     api = page_loads + p.timer_requests + p.staff_requests
     static = page_loads * p.static_files_per_page
+    wru, rru = lap_writes(p, s)
     return Usage(cloudfront_requests=api + static, cloudfront_bytes_out=page_loads * s.page_html,
                  api_requests=api, lambda_requests=api,
-                 lambda_gb_seconds=api * p.lambda_page_ms / 1000 * p.lambda_memory_gb)
+                 lambda_gb_seconds=api * p.lambda_page_ms / 1000 * p.lambda_memory_gb,
+                 dynamodb_wru=p.laps * wru, dynamodb_rru=p.laps * rru)
 
 
 def polling(p: Profile, s: Sizes) -> Usage:
@@ -256,6 +289,7 @@ def dollars(u: Usage, prices: Prices = Prices()) -> dict[str, float]:
         "Lambda": (u.lambda_requests / 1e6 * prices.lambda_per_million
                    + u.lambda_gb_seconds * prices.lambda_per_gb_second),
         "DynamoDB reads": u.dynamodb_rru / 1e6 * prices.dynamodb_per_million_rru,
+        "DynamoDB writes": u.dynamodb_wru / 1e6 * prices.dynamodb_per_million_wru,
         "ALB": u.alb_hours * prices.alb_per_hour + u.alb_lcu_hours * prices.alb_per_lcu_hour,
         "Fargate": (u.fargate_vcpu_hours * prices.fargate_per_vcpu_hour
                     + u.fargate_gb_hours * prices.fargate_per_gb_hour),
@@ -311,6 +345,8 @@ def measure(racers: int = 50) -> Sizes:
         def put(self, event_id: str, sort_key: str, item: Materialised, expected_version: int | None) -> None:
             self.items[(event_id, sort_key)] = item
 
+    from chalicelib.domain.leaderboards import board_key as _board_key
+
     now = 1_800_000_000_000
     event_id = "reinvent-2026"
     countries = ("SE", "US", "GB", "DE", "JP", "BR", "IN", "FR", "ES", "CA")
@@ -358,7 +394,9 @@ def measure(racers: int = 50) -> Sizes:
                  heartbeat_gzip=gzipped(b": heartbeat\n\n"),
                  board_item=item_bytes((event_id, board_key("1"))),
                  overlay_item=item_bytes((event_id, overlay_key("1"))),
-                 race_item=len(racing.model_dump_json()) + 64, page_html=len(page_html.encode()))
+                 race_item=len(racing.model_dump_json()) + 64, page_html=len(page_html.encode()),
+                 # The combined board of 4 such tracks holds 4x the entries (it keeps no state of its own).
+                 combined_item=4 * len(boards.items[(event_id, _board_key("combined"))].body) + 64)
 
 
 # --- report ----------------------------------------------------------------------------------------------------------
@@ -372,9 +410,14 @@ def report(p: Profile, s: Sizes) -> tuple[float, float]:
     print(f"measured: 50-racer board fragment {s.board_html:,} B raw, {s.board_gzip:,} B as one gzipped SSE message; "
           f"overlay {s.overlay_html:,} B / {s.overlay_gzip:,} B; heartbeat {s.heartbeat_gzip} B; "
           f"DynamoDB items: board {s.board_item:,} B, overlay {s.overlay_item:,} B; page {s.page_html:,} B")
+    wru, rru = lap_writes(p, s)
+    print(f"per lap: {wru:g} write units, {rru:g} read units (writer); live server poll every "
+          f"{p.server_poll_every_s * 1000:g} ms per channel per task; {tasks(p)} task(s) of {p.viewers_per_task:,} "
+          f"viewers")
     counts = [("CloudFront requests", "cloudfront_requests", 1), ("CloudFront GB out", "cloudfront_bytes_out", GB),
               ("API Gateway requests", "api_requests", 1), ("Lambda requests", "lambda_requests", 1),
               ("Lambda GB-s", "lambda_gb_seconds", 1), ("DynamoDB read units", "dynamodb_rru", 1),
+              ("DynamoDB write units", "dynamodb_wru", 1),
               ("ALB hours", "alb_hours", 1), ("ALB LCU-hours", "alb_lcu_hours", 1),
               ("Fargate vCPU-hours", "fargate_vcpu_hours", 1), ("Fargate GB-hours", "fargate_gb_hours", 1),
               ("Public IPv4 hours", "public_ip_hours", 1), ("updates delivered", "delivered_updates", 1),
@@ -393,17 +436,24 @@ def report(p: Profile, s: Sizes) -> tuple[float, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--spectators", type=int, default=Profile.spectators)
+    parser.add_argument("--spectators", default=",".join(str(n) for n in GOALS_DOLLARS),
+                        help="comma-separated crowd sizes")
     parser.add_argument("--hours", type=float, default=Profile.hours)
     args = parser.parse_args()
-    profile = replace(Profile(), spectators=args.spectators, hours=args.hours)
     sizes = measure()
-    total_a, total_b = report(profile, sizes)
-    met = "met" if total_b <= GOAL_DOLLARS else "not met"
-    print(f"RESULT aws_cost: polling=${total_a:,.2f} push=${total_b:,.2f} "
-          f"({profile.spectators:,} spectators, {profile.hours:g} h, {profile.tracks} tracks, {REGION} list prices "
-          f"of {PRICES_READ_ON}; push = {total_a / total_b:,.0f}x cheaper) | goal push<=${GOAL_DOLLARS:g} per "
-          f"{profile.hours:g}-hour day | {met}")
+    figures, met = [], True
+    for spectators in (int(n) for n in args.spectators.split(",")):
+        profile = replace(Profile(), spectators=spectators, hours=args.hours)
+        total_a, total_b = report(profile, sizes)
+        print()
+        figures.append(f"{spectators:,}: polling=${total_a:,.2f} push=${total_b:,.2f}")
+        goal = GOALS_DOLLARS.get(spectators)
+        met &= goal is not None and total_b <= goal
+    met &= set(GOALS_DOLLARS) <= {int(n) for n in args.spectators.split(",")}
+    goals = " and ".join(f"push<=${g:g} at {n:,}" for n, g in GOALS_DOLLARS.items())
+    print(f"RESULT aws_cost: {'; '.join(figures)} ({args.hours:g} h, {Profile.tracks} tracks, {REGION} list prices "
+          f"of {PRICES_READ_ON}, DynamoDB writes counted, live poll {Profile.server_poll_every_s * 1000:g} ms) | "
+          f"goal {goals} per {args.hours:g}-hour day | {'met' if met else 'not met'}")
 
 
 if __name__ == "__main__":

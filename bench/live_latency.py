@@ -12,7 +12,9 @@ Load: N spectators = N event-stream subscribers (bench/_sse_crowd.py, one asynci
 leaderboard's stream, half on the overlay's, the URLs the pages subscribe to), each decoding its own gzip stream and
 checking that its version tokens never go backwards. Posts are spaced by a random 1.5-2.5 s pause (a lap every
 ~2.6 s: about three times a real race's lap rate on one track). N = 0, 500, 2000.
-Goal: p95 <= 500 ms at N = 500 and <= 1 s at N = 2000 on both pages, 0 crowd errors, 0 tokens going backwards.
+The app's board writes wake the live server (chalicelib.live_wake; its storage poll is only the fallback).
+Goal (issue #34, on a quiet 2-core machine, three runs in a row): p95 <= 300 ms at N = 500 and <= 500 ms at N = 2000 on
+both pages, 0 crowd errors, 0 tokens going backwards.
 
     .venv/bin/python bench/live_latency.py [--samples 25] [--spectators 0,500,2000] [--workers N]
 """
@@ -239,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{'-' if r['app_cpu'] is None else format(r['app_cpu'], '.0f') + ' %':>8s} {r['machine_load']:5.1f}")
     print(f"bytes per pushed message (50-racer board and overlay fragments, one live worker): plain "
           f"{sizes['plain_bytes_avg']:.0f}, gzip {sizes['gzip_bytes_avg']:.0f} over {sizes['messages']} messages")
-    goals = {500: 500.0, 2000: 1000.0}
+    goals = {500: 300.0, 2000: 500.0}
     met = all(r["crowd"] in goals for r in results if r["crowd"]) and {r["crowd"] for r in results} >= set(goals)
     for r in results:
         if r["crowd"] in goals:
@@ -254,8 +256,8 @@ def main(argv: list[str] | None = None) -> int:
                        + (f",errors={r['load']['errors']},backwards={r['load']['backwards']}" if r["load"] else "")
                        for r in results)
     print(f"RESULT live_latency: {figures} bytes/msg={sizes['plain_bytes_avg']:.0f}plain/"
-          f"{sizes['gzip_bytes_avg']:.0f}gzip load={_stack.machine_load()} | goal p95<=500ms at N=500 and <=1000ms at "
-          f"N=2000, 0 errors, 0 backwards | {'met' if met else 'not met'}")
+          f"{sizes['gzip_bytes_avg']:.0f}gzip load={_stack.machine_load()} | goal p95<=300ms at N=500 and <=500ms at "
+          f"N=2000 on both pages, 0 errors, 0 backwards | {'met' if met else 'not met'}")
     return 0
 
 

@@ -3,7 +3,10 @@
 Context:
   stage           (default "dev")   names resources drem-{stage}-*; one stack per stage.
   with_app        (default "true")  "false" deploys only tables, buckets and the user pool (no Chalice packaging).
-  public_url      the URL people use (QR codes, cookies); `make deploy` passes CloudFront's after the first deploy.
+  public_url      optional: the URL people use (QR codes, cookies); without it the functions read CloudFront's (or
+                  the custom domain's) from the stack's SSM parameter /drem/{stage}/public-url at run time.
+  upload_concurrency  (default 2) reserved concurrency of the upload checker; 0 on an account whose Lambda
+                  concurrency quota is below 102.
   domain_name, certificate_arn      optional custom domain for CloudFront (an ACM certificate in us-east-1).
   ses_from, ses_identity_arn        optional: Cognito emails through Amazon SES from this verified identity.
   alarm_email     optional: an address subscribed to the stage's alarm topic (every alarm notifies that topic).
@@ -43,6 +46,9 @@ def main() -> None:
                for name in ("public_url", "domain_name", "certificate_arn", "ses_from", "ses_identity_arn",
                             "alarm_email")}
     booth = str(app.node.try_get_context("booth") or "false").lower() == "true"  # `make deploy BOOTH=1`
+    upload_concurrency = app.node.try_get_context("upload_concurrency")
+    if upload_concurrency is not None:
+        context["upload_concurrency"] = int(upload_concurrency)
     try:
         DremStack(app, f"drem-{stage}", stage=stage, functions_dir=functions_dir, **context, booth=booth,
                   env=cdk.Environment(account=os.environ.get("CDK_DEFAULT_ACCOUNT"),

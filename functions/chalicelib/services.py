@@ -15,6 +15,7 @@ import time
 from datetime import UTC, datetime
 from typing import Any
 
+from chalicelib import live_wake
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignments import AssignmentService
@@ -43,8 +44,8 @@ from chalicelib.domain.scrutineer_queue import ScrutineerQueue
 from chalicelib.domain.stats import StatsDigests
 from chalicelib.domain.timing import TimingService
 from chalicelib.domain.users import ModelsEraser, OwnedDataEraser, UserService
-from chalicelib.settings import Settings, get_settings
-from chalicelib.storage import clients, health
+from chalicelib.settings import Settings, get_settings, use_parameter_reader
+from chalicelib.storage import clients, health, parameters
 from chalicelib.storage.assignments import DynamoAssignmentStore, FleetCarDirectory
 from chalicelib.storage.audit import DynamoAuditLog
 from chalicelib.storage.booth import DynamoBoothStore
@@ -66,6 +67,9 @@ from chalicelib.storage.races import DynamoRaceStore
 from chalicelib.storage.scrutineer_queue import LEAGUE_QUEUE_PK, DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
+
+# On AWS the public URL may live in the stack's SSM parameter (chalicelib.settings.get_settings reads it).
+use_parameter_reader(parameters.read_parameter)
 
 
 def now_ms() -> int:
@@ -187,7 +191,8 @@ def race_store() -> DynamoRaceStore:
 
 
 def publisher() -> LeaderboardPublisher:
-    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms)
+    return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms,
+                                on_change=live_wake.waker(get_settings().live_wake_dir))
 
 
 def uncached_publisher() -> LeaderboardPublisher:

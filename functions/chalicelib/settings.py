@@ -6,7 +6,7 @@ Chalice sets `.chalice/config.json` variables only while a handler runs, so noth
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from functools import lru_cache
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -38,6 +38,8 @@ class Settings(BaseModel):
     # The live server (drem_live) the public pages' live regions subscribe to: its origin locally
     # (http://host:8002); unset on AWS, where CloudFront routes /live/* to it on the pages' own origin.
     live_url: str | None = None
+    # Where the live server's processes listen for "this event changed" (chalicelib.live_wake); "" = it only polls.
+    live_wake_dir: str = ""
     # A scrutineering worker drives queued models although this process has no simulator: on AWS, the learning booth's
     # task runs one (drem_infra.booth_service), so the functions queue new models for it.
     scrutineering_worker: bool = False
@@ -59,6 +61,7 @@ class Settings(BaseModel):
             "state_dir": state_dir,
             "token_key_file": token_key_file,
             "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
+            "live_wake_dir": env.get("DREM_LIVE_WAKE_DIR") or "",
             "scrutineering_worker": env.get(resources.SCRUTINEERING_WORKER_ENV) == "1",
         }
         settings = cls.model_validate(values)
@@ -139,6 +142,30 @@ def _http_origin_or_none(url: str) -> str | None:
     return url.strip().rstrip("/")
 
 
+# Names the SSM parameter holding the public URL, when the deploy could not put it in DREM_PUBLIC_URL: CloudFront's
+# domain is known only once the distribution exists, and the functions cannot refer to it (a dependency cycle).
+PUBLIC_URL_PARAMETER_ENV = "DREM_PUBLIC_URL_PARAMETER"
+# Reads a parameter (name, settings without it) -> its value; set by the composition root (chalicelib.services), so
+# this module needs no AWS client.
+_parameter_reader: Callable[[str, Settings], str] | None = None
+
+
+def use_parameter_reader(reader: Callable[[str, Settings], str] | None) -> None:
+    global _parameter_reader
+    _parameter_reader = reader
+    get_settings.cache_clear()
+
+
 @lru_cache(maxsize=1)
 def get_settings() -> Settings:
-    return Settings.from_env(os.environ)
+    """The settings from the environment. On AWS the public URL may come from the stack's SSM parameter, read once per
+    process; a failed read raises (that request fails, the next one reads again) rather than serving the local
+    fallback URL, whose links and cookies would be wrong."""
+    settings = Settings.from_env(os.environ)
+    parameter = os.environ.get(PUBLIC_URL_PARAMETER_ENV) or ""
+    if parameter and not os.environ.get("DREM_PUBLIC_URL") and _parameter_reader is not None:
+        url = _http_origin_or_none(_parameter_reader(parameter, settings))
+        if url is None:
+            raise RuntimeError(f"SSM parameter {parameter} does not hold an http(s) URL")
+        settings = Settings.from_env({**os.environ, "DREM_PUBLIC_URL": url})
+    return settings

@@ -37,7 +37,7 @@ from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
 from constructs import Construct
 
-from drem_infra import permissions
+from drem_infra import permissions, resources
 from drem_infra.live_pages import LivePages
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -72,9 +72,10 @@ HEALTH_PATH = "/healthz"
 TASK_CPU = 2048  # 2 vCPU
 TASK_MEMORY_MIB = 4096
 LOG_RETENTION = logs.RetentionDays.ONE_MONTH
-# An ALB listener rule takes at most 5 path patterns; the booth's paths fill two rules, tried before the live default.
+# An ALB listener rule takes at most 5 condition values: the origin secret header and 4 path patterns; the booth's
+# paths fill two rules, tried before the live pages' rule.
 RULE_PRIORITY = 10
-PATTERNS_PER_RULE = 5
+PATTERNS_PER_RULE = 4
 
 
 class BoothService(Construct):
@@ -85,6 +86,7 @@ class BoothService(Construct):
                  user_pool: cognito.UserPool) -> None:
         super().__init__(scope, construct_id)
         stack = cdk.Stack.of(self)
+        self.stage = stage
         self.log_group = logs.LogGroup(self, "Logs", retention=LOG_RETENTION, removal_policy=cdk.RemovalPolicy.DESTROY)
         self.task_role = self._task_role(tables, buckets, user_pool)
         task = ecs.FargateTaskDefinition(
@@ -125,7 +127,7 @@ class BoothService(Construct):
         for index, start in enumerate(range(0, len(BOOTH_PATHS), PATTERNS_PER_RULE)):
             live.listener.add_target_groups(
                 f"Booth{index}", priority=RULE_PRIORITY + index, target_groups=[self.target_group],
-                conditions=[elbv2.ListenerCondition.path_patterns(
+                conditions=[live.from_cloudfront(), elbv2.ListenerCondition.path_patterns(
                     list(BOOTH_PATHS[start:start + PATTERNS_PER_RULE]))])
 
     def _task_role(self, tables: Mapping[str, dynamodb.Table], buckets: Mapping[str, s3.Bucket],
@@ -141,6 +143,9 @@ class BoothService(Construct):
                        for logical, actions in permissions.BUCKET_OBJECT_ACTIONS.items()]
         statements += [iam.PolicyStatement(actions=list(actions), resources=[buckets[logical].bucket_arn])
                        for logical, actions in permissions.BUCKET_ACTIONS.items()]
+        statements.append(iam.PolicyStatement(actions=list(permissions.PARAMETER_ACTIONS), resources=[
+            cdk.Stack.of(self).format_arn(service="ssm", resource="parameter",
+                                          resource_name=resources.public_url_parameter(self.stage).lstrip("/"))]))
         return iam.Role(self, "TaskRole", assumed_by=iam.ServicePrincipal("ecs-tasks.amazonaws.com"),
                         description="drem learning booth: the app's data permissions for drives and training",
                         inline_policies={"DremBooth": iam.PolicyDocument(statements=statements)})

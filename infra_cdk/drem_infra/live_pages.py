@@ -14,6 +14,13 @@ channel and pushes each change to every viewer, so a spectator costs data transf
   the app). See `serve_through` for why this combination and not a cache policy with compression.
 - Timeouts: the server sends a heartbeat every 15 s (HEARTBEAT_SECONDS), so CloudFront's origin read timeout (the gap
   it tolerates between two packets), its keep-alive, and the load balancer's idle timeout all outlast a missed one.
+  The server keeps an idle connection open longer than the load balancer does (SERVER_KEEPALIVE_SECONDS), so it is
+  always the load balancer that closes one, never the server under a request the load balancer is sending (a 502).
+- Only this stage's distribution gets through the load balancer: CloudFront adds a secret header (ORIGIN_SECRET_HEADER,
+  a value generated in Secrets Manager at deploy time) to every origin request, and the listener forwards only requests
+  that carry it (anything else: 403). The security group alone would admit every CloudFront distribution.
+- Scaling: on CPU and on the streams each task carries (the server publishes its open streams as a CloudWatch metric
+  through its log, embedded metric format), so a task full of quiet streams scales out too.
 """
 from __future__ import annotations
 
@@ -31,6 +38,7 @@ from aws_cdk import aws_ecs as ecs
 from aws_cdk import aws_elasticloadbalancingv2 as elbv2
 from aws_cdk import aws_iam as iam
 from aws_cdk import aws_logs as logs
+from aws_cdk import aws_secretsmanager as secretsmanager
 from aws_cdk import custom_resources as cr
 from constructs import Construct
 
@@ -72,6 +80,14 @@ TASK_MEMORY_MIB = 1024
 MIN_TASKS = 1
 MAX_TASKS = 4
 CPU_TARGET_PERCENT = 60
+# Streams per task the connection scaling aims at: below the server's cap per process (drem_live.limits, 5,000) with
+# room for a crowd arriving within the minute scaling takes. Not yet a measured capacity of 0.5 vCPU (issue #34).
+STREAMS_TARGET_PER_TASK = 2000
+STREAMS_METRIC_NAMESPACE = "drem/live"
+STREAMS_METRIC_NAME = "Streams"
+SERVER_KEEPALIVE_SECONDS = 130  # longer than ALB_IDLE_TIMEOUT
+ORIGIN_SECRET_HEADER = "X-Drem-Origin-Secret"
+LIVE_RULE_PRIORITY = 50  # after the booth's rules (drem_infra.booth_service)
 LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 # AWS's managed prefix list of CloudFront's origin-facing addresses (one per region; its id differs per region).
 CLOUDFRONT_PREFIX_LIST = "com.amazonaws.global.cloudfront.origin-facing"
@@ -104,7 +120,9 @@ class LivePages(Construct):
             # Per-viewer stream caps count CloudFront's viewer address: behind the ALB every connection comes from
             # CloudFront. Only CloudFront reaches the ALB, and it sets this header itself.
             environment={**environment, "AWS_DEFAULT_REGION": stack.region,
-                         "DREM_LIVE_CLIENT_ADDRESS_HEADER": VIEWER_ADDRESS_HEADER},
+                         "DREM_LIVE_CLIENT_ADDRESS_HEADER": VIEWER_ADDRESS_HEADER,
+                         "DREM_LIVE_KEEPALIVE_S": str(SERVER_KEEPALIVE_SECONDS),
+                         "DREM_LIVE_METRICS_NAMESPACE": STREAMS_METRIC_NAMESPACE, "DREM_LIVE_METRICS_STAGE": stage},
             port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT)],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
         )
@@ -120,6 +138,15 @@ class LivePages(Construct):
         max_tasks = int(self.node.try_get_context("live_max_tasks") or MAX_TASKS)
         scaling = self.service.auto_scale_task_count(min_capacity=MIN_TASKS, max_capacity=max(MIN_TASKS, max_tasks))
         scaling.scale_on_cpu_utilization("Cpu", target_utilization_percent=CPU_TARGET_PERCENT)
+        # Each task's open streams, averaged over the tasks (drem_live.metrics writes one figure a minute per task).
+        self.streams_metric = cloudwatch.Metric(
+            namespace=STREAMS_METRIC_NAMESPACE, metric_name=STREAMS_METRIC_NAME, dimensions_map={"Stage": stage},
+            statistic="Average", period=cdk.Duration.minutes(1))
+        scaling.scale_to_track_custom_metric("Streams", metric=self.streams_metric,
+                                             target_value=STREAMS_TARGET_PER_TASK)
+        self.origin_secret = secretsmanager.Secret(
+            self, "OriginSecret", description=f"drem {stage}: the header CloudFront adds for the live load balancer",
+            generate_secret_string=secretsmanager.SecretStringGenerator(exclude_punctuation=True, password_length=40))
 
         self.alb_security_group = ec2.SecurityGroup(
             self, "LoadBalancerSecurityGroup", vpc=self.vpc, allow_all_outbound=False,
@@ -129,14 +156,26 @@ class LivePages(Construct):
         self.load_balancer = elbv2.ApplicationLoadBalancer(
             self, "LoadBalancer", vpc=self.vpc, internet_facing=True, security_group=self.alb_security_group,
             idle_timeout=ALB_IDLE_TIMEOUT, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC))
-        self.listener = self.load_balancer.add_listener("Http", port=80, open=False)
+        self.listener = self.load_balancer.add_listener(
+            "Http", port=80, open=False, default_action=elbv2.ListenerAction.fixed_response(
+                403, content_type="text/plain", message_body="Only drem's CloudFront distribution reaches this."))
         self.target_group = self.listener.add_targets(
             "Server", port=CONTAINER_PORT, protocol=elbv2.ApplicationProtocol.HTTP, targets=[self.service],
+            priority=LIVE_RULE_PRIORITY, conditions=[self.from_cloudfront(), elbv2.ListenerCondition.path_patterns(
+                [PATH_PATTERN])],
             deregistration_delay=DEREGISTRATION_DELAY,
             health_check=elbv2.HealthCheck(path=HEALTH_PATH, healthy_http_codes="200",
                                            interval=cdk.Duration.seconds(15), timeout=cdk.Duration.seconds(5),
                                            healthy_threshold_count=2, unhealthy_threshold_count=3))
         self._alarms(stage)
+
+    def from_cloudfront(self) -> elbv2.ListenerCondition:
+        """The condition every listener rule carries: the request has this stage's origin secret."""
+        return elbv2.ListenerCondition.http_header(ORIGIN_SECRET_HEADER, [self.origin_secret_value()])
+
+    def origin_secret_value(self) -> str:
+        # A CloudFormation dynamic reference, resolved at deploy time: the value is in no template or output.
+        return self.origin_secret.secret_value.unsafe_unwrap()
 
     def _task_role(self, tables: Mapping[str, dynamodb.Table]) -> iam.Role:
         """Only the reads the live server makes, only on the tables it reads (tests/infra/test_iam_policy.py)."""
@@ -193,7 +232,8 @@ class LivePages(Construct):
         gzip passes back untouched (`compress=False`: CloudFront compresses nothing itself)."""
         self.origin = origins.LoadBalancerV2Origin(
             self.load_balancer, protocol_policy=cloudfront.OriginProtocolPolicy.HTTP_ONLY, http_port=80,
-            read_timeout=ORIGIN_READ_TIMEOUT, keepalive_timeout=ORIGIN_KEEPALIVE_TIMEOUT)
+            read_timeout=ORIGIN_READ_TIMEOUT, keepalive_timeout=ORIGIN_KEEPALIVE_TIMEOUT,
+            custom_headers={ORIGIN_SECRET_HEADER: self.origin_secret_value()})
         policy = cloudfront.OriginRequestPolicy(
             self, "OriginRequestPolicy",
             comment="drem live pages: viewer headers (Accept-Encoding, Last-Event-ID, If-None-Match) and query",

@@ -57,6 +57,9 @@ COGNITO_CALLS_WITHOUT_IAM: frozenset[str] = frozenset({
     "RespondToAuthChallenge", "SignUp",
 })
 
+# The functions read the stack's public URL from its one SSM parameter (chalicelib.storage.parameters).
+PARAMETER_ACTIONS: tuple[str, ...] = ("ssm:GetParameter",)
+
 # Lambda writes its logs through these, into log groups the stack creates (with retention) and names.
 LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
 
@@ -65,7 +68,7 @@ LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
 # logical name; tests/infra/test_iam_policy.py derives the same set from the live routes' reads and fails on any drift.
 LIVE_TABLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "events": ("dynamodb:GetItem",),
-    "leaderboards": ("dynamodb:GetItem",),
+    "leaderboards": ("dynamodb:BatchGetItem", "dynamodb:GetItem"),  # the adapter reads a big board's state parts
     "races": ("dynamodb:GetItem", "dynamodb:Query"),
 }
 # The read calls the live server may make at all (its contract: GetItem/Query/BatchGetItem through the adapters).

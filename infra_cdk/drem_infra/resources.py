@@ -191,6 +191,11 @@ def client_name(stage: str) -> str:
 # stack routes the models bucket's "Object Created" events under UPLOADS_PREFIX to it; the bucket's name is only
 # known at deploy time, which is why the rule lives in CDK and not in an `@app.on_cw_event` pattern.
 UPLOAD_COMPLETE_FUNCTION = "upload_complete"
+
+
+def public_url_parameter(stage: str) -> str:
+    """The SSM parameter the stack writes its public URL to, and the functions read it from at run time."""
+    return f"/drem/{stage}/public-url"
 UPLOADS_PREFIX = "uploads/"
 
 

@@ -30,6 +30,7 @@ from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
 from aws_cdk import aws_sns as sns
 from aws_cdk import aws_sns_subscriptions as sns_subscriptions
+from aws_cdk import aws_ssm as ssm
 from constructs import Construct
 
 from drem_infra import permissions, resources
@@ -43,6 +44,17 @@ LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 # (10,000 rps), so a runaway client cannot take the account's whole API quota.
 API_RATE_LIMIT_RPS = 200
 API_BURST_LIMIT = 400
+# The public pages' polling fallback (and the JSON polls): at most this, per route, whatever the crowd.
+PUBLIC_POLL_PATHS = ("/leaderboard/{event_id}/live", "/overlay/{event_id}/live", "/api/leaderboard/{event_id}",
+                     "/api/overlay/{event_id}")
+PUBLIC_POLL_RATE_LIMIT_RPS = 50
+PUBLIC_POLL_BURST_LIMIT = 100
+# API Gateway gives up on an integration after 29 s: a function must finish (or fail with its own message) before.
+API_FUNCTION_TIMEOUT_S = 28
+# The upload checker (the models bucket's EventBridge rule) may use at most this many instances, and always has them,
+# so a burst of uploads never takes the API's concurrency (`-c upload_concurrency=0` leaves it unreserved: needed on a
+# new account whose concurrency quota is below 100 + this).
+UPLOAD_RESERVED_CONCURRENCY = 2
 # Alarms on the API stage (AWS/ApiGateway, per ApiName and Stage), each over 5 minutes. API Gateway has no throttle
 # metric: a request over the limits above is answered 429 and counted in 4XXError, together with the app's own 4xx
 # (401 after a session expires, 403, 404 for a mistyped address, 400/422 for a form error), of which ordinary use
@@ -86,7 +98,8 @@ class DremStack(cdk.Stack):
                  functions_dir: Path | None = None, public_url: str | None = None,
                  domain_name: str | None = None, certificate_arn: str | None = None,
                  ses_from: str | None = None, ses_identity_arn: str | None = None,
-                 alarm_email: str | None = None, booth: bool = False, **kwargs) -> None:
+                 alarm_email: str | None = None, booth: bool = False,
+                 upload_concurrency: int = UPLOAD_RESERVED_CONCURRENCY, **kwargs) -> None:
         super().__init__(scope, construct_id, **kwargs)
         self.stage = stage
         self.with_booth = booth
@@ -94,19 +107,23 @@ class DremStack(cdk.Stack):
         self.alarm_topic = self._alarm_topic(alarm_email)
         self.ses_from, self.ses_identity_arn = ses_from, ses_identity_arn
         self.domain_name = domain_name
+        self.upload_concurrency = upload_concurrency
         self.public_url = public_url or (f"https://{domain_name}" if domain_name else None)
         self.tables = {spec.logical: self._table(spec) for spec in resources.TABLES}
         self.buckets = {spec.logical: self._bucket(spec) for spec in resources.BUCKETS}
         self.user_pool, self.user_pool_client = self._user_pool()
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
         self.distribution = self._distribution(certificate_arn) if self.app is not None else None
+        if self.distribution is not None:
+            self._public_url_parameter(self.distribution)
         # The live pages' push server (Fargate behind an ALB) at /live/* of the same distribution (same origin).
         self.live = (LivePages(self, "Live", stage=stage, environment=self.app_environment(), tables=self.tables)
                      if self.distribution is not None else None)
         if self.live is not None and self.distribution is not None:
             self.live.serve_through(self.distribution)
         # The learning booth (drives, training) in a container beside the live pages: opt-in, it costs by the hour.
-        self.booth = (BoothService(self, "Booth", stage=stage, environment=self.app_environment(), live=self.live,
+        booth_environment = self.app_environment(public_url_parameter=True)
+        self.booth = (BoothService(self, "Booth", stage=stage, environment=booth_environment, live=self.live,
                                    tables=self.tables, buckets=self.buckets, user_pool=self.user_pool)
                       if self.with_booth and self.live is not None else None)
         if self.booth is not None and self.live is not None and self.distribution is not None:
@@ -249,7 +266,10 @@ class DremStack(cdk.Stack):
 
     # --- application --------------------------------------------------------------------------------------------
 
-    def app_environment(self) -> dict[str, str]:
+    def app_environment(self, *, public_url_parameter: bool = False) -> dict[str, str]:
+        """The app's settings. `public_url_parameter`: without a URL known at synth, name the stack's SSM parameter
+        the app then reads it from at run time (the functions and the booth, whose roles may read it): the same on
+        every deploy, so no deploy ever serves the local fallback URL (docs/deploy.md)."""
         env = resources.stage_environment(
             self.stage, self.user_pool.user_pool_id, self.user_pool_client.user_pool_client_id,
             {logical: t.table_name for logical, t in self.tables.items()},
@@ -257,11 +277,20 @@ class DremStack(cdk.Stack):
         )
         if self.public_url:
             env["DREM_PUBLIC_URL"] = self.public_url
+        elif public_url_parameter:
+            env["DREM_PUBLIC_URL_PARAMETER"] = resources.public_url_parameter(self.stage)
         # The live pages' EventSource base: empty means the page's own origin (CloudFront routes /live/* to them).
         env["DREM_LIVE_URL"] = ""
         if self.with_booth:  # its task runs the scrutineering worker, so the functions queue new models for it
             env[resources.SCRUTINEERING_WORKER_ENV] = "1"
         return env
+
+    def _public_url_parameter(self, distribution: cloudfront.Distribution) -> ssm.StringParameter:
+        """The public URL where the functions read it at run time (CloudFront's domain is known only now)."""
+        return ssm.StringParameter(
+            self, "PublicUrlParameter", parameter_name=resources.public_url_parameter(self.stage),
+            string_value=self.public_url or f"https://{distribution.distribution_domain_name}",
+            description=f"drem {self.stage}: the URL people use (QR codes, links, Secure cookies)")
 
     def _distribution(self, certificate_arn: str | None) -> cloudfront.Distribution:
         """Everything through CloudFront: /static/* cached at the edge, the rest passed to the API uncached (with
@@ -322,9 +351,10 @@ class DremStack(cdk.Stack):
         from chalice.cdk import Chalice
         from chalice.utils import to_cfn_resource_name
 
+        env = self.app_environment(public_url_parameter=True)
         with _packaging_leaves_no_trace():
             app = Chalice(self, "App", source_dir=str(functions_dir),
-                          stage_config={"environment_variables": self.app_environment()})
+                          stage_config={"environment_variables": env, "lambda_timeout": API_FUNCTION_TIMEOUT_S})
         self._unknown_paths_are_not_found(app)
         sam = json.loads(Path(app._sam_package_dir, "sam.json").read_text())  # the template Chalice just wrote
         functions = [name for name, r in sam["Resources"].items() if r["Type"] == "AWS::Serverless::Function"]
@@ -334,9 +364,17 @@ class DremStack(cdk.Stack):
         api = sam["Resources"].get("RestAPI")
         if api is not None:
             rest_api = app.get_resource("RestAPI")
+            # API Gateway applies a stage's throttle to each method on its own ("per-API, per-stage throttling limits
+            # are applied at the API method level", API Gateway developer guide, "Throttle requests to your REST
+            # APIs"): timers and staff never share a bucket with spectators. The spectators' polling fallback gets
+            # a smaller budget of its own, so phones refused by the live server cannot hold the functions'
+            # concurrency that timers and staff need.
             rest_api.add_property_override("MethodSettings", [{
                 "ResourcePath": "/*", "HttpMethod": "*",
-                "ThrottlingRateLimit": API_RATE_LIMIT_RPS, "ThrottlingBurstLimit": API_BURST_LIMIT}])
+                "ThrottlingRateLimit": API_RATE_LIMIT_RPS, "ThrottlingBurstLimit": API_BURST_LIMIT},
+                *({"ResourcePath": _method_setting_path(path), "HttpMethod": "GET",
+                   "ThrottlingRateLimit": PUBLIC_POLL_RATE_LIMIT_RPS, "ThrottlingBurstLimit": PUBLIC_POLL_BURST_LIMIT}
+                  for path in PUBLIC_POLL_PATHS)])
             # API Gateway's metrics name a REST API by its name, which Chalice leaves at the app's ("drem") for every
             # stage: a stage-scoped name keeps two stages of one account apart in the API alarms.
             api_name = f"drem-{self.stage}"
@@ -352,6 +390,9 @@ class DremStack(cdk.Stack):
             rest_api.add_property_override("DefinitionBody.x-amazon-apigateway-binary-media-types", ["*/*"])
             self._api_alarms(api_name, api["Properties"]["StageName"])
         upload_fn = to_cfn_resource_name(resources.UPLOAD_COMPLETE_FUNCTION)
+        if upload_fn in sam["Resources"] and self.upload_concurrency > 0:
+            app.get_resource(upload_fn).add_property_override("ReservedConcurrentExecutions",
+                                                              self.upload_concurrency)
         if upload_fn in sam["Resources"]:
             for spec in resources.BUCKETS:
                 if spec.eventbridge:
@@ -383,6 +424,9 @@ class DremStack(cdk.Stack):
                                                   resources=[self.buckets[logical].arn_for_objects("*")]))
         for logical, actions in permissions.BUCKET_ACTIONS.items():
             statements.append(iam.PolicyStatement(actions=list(actions), resources=[self.buckets[logical].bucket_arn]))
+        statements.append(iam.PolicyStatement(actions=list(permissions.PARAMETER_ACTIONS), resources=[
+            self.format_arn(service="ssm", resource="parameter",
+                            resource_name=resources.public_url_parameter(self.stage).lstrip("/"))]))
         document = iam.PolicyDocument(statements=statements)
         app.get_resource("DefaultRole").add_property_override(
             "Policies", [{"PolicyName": "DremApp", "PolicyDocument": self.resolve(document.to_json())}])
@@ -450,13 +494,20 @@ class DremStack(cdk.Stack):
         cdk.CfnOutput(self, "AlarmTopicArn", value=self.alarm_topic.topic_arn)
         if self.distribution is not None:
             cdk.CfnOutput(self, "DistributionUrl", value=f"https://{self.distribution.distribution_domain_name}")
-            cdk.CfnOutput(self, "PublicUrl", value=self.public_url or "")
+            cdk.CfnOutput(self, "PublicUrl",
+                          value=self.public_url or f"https://{self.distribution.distribution_domain_name}")
         cdk.CfnOutput(self, "UserPoolId", value=self.user_pool.user_pool_id)
         cdk.CfnOutput(self, "UserPoolClientId", value=self.user_pool_client.user_pool_client_id)
         for logical, table in self.tables.items():
             cdk.CfnOutput(self, f"{logical.capitalize()}TableName", value=table.table_name)
         for logical, bucket in self.buckets.items():
             cdk.CfnOutput(self, f"{logical.capitalize()}BucketName", value=bucket.bucket_name)
+
+
+def _method_setting_path(path: str) -> str:
+    """A resource path as a stage's MethodSettings names it: every "/" of the path written "~1", after a leading "/"
+    (AWS::ApiGateway::Stage MethodSetting ResourcePath: "/resource/subresource" is "/~1resource~1subresource")."""
+    return "/" + path.replace("/", "~1")
 
 
 @contextlib.contextmanager

@@ -15,6 +15,8 @@ import subprocess
 import sys
 
 DEFAULT_POLL_MS = 100
+WOKEN_POLL_MS = 250
+DEFAULT_KEEPALIVE_S = 15.0
 _PR_SET_PDEATHSIG = 1
 
 
@@ -59,12 +61,20 @@ def _serve(host: str, port: int, *, reuse_port: bool) -> None:
     from drem_live.limits import env_limits
     from drem_live.server import make_app
 
-    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or DEFAULT_POLL_MS)
-    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits())
+    wake_dir = os.environ.get("DREM_LIVE_WAKE_DIR") or ""
+    # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
+    # An idle poller's connection is not kept long locally; behind a load balancer the server must keep it longer
+    # than the balancer does (DREM_LIVE_KEEPALIVE_S), or the balancer may send a request onto a closing one (a 502).
+    keepalive_s = float(os.environ.get("DREM_LIVE_KEEPALIVE_S") or DEFAULT_KEEPALIVE_S)
+    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
+    namespace = os.environ.get("DREM_LIVE_METRICS_NAMESPACE") or ""
+    metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None
+    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits(), wake_dir=wake_dir,
+                   metrics=metrics)
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
     web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,
-                access_log=None, backlog=1024, keepalive_timeout=15.0,  # an idle poller's connection is not kept long
+                access_log=None, backlog=1024, keepalive_timeout=keepalive_s,
                 handler_cancellation=True)  # a viewer leaving frees its stream at once
 
 

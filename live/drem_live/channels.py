@@ -1,5 +1,6 @@
-"""Channels: one per (kind, event, options) that anyone watches. A single watcher per channel reads storage every
-`poll_s`, renders the live region once per token change (in a worker thread: boto3 and jinja block) and hands the same
+"""Channels: one per (kind, event, options) that anyone watches. A single watcher per channel reads storage when the
+writer wakes it (`Channels.wake(event_id)`, drem_live.wake) and every `poll_s` as the fallback, renders the live
+region once per token change (in a worker thread: boto3 and jinja block) and hands the same
 message bytes to every subscriber. A channel never broadcasts a token that is not newer than the last one it sent
 (`token_is_newer`), and it stops when its last subscriber leaves.
 
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 from drem_live.sse import Message
 
 log = logging.getLogger("drem_live")
+MIN_READ_GAP_S = 0.01  # however many wake-ups arrive, a channel reads at most this often
 
 
 
@@ -60,8 +62,11 @@ class MessageSizes:
 
 class Channel:
     def __init__(self, key: Hashable, step: Callable[[Message | None], Message | None], poll_s: float,
-                 executor: Executor, sizes: MessageSizes, is_newer: Callable[[str, str | None], bool]) -> None:
+                 executor: Executor, sizes: MessageSizes, is_newer: Callable[[str, str | None], bool],
+                 event_id: str = "") -> None:
         self.key = key
+        self.event_id = event_id
+        self._woken = asyncio.Event()
         self.subscribers: set[Subscriber] = set()
         self.latest: Message | None = None
         self.first = asyncio.Event()
@@ -79,10 +84,15 @@ class Channel:
         if self._task is not None:
             self._task.cancel()
 
+    def wake(self) -> None:
+        """Read again now (the writer changed this event); a wake during a read makes one more read after it."""
+        self._woken.set()
+
     async def _watch(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
             started = time.monotonic()
+            self._woken.clear()
             try:
                 message = await loop.run_in_executor(self._executor, self._step, self.latest)
             except asyncio.CancelledError:
@@ -96,7 +106,11 @@ class Channel:
                 for subscriber in self.subscribers:
                     subscriber.offer(message)
                 self.first.set()
-            await asyncio.sleep(max(0.0, self._poll_s - (time.monotonic() - started)))
+            try:
+                await asyncio.wait_for(self._woken.wait(), max(0.0, self._poll_s - (time.monotonic() - started)))
+            except TimeoutError:
+                continue
+            await asyncio.sleep(max(0.0, MIN_READ_GAP_S - (time.monotonic() - started)))
 
 
 class Channels:
@@ -117,11 +131,12 @@ class Channels:
         return len(self._open)
 
     def join(self, key: Hashable, step: Callable[[Message | None], Message | None],
-             subscriber: Subscriber, page: Hashable | None = None) -> Channel:
+             subscriber: Subscriber, page: Hashable | None = None, event_id: str = "") -> Channel:
         """Subscribe to channel `key` (of `page`), opening it if there is room: joining an open one is always free.
 
         A page (kind and event) may have at most `max_per_page` option sets open, so made-up option sets of one page
-        cannot take every channel of the server (issue 27: 4 addresses x 64 distinct queries took all 256)."""
+        cannot take every channel of the server (issue 27: 4 addresses x 64 distinct queries took all 256). A channel
+        of `event_id` is woken by `wake(event_id)` when the writer says that event changed."""
         channel = self._open.get(key)
         if channel is None:
             if len(self._open) >= self.max_channels:
@@ -129,7 +144,7 @@ class Channels:
             same_page = sum(1 for other in self._pages.values() if other == page) if page is not None else 0
             if page is not None and same_page >= self.max_per_page:
                 raise ChannelsFull(f"this page is already watched with {self.max_per_page} different options")
-            channel = Channel(key, step, self.poll_s, self.executor, self.sizes, self.is_newer)
+            channel = Channel(key, step, self.poll_s, self.executor, self.sizes, self.is_newer, event_id)
             self._open[key] = channel
             if page is not None:
                 self._pages[key] = page
@@ -143,6 +158,13 @@ class Channels:
             del self._open[channel.key]
             self._pages.pop(channel.key, None)
             channel.stop()
+
+    def wake(self, event_id: str) -> int:
+        """Wake every channel of `event_id`; how many there were."""
+        woken = [channel for channel in self._open.values() if channel.event_id == event_id]
+        for channel in woken:
+            channel.wake()
+        return len(woken)
 
     def stop_all(self) -> None:
         for channel in self._open.values():

@@ -29,8 +29,10 @@ from pydantic import ValidationError
 from drem_live.app_code import AppCode, etag_matches, token_is_newer
 from drem_live.channels import Channels, ChannelsFull, Subscriber
 from drem_live.limits import Limits, StreamCount
+from drem_live.metrics import publish_streams
 from drem_live.polls import PollViews
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, clock_message
+from drem_live.wake import WAKE, listen_for_wakes
 
 log = logging.getLogger("drem_live")
 
@@ -80,8 +82,11 @@ async def preflight(_request: web.Request) -> web.Response:
 
 async def healthz(request: web.Request) -> web.Response:
     app = request.app
+    wake = app.get(WAKE)
     return web.json_response({"ok": True, "pid": os.getpid(), "channels": len(app[CHANNELS]),
-                              "streams": app[STREAMS].total, "message_bytes": app[CHANNELS].sizes.as_dict()},
+                              "streams": app[STREAMS].total, "message_bytes": app[CHANNELS].sizes.as_dict(),
+                              "poll_ms": round(app[CHANNELS].poll_s * 1000),
+                              "wakes": wake.received if wake is not None else None},
                              headers={**CORS, **NO_SNIFF})
 
 
@@ -153,7 +158,7 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
 
     subscriber = Subscriber()
     try:
-        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id))
+        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id), event_id=event_id)
     except ChannelsFull as exc:
         return refuse(503, f"{exc}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
     streams.open(client, key)
@@ -215,7 +220,9 @@ def poll_handler(kind: str) -> Handler:
     return handle
 
 
-def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8) -> web.Application:
+def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
+             wake_dir: str = "", metrics: tuple[str, str] | None = None) -> web.Application:
+    """`metrics` (namespace, stage): publish the open streams to CloudWatch (drem_live.metrics)."""
     executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="drem-live")
 
     def read_view(kind: str, event_id: str, track: str) -> tuple[int, str]:
@@ -231,6 +238,10 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8) 
     app[POLLS] = PollViews(read_view, poll_s, executor)
     app[KNOWN_EVENTS] = set()
     app[UNKNOWN_EVENTS] = {}
+    if wake_dir:
+        listen_for_wakes(app, wake_dir, app[CHANNELS])
+    if metrics is not None:
+        publish_streams(app, *metrics, streams=lambda: app[STREAMS].total)
     app.router.add_get("/live/healthz", healthz)
     for kind in ("leaderboard", "overlay"):
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))

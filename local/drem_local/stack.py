@@ -345,6 +345,8 @@ def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
         DREM_STAGE=config.stage,
         DREM_STATE_DIR=str(config.state_dir.resolve()),
         DREM_PUBLIC_URL=config.app_url,
+        # The app's board writes wake the live server's processes here (chalicelib.live_wake).
+        DREM_LIVE_WAKE_DIR=str((config.state_dir / "live-wake").resolve()),
     )
     env.setdefault("DREM_LIVE_URL", config.live_url)
     return env

@@ -78,9 +78,11 @@ def templates(tmp_path_factory, lambda_build):
         # With the learning booth (`make deploy BOOTH=1`): every infra test, the emulated deploy included, sees it.
         with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL,
                              booth=True)
+        # `make deploy` without a domain: the public URL is CloudFront's, known only once the distribution exists.
+        cloudfront_only = DremStack(app, "drem-cloudfront", stage=STAGE, functions_dir=lambda_build)
         with functions_dir_exclusively():  # the Chalice construct packages functions/ (its .chalice/ cache too)
             app.synth()
-        return Template.from_stack(storage_only), Template.from_stack(with_app)
+        return Template.from_stack(storage_only), Template.from_stack(with_app), Template.from_stack(cloudfront_only)
     finally:
         os.chdir(cwd)
         os.environ.clear()
@@ -101,4 +103,10 @@ def template(templates):
 @pytest.fixture(scope="session")
 def app_template(templates):
     return templates[1]
+
+
+@pytest.fixture(scope="session")
+def cloudfront_template(templates):
+    """The app's stack deployed without a public URL or domain (the functions read CloudFront's at run time)."""
+    return templates[2]
 

@@ -18,7 +18,7 @@ STORAGE_DIR = Path(__file__).resolve().parents[2] / "functions" / "chalicelib" /
 # Not callers: the CLI's adapter for `drem export/import --aws` (it runs with the operator's own credentials, never in
 # Lambda) and the error translator, which lists operation-name prefixes to tell reads from writes.
 CLI_ONLY = {"event_archive.py", "aws_errors.py"}
-SERVICES = ("dynamodb", "s3", "cognito-idp")
+SERVICES = ("dynamodb", "s3", "cognito-idp", "ssm")
 # Client methods that are not API operations but sign a request the role must be allowed to make.
 PRESIGNED = {"generate_presigned_post": ("s3", "PutObject"), "generate_presigned_url": ("s3", "GetObject")}
 # How an S3 operation is authorised (HeadObject is GetObject; CopyObject reads and writes).
@@ -69,6 +69,7 @@ def required_actions(calls: dict[str, set[str]]) -> set[str]:
     for operation in calls["s3"]:
         needed |= {f"s3:{a}" for a in S3_AUTHORISED_AS.get(operation, (operation,))}
     needed |= {f"cognito-idp:{op}" for op in calls["cognito-idp"] - permissions.COGNITO_CALLS_WITHOUT_IAM}
+    needed |= {f"ssm:{op}" for op in calls["ssm"]}
     return needed
 
 

@@ -88,9 +88,10 @@ def test_one_small_fargate_task_in_public_subnets_and_no_nat_gateway(app_templat
     assert task["Properties"]["RuntimePlatform"]["CpuArchitecture"] == "X86_64"
     _, scaling = _one(app_template, "AWS::ApplicationAutoScaling::ScalableTarget")
     assert scaling["Properties"]["MinCapacity"] == 1 and scaling["Properties"]["MaxCapacity"] >= 1
-    _, policy = _one(app_template, "AWS::ApplicationAutoScaling::ScalingPolicy")
-    tracking = policy["Properties"]["TargetTrackingScalingPolicyConfiguration"]
-    assert tracking["PredefinedMetricSpecification"]["PredefinedMetricType"] == "ECSServiceAverageCPUUtilization"
+    policies = [p["Properties"]["TargetTrackingScalingPolicyConfiguration"]
+                for p in app_template.find_resources("AWS::ApplicationAutoScaling::ScalingPolicy").values()]
+    assert [t["PredefinedMetricSpecification"]["PredefinedMetricType"] for t in policies
+            if "PredefinedMetricSpecification" in t] == ["ECSServiceAverageCPUUtilization"]
 
 
 def test_only_cloudfront_reaches_the_load_balancer_and_only_the_load_balancer_the_task(app_template):

@@ -210,3 +210,39 @@ def running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     return "State:\tZ" not in status
+
+
+def test_a_lap_wakes_every_live_worker_without_waiting_for_a_poll(live_stack: Any, race: Any,
+                                                                  tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The app's board write wakes the live server's processes (chalicelib.live_wake): a live server whose storage poll
+    would come only in ten minutes still pushes the lap to every viewer, on each of its workers."""
+    eid, _race_id, timer = race
+    port = local_stack.free_port()
+    env = {**live_stack.env, "DREM_LIVE_POLL_MS": "600000"}
+    process = local_stack.spawn("woken live server", [sys.executable, "-m", "drem_live", "--host", "127.0.0.1",
+                                                      "--port", str(port), "--workers", "2"],
+                                tmp_path_factory.mktemp("woken") / "live.log", env=env)
+    try:
+        local_stack.wait_for_ok(f"http://127.0.0.1:{port}/live/healthz", process, 60)
+        wake_dir = Path(env["DREM_LIVE_WAKE_DIR"])
+        deadline = time.monotonic() + 30
+        while not (wake_dir / f"{process.popen.pid}.sock").exists() or len(list(wake_dir.glob("*.sock"))) < 4:
+            assert time.monotonic() < deadline, f"wake sockets: {sorted(wake_dir.iterdir())}"  # 2 + drem up's 2
+            time.sleep(0.05)
+        url = f"http://127.0.0.1:{port}/live/leaderboard/{eid}?track=1&lang=en&tracks=1&summary_seconds=0"
+        streams = [open_stream(url, **{"Accept-Encoding": "identity"}) for _ in range(6)]
+        shown = [stream.next_fragment()["id"] for stream in streams]
+        seed = int(time.time() * 1000)
+        strip(live_stack.url, timer, eid, seed, "wake-1")
+        strip(live_stack.url, timer, eid, seed + 7_654, "wake-2")
+        for stream, first in zip(streams, shown, strict=True):
+            while True:  # a read timeout (20 s) fails the test: without a wake-up nothing comes before the poll
+                pushed = stream.next_fragment()
+                assert pushed["id"] != first
+                if "0:07.654" in pushed["data"]:
+                    break
+            stream.response.close()
+        health = requests.get(f"http://127.0.0.1:{port}/live/healthz", timeout=5, proxies=NO_PROXY).json()
+        assert health["poll_ms"] == 600000 and health["wakes"] >= 1
+    finally:
+        process.stop(10)

@@ -47,7 +47,7 @@ def test_polling_asks_once_per_poll_per_spectator(aws_cost, sizes):
 
 
 def test_doubling_the_spectators_doubles_delivered_updates_but_not_the_live_servers_reads(aws_cost, sizes):
-    profile = aws_cost.Profile(spectators=2_000)
+    profile = aws_cost.Profile(spectators=2_000, viewers_per_task=4_000)
     double = replace(profile, spectators=4_000)
     one, two = aws_cost.push(profile, sizes), aws_cost.push(double, sizes)
 
@@ -76,7 +76,25 @@ def test_push_requests_do_not_follow_the_poll_rate_and_every_viewer_gets_every_l
 
 
 def test_more_viewers_than_a_task_carries_add_a_task_and_its_reads(aws_cost, sizes):
-    profile = aws_cost.Profile(spectators=10_000)
+    profile = aws_cost.Profile(spectators=10_000, viewers_per_task=4_000)
     assert aws_cost.tasks(profile) == 3
     small = aws_cost.push(replace(profile, spectators=2_000), sizes)
     assert aws_cost.push(profile, sizes).live_dynamodb_reads == 3 * small.live_dynamodb_reads
+
+
+def test_every_lap_pays_its_writes_whatever_the_design_and_the_crowd(aws_cost, sizes):
+    profile = aws_cost.Profile()
+    wru, rru = aws_cost.lap_writes(profile, sizes)
+    # The race transaction (2x), the track board with its ranking state, the combined board, the overlay, the intent.
+    assert wru >= 2 * 2 + sizes.board_item / 1024 + sizes.overlay_item / 1024
+    assert rru > 0
+    for design in (aws_cost.polling, aws_cost.push):
+        assert design(profile, sizes).dynamodb_wru == profile.laps * wru
+        assert design(replace(profile, spectators=20_000), sizes).dynamodb_wru == profile.laps * wru
+    assert aws_cost.dollars(aws_cost.push(profile, sizes))["DynamoDB writes"] > 0
+
+
+def test_the_live_server_polls_at_its_real_interval(aws_cost):
+    from drem_live.__main__ import DEFAULT_POLL_MS
+
+    assert aws_cost.Profile().server_poll_every_s == DEFAULT_POLL_MS / 1000

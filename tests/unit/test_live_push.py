@@ -199,3 +199,45 @@ def test_made_up_option_sets_of_one_page_cannot_take_every_channel() -> None:
             channels.stop_all()
 
     asyncio.run(run())
+
+
+def test_a_wake_reads_the_events_channels_at_once_and_no_others() -> None:
+    """With a poll of an hour, only a wake-up makes a channel read again; a wake for another event reads nothing."""
+    async def run() -> tuple[int, int, int]:
+        reads = {"e1": 0, "e2": 0}
+
+        def step_for(event_id: str):
+            def step(_last: Message | None) -> Message | None:
+                reads[event_id] += 1
+                return Message.fragment(f"{reads[event_id]}.0-0", "<section></section>")
+            return step
+
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(3600, executor, max_channels=4, is_newer=token_is_newer)
+            first, second = Subscriber(), Subscriber()
+            channels.join(("overlay", "e1"), step_for("e1"), first, "e1")
+            channels.join(("overlay", "e2"), step_for("e2"), second, "e2")
+            await asyncio.wait_for(first.wake.wait(), 10)
+            await asyncio.wait_for(second.wake.wait(), 10)
+            first.take(), second.take()
+            assert channels.wake("e1") == 1
+            await asyncio.wait_for(first.wake.wait(), 10)  # the poll would come in an hour
+            woken = first.take()
+            assert woken is not None and woken.token == "2.0-0"
+            assert channels.wake("nobody") == 0
+            channels.stop_all()
+            return reads["e1"], reads["e2"], len(channels)
+
+    assert asyncio.run(run()) == (2, 1, 0)
+
+
+def test_the_streams_metric_is_one_embedded_metric_format_record() -> None:
+    import json
+
+    from drem_live.metrics import emf_line
+
+    record = json.loads(emf_line("drem/live", "prod", 1234, 1_800_000_000_000))
+    [directive] = record["_aws"]["CloudWatchMetrics"]
+    assert directive == {"Namespace": "drem/live", "Dimensions": [["Stage"]],
+                         "Metrics": [{"Name": "Streams", "Unit": "Count"}]}
+    assert (record["Stage"], record["Streams"], record["_aws"]["Timestamp"]) == ("prod", 1234, 1_800_000_000_000)

@@ -30,6 +30,9 @@ from drem_leaderboard.summary import RaceSummary
 
 BOARD_ATTEMPTS = 4
 PUBLIC_READ_FRESH_MS = 250.0
+# Entries per public board page. A 5,000-racer board is 1.6 MB of JSON: far past DynamoDB's 400 KB item limit, and
+# more than a big screen shows. Polls and pushes read the first page (one GetItem); `?page=N` reads the others.
+BOARD_PAGE_ENTRIES = 200
 
 
 class StaleBoard(Exception):
@@ -44,7 +47,10 @@ class PublicView(BaseModel):
 
 
 class Materialised(PublicView):
+    """A board or overlay as its writer sees it: `body` is what polls get (a board's first page), `pages` the bodies
+    of a long board's further pages (2, 3, ...), `state` the rows it was ranked from."""
     state: str = ""
+    pages: tuple[str, ...] = ()
 
 
 class BoardRow(BaseModel):
@@ -55,6 +61,10 @@ class BoardRow(BaseModel):
 
 class BoardState(BaseModel):
     rows: list[BoardRow] = []
+
+
+# What a write's `build` gives: (body, etag, state) or (body, etag, state, further pages' bodies).
+Built = tuple[str, str, str] | tuple[str, str, str, list[str]]
 
 
 class BoardRepository(Protocol):
@@ -180,6 +190,11 @@ def board_key(track_id: str) -> str:
     return f"BOARD#{track_id}"
 
 
+def board_page_key(track_id: str, page: int) -> str:
+    """Where page `page` (2, 3, ...) of a long board is read from (the storage adapter writes it there)."""
+    return f"BOARD#{track_id}~PAGE#{page}"
+
+
 def overlay_key(track_id: str) -> str:
     return f"OVERLAY#{track_id}"
 
@@ -194,8 +209,11 @@ def empty_board_body(event_id: str, track_id: str) -> str:
 
 class LeaderboardPublisher:
     def __init__(self, boards: BoardRepository, clock_ms: Callable[[], int], *,
-                 cache: PublicViewCache | None = PROCESS_CACHE) -> None:
-        """`cache=None` reads the table on every poll; the default shares this process's cache."""
+                 cache: PublicViewCache | None = PROCESS_CACHE,
+                 on_change: Callable[[str], None] | None = None) -> None:
+        """`cache=None` reads the table on every poll; the default shares this process's cache. `on_change(event_id)`
+        is told after every write (the live server's wake-up)."""
+        self._on_change = on_change
         self._boards = boards
         self._clock_ms = clock_ms
         self._cache = cache
@@ -207,6 +225,12 @@ class LeaderboardPublisher:
     def board(self, event_id: str, track_id: str) -> PublicView:
         found = self._public(event_id, board_key(track_id))
         return found or PublicView(version=0, etag='"v0"', body=empty_board_body(event_id, track_id))
+
+    def board_page(self, event_id: str, track_id: str, page: int) -> PublicView | None:
+        """Page `page` (1 = `board`) of a track's board; None past its last page."""
+        if page <= 1:
+            return self.board(event_id, track_id)
+        return self._public(event_id, board_page_key(track_id, page))
 
     def overlay(self, event_id: str, track_id: str) -> PublicView:
         found = self._public(event_id, overlay_key(track_id))
@@ -274,13 +298,14 @@ class LeaderboardPublisher:
                      change: Callable[[dict[str, BoardRow]], dict[str, BoardRow]]) -> Leaderboard:
         result: dict[str, Leaderboard] = {}
 
-        def build(version: int, old_state: str) -> tuple[str, str, str] | None:
+        def build(version: int, old_state: str) -> Built | None:
             old_rows = _rows(old_state)
             rows = change(old_rows)
             board = _ranked(rows.values(), method, track_id, version)
             result["board"] = board
             state = BoardState(rows=sorted(rows.values(), key=lambda r: r.summary.racer_sub)).model_dump_json()
-            return _board_body(event_id, board, self._clock_ms()), board.etag, state
+            first, *further = _board_pages(event_id, board, self._clock_ms())
+            return first, board.etag, state, further
 
         self._write(event_id, board_key(track_id), build, skip_unchanged=True)
         return result["board"]
@@ -292,15 +317,16 @@ class LeaderboardPublisher:
             rows.extend(_rows(stored.state).values() if stored else [])
         result: dict[str, Leaderboard] = {}
 
-        def build(version: int, _old_state: str) -> tuple[str, str, str]:
+        def build(version: int, _old_state: str) -> Built:
             board = _ranked(rows, method, COMBINED_TRACK_ID, version)
             result["board"] = board
-            return _board_body(event_id, board, self._clock_ms()), board.etag, ""
+            first, *further = _board_pages(event_id, board, self._clock_ms())
+            return first, board.etag, "", further
 
         self._write(event_id, board_key(COMBINED_TRACK_ID), build, skip_unchanged=True)
         return result["board"]
 
-    def _write(self, event_id: str, sort_key: str, build: Callable[[int, str], tuple[str, str, str] | None], *,
+    def _write(self, event_id: str, sort_key: str, build: Callable[[int, str], Built | None], *,
                skip_unchanged: bool = False) -> None:
         for _ in range(BOARD_ATTEMPTS):
             current = self._boards.get(event_id, sort_key)
@@ -308,12 +334,16 @@ class LeaderboardPublisher:
             built = build(version, current.state if current else "")
             if built is None:
                 return
-            body, etag, state = built
+            body, etag, state, *more = built
+            pages = tuple(more[0]) if more else ()
             if skip_unchanged and current is not None and current.etag == etag and current.state == state:
                 return
             try:
-                self._boards.put(event_id, sort_key, Materialised(version=version, etag=etag, body=body, state=state),
+                self._boards.put(event_id, sort_key, Materialised(version=version, etag=etag, body=body, state=state,
+                                                                  pages=pages),
                                  expected_version=current.version if current else None)
+                if self._on_change is not None:
+                    self._on_change(event_id)
                 return
             except StaleBoard:
                 continue
@@ -328,7 +358,7 @@ def board_item_content(event_id: str, track_id: str, rows: Iterable[BoardRow], m
     """(body, etag) of the board item these rows give, exactly as the publisher writes it; `drem import` uses it to
     refuse an exported board whose public body was edited apart from its rows."""
     board = _ranked(rows, method, track_id, version)
-    return _board_body(event_id, board, updated_at_ms), board.etag
+    return _board_pages(event_id, board, updated_at_ms)[0], board.etag
 
 
 def _rows(state: str) -> dict[str, BoardRow]:
@@ -348,5 +378,13 @@ def _ranked(rows: Iterable[BoardRow], method: RankingMethod, track_id: str, vers
                 profiles={r.summary.racer_sub: r.profile for r in rows}, version=version)
 
 
-def _board_body(event_id: str, board: Leaderboard, now_ms: int) -> str:
-    return _dumps({"event_id": event_id, "updated_at_ms": now_ms, **board.model_dump(mode="json")})
+def _board_pages(event_id: str, board: Leaderboard, now_ms: int) -> list[str]:
+    """The board's public bodies, one per page of BOARD_PAGE_ENTRIES entries. A board that fits one page is exactly
+    what it always was; a longer one says on each page which page it is, how many there are and how many entries."""
+    whole = {"event_id": event_id, "updated_at_ms": now_ms, **board.model_dump(mode="json")}
+    entries = whole["entries"]
+    if len(entries) <= BOARD_PAGE_ENTRIES:
+        return [_dumps(whole)]
+    count = -(-len(entries) // BOARD_PAGE_ENTRIES)
+    return [_dumps({**whole, "entries": entries[(page - 1) * BOARD_PAGE_ENTRIES:page * BOARD_PAGE_ENTRIES],
+                    "page": page, "pages": count, "total_entries": len(entries)}) for page in range(1, count + 1)]

@@ -6,10 +6,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from chalice import Blueprint, Response
+from pydantic import BaseModel, Field
 
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
 from chalicelib.auth.principals import Principal
+from chalicelib.domain.errors import NotFound
 from chalicelib.domain.leaderboards import PublicView
 from chalicelib.routes.responses import etag_matches
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
@@ -28,11 +30,18 @@ def conditional(view: PublicView) -> Response:
     return Response(body=view.body, status_code=200, headers={**headers, "Content-Type": "application/json"})
 
 
-@route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC, conditional=True)
-def leaderboard(principal: Principal, event_id: str) -> Response:
-    query: Mapping[str, str] = bp.current_request.query_params or {}
-    track = query.get("track") or COMBINED_TRACK_ID
-    return conditional(services.publisher().board(event_id, track))
+class BoardQuery(BaseModel):
+    track: str = Field(default=COMBINED_TRACK_ID, min_length=1, max_length=32)
+    page: int = Field(default=1, ge=1, le=10_000, description="a long board's page (BOARD_PAGE_ENTRIES entries each)")
+    since: str | None = None
+
+
+@route(bp, "/api/leaderboard/{event_id}", allow=PUBLIC, conditional=True, query=BoardQuery)
+def leaderboard(principal: Principal, event_id: str, query: BoardQuery) -> Response:
+    view = services.publisher().board_page(event_id, query.track, query.page)
+    if view is None:
+        raise NotFound(f"The board of track {query.track} has no page {query.page}.")
+    return conditional(view)
 
 
 @route(bp, "/api/overlay/{event_id}", allow=PUBLIC, conditional=True)

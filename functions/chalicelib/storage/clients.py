@@ -38,6 +38,11 @@ def client(service: str) -> Any:
     return _client(service, settings.region, settings.endpoint_url)
 
 
+def client_for(service: str, region: str, endpoint_url: str | None) -> Any:
+    """A client while the settings are still being made (they may need what it reads)."""
+    return _client(service, region, endpoint_url)
+
+
 def cognito() -> Any:
     return client("cognito-idp")
 

@@ -22,7 +22,12 @@ def collect_event(source: StackReader, event_id: str) -> EventBundle:
                        "before exporting (a race in progress does not move between stacks).")
     races = [i for i in race_items if i["sk"]["S"].startswith("RACE#")]
     audit_trail = [i for i in race_items if i["sk"]["S"].startswith("AUDIT#")]  # who changed results, carried along
-    boards = source.partition("leaderboards", pk)
+    # A long board's further pages and parts are its storage layout: the import recomputes the boards from the races.
+    boards = [i for i in source.partition("leaderboards", pk) if "~" not in i["sk"]["S"]]
+    too_big = sorted(i["sk"]["S"] for i in boards if "state_ref" in i)
+    if too_big:
+        raise Conflict(f"Event {event_id}'s board(s) {', '.join(too_big)} hold too many racers to export yet (their "
+                       "rows are stored in parts); the export would be incomplete.")
     event_doc = json.loads(event_item["doc"]["S"])
 
     fleets = [f for f in (source.get_item("fleet", f"FLEET#{fid}", "META")
