@@ -27,12 +27,13 @@ common/helpers/api-helper.ts) expects: form field `password`, the answer "failur
 password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls without the current token.
 
 A restart (`FakeConsole.restart()`, what a battery swap does): the web server process starts again with a new random
-SECRET_KEY ([webserver.py]), so every Flask session and with it every CSRF token is void, and the login token (held in
-the server's memory) is gone; the nodes boot as at power-on: manual mode, `modelLoadingStatus_ = "error"`, no model
-loaded, throttle_scale 0 ([ctrl_node.cpp] init(), [ctrl_state.hpp], [deepracer_navigation_node.py]). What is on disk
-stays: the model folders under /opt/aws/deepracer/artifacts, which `/api/uploaded_model_list` lists by reading that
-directory ([webserver models.py] get_uploaded_models_list, get_file_and_folder_info). While it restarts the car answers
-nothing (connection refused).
+SECRET_KEY, so every Flask session and with it every CSRF token is void, and the login token (held in the server's
+memory) is gone. (The key drawn per start is how this fake has always modelled [webserver.py]'s SECRET_KEY; that file
+was not in our source index when the restart was added, so this one point is not re-read upstream.) The nodes boot as
+at power-on: manual mode, `modelLoadingStatus_ = "error"`, no model loaded, throttle_scale 0 ([ctrl_node.cpp] init(),
+[ctrl_state.hpp], [deepracer_navigation_node.py]). What is on disk stays: the model folders under
+/opt/aws/deepracer/artifacts, which `/api/uploaded_model_list` lists by reading that directory ([webserver models.py]
+get_uploaded_models_list, get_file_and_folder_info). While it restarts the car answers nothing (connection refused).
 
 Time: `FakeConsole.advance_clock(seconds)` moves the clock that Flask-WTF's token check (itsdangerous) and the
 login's cookie age read, so a test can pass the one-hour limits without waiting an hour.
