@@ -141,3 +141,25 @@ def test_the_organiser_chooses_what_happens_to_self_reported_entries(stack: Any,
     assert [e.racer for e in board()] == ["alice"]
     with pytest.raises(Forbidden, match="takes only entries drem verifies"):
         push(BOB, drem_sim_export(tmp_path / "bob2", track=TRACK, progress=[100], lap_times=[12.5]))
+
+
+def test_a_re_drive_interrupted_by_the_workers_stop_is_given_back_at_once(stack: Any, aws_clients: Any,
+                                                                          tmp_path: Path) -> None:
+    model = upload_model(stack, aws_clients, ALICE)
+    push(ALICE, drem_sim_export(tmp_path / "m", track=TRACK, progress=[100], lap_times=[15.0]), model)
+
+    class Stopped(BaseException):
+        pass
+
+    def stopped_mid_drive(folder: Path, track: str, laps: int) -> DriveOutcome:
+        raise Stopped  # SIGTERM while the child drives
+
+    interrupted = verifier(FakeDrive(DriveOutcome()))
+    interrupted.drive = stopped_mid_drive
+    with pytest.raises(Stopped):
+        interrupted.run_one()
+    interrupted.give_back()
+    job = interrupted.queue.state_of(model.model_id)
+    assert job is not None and job.state == "queued"  # not leased for minutes: the next start drives it
+    assert verifier(FakeDrive(DriveOutcome(reports=[report(16.0)]))).run_one() is not False
+    assert board()[0].source == "verified by drem"

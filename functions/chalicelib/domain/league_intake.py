@@ -27,7 +27,7 @@ from chalicelib.domain.errors import Conflict, Forbidden, PayloadTooLarge
 from chalicelib.domain.league import NAME_PATTERN, LeagueService, Submission, VerifiedDrive
 from chalicelib.domain.model_scrutiny import DriveOutcome, ScrutineerService
 from chalicelib.domain.racer_models import ModelRecord, ModelStatus
-from chalicelib.domain.scrutineer_queue import ScrutineerQueue
+from chalicelib.domain.scrutineer_queue import ScrutineerJob, ScrutineerQueue
 from chalicelib.formats.league_assembler import assemble
 from chalicelib.formats.league_export import ExportFiles, ExportLimits, MiB, read_tar_gz
 
@@ -118,6 +118,13 @@ class LeagueVerifier:
         self.queue = queue
         self.drive = drive
         self.laps = laps
+        self.current: ScrutineerJob | None = None  # left set if the drive is interrupted, for `give_back`
+
+    def give_back(self) -> None:
+        """Stopping mid-drive (SIGTERM): the job goes back to the queue at once, not after its lease."""
+        if self.current is not None:
+            self.queue.give_back(self.current)
+            self.current = None
 
     def run_one(self) -> Submission | None | bool:
         """Re-drive the oldest waiting job: its updated submission, None if the job had nothing left to verify,
@@ -125,6 +132,12 @@ class LeagueVerifier:
         job = self.queue.take()
         if job is None:
             return False
+        self.current = job
+        updated = self._verify(job)
+        self.current = None
+        return updated
+
+    def _verify(self, job: ScrutineerJob) -> Submission | None:
         track = job.track_types[0]
         record = self.scrutineer.models.store.get(job.owner_sub, job.model_id)
         if record is None or record.status is not ModelStatus.AVAILABLE or self.queue.exhausted(job):
