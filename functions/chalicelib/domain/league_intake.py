@@ -90,8 +90,8 @@ class LeagueIntake:
                             field="model_id")
         if record.status is not ModelStatus.AVAILABLE or record.scrutiny != "ready":
             reason = record.scrutiny_reason or f"it is {record.status.value}"
-            raise Conflict(f"Model '{record.name}' cannot be re-driven by drem ({reason}); push the logs alone to "
-                           "enter them as self-reported.", field="model_id")
+            raise Conflict(f"Model '{record.name}' cannot be re-driven by drem ({reason}); push the logs alone "
+                           "(drem league push --self-reported) to enter them as self-reported.", field="model_id")
         return record
 
     def _model_metadata(self, record: ModelRecord) -> bytes:
