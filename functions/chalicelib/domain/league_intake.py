@@ -23,11 +23,11 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
 from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import Conflict, Forbidden, PayloadTooLarge
+from chalicelib.domain.errors import Conflict, Forbidden, NotFound, PayloadTooLarge
 from chalicelib.domain.league import NAME_PATTERN, LeagueService, Submission, VerifiedDrive
 from chalicelib.domain.model_scrutiny import DriveOutcome, ScrutineerService
 from chalicelib.domain.racer_models import ModelRecord, ModelStatus
-from chalicelib.domain.scrutineer_queue import ScrutineerJob, ScrutineerQueue
+from chalicelib.domain.scrutineer_queue import MAX_ATTEMPTS, ScrutineerJob, ScrutineerQueue
 from chalicelib.formats.league_assembler import assemble
 from chalicelib.formats.league_export import ExportFiles, ExportLimits, MiB, read_tar_gz
 
@@ -140,15 +140,22 @@ class LeagueVerifier:
     def _verify(self, job: ScrutineerJob) -> Submission | None:
         track = job.track_types[0]
         record = self.scrutineer.models.store.get(job.owner_sub, job.model_id)
-        if record is None or record.status is not ModelStatus.AVAILABLE or self.queue.exhausted(job):
+        if record is None:
             self.queue.drop(job.model_id)
-            failure = "the model was deleted" if record is None or record.status is not ModelStatus.AVAILABLE \
-                else "the re-drive stopped three times without finishing"
-            return self.league.record_drive(track, record.owner_username, job.model_id, None, failure) \
-                if record is not None else None
+            return None
+        gone = record.status is not ModelStatus.AVAILABLE
+        if gone or self.queue.exhausted(job):  # the entry stays self-reported, saying why
+            self.queue.drop(job.model_id)
+            why = ("the model was deleted before drem re-drove it" if gone
+                   else f"the re-drive stopped {MAX_ATTEMPTS} times without finishing")
+            return self.league.record_drive(track, record.owner_username, job.model_id, None, why)
         with tempfile.TemporaryDirectory(prefix="league-verify-") as folder:
-            self.scrutineer.model_files(record, Path(folder))
-            outcome = self.drive(Path(folder), track, self.laps)
+            try:
+                self.scrutineer.model_files(record, Path(folder))
+            except (NotFound, Conflict) as error:
+                outcome = DriveOutcome(failure=f"drem could not fetch the model's files: {error.message}")
+            else:
+                outcome = self.drive(Path(folder), track, self.laps)
         report = outcome.reports[0] if outcome.reports else None
         drive = None
         if report is not None and report.verdict in ("passed", "failed"):
