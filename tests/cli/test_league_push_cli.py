@@ -1,6 +1,7 @@
 """`drem league push` as a racer runs it: the installed `drem`, from outside the repository, with the files the racer
 has (a DROA logs archive whose names hold ':'; a console logs download without model_metadata.json plus the
-console's model download). The CLI only packs and uploads; the live stack assembles and ranks."""
+console's model download). The CLI only packs and uploads; the live stack assembles and ranks. (A model that drem
+re-drives, pushed the same way, is tests/integration/test_event_day_cli.py's drem sample.)"""
 from __future__ import annotations
 
 import io
@@ -48,7 +49,12 @@ def test_console_logs_and_model_download_pushed_together(live_stack, tmp_path: P
     assert alone.returncode == 1 and "model/model_metadata.json: missing" in alone.stderr
     assert "model download" in alone.stderr
     model = _model_download(tmp_path / "console-model.tar.gz")
-    pushed = ok(drem("league", "push", str(logs), str(model), "--track", "reinvent_base", cwd=tmp_path, env=env))
+    # Its agent/model.pb is a placeholder, not a graph: drem cannot re-drive it, and says so before anything is ranked.
+    refused = drem("league", "push", str(logs), str(model), "--track", "reinvent_base", cwd=tmp_path, env=env)
+    assert refused.returncode == 1 and "cannot be re-driven by drem" in refused.stderr
+    assert "--self-reported" in refused.stderr
+    pushed = ok(drem("league", "push", str(logs), str(model), "--track", "reinvent_base", "--self-reported",
+                     cwd=tmp_path, env=env))
     assert "pushed console-logs" in pushed and "1/2 laps, best 14.321 s" in pushed
     board = requests.get(live_stack.url + "/api/league/reinvent_base", timeout=10).json()
     assert any(ranked["entry"]["best_lap_s"] == 14.321 for ranked in board["entries"]), board

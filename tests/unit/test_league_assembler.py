@@ -22,6 +22,7 @@ from tests.unit.league_helpers import (
     drfc_export,
     droa_export,
     raw_tar_gz,
+    simtrace,
     tar_gz_of,
     training_metrics,
 )
@@ -337,3 +338,14 @@ def test_the_same_laps_give_the_same_digest_whatever_the_file_looks_like(tmp_pat
     assert build(folder).evidence_digest == first.evidence_digest
     other = build(console_old_export(tmp_path / "c", world="reinvent_base", laps=[(16469, 100)]))
     assert other.evidence_digest != first.evidence_digest
+
+
+def test_an_older_evaluation_on_another_track_does_not_block_the_submitted_one(tmp_path: Path) -> None:
+    """A console export keeps every evaluation's sim-trace: the submitted evaluation's own one decides."""
+    folder = console_old_export(tmp_path / "m", world="reinvent_base", laps=LAPS)
+    older = folder / "sim-trace/evaluation/20201001101010-OldOldOldOldOldOldOldO/evaluation-simtrace/0-iteration.csv"
+    older.parent.mkdir(parents=True)
+    older.write_text(simtrace("Spain_track", [(40000, 100)]))
+    assert [t.time_s for t in build(folder).trials] == [16.468, 16.267, 9.0]
+    (folder / "sim-trace/evaluation/20201021101010-XyXyXyXyXyXyXyXyXyXyXy").rename(folder / "sim-trace/unpaired")
+    assert "track_len" in _problem(folder)  # without its own trace, every trace in the export must agree

@@ -141,3 +141,38 @@ def test_the_organiser_chooses_what_happens_to_self_reported_entries(stack: Any,
     assert [e.racer for e in board()] == ["alice"]
     with pytest.raises(Forbidden, match="takes only entries drem verifies"):
         push(BOB, drem_sim_export(tmp_path / "bob2", track=TRACK, progress=[100], lap_times=[12.5]))
+
+
+def test_a_re_drive_interrupted_by_the_workers_stop_is_given_back_at_once(stack: Any, aws_clients: Any,
+                                                                          tmp_path: Path) -> None:
+    model = upload_model(stack, aws_clients, ALICE)
+    push(ALICE, drem_sim_export(tmp_path / "m", track=TRACK, progress=[100], lap_times=[15.0]), model)
+
+    class Stopped(BaseException):
+        pass
+
+    def stopped_mid_drive(folder: Path, track: str, laps: int) -> DriveOutcome:
+        raise Stopped  # SIGTERM while the child drives
+
+    interrupted = verifier(FakeDrive(DriveOutcome()))
+    interrupted.drive = stopped_mid_drive
+    with pytest.raises(Stopped):
+        interrupted.run_one()
+    interrupted.give_back()
+    job = interrupted.queue.state_of(model.model_id)
+    assert job is not None and job.state == "queued"  # not leased for minutes: the next start drives it
+    assert verifier(FakeDrive(DriveOutcome(reports=[report(16.0)]))).run_one() is not False
+    assert board()[0].source == "verified by drem"
+
+
+def test_a_model_deleted_before_its_re_drive_leaves_the_entry_self_reported(stack: Any, aws_clients: Any,
+                                                                           tmp_path: Path) -> None:
+    model = upload_model(stack, aws_clients, ALICE)
+    push(ALICE, drem_sim_export(tmp_path / "m", track=TRACK, progress=[100], lap_times=[15.0]), model)
+    services.model_service().delete(ALICE, model.model_id)
+    drive = FakeDrive(DriveOutcome(reports=[report(16.0)]))
+    result = verifier(drive).run_one()
+    assert drive.calls == []  # nothing driven
+    assert result is not None and result is not False and result.verification == "not_verified"
+    assert "deleted before drem re-drove it" in result.verification_note
+    assert board()[0].source == "self-reported from logs"

@@ -23,11 +23,11 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
 from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import Conflict, Forbidden, PayloadTooLarge
+from chalicelib.domain.errors import Conflict, Forbidden, NotFound, PayloadTooLarge
 from chalicelib.domain.league import NAME_PATTERN, LeagueService, Submission, VerifiedDrive
 from chalicelib.domain.model_scrutiny import DriveOutcome, ScrutineerService
 from chalicelib.domain.racer_models import ModelRecord, ModelStatus
-from chalicelib.domain.scrutineer_queue import ScrutineerQueue
+from chalicelib.domain.scrutineer_queue import MAX_ATTEMPTS, ScrutineerJob, ScrutineerQueue
 from chalicelib.formats.league_assembler import assemble
 from chalicelib.formats.league_export import ExportFiles, ExportLimits, MiB, read_tar_gz
 
@@ -90,8 +90,8 @@ class LeagueIntake:
                             field="model_id")
         if record.status is not ModelStatus.AVAILABLE or record.scrutiny != "ready":
             reason = record.scrutiny_reason or f"it is {record.status.value}"
-            raise Conflict(f"Model '{record.name}' cannot be re-driven by drem ({reason}); push the logs alone to "
-                           "enter them as self-reported.", field="model_id")
+            raise Conflict(f"Model '{record.name}' cannot be re-driven by drem ({reason}); push the logs alone "
+                           "(drem league push --self-reported) to enter them as self-reported.", field="model_id")
         return record
 
     def _model_metadata(self, record: ModelRecord) -> bytes:
@@ -118,6 +118,13 @@ class LeagueVerifier:
         self.queue = queue
         self.drive = drive
         self.laps = laps
+        self.current: ScrutineerJob | None = None  # left set if the drive is interrupted, for `give_back`
+
+    def give_back(self) -> None:
+        """Stopping mid-drive (SIGTERM): the job goes back to the queue at once, not after its lease."""
+        if self.current is not None:
+            self.queue.give_back(self.current)
+            self.current = None
 
     def run_one(self) -> Submission | None | bool:
         """Re-drive the oldest waiting job: its updated submission, None if the job had nothing left to verify,
@@ -125,17 +132,30 @@ class LeagueVerifier:
         job = self.queue.take()
         if job is None:
             return False
+        self.current = job
+        updated = self._verify(job)
+        self.current = None
+        return updated
+
+    def _verify(self, job: ScrutineerJob) -> Submission | None:
         track = job.track_types[0]
         record = self.scrutineer.models.store.get(job.owner_sub, job.model_id)
-        if record is None or record.status is not ModelStatus.AVAILABLE or self.queue.exhausted(job):
+        if record is None:
             self.queue.drop(job.model_id)
-            failure = "the model was deleted" if record is None or record.status is not ModelStatus.AVAILABLE \
-                else "the re-drive stopped three times without finishing"
-            return self.league.record_drive(track, record.owner_username, job.model_id, None, failure) \
-                if record is not None else None
+            return None
+        gone = record.status is not ModelStatus.AVAILABLE
+        if gone or self.queue.exhausted(job):  # the entry stays self-reported, saying why
+            self.queue.drop(job.model_id)
+            why = ("the model was deleted before drem re-drove it" if gone
+                   else f"the re-drive stopped {MAX_ATTEMPTS} times without finishing")
+            return self.league.record_drive(track, record.owner_username, job.model_id, None, why)
         with tempfile.TemporaryDirectory(prefix="league-verify-") as folder:
-            self.scrutineer.model_files(record, Path(folder))
-            outcome = self.drive(Path(folder), track, self.laps)
+            try:
+                self.scrutineer.model_files(record, Path(folder))
+            except (NotFound, Conflict) as error:
+                outcome = DriveOutcome(failure=f"drem could not fetch the model's files: {error.message}")
+            else:
+                outcome = self.drive(Path(folder), track, self.laps)
         report = outcome.reports[0] if outcome.reports else None
         drive = None
         if report is not None and report.verdict in ("passed", "failed"):

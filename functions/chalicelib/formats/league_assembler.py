@@ -267,20 +267,27 @@ def _check_simtraces(files: ExportFiles, track: str, track_length_m: float, eval
     """DeepRacer writes every step of an evaluation to its sim-trace, with the track's centre-line length
     (`track_len`, simapp markov/metrics/s3_metrics.py). Every evaluation sim-trace must be of a track that long; the
     submitted evaluation's own sim-trace (its folder named after the metrics file's job) also bounds each lap: a lap
-    claimed faster than its episode lasted in the sim-trace is an edited metrics file."""
+    claimed faster than its episode lasted in the sim-trace is an edited metrics file. When the export holds the
+    submitted evaluation's own sim-trace, that one decides (older evaluations on other tracks are left alone); when it
+    does not, every evaluation sim-trace must be of the track."""
     traces = sorted(n for n in files.files if _SIMTRACE.search(n))
     job = _evaluation_job(evaluation_file)
-    for name in traces:
+    own = [name for name in traces if len(job) >= 8 and _simtrace_job(name) in (job, f"evaluation-{job}")]
+    for name in own or traces:  # a console export keeps every evaluation: the submitted one's own trace decides
         episodes = _simtrace_episodes(files, name)
         for episode in episodes.values():
             for length in episode.lengths:
                 if abs(length - track_length_m) > TRACK_LENGTH_TOLERANCE * track_length_m:
                     raise ExportProblem(name, f"the evaluation ran on a track {length:.2f} m long; {track} is "
                                               f"{track_length_m:.2f} m", field="track_len")
-        folder = name.split("/evaluation-simtrace/")[0].rsplit("/", 1)[-1]
-        if len(job) >= 8 and (folder == job or folder.removeprefix("evaluation-") == job):
+        if name in own:
             _check_lap_times(name, episodes, evaluation_file, entries)
     return bool(traces)
+
+
+def _simtrace_job(name: str) -> str:
+    """The folder an evaluation sim-trace sits in: `evaluation-20220709200242` (DRfC), `20201021101010-Xy…`."""
+    return name.split("/evaluation-simtrace/")[0].rsplit("/", 1)[-1]
 
 
 class _Episode:

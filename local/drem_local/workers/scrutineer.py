@@ -225,6 +225,8 @@ def serve(poll_s: float, once: bool = False) -> int:
         drive.stop()
         try:
             worker.give_back()
+            if league is not None:
+                league.give_back()
         except Exception as error:  # the lease then expires and the job is driven after the next start
             logs.log(logging.WARNING, "scrutineering job not given back", error=repr(error)[:300])
         logs.log(logging.INFO, "scrutineering worker stopped")
