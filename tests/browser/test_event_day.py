@@ -224,6 +224,15 @@ def test_the_cars_page_confirms_an_emergency_stop_and_refreshes_itself(chromium,
     page.goto(url + "/console/cars")
     row = page.locator("tr[data-hostname='estop-car']")
     assert row.get_by_test_id("loaded-model").inner_text() == "—"
+    # The fleet picker shows the whole fleet name: its box is at least as wide as the name's text.
+    fits = page.evaluate("""() => {
+        const select = document.querySelector("tr[data-hostname='estop-car'] select[name=fleet_id]");
+        const context = document.createElement('canvas').getContext('2d');
+        context.font = getComputedStyle(select).font;
+        return select.getBoundingClientRect().width
+            >= context.measureText(select.selectedOptions[0].text).width + 16;
+    }""")
+    assert fits, "the fleet name is cut in its picker"
     row.get_by_role("button", name="Emergency stop").click()
     page.wait_for_load_state()
     assert "Emergency stop sent to estop-car" in page.get_by_test_id("notice").inner_text()

@@ -104,7 +104,7 @@ def test_racer_signs_up_uploads_models_and_sees_their_verdicts(app_url, page):
     for index in range(2):
         assert bars.nth(index).evaluate("bar => bar.value > 0 && bar.value === bar.max")
     states = page.get_by_test_id("upload-state").all_inner_texts()
-    assert states == ["uploaded: AVAILABLE", "uploaded: NOT_VALID"]
+    assert states == ["uploaded: Ready to race", "uploaded: Not valid"]  # the table's words, not the raw values
     # Scrutineer the good one in the simulator: the result replaces the form's cell and stays after a reload.
     # (The stack's worker may have driven it in the background already, on the coming events' track: the button then
     # reads "Drive again", and the wait is for the REINVENT_2018 drive asked for here.)

@@ -77,10 +77,6 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
 
     page.set_viewport_size(BIG_SCREEN)
     sign_in(page, app_url, "deck-op")
-    # The Cars page, open on another tab all along: its model rows follow the queue's assignments live.
-    cars_page = page.context.new_page()
-    cars_page.goto(f"{app_url}/console/cars")
-    assert cars_page.get_by_test_id("models-car-b").get_by_test_id("assigned-models").inner_text() == "none assigned"
     page.goto(timekeeper)
     assert "Nobody in line" in page.get_by_test_id("queue-panel").inner_text()
 
@@ -103,6 +99,10 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
                            ".map(e => e.textContent).join() === 'deck-ann,deck-cy,deck-ben'")
     assert "assigned to car-a" in page.get_by_test_id("preload").inner_text()
 
+    # The Cars page, open on another tab from here on: its model rows follow the queue's assignments live.
+    cars_page = page.context.new_page()
+    cars_page.goto(f"{app_url}/console/cars")
+    assert cars_page.get_by_test_id("models-car-b").get_by_test_id("assigned-models").inner_text() == "none assigned"
     page.get_by_test_id("start-head").click()  # "Ready race for deck-ann on car-a"
     page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'deck-ann'")
     assert "car-a" in page.get_by_test_id("race-panel").inner_text()

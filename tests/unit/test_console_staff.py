@@ -135,6 +135,8 @@ def test_operator_gives_models_to_a_car_and_sees_its_progress(app: Any, users: A
 
     page = operator.get("/console/models")
     assert "car-7 (offline)" in text(page) and f'value="{good["model_id"]}"' in body(page)
+    # The sensor and training algorithm in words (the page showed "FRONT_FACING_CAMERA · behaviour_cloning").
+    assert "Front camera · Behaviour cloning" in text(page) and "FRONT_FACING_CAMERA" not in text(page)
     assert f'value="{broken["model_id"]}"' not in body(page)  # only AVAILABLE models are offered
 
     no_car = post(operator, "/console/models/assign", {"model_ids": good["model_id"]}, htmx=True)

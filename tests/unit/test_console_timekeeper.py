@@ -125,3 +125,32 @@ def test_commands_need_the_csrf_token_and_an_operator(console):
 
     racer_web = console.sign_in("someone", "racer")
     assert racer_web.get(base).status_code == 403
+
+
+def test_a_sim_car_is_the_timer_only_of_the_races_it_drives(console):
+    """Issue 31: track 2 said "Timed by sim car sim-car-1" while its race had no car (the sim car times track 1)."""
+    desk = console.desk
+    scenario = Scenario(desk).add_fleet()
+    scenario.add_event(tracks=[{"track_id": "1", "fleet_id": scenario.fleet_id},
+                               {"track_id": "2", "fleet_id": scenario.fleet_id}])
+    sim = desk.device(scenario.fleet_id, "sim-car-1", kind="car")
+    beat = desk.client.http.post("/api/devices/self/heartbeat", body=json.dumps({"times_laps": True}).encode(),
+                                 headers={"Authorization": f"Device {sim}", "Content-Type": "application/json",
+                                          "Accept": "application/json"})
+    assert beat.status_code == 200, beat.body
+    car_id = next(d["device_id"] for d in json.loads(desk.call("GET", "/api/devices").body)["devices"]
+                  if d["hostname"] == "sim-car-1")
+    console.sign_in("timekeeper", "operator")
+    eid = scenario.event_id
+    assert "Timed by sim car sim-car-1 when it drives the race" in text_of(
+        console.web.get(f"/console/timekeeper/{eid}/2").body.decode())
+    desk.ok(desk.create_race(eid, *_racer(desk, "tk-two"), "2"), 201)  # no car
+    on_two = text_of(console.web.get(f"/console/timekeeper/{eid}/2").body.decode())
+    assert "No timer for this race" in on_two and "Timed by sim car" not in on_two
+    desk.ok(desk.create_race(eid, *_racer(desk, "tk-one"), "1", car=car_id), 201)
+    assert "Timed by sim car sim-car-1" in text_of(console.web.get(f"/console/timekeeper/{eid}/1").body.decode())
+
+
+def _racer(desk, username: str) -> tuple[str]:
+    desk.users.create(username, ("racer",))
+    return (username,)

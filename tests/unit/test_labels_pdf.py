@@ -98,7 +98,7 @@ def test_registration_desk_prints_the_new_racers_card(console, monkeypatch, tmp_
     get_settings.cache_clear()
     console.sign_in("desk-web", "registration")
     desk = console.post("/console/registration", {"username": "new_racer", "email": "new@example.test",
-                                                   "country_code": "SE"})
+                                                   "country_code": "SE", "display_name": "김민준"})
     assert desk.status_code == 201
     page = desk.body.decode()
     password = html.unescape(re.search(r'data-testid="temporary-password">([^<]+)<', page).group(1))
@@ -111,6 +111,7 @@ def test_registration_desk_prints_the_new_racers_card(console, monkeypatch, tmp_
     assert reply.status_code == 200 and reply.headers["Cache-Control"] == "no-store"
     text = pdf_text(reply.body, tmp_path)
     assert "new_racer" in text and password in text
+    assert "김민준" in text  # whose card it is, in their own script (Hangul from the Korean fallback font)
     [sheet] = pdf_pages(reply.body, tmp_path, dpi=300)
     assert decoded_qr_codes(sheet) == [f"{PUBLIC_URL}/login?next=/console/my-models"]
 

@@ -150,3 +150,13 @@ def test_public_page_and_hyperparameter_fragment(pushed: dict[str, str], client:
     assert 'hx-get="/league/reinvent_base/racers/bob"' in html
     fragment = client.http.get(f"/league/{REINVENT}/racers/bob", headers={"HX-Request": "true"}).body.decode()
     assert "<html" not in fragment and "sac_alpha" in fragment and "15.500 s" in fragment
+
+
+def test_the_league_page_names_racers_by_their_display_name(pushed: dict[str, str], client: Any) -> None:
+    """Issue 31: the league showed sign-in names while every other board showed the racer's own spelling."""
+    reply = client.http.put("/api/me/profile", headers={**bearer(pushed["alice"]), "Content-Type": "application/json"},
+                            body=json.dumps({"display_name": "Zoë.Müller"}))
+    assert reply.status_code == 200, reply.body
+    html = client.http.get(f"/league/{REINVENT}").body.decode()
+    assert '<td data-label="Racer">Zoë.Müller</td>' in html
+    assert 'hx-get="/league/reinvent_base/racers/alice"' in html  # the row still opens alice's submission

@@ -7,7 +7,7 @@ import pytest
 import requests
 from requests.adapters import BaseAdapter
 
-from drem_local.api_client import ApiClient, ApiError
+from drem_local.api_client import ApiClient, ApiError, api_url
 from drem_local.commands import users as users_command
 
 pytestmark = pytest.mark.unit
@@ -38,7 +38,7 @@ def _run(client, token, *argv):
     parser = argparse.ArgumentParser()
     users_command.add_arguments(parser)
     args = parser.parse_args(["--token", token, *argv])
-    api_client = ApiClient(args.api, args.token)
+    api_client = ApiClient(api_url(args), args.token)
     api_client._http.mount("http://", ChaliceTransport(client))
     answer = users_command._perform(api_client, args)
     return users_command.describe(args.action, answer)

@@ -123,6 +123,17 @@ class ProfileService:
         self._store.link_username(username, sub)
         return profile
 
+    def shown_names(self, usernames: list[str]) -> dict[str, str]:
+        """{sign-in name: what boards show} for racers named by their sign-in name (the league's rows); a name
+        without a profile is left out (the caller shows it as it is)."""
+        shown = {}
+        for username in dict.fromkeys(usernames):
+            sub = self._store.sub_for_username(username)
+            profile = self._store.get(sub) if sub else None
+            if profile is not None:
+                shown[username] = public_view(profile).display_name
+        return shown
+
     def account_name(self, username: str) -> str | None:
         """The sign-in name as the account spells it, for a name typed in any case; None when there is none."""
         sub = self._store.sub_for_username(username)

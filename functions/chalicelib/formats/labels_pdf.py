@@ -65,6 +65,7 @@ class RacerCard(BaseModel):
     model_config = ConfigDict(frozen=True)
     username: str
     temporary_password: str
+    display_name: str = ""  # whose card it is, in their own script (checked by the caller's form)
 
 
 def car_status_url(public_url: str, device_id: str) -> str:
@@ -158,7 +159,7 @@ def car_labels_pdf(cars: Sequence[CarLabel], format_name: str, public_url: str) 
 
 def racer_card_pdf(card: RacerCard, format_name: str, public_url: str, event_name: str = "") -> bytes:
     sheet = stock(format_name)
-    pdf = _Labels(sheet, "Racer card", [card.username, event_name])
+    pdf = _Labels(sheet, "Racer card", [card.username, event_name, card.display_name])
     x, y = pdf.slot(0)
     width, height = sheet.label
     pad = height * 0.08
@@ -167,9 +168,9 @@ def racer_card_pdf(card: RacerCard, format_name: str, public_url: str, event_nam
     draw_qr(pdf, racer_sign_in_url(public_url), x + width - pad - qr, y + pad, qr)
     text_w = width - qr - 3 * pad
     pdf.set_text_color(80, 80, 80)
-    pdf.text_line(x + pad, y + pad, text_w, 4 * scale, event_name or "DeepRacer", 6.5 * scale)
+    pdf.text_line(x + pad, y + pad, text_w, 4 * scale, card.display_name or event_name or "DeepRacer", 6.5 * scale)
     pdf.set_text_color(0, 0, 0)
-    pdf.text_line(x + pad, y + pad + 4.5 * scale, text_w, 4 * scale, "Username", 6 * scale)
+    pdf.text_line(x + pad, y + pad + 4.5 * scale, text_w, 4 * scale, "Sign-in name", 6 * scale)
     pdf.text_line(x + pad, y + pad + 8.5 * scale, text_w, 6 * scale, card.username, 11 * scale, "B")
     pdf.text_line(x + pad, y + pad + 15.5 * scale, text_w, 4 * scale, "Temporary password", 6 * scale)
     size = 10 * scale

@@ -6,12 +6,13 @@ POST body only (never a URL, never stored) and the PDF is served `no-store`.
 from __future__ import annotations
 
 from chalice import Blueprint, Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, route
 from chalicelib.auth.principals import User
 from chalicelib.domain.devices import DeviceKind
+from chalicelib.domain.names import check_display_name
 from chalicelib.formats.labels_pdf import (
     CarLabel,
     LabelFormat,
@@ -36,7 +37,13 @@ class RacerCardForm(BaseModel):
     model_config = ConfigDict(extra="ignore")
     username: str = Field(min_length=1, max_length=128)
     temporary_password: str = Field(min_length=1, max_length=256)
+    display_name: str = Field(default="", max_length=200)
     format: LabelFormat = "avery-l7160"
+
+    @field_validator("display_name")
+    @classmethod
+    def _display_name(cls, value: str) -> str:
+        return check_display_name(value) if value.strip() else ""
 
 
 @route(bp, "/console/cars/labels.pdf", allow={ADMIN, OPERATOR}, query=CarLabelsQuery)
@@ -51,7 +58,8 @@ def car_labels(principal: User, query: CarLabelsQuery) -> Response:
 
 @route(bp, "/console/registration/card.pdf", methods=["POST"], allow={ADMIN, REGISTRATION})
 def racer_card(principal: User) -> Response:
-    card = RacerCardForm.model_validate(submitted(bp.current_request, "username", "temporary_password", "format"))
-    body = racer_card_pdf(RacerCard(username=card.username, temporary_password=card.temporary_password),
-                          card.format, get_settings().public_url)
+    card = RacerCardForm.model_validate(submitted(bp.current_request, "username", "temporary_password",
+                                                  "display_name", "format"))
+    body = racer_card_pdf(RacerCard(username=card.username, temporary_password=card.temporary_password,
+                                    display_name=card.display_name), card.format, get_settings().public_url)
     return Response(body=body, headers=label_headers(f"racer-card-{card.username}.pdf"))

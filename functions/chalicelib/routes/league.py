@@ -65,7 +65,9 @@ def delete_racer(principal: User, track: str, racer: str) -> dict:
 @route(bp, "/league/{track}", allow=PUBLIC, query=BoardQuery)
 def league_page(principal: Principal, track: str, query: BoardQuery) -> Response:
     """The public board page"""
-    return render.page("league", view=board_view(services.league_service().board(track, query), query))
+    board = services.league_service().board(track, query)
+    names = services.profile_service().shown_names([ranked.entry.racer for ranked in board.entries])
+    return render.page("league", view=board_view(board, query, names))
 
 
 @route(bp, "/league/{track}/racers/{racer}", allow=PUBLIC)

@@ -1,6 +1,7 @@
 """What the league page and its fragment show: display strings computed here, so templates only lay them out."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,9 +43,12 @@ def seconds(value: float | None) -> str:
     return f"{value:.3f} s" if value is not None else "–"
 
 
-def board_view(board: Board, query: BoardQuery) -> BoardView:
+def board_view(board: Board, query: BoardQuery, names: Mapping[str, str] | None = None) -> BoardView:
+    """`names`: each racer's display name by sign-in name (the rows keep the sign-in name in their links)."""
+    names = names or {}
     rows = [BoardRowView(
-        rank=ranked.rank, racer=e.racer, model_name=e.model_name, algorithm=e.algorithm, sensor=" + ".join(e.sensor),
+        rank=ranked.rank, racer=names.get(e.racer, e.racer), model_name=e.model_name, algorithm=e.algorithm,
+        sensor=" + ".join(e.sensor),
         action_space=e.action_space, best_lap=seconds(e.best_lap_s), average_lap=seconds(e.average_lap_s),
         laps=f"{e.laps_completed}/{e.trials}", completion=f"{e.average_completion_pct:.1f} %",
         off_track=e.off_track_total, resets=e.reset_total, submitted=e.submitted_at[:16].replace("T", " "),

@@ -54,9 +54,6 @@ def line_chart(series: list[Series], x_labels: list[str], *, title: str, y_label
     values = [v for s in series for _, v in s.points]
     if not values or not x_labels:
         return Markup(f'<p class="plot-empty" data-testid="{escape(testid)}">{escape(title)}: no data yet.</p>')
-    if len(x_labels) == 1:  # one month is no line: its figures side by side as bars
-        return bar_chart([(line.label, v) for line in series for _, v in line.points],
-                         title=f"{title}: {x_labels[0]}", y_label=y_label, testid=testid)
     low, high = _scale(values)
     span = max(len(x_labels) - 1, 1)
 

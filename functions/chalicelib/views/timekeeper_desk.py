@@ -130,11 +130,14 @@ class TimekeeperDesk:
         race_id = self._live.live_race_id(event_id, track_id)
         race = self._race_screen(event, race_id, devices) if race_id else None
         timers = [d for d in devices if d.kind is DeviceKind.TIMER or (d.telemetry and d.telemetry.times_laps)]
+        # A timing car (a sim car) times only the races it is the car of: not a live race on another car or none.
+        if race is not None:
+            timers = [d for d in timers if d.kind is DeviceKind.TIMER or d.device_id == race.car]
         connected = any(d.online for d in timers)
         return TimekeeperScreen(
             event_id=event_id, event_name=event.name, track_id=track_id,
-            track_title=track.leaderboard_title or f"Track {track_id}", fleet_id=track.fleet_id,
-            timer_connected=connected, timer_text=_timer_text(track, timers, connected),
+            track_title=event.track_name(track_id), fleet_id=track.fleet_id,
+            timer_connected=connected, timer_text=_timer_text(track, timers, connected, live=race is not None),
             cars=[CarChoice(device_id=d.device_id, label=_car_label(d), online=d.online)
                   for d in devices if d.kind is DeviceKind.CAR], race=race)
 
@@ -210,13 +213,16 @@ def _car_label(device: DeviceView) -> str:
     return f"{device.hostname} ({'online' if device.online else 'offline'})"
 
 
-def _timer_text(track: Track, timers: list[DeviceView], connected: bool) -> str:
+def _timer_text(track: Track, timers: list[DeviceView], connected: bool, *, live: bool) -> str:
     if not track.fleet_id:
         return "No fleet on this track: capture laps by hand"
     if not timers:
+        if live:
+            return "No timer for this race (a sim car times only the races it drives): capture laps by hand"
         return "No timer in this track's fleet: capture laps by hand"
     if connected:
         timing_cars = [d.hostname for d in timers if d.kind is DeviceKind.CAR and d.online]
-        return f"Timed by sim car {', '.join(timing_cars)}" if timing_cars and len(timing_cars) == sum(
-            1 for d in timers if d.online) else "Timer connected"
+        if timing_cars and len(timing_cars) == sum(1 for d in timers if d.online):
+            return f"Timed by sim car {', '.join(timing_cars)}" + ("" if live else " when it drives the race")
+        return "Timer connected"
     return "Timer offline: capture laps by hand"

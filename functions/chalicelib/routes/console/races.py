@@ -97,8 +97,9 @@ def _edit_page(principal: User, event_id: str, race_id: str, errors: dict[str, s
 
 def _audit_rows(event_id: str, race_id: str | None = None) -> list[dict[str, str]]:
     entries = audit.newest_first(services.audit_log().for_event(event_id), race_id)
+    names = services.profile_service().shown_names([e.racer for e in entries if e.racer])  # as the boards name them
     return [{"action": e.action, "when": _when(e.at_ms), "by": e.by, "what": audit.ACTION_LABELS[e.action],
-             "racer": e.racer or "", "lap": "" if e.lap_id is None else str(e.lap_id + 1),
+             "racer": names.get(e.racer or "", e.racer or ""), "lap": "" if e.lap_id is None else str(e.lap_id + 1),
              "before": audit.describe(e.before), "after": audit.describe(e.after)} for e in entries]
 
 
