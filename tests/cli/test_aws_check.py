@@ -89,7 +89,7 @@ def test_missing_flag_images_and_fonts_are_named_with_what_to_run(tmp_path: Path
 
     monkeypatch.setattr(pdf_fonts, "search_dirs", lambda: (tmp_path,))
     fonts = aws_preflight.pdf_fonts()
-    assert not fonts.ok and "fonts-noto-core fonts-droid-fallback" in fonts.sentence
+    assert not fonts.ok and "fonts-noto-core fonts-droid-fallback fonts-nanum" in fonts.sentence
 
 
 def test_make_deploy_checks_before_it_builds_and_installs_no_torch(tmp_path: Path) -> None:
