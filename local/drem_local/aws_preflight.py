@@ -103,7 +103,8 @@ def pdf_fonts() -> Check:
                      if not any((folder / name).is_file() for folder in search_dirs()))
     if missing:
         return Check("fonts", False, f"The PDF fonts are missing ({', '.join(missing)}): run `sudo apt-get install "
-                     "fonts-noto-core fonts-droid-fallback fonts-nanum` (or `make install`), then run `make deploy` again.")
+                     "fonts-noto-core fonts-droid-fallback fonts-nanum` (or `make install`), then run `make deploy` "
+                     "again.")
     return Check("fonts", True, "PDF fonts installed.")
 
 
