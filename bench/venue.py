@@ -28,12 +28,15 @@ import argparse
 import http.client
 import json
 import multiprocessing
+import shutil
 import socket
 import sys
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import urlencode, urlsplit
 
@@ -116,7 +119,11 @@ def guesser(host: str, port: int, targets: list[str], stop: threading.Event, log
     while not stop.is_set():
         target = targets[n % len(targets)]
         body = json.dumps({"username": target, "password": f"Guess-{n}-x!"}).encode()
-        status, _h, _b = request(host, port, "POST", "/api/auth/token", body, {"Content-Type": "application/json"})
+        try:
+            status, _h, _b = request(host, port, "POST", "/api/auth/token", body,
+                                     {"Content-Type": "application/json"})
+        except (OSError, http.client.HTTPException):
+            status = 0  # no answer: counted apart (the server dropped or timed out the connection)
         log.append((target, time.monotonic(), status))
         n += 1
 
@@ -232,6 +239,16 @@ def create_accounts(stack: _stack.BenchStack, count: int) -> list[str]:
     return names
 
 
+@contextmanager
+def _keeping_logs(stack: _stack.BenchStack, target: Path | None) -> Iterator[None]:
+    """Copy the servers' logs to `target` when the run ends, however it ends (the stack's folder is deleted)."""
+    try:
+        yield
+    finally:
+        if target is not None:
+            shutil.copytree(stack.tmp / "state" / "logs", target, dirs_exist_ok=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--phones", type=int, default=1000)
@@ -240,9 +257,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--uploads", type=int, default=50)
     parser.add_argument("--slow", type=int, default=500)
     parser.add_argument("--bodies", type=int, default=10)
+    parser.add_argument("--keep-logs", type=Path, default=None, help="copy the servers' logs here at the end")
     args = parser.parse_args(argv)
 
-    with _stack.bench_stack() as stack:
+    with _stack.bench_stack() as stack, _keeping_logs(stack, args.keep_logs):
         parts = urlsplit(stack.url)
         host, port = parts.hostname or "127.0.0.1", parts.port or 80
         started = time.monotonic()
@@ -288,7 +306,10 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(max(0.0, run_start + i * args.seconds / len(order) - time.monotonic()))
             name = order[i]
             began = time.monotonic()
-            status, _jar = form_sign_in(host, port, name, PASSWORD, devices.get(name, ""))
+            try:
+                status, _jar = form_sign_in(host, port, name, PASSWORD, devices.get(name, ""))
+            except (OSError, http.client.HTTPException):
+                status = 0  # no answer within 60 s, or the connection dropped: a phone that could not sign in
             sign_ins.append((status, time.monotonic() - began))
 
         laps: list[float] = []
@@ -315,6 +336,8 @@ def main(argv: list[str] | None = None) -> int:
             thread.join(30)
 
     refused = sum(1 for status, _s in sign_ins if status != 303)
+    unanswered = sum(1 for status, _s in sign_ins if status == 0)
+    guesses_unanswered = sum(1 for _t, _a, status in guesses if status == 0)
     upload_refused = sum(1 for status in uploads if status not in (200, 204))
     per_minute: Counter[tuple[str, int]] = Counter()
     for target, at, status in guesses:
@@ -330,7 +353,8 @@ def main(argv: list[str] | None = None) -> int:
     sign_in_p95 = sorted(s for _st, s in sign_ins)[int(0.95 * (len(sign_ins) - 1))] if sign_ins else 0.0
     met = (refused == 0 and upload_refused == 0 and p95 <= 1000 and max(growth.values()) <= 150
            and worst_guesses <= 10 and guess_ok == 0)
-    print(f"phones={len(sign_ins)} sign_in_refused={refused} sign_in_p95={sign_in_p95:.2f}s "
+    print(f"phones={len(sign_ins)} sign_in_refused={refused} (unanswered {unanswered}) "
+          f"sign_in_p95={sign_in_p95:.2f}s guesses_unanswered={guesses_unanswered} "
           f"uploads={len(uploads)} upload_refused={upload_refused} watchers_connected={crowd_stats['connected']} "
           f"watcher_errors={crowd_stats['errors']} lap_samples={len(laps)} "
           f"guess_attempts={len(guesses)} slow_cut={cut[0]} bodies={dict(body_statuses)} "
