@@ -20,6 +20,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -168,6 +169,12 @@ def resume_model_checks() -> None:
         logs.log(logging.WARNING, "interrupted model checks could not be resumed yet", error=repr(error)[:300])
 
 
+def _resume_checks_forever() -> None:
+    while True:
+        resume_model_checks()
+        time.sleep(RESUME_CHECKS_EVERY_S)
+
+
 def serve(poll_s: float, once: bool = False) -> int:
     use_app_source()
     from chalicelib import logs
@@ -179,12 +186,10 @@ def serve(poll_s: float, once: bool = False) -> int:
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
-    next_resume = 0.0
+    # Beside the drives, not between them: a drive takes up to 90 s, and a check cut short must not wait for a queue.
+    threading.Thread(target=_resume_checks_forever, name="resume-model-checks", daemon=True).start()
     try:
         while True:
-            if time.monotonic() >= next_resume:
-                resume_model_checks()
-                next_resume = time.monotonic() + RESUME_CHECKS_EVERY_S
             try:
                 job = worker.run_one()
             except Exception as error:  # storage briefly away (restarting): wait and take the queue again
