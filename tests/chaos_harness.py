@@ -140,6 +140,7 @@ class Track:
     racer: str
     next_ts: int
     acknowledged_keys: set[str] = field(default_factory=set)  # keys whose answer was a lap
+    unanswered: dict[str, int] = field(default_factory=dict)  # key → timestamp of a post that got no answer (yet)
 
 
 class Chaos:
@@ -196,17 +197,23 @@ class Chaos:
 
     # --- the event's traffic ---------------------------------------------------------------------------------------
 
-    def _post_lap(self, track: Track) -> None:
-        key = f"t{track.track_id}-{track.next_ts}"
+    def _post_lap(self, track: Track, key: str | None = None, timestamp_ms: int | None = None) -> None:
+        """Post the next crossing (or, given `key`, repeat one that got no answer, as a timer does when it is back)."""
+        retry = key is not None
+        key = key or f"t{track.track_id}-{track.next_ts}"
+        timestamp_ms = timestamp_ms if timestamp_ms is not None else track.next_ts
+        track.unanswered[key] = timestamp_ms
         failures: list[str] = []
         answer = self.api.until_answered("POST", "/api/timing/strip-events", {
-            "event_id": self.event_id, "track_id": track.track_id, "timestamp_ms": track.next_ts, "sensor": 17,
+            "event_id": self.event_id, "track_id": track.track_id, "timestamp_ms": timestamp_ms, "sensor": 17,
             "idempotency_key": key}, auth=f"Device {self.timer}", ok=(200,), failures=failures)
+        del track.unanswered[key]
         if answer["replayed"]:
             _note_misleading(self.report, f"lap {key}", failures)
         if answer["action"] == "lap":
             track.acknowledged_keys.add(key)
-        track.next_ts += LAP_STEP_MS
+        if not retry:
+            track.next_ts += LAP_STEP_MS
 
     def _register(self, username: str) -> None:
         failures: list[str] = []
@@ -341,6 +348,8 @@ class Chaos:
     def _settle_and_check(self) -> None:
         report, api = self.report, self.api
         for track in self.tracks:
+            for key, timestamp_ms in list(track.unanswered.items()):  # a post whose client gave up: sent again
+                self._post_lap(track, key, timestamp_ms)
             race = api.until_answered("GET", f"/api/events/{self.event_id}/races/{track.race_id}")
             laps = len(race["laps"])
             report.laps_acknowledged += len(track.acknowledged_keys)
