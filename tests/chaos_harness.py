@@ -8,7 +8,9 @@ would). Meanwhile, the way an event runs:
 - two timers post laps on two tracks, each post retried with its idempotency key until it is answered;
 - the registration desk registers racers, retrying the same registration until it is answered;
 - an operator creates events; when storage stops answering mid-create, the client checks the event list before
-  creating it again (what the error message tells a user to do), since event creation has no idempotency key.
+  creating it again (what the error message tells a user to do), since event creation has no idempotency key;
+- a racer uploads models (ticket, the file through the app's storage gateway, then "complete", each retried until
+  answered); a check the kill cut short is left to the scrutineering worker, which must finish every one.
 
 Each round kills -9 the storage server or the app (in turn) at a random moment, then restarts it. At the end every count
 a user
@@ -52,6 +54,9 @@ class ChaosReport:
     events_duplicated: int = 0
     stale_boards: int = 0
     half_created_accounts: int = 0
+    models_acknowledged: int = 0  # uploads whose file the storage gateway acknowledged
+    models_lost: int = 0  # their record is gone
+    models_stuck: int = 0  # still UPLOADED ("Checking…") once the worker had time to resume every check
     crash_restart_s: list[float] = field(default_factory=list)
     crash_restart_by_role: dict[str, list[float]] = field(default_factory=dict)
     clean_restart_s: list[float] = field(default_factory=list)
@@ -60,11 +65,11 @@ class ChaosReport:
 
     @property
     def acknowledged(self) -> int:
-        return self.laps_acknowledged + self.racers_acknowledged + self.events_acknowledged
+        return self.laps_acknowledged + self.racers_acknowledged + self.events_acknowledged + self.models_acknowledged
 
     @property
     def lost(self) -> int:
-        return self.laps_lost + self.racers_lost + self.events_lost
+        return self.laps_lost + self.racers_lost + self.events_lost + self.models_lost
 
     @property
     def duplicated(self) -> int:
@@ -135,6 +140,7 @@ class Track:
     racer: str
     next_ts: int
     acknowledged_keys: set[str] = field(default_factory=set)  # keys whose answer was a lap
+    unanswered: dict[str, int] = field(default_factory=dict)  # key → timestamp of a post that got no answer (yet)
 
 
 class Chaos:
@@ -151,6 +157,7 @@ class Chaos:
         self.timer = ""
         self.registered: list[str] = []
         self.event_names: list[str] = []
+        self.model_ids: list[str] = []
         self._stop = threading.Event()
         self._supervisor: Supervisor | None = None
 
@@ -190,17 +197,23 @@ class Chaos:
 
     # --- the event's traffic ---------------------------------------------------------------------------------------
 
-    def _post_lap(self, track: Track) -> None:
-        key = f"t{track.track_id}-{track.next_ts}"
+    def _post_lap(self, track: Track, key: str | None = None, timestamp_ms: int | None = None) -> None:
+        """Post the next crossing (or, given `key`, repeat one that got no answer, as a timer does when it is back)."""
+        retry = key is not None
+        key = key or f"t{track.track_id}-{track.next_ts}"
+        timestamp_ms = timestamp_ms if timestamp_ms is not None else track.next_ts
+        track.unanswered[key] = timestamp_ms
         failures: list[str] = []
         answer = self.api.until_answered("POST", "/api/timing/strip-events", {
-            "event_id": self.event_id, "track_id": track.track_id, "timestamp_ms": track.next_ts, "sensor": 17,
+            "event_id": self.event_id, "track_id": track.track_id, "timestamp_ms": timestamp_ms, "sensor": 17,
             "idempotency_key": key}, auth=f"Device {self.timer}", ok=(200,), failures=failures)
+        del track.unanswered[key]
         if answer["replayed"]:
             _note_misleading(self.report, f"lap {key}", failures)
         if answer["action"] == "lap":
             track.acknowledged_keys.add(key)
-        track.next_ts += LAP_STEP_MS
+        if not retry:
+            track.next_ts += LAP_STEP_MS
 
     def _register(self, username: str) -> None:
         failures: list[str] = []
@@ -231,6 +244,29 @@ class Chaos:
             raise RuntimeError(f"creating event {name} never finished")
         self.event_names.append(name)
 
+    def _upload_model(self, name: str, bias: float) -> None:
+        from tests.unit.models_helpers import onnx_archive
+
+        ticket = self.api.until_answered("POST", "/api/models", {"filename": f"{name}.tar.gz"}, ok=(201,))
+        upload, data = ticket["upload"], onnx_archive(bias)
+        deadline = time.monotonic() + OP_DEADLINE_S
+        while True:  # a presigned POST of the same bytes again is harmless: the retry every browser would do
+            try:
+                posted = requests.post(upload["url"], data=upload["fields"], files={"file": (f"{name}.tar.gz", data)},
+                                       timeout=30)
+                if posted.status_code in (200, 204):
+                    break
+                if posted.status_code not in RETRYABLE:
+                    raise RuntimeError(f"uploading {name} answered {posted.status_code}: {posted.text[:200]}")
+            except requests.RequestException:
+                pass
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"uploading {name} never finished")
+            time.sleep(0.2)
+        model_id = ticket["model"]["model_id"]
+        self.model_ids.append(model_id)  # the file is stored: from here the check must finish, one way or another
+        self.api.until_answered("POST", f"/api/models/{model_id}/complete", ok=(200,))
+
     def _event_names_stored(self) -> list[str]:
         events = self.api.until_answered("GET", "/api/events")
         items = events.get("events", events) if isinstance(events, dict) else events
@@ -257,6 +293,9 @@ class Chaos:
             threading.Thread(target=self._worker, args=(lambda i: self._register(f"{prefix}-racer-{i}"),), daemon=True),
             threading.Thread(target=self._worker, args=(lambda i: self._create_event(f"{prefix} event {i}"),),
                              daemon=True),
+            threading.Thread(target=self._worker, args=(
+                lambda i: self._upload_model(f"{prefix}-model-{i}", (i + 1) / 1000 + self.random.random()),),
+                daemon=True),
         ]
         for worker in workers:
             worker.start()
@@ -309,6 +348,8 @@ class Chaos:
     def _settle_and_check(self) -> None:
         report, api = self.report, self.api
         for track in self.tracks:
+            for key, timestamp_ms in list(track.unanswered.items()):  # a post whose client gave up: sent again
+                self._post_lap(track, key, timestamp_ms)
             race = api.until_answered("GET", f"/api/events/{self.event_id}/races/{track.race_id}")
             laps = len(race["laps"])
             report.laps_acknowledged += len(track.acknowledged_keys)
@@ -324,6 +365,27 @@ class Chaos:
         report.events_lost = sum(1 for name in self.event_names if names[name] == 0)
         report.events_duplicated = sum(names[name] - 1 for name in self.event_names if names[name] > 1)
         report.half_created_accounts = sum(1 for name in users if not self._groups(name))
+        report.models_acknowledged = len(self.model_ids)
+        for model_id in self.model_ids:
+            status = self._model_settled(model_id)
+            report.models_lost += status is None
+            report.models_stuck += status == "UPLOADED"
+
+    def _model_settled(self, model_id: str, within_s: float = 120.0) -> str | None:
+        """The model's status once its check is over (the worker resumes a check a kill cut short), or UPLOADED if
+        it never ends within `within_s`; None when the model is gone."""
+        deadline = time.monotonic() + within_s
+        status = "UPLOADED"
+        while time.monotonic() < deadline:
+            answer = self.api.call("GET", f"/api/models/{model_id}")
+            if answer is not None and answer[0] == 404:
+                return None
+            if answer is not None and answer[0] == 200:
+                status = answer[1]["model"]["status"]
+                if status != "UPLOADED":
+                    return status
+            time.sleep(0.5)
+        return status
 
     def _board_catches_up(self, track: Track, race: dict[str, Any], within_s: float = 10.0) -> bool:
         """Boards equal races within seconds of the last restart, with no manual recompute."""

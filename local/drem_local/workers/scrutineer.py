@@ -20,6 +20,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -190,6 +191,12 @@ def league_verifier(drive: BoundedClipDrive) -> Any:
                           lambda folder, track, laps: drive(folder, [], laps, track=track))
 
 
+def _resume_checks_forever() -> None:
+    while True:
+        resume_model_checks()
+        time.sleep(RESUME_CHECKS_EVERY_S)
+
+
 def serve(poll_s: float, once: bool = False) -> int:
     use_app_source()
     from chalicelib import logs
@@ -202,12 +209,10 @@ def serve(poll_s: float, once: bool = False) -> int:
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
-    next_resume = 0.0
+    # Beside the drives, not between them: a drive takes up to 90 s, and a check cut short must not wait for a queue.
+    threading.Thread(target=_resume_checks_forever, name="resume-model-checks", daemon=True).start()
     try:
         while True:
-            if time.monotonic() >= next_resume:
-                resume_model_checks()
-                next_resume = time.monotonic() + RESUME_CHECKS_EVERY_S
             try:
                 job = worker.run_one()
                 if job is None and league is not None and league.run_one() is not False:
