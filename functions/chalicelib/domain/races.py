@@ -381,8 +381,9 @@ class RaceService:
         try:
             # The track's board, then its overlay, then the combined board: the big screen and the stream overlay
             # show the lap as soon as each can (the live server is woken by each write), the combined board last.
-            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race, combined=False)
+            # The name first, so nothing but the overlay's own write stands between the board and the overlay.
             name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
+            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race, combined=False)
             self._boards.publish_overlay(race, now_ms, board, name)
             self._boards.refresh_combined(event.event_id, [t.track_id or "" for t in event.tracks],
                                           event.race_config.ranking_method)
