@@ -62,10 +62,10 @@ def _serve(host: str, port: int, *, reuse_port: bool) -> None:
     from drem_live.server import make_app
 
     wake_dir = os.environ.get("DREM_LIVE_WAKE_DIR") or ""
-    # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
     # An idle poller's connection is not kept long locally; behind a load balancer the server must keep it longer
     # than the balancer does (DREM_LIVE_KEEPALIVE_S), or the balancer may send a request onto a closing one (a 502).
     keepalive_s = float(os.environ.get("DREM_LIVE_KEEPALIVE_S") or DEFAULT_KEEPALIVE_S)
+    # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
     poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
     namespace = os.environ.get("DREM_LIVE_METRICS_NAMESPACE") or ""
     metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None

@@ -1,8 +1,9 @@
 """The board/overlay JSON polls (`/live/api/leaderboard|overlay/{event}?track=`) served from memory.
 
 Each (kind, event, track) is read from storage at most once per `fresh_s` (one read in flight at a time; everyone
-else waits for it), whatever the poll rate. A re-read never replaces a view with an older version (monotonic). The
-table is bounded (least recently used out first), so made-up event ids cannot grow it.
+else waits for it), whatever the poll rate, and again on the first poll after the writer woke the server for its
+event. A re-read never replaces a view with an older version (monotonic). The table is bounded (least recently used
+out first), so made-up event ids cannot grow it.
 """
 from __future__ import annotations
 
@@ -43,6 +44,12 @@ class PollViews:
             self._reading[key] = flight
             flight.add_done_callback(lambda _f: self._reading.pop(key, None))
         return await asyncio.shield(flight)
+
+    def expire(self, event_id: str) -> None:
+        """The writer changed `event_id` (drem_live.wake): its views are read again on their next poll."""
+        for key, view in list(self._views.items()):
+            if key[1] == event_id:
+                self._views[key] = CachedView(view.version, view.etag, view.body, float("-inf"))
 
     async def _refresh(self, key: tuple[str, str, str], cached: CachedView | None) -> CachedView:
         read_at = time.monotonic()

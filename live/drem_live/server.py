@@ -239,7 +239,11 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
     app[KNOWN_EVENTS] = set()
     app[UNKNOWN_EVENTS] = {}
     if wake_dir:
-        listen_for_wakes(app, wake_dir, app[CHANNELS])
+        def woken(event_id: str) -> None:
+            app[CHANNELS].wake(event_id)
+            app[POLLS].expire(event_id)
+
+        listen_for_wakes(app, wake_dir, woken)
     if metrics is not None:
         publish_streams(app, *metrics, streams=lambda: app[STREAMS].total)
     app.router.add_get("/live/healthz", healthz)

@@ -12,33 +12,33 @@ import logging
 import os
 import re
 import socket
+from collections.abc import Callable
 from pathlib import Path
 
 from aiohttp import web
 
 from drem_live.app_code import wake_socket_path
-from drem_live.channels import Channels
 
 log = logging.getLogger("drem_live")
 EVENT_ID = re.compile(rb"[A-Za-z0-9_.-]{1,128}")
 
 
 class WakeProtocol(asyncio.DatagramProtocol):
-    def __init__(self, channels: Channels) -> None:
-        self._channels = channels
+    def __init__(self, on_wake: Callable[[str], None]) -> None:
+        self._on_wake = on_wake
         self.received = 0
 
     def datagram_received(self, data: bytes, addr: object) -> None:
         if EVENT_ID.fullmatch(data):
             self.received += 1
-            self._channels.wake(data.decode())
+            self._on_wake(data.decode())
 
 
 WAKE: web.AppKey[WakeProtocol] = web.AppKey("wake", WakeProtocol)
 
 
-def listen_for_wakes(app: web.Application, directory: str, channels: Channels) -> None:
-    """Bind this process's wake socket while `app` runs (on_startup/on_cleanup)."""
+def listen_for_wakes(app: web.Application, directory: str, on_wake: Callable[[str], None]) -> None:
+    """Bind this process's wake socket while `app` runs (on_startup/on_cleanup); `on_wake(event_id)` per datagram."""
     path = wake_socket_path(directory, os.getpid())
     transport: list[asyncio.DatagramTransport] = []
 
@@ -51,7 +51,7 @@ def listen_for_wakes(app: web.Application, directory: str, channels: Channels) -
             os.chmod(path, 0o600)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
             made, protocol = await asyncio.get_running_loop().create_datagram_endpoint(
-                lambda: WakeProtocol(channels), sock=sock)
+                lambda: WakeProtocol(on_wake), sock=sock)
         except OSError as exc:  # e.g. a path longer than a socket address: the poll still serves every change
             log.warning("no wake socket at %s (%s): the live server only polls", path, exc)
             return

@@ -126,3 +126,35 @@ def test_the_api_serves_further_pages(desk: Any, stack: StackOutputs) -> None:
     assert third.status_code == 200 and [e["position"] for e in json.loads(third.body)["entries"]][:1] == [401]
     assert desk.anonymous_get(f"/api/leaderboard/{EVENT}?track=1&page=4").status_code == 404
     assert desk.anonymous_get(f"/api/leaderboard/{EVENT}?track=1&page=x").status_code == 400
+
+
+class _BigBoardStack:
+    """A stack whose event has a board stored in parts (what `drem export` reads through its StackReader)."""
+
+    def get_item(self, table: str, pk: str, sk: str) -> dict[str, Any] | None:
+        if table == "events":
+            return {"pk": {"S": pk}, "sk": {"S": sk}, "doc": {"S": json.dumps({"event_id": EVENT, "tracks": []})}}
+        return None
+
+    def partition(self, table: str, pk: str, sk_prefix: str = "") -> list[dict[str, Any]]:
+        if table != "leaderboards":
+            return []
+        return [{"pk": {"S": pk}, "sk": {"S": "BOARD#1"}, "state_ref": {"S": "abc"}, "state_parts": {"N": "2"}},
+                {"pk": {"S": pk}, "sk": {"S": "BOARD#1~STATE#abc#0"}, "data": {"B": "eA=="}}]
+
+    def accounts_by_sub(self) -> dict[str, Any]:
+        return {}
+
+    def read_object(self, bucket: str, key: str) -> bytes | None:
+        return None
+
+    def read_logo(self, event_id: str) -> Any:
+        return None
+
+
+def test_exporting_an_event_whose_board_is_in_parts_is_refused_with_a_reason() -> None:
+    from chalicelib.domain.errors import Conflict
+    from chalicelib.domain.event_transfer.export import collect_event
+
+    with pytest.raises(Conflict, match="too many racers to export yet"):
+        collect_event(_BigBoardStack(), EVENT)

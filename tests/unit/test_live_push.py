@@ -241,3 +241,21 @@ def test_the_streams_metric_is_one_embedded_metric_format_record() -> None:
     assert directive == {"Namespace": "drem/live", "Dimensions": [["Stage"]],
                          "Metrics": [{"Name": "Streams", "Unit": "Count"}]}
     assert (record["Stage"], record["Streams"], record["_aws"]["Timestamp"]) == ("prod", 1234, 1_800_000_000_000)
+
+
+def test_a_wake_makes_the_next_json_poll_read_again() -> None:
+    from drem_live.polls import PollViews
+
+    async def run() -> list[int]:
+        versions = iter([1, 2])
+        with ThreadPoolExecutor(1) as executor:
+            polls = PollViews(lambda _k, _e, _t: (next(versions), "{}"), 3600, executor)
+            seen = [(await polls.get("leaderboard", "e1", "1")).version,
+                    (await polls.get("leaderboard", "e1", "1")).version]  # within the hour: from memory
+            polls.expire("e2")
+            seen.append((await polls.get("leaderboard", "e1", "1")).version)  # another event's wake-up
+            polls.expire("e1")
+            seen.append((await polls.get("leaderboard", "e1", "1")).version)
+            return seen
+
+    assert asyncio.run(run()) == [1, 1, 1, 2]

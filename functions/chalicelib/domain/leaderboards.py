@@ -240,8 +240,9 @@ class LeaderboardPublisher:
     # --- writes ------------------------------------------------------------------------------------------------
 
     def refresh_racer(self, event_id: str, track_id: str, racer_sub: str, row: BoardRow | None,
-                      method: RankingMethod, *, all_tracks: Iterable[str] = ()) -> Leaderboard:
-        """Replace one racer's row on a track's board (None removes it), re-rank, and refresh the combined board."""
+                      method: RankingMethod, *, all_tracks: Iterable[str] = (), combined: bool = True) -> Leaderboard:
+        """Replace one racer's row on a track's board (None removes it), re-rank, and refresh the combined board
+        (`combined=False`: the caller does, with `refresh_combined`, once it has published what is more urgent)."""
         def change(rows: dict[str, BoardRow]) -> dict[str, BoardRow]:
             rows = {sub: r for sub, r in rows.items() if sub != racer_sub}
             if row is not None:
@@ -249,8 +250,13 @@ class LeaderboardPublisher:
             return rows
 
         board = self._write_board(event_id, track_id, method, change)
-        self._refresh_combined(event_id, list(all_tracks), method)
+        if combined:
+            self._refresh_combined(event_id, list(all_tracks), method)
         return board
+
+    def refresh_combined(self, event_id: str, all_tracks: Iterable[str], method: RankingMethod) -> Leaderboard:
+        """Re-rank the combined board from every track board's rows."""
+        return self._refresh_combined(event_id, list(all_tracks), method)
 
     def rebuild(self, event_id: str, rows_by_track: Mapping[str, list[BoardRow]], method: RankingMethod,
                 all_tracks: Iterable[str]) -> dict[str, Leaderboard]:

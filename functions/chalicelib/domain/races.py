@@ -391,10 +391,15 @@ class RaceService:
         The race change is already stored (with its intent) when this runs, so a storage failure here does not fail
         the request: the change is acknowledged and the intent makes sure the board catches up."""
         try:
-            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race)
+            # The track's board, then its overlay, then the combined board: the big screen and the stream overlay
+            # show the lap as soon as each can (the live server is woken by each write), the combined board last.
+            # The name first, so nothing but the overlay's own write stands between the board and the overlay.
+            name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
+            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race, combined=False)
             if self._overlay_may_show(race):
-                name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
                 self._boards.publish_overlay(race, now_ms, board, name)
+            self._boards.refresh_combined(event.event_id, [t.track_id or "" for t in event.tracks],
+                                          event.race_config.ranking_method)
             if race.status in TERMINAL_STATUSES:  # only submitted races count: no stats work per lap of a live race
                 self._refresh_stats(event.event_id)
             self._finish(PublishIntent.of(race))
@@ -443,13 +448,13 @@ class RaceService:
         self._races.complete_publish(intent)
 
     def refresh_racer_board(self, event: Event, track_id: str, racer: Racer, now_ms: int,
-                            changed: Race | None = None) -> Leaderboard:
+                            changed: Race | None = None, *, combined: bool = True) -> Leaderboard:
         races = [r.race for r in self._races.list_event(event.event_id, track_id=track_id, racer_sub=racer.sub)]
         if changed is not None:  # the race just written wins over any older copy the listing returned
             races = [r for r in races if r.race_id != changed.race_id] + [changed]
         return self._boards.refresh_racer(event.event_id, track_id, racer.sub, self._row(races),
                                           event.race_config.ranking_method,
-                                          all_tracks=[t.track_id or "" for t in event.tracks])
+                                          all_tracks=[t.track_id or "" for t in event.tracks], combined=combined)
 
     def refresh_racer_everywhere(self, racer_sub: str) -> int:
         """After a profile change (colour, country, name): rebuild the racer's row on every board they are on, so
