@@ -131,7 +131,7 @@ class Channels:
         return len(self._open)
 
     def join(self, key: Hashable, step: Callable[[Message | None], Message | None],
-             subscriber: Subscriber, page: Hashable | None = None, event_id: str = "") -> Channel:
+             subscriber: Subscriber, *, page: Hashable | None = None, event_id: str = "") -> Channel:
         """Subscribe to channel `key` (of `page`), opening it if there is room: joining an open one is always free.
 
         A page (kind and event) may have at most `max_per_page` option sets open, so made-up option sets of one page

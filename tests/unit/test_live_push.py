@@ -215,8 +215,8 @@ def test_a_wake_reads_the_events_channels_at_once_and_no_others() -> None:
         with ThreadPoolExecutor(1) as executor:
             channels = Channels(3600, executor, max_channels=4, is_newer=token_is_newer)
             first, second = Subscriber(), Subscriber()
-            channels.join(("overlay", "e1"), step_for("e1"), first, "e1")
-            channels.join(("overlay", "e2"), step_for("e2"), second, "e2")
+            channels.join(("overlay", "e1"), step_for("e1"), first, event_id="e1")
+            channels.join(("overlay", "e2"), step_for("e2"), second, event_id="e2")
             await asyncio.wait_for(first.wake.wait(), 10)
             await asyncio.wait_for(second.wake.wait(), 10)
             first.take(), second.take()
