@@ -51,6 +51,7 @@ USER_POOL_ACTIONS: tuple[str, ...] = (
     "cognito-idp:AdminSetUserPassword",  # a resumed staff registration hands out a new temporary password
     "cognito-idp:AdminUserGlobalSignOut",
     "cognito-idp:ListUsers",
+    "cognito-idp:ListUsersInGroup",  # the registration repair reads the role groups' member lists
 )
 COGNITO_CALLS_WITHOUT_IAM: frozenset[str] = frozenset({
     "ChangePassword", "ConfirmSignUp", "DeleteUser", "GetUser", "GlobalSignOut", "InitiateAuth",

@@ -49,9 +49,11 @@ def test_console_logs_and_model_download_pushed_together(live_stack, tmp_path: P
     assert alone.returncode == 1 and "model/model_metadata.json: missing" in alone.stderr
     assert "model download" in alone.stderr
     model = _model_download(tmp_path / "console-model.tar.gz")
-    # Its agent/model.pb is a placeholder, not a graph: drem cannot re-drive it, and says so before anything is ranked.
+    # Its agent/model.pb is a placeholder, not a graph: no car could load it (the upload says NOT_VALID), so drem
+    # cannot re-drive it, and says so before anything is ranked.
     refused = drem("league", "push", str(logs), str(model), "--track", "reinvent_base", cwd=tmp_path, env=env)
-    assert refused.returncode == 1 and "cannot be re-driven by drem" in refused.stderr
+    assert refused.returncode == 1 and "was not accepted as a model" in refused.stderr, refused.stderr
+    assert "a stock car cannot load this model" in refused.stderr
     assert "--self-reported" in refused.stderr
     pushed = ok(drem("league", "push", str(logs), str(model), "--track", "reinvent_base", "--self-reported",
                      cwd=tmp_path, env=env))

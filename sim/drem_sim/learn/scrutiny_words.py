@@ -42,10 +42,7 @@ def console_model_unusable(reason: str) -> PlainFailure:
 
 
 def not_raceable(reason: str, detail: str | None) -> PlainFailure:
-    return PlainFailure(
-        f"This model cannot race: {reason}. Fix it where you trained it, download it again, and upload the new "
-        "archive.",
-        detail or reason)
+    return PlainFailure(f"This model cannot race: {reason}.", detail or reason)  # the reason says what to do
 
 
 def model_stopped(track: str, error: BaseException) -> PlainFailure:
