@@ -44,6 +44,15 @@ def call(url: str, method: str, path: str, *, token: str | None = None, device: 
     return reply.json() if reply.content else None
 
 
+def upload_model(url: str, token: str, filename: str, archive: bytes) -> dict:
+    """A model archive uploaded as a racer's browser does (ticket, form POST to storage, complete): its record."""
+    ticket = call(url, "POST", "/api/models", token=token, body={"filename": filename}, expect=201)
+    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
+                           files={"file": (filename, archive)}, timeout=30)
+    assert posted.status_code in (200, 204), posted.text
+    return call(url, "POST", f"/api/models/{ticket['model']['model_id']}/complete", token=token)["model"]
+
+
 def sign_in(page: Any, url: str, username: str) -> None:
     page.goto(url + "/login")
     page.fill("#username", username)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.browser.console_api import access_token, call, create_user, sign_in, upload_model
 from tests.unit.models_helpers import onnx_archive
 
 pytestmark = pytest.mark.browser
@@ -18,15 +18,6 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
 SCREENSHOTS = ROOT / "test-artifacts"  # the reviewed copies live in docs/screenshots/
 
-
-def _upload(url: str, token: str, filename: str, archive: bytes) -> dict:
-    import requests
-
-    ticket = call(url, "POST", "/api/models", token=token, body={"filename": filename}, expect=201)
-    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
-                           files={"file": (filename, archive)}, timeout=30)
-    assert posted.status_code in (200, 204), posted.text
-    return call(url, "POST", f"/api/models/{ticket['model']['model_id']}/complete", token=token)["model"]
 
 
 def test_my_models_shows_the_background_drive_without_a_reload(live_stack, app_url, page) -> None:
@@ -73,7 +64,7 @@ def test_sending_a_model_that_has_not_passed_to_a_car_asks_first(live_stack, app
     create_user(live_stack, "scr-op", "operator")
     create_user(live_stack, "scr-kim", "racer")
     op = access_token(live_stack, "scr-op")
-    model = _upload(app_url, access_token(live_stack, "scr-kim"), "wobbly.tar.gz", onnx_archive(0.3))
+    model = upload_model(app_url, access_token(live_stack, "scr-kim"), "wobbly.tar.gz", onnx_archive(0.3))
     fleet = call(app_url, "POST", "/api/fleets", token=op, body={"name": "Scrutiny fleet"}, expect=201)
     code = call(app_url, "POST", "/api/devices/activation-codes", token=op, expect=201,
                 body={"fleet_id": fleet["fleet_id"], "hostname": "car-scr", "device_kind": "car"})["code"]

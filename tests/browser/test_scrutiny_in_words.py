@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.browser.console_api import access_token, call, create_user, sign_in, upload_model
 from tests.unit.models_helpers import UNREADABLE_IR_VERSION, onnx_archive
 
 pytestmark = pytest.mark.browser
@@ -17,21 +17,12 @@ SCREENSHOTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 CODE_NAMES = re.compile(r"\b\w*(Error|Exception|Traceback)\b|onnxruntime|\w+\.\w+\.\w+")
 
 
-def _upload(url: str, token: str, filename: str, archive: bytes) -> dict:
-    import requests
-
-    ticket = call(url, "POST", "/api/models", token=token, body={"filename": filename}, expect=201)
-    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
-                           files={"file": (filename, archive)}, timeout=30)
-    assert posted.status_code in (200, 204), posted.text
-    return call(url, "POST", f"/api/models/{ticket['model']['model_id']}/complete", token=token)["model"]
-
 
 def test_a_stopped_test_drive_is_a_sentence_for_the_racer_and_a_detail_for_staff(live_stack, app_url, page) -> None:
     create_user(live_stack, "words-racer", "racer")
     create_user(live_stack, "words-op", "operator")
     token = access_token(live_stack, "words-racer")
-    model = _upload(app_url, token, "too-new-graph.tar.gz", onnx_archive(0.2, ir_version=UNREADABLE_IR_VERSION))
+    model = upload_model(app_url, token, "too-new-graph.tar.gz", onnx_archive(0.2, ir_version=UNREADABLE_IR_VERSION))
     answer = call(app_url, "POST", f"/api/models/{model['model_id']}/scrutineer", token=token,
                   body={"track_type": "REINVENT_2018", "laps": 1})["model"]
     assert answer["scrutineer_status"] == "cannot_scrutineer", answer

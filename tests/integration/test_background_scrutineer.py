@@ -14,20 +14,13 @@ import pytest
 import requests
 from PIL import Image
 
-from tests.browser.console_api import access_token, call, create_user
+from tests.browser.console_api import access_token, call, create_user, upload_model
 
 pytestmark = pytest.mark.integration
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
 SETTLED = ("passed", "failed", "cannot_scrutineer")
 
-
-def _upload(url: str, token: str, filename: str, archive: bytes) -> dict:
-    ticket = call(url, "POST", "/api/models", token=token, body={"filename": filename}, expect=201)
-    posted = requests.post(ticket["upload"]["url"], data=ticket["upload"]["fields"],
-                           files={"file": (filename, archive)}, timeout=30)
-    assert posted.status_code in (200, 204), posted.text
-    return call(url, "POST", f"/api/models/{ticket['model']['model_id']}/complete", token=token)["model"]
 
 
 def wait_until_scrutineered(url: str, token: str, model_id: str, timeout: float = 240.0) -> dict:
@@ -47,7 +40,7 @@ def test_an_uploaded_model_is_scrutineered_by_itself_and_its_clip_is_the_owners(
     ann, bob = access_token(live_stack, "scr-ann"), access_token(live_stack, "scr-bob")
     admin = access_token_admin(live_stack)
 
-    model = _upload(url, ann, "scr-sample.tar.gz", SAMPLE.read_bytes())
+    model = upload_model(url, ann, "scr-sample.tar.gz", SAMPLE.read_bytes())
     assert model["status"] == "AVAILABLE" and model["scrutineer_status"] in ("queued", "driving", "passed")
 
     done = wait_until_scrutineered(url, ann, model["model_id"])
@@ -97,7 +90,7 @@ def test_a_worker_killed_mid_drive_leaves_a_job_the_next_worker_drives(live_stac
     running.scrutineer.stop()  # this test's own workers, with a short lease, take the queue meanwhile
     first = second = None
     try:
-        model = _upload(url, token, "scr-kill.tar.gz", SAMPLE.read_bytes())
+        model = upload_model(url, token, "scr-kill.tar.gz", SAMPLE.read_bytes())
         model_id = model["model_id"]
         first = _worker(live_stack, lease_s=6)
         deadline = time.monotonic() + 60
