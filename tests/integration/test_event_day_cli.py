@@ -63,10 +63,14 @@ def test_sim_eval_runs_without_torch(tmp_path):
 
 
 def test_league_push_takes_drems_own_sample_model(live_stack, tmp_path):
-    ran = drem("league", "push", str(SAMPLE), "--track", "drem_oval", "--username", live_stack.admin_username,
-               "--password", live_stack.admin_password, cwd=tmp_path, env={"DREM_STATE_DIR": str(live_stack.state_dir)},
-               timeout=240)
+    # The racer uploaded this very model before (for a race, say): the push uses that model instead of refusing the
+    # identical upload.
+    env = {"DREM_STATE_DIR": str(live_stack.state_dir)}
+    login = ["--username", live_stack.admin_username, "--password", live_stack.admin_password]
+    drem("models", "upload", str(SAMPLE), *login, cwd=tmp_path, env=env, timeout=240)  # new, or already there
+    ran = drem("league", "push", str(SAMPLE), "--track", "drem_oval", *login, cwd=tmp_path, env=env, timeout=240)
     assert ran.returncode == 0, ran.stderr
+    assert "drem-bc-oval.tar.gz is your model 'drem-bc-oval', uploaded before: pushing with it" in ran.stdout
     assert "pushed drem-bc-oval" in ran.stdout and "drem re-drives drem-bc-oval.tar.gz on drem_oval" in ran.stdout
     # The model came with the push: the scrutineering worker re-drives it on drem_oval and the board then ranks what
     # drem measured, marked verified.

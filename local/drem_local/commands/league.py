@@ -124,6 +124,11 @@ def upload_model(api: Any, path: Path) -> str:
     if posted.status_code not in (200, 201, 204):
         raise ApiError(posted.status_code, f"storage refused {path.name} (HTTP {posted.status_code})")
     model = api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
+    duplicate = model.get("duplicate_of") or {}
+    if model["status"] != "AVAILABLE" and duplicate.get("model_id"):
+        # The racer uploaded this very model before (to push it to another track, say): push with that one.
+        print(f"{path.name} is your model '{duplicate.get('name')}', uploaded before: pushing with it")
+        return str(duplicate["model_id"])
     if model["status"] != "AVAILABLE":
         raise ApiError(400, f"{path.name} was not accepted as a model ({model['status']}: {model.get('reason')}); "
                             "push with --self-reported to rank the logs alone")
