@@ -52,13 +52,14 @@ def drive_track(folder: Path, track_type: str, laps: int, *,
     from drem_sim.env import RaceEnv
     from drem_sim.learn.evaluate import drive
     from drem_sim.learn.package import ArchiveError
-    from drem_sim.learn.pilot import OnnxPilot, TensorFlowModelError
+    from drem_sim.learn.pilot import NotRaceableModel, OnnxPilot, TensorFlowModelError
     from drem_sim.learn.scrutineer import PASS_COMPLETION_PCT, EventTrack, track_for_event
     from drem_sim.learn.scrutiny_words import (
         PlainFailure,
         archive_unusable,
         console_model_unusable,
         model_stopped,
+        not_raceable,
         track_unavailable,
     )
     from drem_sim.tracks import TrackError, load_track
@@ -75,6 +76,8 @@ def drive_track(folder: Path, track_type: str, laps: int, *,
         return stopped("cannot_scrutineer", track_unavailable(event_track.track, error))
     try:
         pilot = OnnxPilot.from_archive(folder)
+    except NotRaceableModel as error:  # the same sentence as a drive by hand (drem_sim.learn.scrutineer)
+        return stopped("invalid", not_raceable(error.reason, error.detail))
     except TensorFlowModelError as error:
         return stopped("cannot_scrutineer", console_model_unusable(str(error).removeprefix("cannot scrutineer: ")))
     except ArchiveError as error:
