@@ -17,6 +17,7 @@ from typing import Any
 
 from chalicelib import live_wake
 from chalicelib.auth.revocation import REVOKED
+from chalicelib.auth.sessions import use_session_backends
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignments import AssignmentService
 from chalicelib.domain.booth_drive import DriveService, LiveDrives
@@ -36,7 +37,7 @@ from chalicelib.domain.model_registry import RegistryService, lineage_from_archi
 from chalicelib.domain.model_scrutiny import ScrutineerService, ScrutinyEnqueuer, upcoming_track_types
 from chalicelib.domain.on_deck import OnDeck
 from chalicelib.domain.passwords import PasswordService
-from chalicelib.domain.profiles import Profile, ProfileService, ProfilesForBoards
+from chalicelib.domain.profiles import ProfileService, ProfilesForBoards
 from chalicelib.domain.racer_models import ModelRecord, ModelService, ModelStatus
 from chalicelib.domain.racer_queue import RacerQueueService
 from chalicelib.domain.races import RaceService
@@ -139,8 +140,9 @@ def profile_store() -> DynamoProfileStore:
 
 
 def profile_service() -> ProfileService:
-    """Profiles with the account directory behind them (for changes that touch the account)."""
-    return ProfileService(profile_store(), user_directory())
+    """Profiles with the account directory behind them (for changes that touch the account); a change is shown on
+    every board the racer is on."""
+    return ProfileService(profile_store(), user_directory(), boards=race_service())
 
 
 def public_profiles() -> ProfileService:
@@ -215,15 +217,8 @@ def race_service() -> RaceService:
                        publisher(), now_ms, audit=audit_log(), stats=stats_digests())
 
 
-def shown_on_boards(profile: Profile) -> Profile:
-    """Board rows carry the racer's colour and country as they were when a race was published: refresh them so a
-    profile change reaches every leaderboard and overlay the racer is on."""
-    race_service().refresh_racer_everywhere(profile.sub)
-    return profile
-
-
 def timing_service() -> TimingService:
-    return TimingService(race_service(), race_store(), device_store(), now_ms)
+    return TimingService(race_service(), race_store(), device_store(), now_ms, events=event_store())
 
 
 # --- models, cars and the league ------------------------------------------------------------------------------------
@@ -356,3 +351,16 @@ def training_service(settings: Settings | None = None) -> TrainingService:
 
 def drive_service() -> DriveService:
     return DriveService(LIVE_DRIVES, run_service(), get_settings().drive_dir)
+
+
+class _AppSessionBackends:
+    """chalicelib.auth.sessions keeps and renews sessions through these (it must not import this module)."""
+
+    def session_store(self) -> DynamoSessionStore:
+        return session_store()
+
+    def identity_provider(self, settings: Settings) -> CognitoIdentityProvider:
+        return identity_provider(settings)
+
+
+use_session_backends(_AppSessionBackends())

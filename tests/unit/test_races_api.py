@@ -242,7 +242,7 @@ def test_csv_exports_have_drem_columns_and_file_names(desk: Desk, clock: FakeClo
 def test_race_writes_are_conditional_on_the_version(scenario: Scenario) -> None:
     """Two writers that read the same version: the second one is refused instead of overwriting the first."""
     from chalicelib import services
-    from chalicelib.domain.races import StaleRace
+    from chalicelib.domain.race_writes import StaleRace
 
     scenario.add_racers("tom").add_event().add_race("tom", start=False)
     eid, rid = scenario.event_id, scenario.race_id

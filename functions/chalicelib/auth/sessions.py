@@ -3,15 +3,47 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Protocol
 
-from chalicelib import services
 from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
 from chalicelib.auth.csrf import session_secret
 from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
-from chalicelib.auth.revocation import REVOKED
+from chalicelib.auth.revocation import REVOKED, RevocationStore
 from chalicelib.auth.tokens import VerifiedToken, verify_token
 from chalicelib.domain.errors import NotAuthenticated, TokenExpired
 from chalicelib.settings import Settings, get_settings
+
+
+class TokenRenewer(Protocol):
+    def refresh(self, refresh_token: str) -> RenewedTokens: ...
+
+
+class RenewedTokens(Protocol):
+    @property
+    def access_token(self) -> str: ...
+    @property
+    def expires_in(self) -> int: ...
+
+
+class SessionBackends(Protocol):
+    """Where sessions are kept and renewed; the composition root (chalicelib.services) installs its own with
+    `use_session_backends`, so this module needs nothing above the auth layer."""
+    def session_store(self) -> RevocationStore: ...
+    def identity_provider(self, settings: Settings) -> TokenRenewer: ...
+
+
+_backends: SessionBackends | None = None
+
+
+def use_session_backends(backends: SessionBackends) -> None:
+    global _backends
+    _backends = backends
+
+
+def _installed() -> SessionBackends:
+    if _backends is None:
+        raise RuntimeError("No session backends installed: import chalicelib.services (the composition root) first.")
+    return _backends
 
 
 @dataclass
@@ -46,7 +78,7 @@ def current_token(token: str, settings: Settings) -> VerifiedToken:
     """A verified access token that has not been revoked since it was issued (chalicelib.auth.revocation)."""
     verified = verify_token(token, settings)
     try:
-        REVOKED.require_current(services.session_store(), verified.sub, verified.claims)
+        REVOKED.require_current(_installed().session_store(), verified.sub, verified.claims)
     except NotAuthenticated as exc:
         raise TokenRevoked(exc.message) from None
     return verified
@@ -79,7 +111,7 @@ def _from_session_cookies(cookies: Mapping[str, str], settings: Settings) -> Res
     if not refresh:
         return _signed_out(settings)
     try:
-        tokens = services.identity_provider(settings).refresh(refresh)
+        tokens = _installed().identity_provider(settings).refresh(refresh)
         renewed_token = current_token(tokens.access_token, settings)
     except NotAuthenticated:
         return _signed_out(settings)

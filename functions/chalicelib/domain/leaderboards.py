@@ -254,6 +254,27 @@ class LeaderboardPublisher:
             self._refresh_combined(event_id, list(all_tracks), method)
         return board
 
+    def publish_change(self, event_id: str, track_id: str, racer_sub: str, row: BoardRow | None,
+                       method: RankingMethod, all_tracks: Iterable[str], *, race: Race | None, now_ms: int,
+                       display_name: str, live_race_id: str | None) -> Leaderboard:
+        """A race changed: the racer's row on the track's board, then the overlay (if `race` may show there), then
+        the combined board. In that order, so the big screen and the stream overlay show a lap as soon as each can
+        (the live server is woken by each write), the combined board last."""
+        board = self.refresh_racer(event_id, track_id, racer_sub, row, method, combined=False)
+        if race is not None and self._overlay_may_show(race, live_race_id):
+            self.publish_overlay(race, now_ms, board, display_name)
+        self._refresh_combined(event_id, list(all_tracks), method)
+        return board
+
+    def _overlay_may_show(self, race: Race, live_race_id: str | None) -> bool:
+        """The overlay (and the commentator) follow the track's current race: the live one, else the one it shows
+        now. A lap edit of an older race, or a replay of its publish, changes its board row but must not make it
+        "current" again."""
+        if live_race_id is not None:
+            return live_race_id == race.race_id
+        shown = json.loads(self.overlay(race.event_id, race.track_id).body).get("race_id")
+        return shown in (None, race.race_id)
+
     def refresh_combined(self, event_id: str, all_tracks: Iterable[str], method: RankingMethod) -> Leaderboard:
         """Re-rank the combined board from every track board's rows."""
         return self._refresh_combined(event_id, list(all_tracks), method)

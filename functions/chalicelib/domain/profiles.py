@@ -111,10 +111,19 @@ class AccountLookup(Protocol):
     def get_user(self, username: str) -> object: ...
 
 
+class BoardRows(Protocol):
+    """Rebuilds a racer's rows on every board they are on (RaceService.refresh_racer_everywhere): board rows carry
+    the racer's colour, country and name as they were when a race was published."""
+    def refresh_racer_everywhere(self, racer_sub: str) -> int: ...
+
+
 class ProfileService:
-    def __init__(self, store: ProfileStore, accounts: AccountLookup | None = None) -> None:
+    def __init__(self, store: ProfileStore, accounts: AccountLookup | None = None, *,
+                 boards: BoardRows | None = None) -> None:
+        """`boards`: told after every profile change, so it reaches every leaderboard and overlay at once."""
         self._store = store
         self._accounts = accounts
+        self._boards = boards
 
     def create_for(self, sub: str, username: str, country_code: str | None, display_name: str = "") -> Profile:
         profile = Profile(sub=sub, username=username, display_name=display_name or None, country_code=country_code,
@@ -204,6 +213,8 @@ class ProfileService:
         changes = {k: v for k, v in update.model_dump(exclude_unset=True).items() if v is not None}
         saved = profile.model_copy(update={**changes, "updated_at": _now()})
         self._store.put(saved)
+        if self._boards is not None:
+            self._boards.refresh_racer_everywhere(saved.sub)
         return saved
 
 

@@ -21,7 +21,7 @@ import json
 import logging
 import uuid
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -31,6 +31,7 @@ from chalicelib.domain.errors import Conflict, DremError, Forbidden, InvalidInpu
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, LeaderboardPublisher
 from chalicelib.domain.ownership import require_owner_or_role
+from chalicelib.domain.race_writes import with_retries
 from chalicelib.formats.race_export import CsvFile, ExportKind, export_csv
 from drem_leaderboard import race_machine
 from drem_leaderboard.commands import RaceCommand, SetLapValidity
@@ -40,17 +41,11 @@ from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer
 
-WRITE_ATTEMPTS = 3
 # A race write finishes other writes' intents only once they are this old: a younger one most likely belongs to a
 # request that is publishing it right now, and rebuilding it too would only add load.
 STALE_INTENT_MS = 2_000
 log = logging.getLogger("drem.races")
 RACE_READERS = frozenset({Role.ADMIN, Role.OPERATOR, Role.COMMENTATOR})
-T = TypeVar("T")
-
-
-class StaleRace(Exception):
-    """The race changed since it was read (another command or strip event won); reload and apply again."""
 
 
 class MaxRunsOverride(BaseModel):
@@ -163,15 +158,6 @@ def race_view(record: RaceRecord, now_ms: int, **extra: Any) -> dict[str, Any]:
         record.max_runs_override.model_dump() if record.max_runs_override else None),
         "as_of_ms": now_ms, "time_left_ms": race_time_left_ms(race, now_ms),
         "current_lap_ms": current_lap_ms(race, now_ms), **extra}
-
-
-def with_retries(attempt: Callable[[], T]) -> T:
-    for _ in range(WRITE_ATTEMPTS):
-        try:
-            return attempt()
-        except StaleRace:
-            continue
-    raise Conflict("The race was changed by someone else at the same moment; try again.")
 
 
 def rule_error(exc: RaceRuleError) -> Exception:
@@ -339,8 +325,7 @@ class RaceService:
                            before={k: listing[k] for k in ("track_id", "status", "laps", "valid_laps",
                                                            "fastest_lap_ms")})
         try:
-            self.refresh_racer_board(event, record.race.track_id, record.race.racer, self.clock_ms())
-            self._refresh_stats(event_id)
+            self._publish_change(event, record.race.track_id, record.race.racer, self.clock_ms(), None)
             self._finish(PublishIntent.of(record.race, deleted=True))
         except DremError as exc:
             _board_behind(record.race, exc)
@@ -385,59 +370,51 @@ class RaceService:
     # --- publishing --------------------------------------------------------------------------------------------
 
     def publish(self, event: Event, race: Race, now_ms: int) -> None:
-        """After a change: the racer's board row (their submitted races + this one if live), then the overlay; then
-        drop the publish intent the write stored, and finish any other write's intent a crash left behind.
+        """After a change: publish it (`_publish_change`), then drop the publish intent the write stored, and finish
+        any other write's intent a crash left behind.
 
         The race change is already stored (with its intent) when this runs, so a storage failure here does not fail
         the request: the change is acknowledged and the intent makes sure the board catches up."""
         try:
-            # The track's board, then its overlay, then the combined board: the big screen and the stream overlay
-            # show the lap as soon as each can (the live server is woken by each write), the combined board last.
-            # The name first, so nothing but the overlay's own write stands between the board and the overlay.
-            name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
-            board = self.refresh_racer_board(event, race.track_id, race.racer, now_ms, changed=race, combined=False)
-            if self._overlay_may_show(race):
-                self._boards.publish_overlay(race, now_ms, board, name)
-            self._boards.refresh_combined(event.event_id, [t.track_id or "" for t in event.tracks],
-                                          event.race_config.ranking_method)
-            if race.status in TERMINAL_STATUSES:  # only submitted races count: no stats work per lap of a live race
-                self._refresh_stats(event.event_id)
+            self._publish_change(event, race.track_id, race.racer, now_ms, race)
             self._finish(PublishIntent.of(race))
             self.complete_pending_publishes(STALE_INTENT_MS)
         except DremError as exc:
             _board_behind(race, exc)
 
-    def _overlay_may_show(self, race: Race) -> bool:
-        """The overlay (and the commentator) follow the track's current race: the live one, else the one it shows
-        now. A lap edit in race admin of an older race changes its board row but must not make it "current"."""
-        live = self._races.live_race_id(race.event_id, race.track_id)
-        if live is not None:
-            return live == race.race_id
-        shown = json.loads(self._boards.overlay(race.event_id, race.track_id).body).get("race_id")
-        return shown in (None, race.race_id)
-
     def complete_pending_publishes(self, older_than_ms: int = 0) -> int:
-        """Rebuild every board row whose publish intent is still stored (a crash or outage came between a race write
-        and its board write). Returns how many were finished."""
+        """Publish again every race change whose publish intent is still stored (a crash or outage came between a
+        race write and its board write), the same way the write itself publishes. Returns how many were finished."""
         finished = 0
         for intent in self._races.pending_publishes(older_than_ms):
             event = self._events.get(intent.event_id)
-            if event is None:  # the event is gone; nothing left to publish to
-                self._races.complete_publish(intent)
-                continue
-            now = self.clock_ms()
-            board = self.refresh_racer_board(event, intent.track_id,
-                                             Racer(sub=intent.racer_sub, username=intent.racer_username), now)
-            record = self._races.get(intent.event_id, intent.race_id)
-            live = self._races.live_race_id(intent.event_id, intent.track_id)
-            if record is not None and live in (None, intent.race_id):  # an older race must not cover a newer live one
-                race = record.race
-                name = self._profiles.racer_profile(race.racer.sub, race.racer.username).username or race.racer.username
-                self._boards.publish_overlay(race, now, board, name)
-            self._refresh_stats(intent.event_id)
+            if event is not None:  # else the event is gone; nothing left to publish to
+                record = self._races.get(intent.event_id, intent.race_id)
+                self._publish_change(event, intent.track_id,
+                                     Racer(sub=intent.racer_sub, username=intent.racer_username), self.clock_ms(),
+                                     record.race if record is not None else None)
+                finished += 1
             self._races.complete_publish(intent)
-            finished += 1
         return finished
+
+    def _publish_change(self, event: Event, track_id: str, racer: Racer, now_ms: int, race: Race | None) -> None:
+        """The one owner of "a race changed": the racer's board row (their submitted races + `race` if live), the
+        track's overlay (when `race` is the track's current race), the combined board, then the statistics once a
+        race is submitted or gone. `race` None: the race was deleted (its row is rebuilt without it).
+
+        The live write and the crash replay (`complete_pending_publishes`) both come here, so a replayed change
+        reaches exactly what the write would have."""
+        races = [r.race for r in self._races.list_event(event.event_id, track_id=track_id, racer_sub=racer.sub)]
+        if race is not None:  # the race just written wins over any older copy the listing returned
+            races = [r for r in races if r.race_id != race.race_id] + [race]
+        profile = self._profiles.racer_profile(racer.sub, racer.username)
+        live = self._races.live_race_id(event.event_id, track_id) if race is not None else None
+        self._boards.publish_change(event.event_id, track_id, racer.sub, self._row(races, profile),
+                                    event.race_config.ranking_method, [t.track_id or "" for t in event.tracks],
+                                    race=race, now_ms=now_ms, display_name=profile.username or racer.username,
+                                    live_race_id=live)
+        if race is None or race.status in TERMINAL_STATUSES:  # only submitted races count: no stats work per lap
+            self._refresh_stats(event.event_id)
 
     def _refresh_stats(self, event_id: str) -> None:
         # Before the intent is dropped: a crash here leaves the intent, whose completion refreshes the digest too.
@@ -473,11 +450,12 @@ class RaceService:
             refreshed += 1
         return refreshed
 
-    def _row(self, races: Iterable[Race]) -> BoardRow | None:
+    def _row(self, races: Iterable[Race], profile: RacerProfile | None = None) -> BoardRow | None:
         summary = summarise_racer(c for r in races if (c := counts_on_board(r)) is not None)
         if summary is None:
             return None
-        return BoardRow(summary=summary, profile=self._profiles.racer_profile(summary.racer_sub, summary.username))
+        return BoardRow(summary=summary,
+                        profile=profile or self._profiles.racer_profile(summary.racer_sub, summary.username))
 
 
 def _board_behind(race: Race, exc: DremError) -> None:

@@ -23,8 +23,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib.auth.principals import Device
 from chalicelib.domain.devices import DeviceKind, DeviceRecord
-from chalicelib.domain.errors import DremError, Forbidden, MaybeStored
-from chalicelib.domain.races import RaceRecord, RaceService, with_retries
+from chalicelib.domain.errors import DremError, Forbidden, MaybeStored, NotFound
+from chalicelib.domain.race_writes import with_retries
+from chalicelib.domain.races import EventSource, RaceRecord, RaceService
 from drem_leaderboard.models import Lap
 from drem_leaderboard.timer_input import MAX_DEVICE_TIMESTAMP_MS, StripEvent, handle_strip_event
 
@@ -54,6 +55,7 @@ class StripAnswer(BaseModel):
 
 
 class OutcomeStore(Protocol):
+    def get(self, event_id: str, race_id: str) -> RaceRecord | None: ...
     def get_outcome(self, device_id: str, key: str) -> str | None: ...
     def live_race_id(self, event_id: str, track_id: str) -> str | None: ...
     def save_with_outcome(self, record: RaceRecord | None, expected_version: int | None, device_id: str, key: str,
@@ -66,14 +68,19 @@ class DeviceDirectory(Protocol):
 
 class TimingService:
     def __init__(self, races: RaceService, outcomes: OutcomeStore, devices: DeviceDirectory,
-                 clock_ms: Callable[[], int]) -> None:
+                 clock_ms: Callable[[], int], events: EventSource) -> None:
+        """`races` is entered once per crossing, to publish the change: the event, the race and its write come from
+        the stores directly."""
         self._races = races
+        self._events = events
         self._outcomes = outcomes
         self._devices = devices
         self._clock_ms = clock_ms
 
     def strip_event(self, device: Device, post: StripPost) -> StripAnswer:
-        event = self._races.event(post.event_id)
+        event = self._events.get(post.event_id)
+        if event is None:
+            raise NotFound(f"There is no event {post.event_id}.", field="event_id")
         fleet = event.track(post.track_id).fleet_id
         registered = self._devices.get_device(device.device_id)
         if fleet is None or registered is None or registered.fleet_id != fleet:
@@ -91,7 +98,9 @@ class TimingService:
                 answer = StripAnswer(idempotency_key=post.idempotency_key, action="ignore", reason="no_live_race",
                                      message=f"crossing ignored: no race is live on track {post.track_id}")
                 return self._keep(device, answer, None, None), None, now
-            record = self._races.record(post.event_id, race_id)
+            record = self._outcomes.get(post.event_id, race_id)
+            if record is None:
+                raise NotFound(f"Event {post.event_id} has no race {race_id}.", field="race_id")
             _check_may_time(registered, record)
             after, outcome = handle_strip_event(record.race, crossing, now)
             answer = StripAnswer(**outcome.model_dump(), race_id=race_id)

@@ -18,14 +18,13 @@ def own_profile(principal: User) -> dict:
 
 @route(bp, "/api/me/profile", methods=["PUT"], allow=SIGNED_IN, body=ProfileUpdate, response=Profile)
 def update_own_profile(principal: User, body: ProfileUpdate) -> dict:
-    return services.shown_on_boards(services.profile_service().update_own(principal, body)).model_dump()
+    return services.profile_service().update_own(principal, body).model_dump()
 
 
 @route(bp, "/api/users/{username}/profile", methods=["PUT"], allow={ADMIN}, body=ProfileUpdate,
        response=PublicProfile)
 def update_user_profile(principal: User, username: str, body: ProfileUpdate) -> dict:
-    return public_view(services.shown_on_boards(services.profile_service().update_for(principal, username,
-                                                                                      body))).model_dump()
+    return public_view(services.profile_service().update_for(principal, username, body)).model_dump()
 
 
 @route(bp, "/api/profiles/{username}", allow=PUBLIC, response=PublicProfile)

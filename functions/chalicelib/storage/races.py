@@ -25,7 +25,8 @@ import time
 from typing import Any
 
 from chalicelib.domain.errors import Conflict
-from chalicelib.domain.races import PublishIntent, RaceRecord, StaleRace
+from chalicelib.domain.race_writes import StaleRace
+from chalicelib.domain.races import PublishIntent, RaceRecord
 from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The races table"

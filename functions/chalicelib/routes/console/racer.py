@@ -113,7 +113,7 @@ def update_profile(principal: User) -> Response:
     except SHOWN_ON_FORM as exc:
         return _profile_form(service.own(principal), field_errors(exc, "highlight_colour"), error_status(exc),
                              typed_country=values.get("country_code", ""), typed_name=values.get("display_name", ""))
-    return _profile_form(services.shown_on_boards(saved), notice="Your profile is saved; the leaderboards show it now.")
+    return _profile_form(saved, notice="Your profile is saved; the leaderboards show it now.")
 
 
 # --- my models ----------------------------------------------------------------------------------------------------
