@@ -54,10 +54,14 @@ test: install-test
 	$(MAKE) --no-print-directory lint
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
-## make lint: ruff (style and likely bugs) and mypy (types; strict for leaderboard/ and chalicelib/domain/), as
-## configured in pyproject.toml. mypy keeps its cache in .mypy_cache/, so a second run takes seconds.
+## make lint: ruff (style and likely bugs), mypy (types; strict for leaderboard/ and chalicelib/domain/) and
+## lint-imports (the layering of docs/architecture.md), as configured in pyproject.toml. mypy keeps its cache in
+## .mypy_cache/ and lint-imports in .import_linter_cache/, so a second run takes seconds. A broken contract prints
+## the import that breaks it.
 lint: $(VENV)/.installed-test
-	@status=0; $(BIN)/ruff check --quiet --output-format concise . || status=1; $(BIN)/mypy || status=1; exit $$status
+	@status=0; $(BIN)/ruff check --quiet --output-format concise . || status=1; $(BIN)/mypy || status=1; \
+	layers=$$(PYTHONPATH=functions $(BIN)/lint-imports 2>&1) || { echo "$$layers" | sed -n '/^Broken contracts/,$$p'; \
+	status=1; }; exit $$status
 
 install: $(VENV)/.installed-runtime $(HTMX) $(FLAGS) font-debs
 

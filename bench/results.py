@@ -133,8 +133,8 @@ def main() -> int:
             # --- 200-racer event ------------------------------------------------------------------------------
             [big] = seed(dynamodb, 1, RACERS, ["SE"])
             services.race_service().recompute(big, by="bench")
-            from chalicelib.formats.results_pdf import render_document
             from chalicelib.routes.results import load_results
+            from chalicelib.views.results_pdf import render_document
 
             def pdf(file_name: str) -> bytes:
                 body = render_document(load_results(big), file_name, None)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from chalice import Chalice
 
 from chalicelib import logs
-from chalicelib.auth.principals import set_device_credential_verifier
+from chalicelib.core.principals import set_device_credential_verifier
 from chalicelib.formats import logo_image
 from chalicelib.routes import (
     accounts,

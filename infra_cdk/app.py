@@ -21,6 +21,7 @@ from pathlib import Path
 
 import aws_cdk as cdk
 
+from drem_infra.lambda_bundle import LAMBDA_LOCK, dependencies_current, vendor_packages
 from drem_infra.stack import DremStack
 
 FUNCTIONS_DIR = Path(__file__).resolve().parent.parent / "functions"
@@ -34,7 +35,6 @@ def main() -> None:
     if with_app:
         # Chalice packaging imports the app; that needs a region even though nothing calls AWS.
         os.environ.setdefault("AWS_DEFAULT_REGION", os.environ.get("CDK_DEFAULT_REGION", "us-east-1"))
-        from drem_local.commands.build import LAMBDA_LOCK, dependencies_current, vendor_packages
         if not dependencies_current(FUNCTIONS_DIR):
             raise SystemExit(f"functions/vendor/ does not hold the wheels of {LAMBDA_LOCK.name}: run `drem build` "
                              "(or `make build`) first; synth never downloads packages")

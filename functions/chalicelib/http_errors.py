@@ -13,7 +13,7 @@ from chalice.app import Request
 from pydantic import ValidationError
 
 from chalicelib import logs
-from chalicelib.domain import errors as e
+from chalicelib.core import errors as e
 from chalicelib.htmx import is_htmx
 from drem_web import render
 

@@ -11,7 +11,7 @@ from email import policy
 from email.message import EmailMessage
 from email.parser import BytesParser
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 MAX_BODY_BYTES = 3 * 1024 * 1024  # the largest upload a form takes (a 2 MB logo) and its fields
 MAX_PARTS = 20

@@ -18,7 +18,7 @@ from pydantic.json_schema import models_json_schema
 
 from chalicelib.auth.access import Allow, DeclaredRoute, declared_routes
 from chalicelib.auth.cookies import SESSION_COOKIE
-from chalicelib.auth.principals import DEVICE_ROLES, USER_ROLES
+from chalicelib.core.principals import DEVICE_ROLES, USER_ROLES
 
 OPENAPI_VERSION = "3.1.0"
 REF_TEMPLATE = "#/components/schemas/{model}"

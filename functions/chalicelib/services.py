@@ -18,6 +18,7 @@ from typing import Any
 from chalicelib import live_wake
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.sessions import use_session_backends
+from chalicelib.core.errors import ServiceUnavailable
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignments import AssignmentService
 from chalicelib.domain.booth_drive import DriveService, LiveDrives
@@ -25,7 +26,6 @@ from chalicelib.domain.booth_runs import RunService
 from chalicelib.domain.booth_tracks import TrackService
 from chalicelib.domain.booth_training import TrainingService
 from chalicelib.domain.devices import DeviceService
-from chalicelib.domain.errors import ServiceUnavailable
 from chalicelib.domain.event_logos import EventLogoService
 from chalicelib.domain.events import EventService
 from chalicelib.domain.fleets import FleetService

@@ -644,7 +644,7 @@ def test_an_import_cut_off_part_way_is_finished_by_running_it_again(live_stack, 
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """Storage fails while the races are written (after the accounts were created): nothing shows on the target,
     and the same command run again finishes the import and shows the temporary passwords nobody saw."""
-    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.core.errors import ServiceUnavailable
     from chalicelib.storage.event_archive import StackStorage
 
     folder = tmp_path / "export"

@@ -48,7 +48,7 @@ def route_modules() -> list[Any]:
 def full_app(chalice_app: Any) -> Any:
     """The session app with every route module registered: app.py registers them; one it does not register yet
     (written, not wired) is registered here (once), so the matrix and the OpenAPI tests cover the whole API."""
-    from chalicelib.auth import principals
+    from chalicelib.core import principals
 
     registered = {entry.view_function.__module__ for by_method in chalice_app.routes.values()
                   for entry in by_method.values()}

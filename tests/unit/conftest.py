@@ -256,7 +256,7 @@ def b64url(data: bytes) -> str:
 @pytest.fixture
 def device_verifier() -> Iterator[None]:
     """The real device-credential verifier, whatever an earlier test left installed (and put back afterwards)."""
-    from chalicelib.auth import principals
+    from chalicelib.core import principals
     from chalicelib.routes.devices import verify_device_credential
 
     previous = principals._device_verifier

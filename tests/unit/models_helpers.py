@@ -135,7 +135,7 @@ def make_fleet(fleet_id: str = "fleet-1") -> str:
 def activate_device(hostname: str, fleet_id: str, kind: str = "car") -> Any:
     """A car or timer brought in through the devices area's own activation service; returns its IssuedCredential."""
     from chalicelib import services
-    from chalicelib.auth.principals import User
+    from chalicelib.core.principals import User
     from chalicelib.domain.activation import ActivationCodeRequest, ActivationExchange
 
     operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))

@@ -15,7 +15,7 @@ from chalicelib.auth.access import (
     route,
     undeclared_routes,
 )
-from chalicelib.auth.principals import ANONYMOUS, Device, User
+from chalicelib.core.principals import ANONYMOUS, Device, User
 
 pytestmark = pytest.mark.unit
 

@@ -186,7 +186,7 @@ def test_clearing_a_car_and_deleting_a_model_withdraw_it(racer: ModelsApi, opera
 
 def create_event(fleet_id: str) -> str:
     from chalicelib import services
-    from chalicelib.auth.principals import User
+    from chalicelib.core.principals import User
     from chalicelib.domain.events import EventInput
 
     operator = User(sub="operator-sub", username="olga", groups=frozenset({"operator"}))
@@ -260,7 +260,7 @@ def _waiting_service(store: VersionsStore):  # type: ignore[no-untyped-def]
 
 
 def test_a_waiting_car_gets_its_new_assignment_as_soon_as_staff_change_it() -> None:
-    from chalicelib.auth.principals import Device
+    from chalicelib.core.principals import Device
     from chalicelib.domain.assignments import WAIT_CHECK_S, AssignmentQuery
 
     store = VersionsStore(changes_after=3)

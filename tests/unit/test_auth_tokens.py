@@ -233,7 +233,7 @@ def test_id_token_is_refused_where_an_access_token_is_required(client, users):
 def test_token_for_another_audience_in_an_id_token_is_refused(client, users):
     # Id tokens carry `aud`; one minted for another client must not pass the id-token check either.
     from chalicelib.auth.tokens import verify_token
-    from chalicelib.domain.errors import NotAuthenticated
+    from chalicelib.core.errors import NotAuthenticated
     from chalicelib.settings import get_settings
 
     users.create("ivy", ("racer",))

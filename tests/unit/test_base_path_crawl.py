@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.routes.navigation import links_for
 from tests.unit.conftest import PASSWORD
 from tests.unit.front_door import Crawler, FrontDoor, api_gateway_stage, reverse_proxy

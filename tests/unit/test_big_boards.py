@@ -153,7 +153,7 @@ class _BigBoardStack:
 
 
 def test_exporting_an_event_whose_board_is_in_parts_is_refused_with_a_reason() -> None:
-    from chalicelib.domain.errors import Conflict
+    from chalicelib.core.errors import Conflict
     from chalicelib.domain.event_transfer.export import collect_event
 
     with pytest.raises(Conflict, match="too many racers to export yet"):

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.booth_runs import compute_metrics, parse_controls
-from chalicelib.domain.errors import InvalidInput
 from tests.unit.models_helpers import ModelsApi, activate_device, bearer, make_fleet, onnx_archive
 
 pytestmark = pytest.mark.unit
@@ -234,7 +234,7 @@ def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsAp
     """A kill -9 can cut the controls row being written: the saved run ends at the last whole row (the decisions
     the racer saw answered), and the half row neither fails the save nor becomes a decision."""
     from chalicelib import services
-    from chalicelib.auth.principals import User
+    from chalicelib.core.principals import User
     from chalicelib.domain.booth_drive import DriveControl, DriveService, LiveDrives, StartDrive
 
     live = LiveDrives()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from chalicelib import services
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.model_conversion import ConsoleConverter, ConversionLimits
 from chalicelib.domain.racer_models import ModelStatus, UploadRequest
 from tests import console_fixture

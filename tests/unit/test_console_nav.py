@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from chalicelib.auth.principals import ANONYMOUS, User
+from chalicelib.core.principals import ANONYMOUS, User
 from chalicelib.routes.navigation import nav_groups
 from tests.unit.racer_console_helpers import body, signed_in
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import pytest
 
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.countries import COUNTRY_CHOICES, country_code_from_text, country_label
-from chalicelib.domain.errors import InvalidInput
 from tests.unit.racer_console_helpers import body, field_error, post, signed_in
 from tests.unit.test_console_events import FORM
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.names import DISPLAY_NAME_MAX, check_display_name, grapheme_count
 from tests.unit.pdf_helpers import pdf_text
 from tests.unit.race_helpers import Desk

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from chalicelib.auth.access import declared_routes
-from chalicelib.auth.principals import Role
+from chalicelib.core.principals import Role
 from tests.unit.authz_principals import World
 
 pytestmark = [pytest.mark.unit, pytest.mark.one_stack_per_module]  # the fuzz calls as `world`'s principals

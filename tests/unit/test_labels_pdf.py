@@ -67,7 +67,7 @@ def test_racer_card_shows_the_credentials_and_a_sign_in_qr(tmp_path: Path) -> No
 
 
 def test_unknown_label_format_is_a_clear_error() -> None:
-    from chalicelib.domain.errors import InvalidInput
+    from chalicelib.core.errors import InvalidInput
 
     with pytest.raises(InvalidInput, match="avery-l7160"):
         car_labels_pdf([CarLabel(device_id="x", hostname="x", fleet_name="f")], "dymo", PUBLIC_URL)

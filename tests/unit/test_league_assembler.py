@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
+from chalicelib.core.errors import InvalidInput, PayloadTooLarge
+from chalicelib.domain.league_assembler import ExportProblem, assemble
 from chalicelib.domain.league_tracks import DREM_TRACK_LENGTHS_M
-from chalicelib.formats.league_assembler import ExportProblem, assemble
 from chalicelib.formats.league_export import ExportLimits, read_export
 from tests.unit.league_helpers import (
     CONTINUOUS_SAC_METADATA,

@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 
 from chalicelib import services
-from chalicelib.auth.principals import User
-from chalicelib.domain.errors import Forbidden, NotFound
+from chalicelib.core.errors import Forbidden, NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.league import BoardQuery, LeaguePolicy, SelfReported
 from chalicelib.domain.league_intake import LeagueVerifier, PushOptions
 from chalicelib.domain.model_scrutiny import DriveOutcome

@@ -8,7 +8,7 @@ import os
 import pytest
 from PIL import Image
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats.logo_image import BOX, MAX_STORED_BYTES, normalised_logo
 
 pytestmark = pytest.mark.unit

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats.model_metadata import (
     ActionSpaceType,
     ModelMetadataError,

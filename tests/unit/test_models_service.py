@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from chalicelib import services
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.racer_models import ListQuery, ModelStatus, UploadRequest, seed_sample_models
 from chalicelib.formats.model_archive.limits import ArchiveLimits
 from chalicelib.routes.racer_models import handle_upload_complete_event
@@ -136,7 +136,7 @@ def test_an_upload_never_completed_is_purged_with_its_object_once_its_link_is_lo
 
 
 def test_a_racer_cannot_hold_more_than_a_few_open_upload_tickets(stack: Any, aws_clients: Any) -> None:
-    from chalicelib.domain.errors import RateLimited
+    from chalicelib.core.errors import RateLimited
     from chalicelib.domain.racer_models import MAX_PENDING_UPLOADS, STALE_UPLOAD_AFTER_S
 
     clock = SteppedClock()

@@ -6,7 +6,7 @@ from xml.etree import ElementTree
 import pytest
 
 from chalicelib.domain.profiles import HIGHLIGHT_PALETTE
-from chalicelib.views.avatars import DEFAULT_COLOUR, avatar_seed, identicon_cells, identicon_svg
+from chalicelib.formats.avatars import DEFAULT_COLOUR, avatar_seed, identicon_cells, identicon_svg
 from tests.unit.users_helpers import call, error_message
 
 pytestmark = pytest.mark.unit

@@ -48,7 +48,7 @@ def test_the_public_url_comes_from_the_stacks_parameter(no_url_in_the_environmen
 
 def test_a_missing_parameter_fails_the_request_and_the_next_read_succeeds(no_url_in_the_environment: None) -> None:
     from chalicelib import services  # noqa: F401
-    from chalicelib.domain.errors import DremError
+    from chalicelib.core.errors import DremError
     from chalicelib.settings import get_settings
 
     with pytest.raises(DremError):

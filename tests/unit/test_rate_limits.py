@@ -7,7 +7,7 @@ import json
 import pytest
 
 from chalicelib.auth.rate_limits import Limit, SlidingWindow
-from chalicelib.domain.errors import RateLimited
+from chalicelib.core.errors import RateLimited
 from tests.unit.conftest import PASSWORD
 from tests.unit.users_helpers import call, sign_up_body
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from chalicelib.domain.results import EventResults, ResultEntry, ResultsBoard
-from chalicelib.formats.results_pdf import certificates_pdf, podium_pdf, render_document, summary_pdf
-from chalicelib.views.avatars import identicon_cells
+from chalicelib.formats.avatars import identicon_cells
+from chalicelib.views.results_pdf import certificates_pdf, podium_pdf, render_document, summary_pdf
 from tests.unit.pdf_helpers import embedded_fonts, pdf_pages, pdf_text, pixels_of, words
 from tests.unit.race_helpers import Desk
 from tests.unit.scenario import Scenario
@@ -101,7 +101,7 @@ def test_one_certificate_per_racer_with_their_place(tmp_path: Path) -> None:
 
 
 def test_unknown_document_or_board_is_a_clear_error() -> None:
-    from chalicelib.domain.errors import InvalidInput
+    from chalicelib.core.errors import InvalidInput
 
     with pytest.raises(InvalidInput, match="summary.pdf"):
         render_document(RESULTS, "secrets.pdf", None)

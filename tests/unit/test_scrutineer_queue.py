@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from chalicelib import services
-from chalicelib.auth.principals import User
-from chalicelib.domain.errors import Forbidden, NotFound
+from chalicelib.core.errors import Forbidden, NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.events import EventInput
 from chalicelib.domain.model_scrutiny import BackgroundScrutineer, DriveOutcome, upcoming_track_types
 from chalicelib.domain.racer_models import ModelRecord, ModelStatus, ScrutineerResult, UploadRequest

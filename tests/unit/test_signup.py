@@ -5,8 +5,8 @@ import pytest
 from botocore.exceptions import ClientError
 from botocore.stub import Stubber
 
+from chalicelib.core.errors import AccountNotReady, InvalidInput
 from chalicelib.domain.countries import COUNTRY_CODES, normalise_country_code
-from chalicelib.domain.errors import AccountNotReady, InvalidInput
 from chalicelib.domain.names import USERNAME_CHARS_MESSAGE, USERNAME_LENGTH_MESSAGE
 from chalicelib.storage.users import CognitoUserDirectory, translate_account_error
 from tests.unit.conftest import PASSWORD

@@ -135,7 +135,7 @@ def test_a_digest_lost_to_a_crash_is_rebuilt_by_the_publish_intent(raced_events:
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """Storage fails right after the race write (the digest write is lost): the race's publish intent stays, and
     the next race write finishes it, digest included, with no recompute by hand."""
-    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.core.errors import ServiceUnavailable
     from chalicelib.storage.race_stats import DynamoStatsDigestStore
 
     stockholm = next(e["event_id"] for e in raced_events.ok(raced_events.call("GET", "/api/events"))["events"]

@@ -6,7 +6,7 @@ import pytest
 from botocore.exceptions import ConnectionClosedError, EndpointConnectionError
 
 from chalicelib import logs
-from chalicelib.domain.errors import MaybeStored, ServiceUnavailable
+from chalicelib.core.errors import MaybeStored, ServiceUnavailable
 from chalicelib.storage.aws_errors import is_write, note_write_sent, translate_common
 
 pytestmark = pytest.mark.unit
@@ -54,7 +54,7 @@ def test_a_failed_read_after_a_write_of_the_same_request_does_not_claim_nothing_
 def test_the_storage_servers_full_disk_refusal_reaches_the_user_as_507_in_its_own_words(in_a_request):
     from botocore.exceptions import ClientError
 
-    from chalicelib.domain.errors import StorageDiskFull
+    from chalicelib.core.errors import StorageDiskFull
     from chalicelib.http_errors import status_for
 
     words = "drem's data disk is full at /srv/drem: free space on that disk, then try again"

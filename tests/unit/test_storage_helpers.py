@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 from botocore.stub import Stubber
 
-from chalicelib.domain.errors import RateLimited
+from chalicelib.core.errors import RateLimited
 from chalicelib.storage.aws_errors import all_items, write_if
 
 pytestmark = pytest.mark.unit

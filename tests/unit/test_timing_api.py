@@ -150,7 +150,7 @@ def test_a_board_write_failing_after_the_lap_is_stored_still_acknowledges_the_la
         desk: Desk, clock: FakeClock, timed_track, monkeypatch: pytest.MonkeyPatch) -> None:
     """Storage goes away between the race write and the board write: the lap is stored, so the answer is the lap
     (not 'cannot be reached'), and the board catches up once storage answers again."""
-    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.core.errors import ServiceUnavailable
     from chalicelib.domain.leaderboards import LeaderboardPublisher
 
     eid, rid, timer = timed_track

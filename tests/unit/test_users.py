@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from chalicelib.domain.errors import InvalidCredentials
+from chalicelib.core.errors import InvalidCredentials
 from tests.unit.conftest import PASSWORD
 from tests.unit.users_helpers import call, error_message, groups_claim, sign_up_body
 

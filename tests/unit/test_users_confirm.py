@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from chalicelib.domain.errors import AccountNotReady
+from chalicelib.core.errors import AccountNotReady
 from tests.unit.conftest import PASSWORD, Browser
 from tests.unit.racer_console_helpers import body, post, sign_in, signed_in, text
 from tests.unit.users_helpers import call, error_message, groups_claim, sign_up_body

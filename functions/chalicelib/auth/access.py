@@ -53,9 +53,9 @@ from pydantic import BaseModel, ValidationError
 from chalicelib import base_path, http_errors, logs, multipart_form
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.cookies import CSRF_COOKIE, request_cookies
-from chalicelib.auth.principals import ANONYMOUS, Principal, Role
 from chalicelib.auth.sessions import resolve_caller
-from chalicelib.domain.errors import Forbidden, InvalidInput, NotAuthenticated
+from chalicelib.core.errors import Forbidden, InvalidInput, NotAuthenticated
+from chalicelib.core.principals import ANONYMOUS, Principal, Role
 from chalicelib.htmx import is_htmx
 from chalicelib.settings import get_settings
 from drem_web import render

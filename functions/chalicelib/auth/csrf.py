@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from urllib.parse import urlsplit
 
 from chalicelib.auth.cookies import CSRF_COOKIE, set_cookie
-from chalicelib.domain.errors import CsrfRejected
+from chalicelib.core.errors import CsrfRejected
 
 FORM_FIELD = "csrf_token"
 HEADER = "x-csrf-token"

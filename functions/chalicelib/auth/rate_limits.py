@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
-from chalicelib.domain.errors import InvalidCredentials, InvalidInput, RateLimited
+from chalicelib.core.errors import InvalidCredentials, InvalidInput, RateLimited
 
 T = TypeVar("T")
 _MAX_KEYS = 20_000  # memory bound: the oldest keys are forgotten first

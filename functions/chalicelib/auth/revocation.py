@@ -23,7 +23,7 @@ from typing import Protocol
 
 from pydantic import BaseModel
 
-from chalicelib.domain.errors import NotAuthenticated
+from chalicelib.core.errors import NotAuthenticated
 
 CACHE_TTL_S = 5.0
 

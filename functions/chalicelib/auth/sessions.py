@@ -7,10 +7,10 @@ from typing import Protocol
 
 from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE, clear_session_cookies, session_cookies
 from chalicelib.auth.csrf import session_secret
-from chalicelib.auth.principals import ANONYMOUS, Principal, User, verify_device_credential
 from chalicelib.auth.revocation import REVOKED, RevocationStore
 from chalicelib.auth.tokens import VerifiedToken, verify_token
-from chalicelib.domain.errors import NotAuthenticated, TokenExpired
+from chalicelib.core.errors import NotAuthenticated, TokenExpired
+from chalicelib.core.principals import ANONYMOUS, Principal, User, verify_device_credential
 from chalicelib.settings import Settings, get_settings
 
 

@@ -20,7 +20,7 @@ import requests
 from jose import jwt
 from jose.exceptions import ExpiredSignatureError, JWTError
 
-from chalicelib.domain.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
+from chalicelib.core.errors import NotAuthenticated, ServiceUnavailable, TokenExpired
 from chalicelib.settings import Settings
 
 _ALGORITHM = "RS256"

@@ -27,9 +27,9 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from chalicelib.auth.principals import Device, User
+from chalicelib.core.errors import InvalidInput, NotAuthenticated
+from chalicelib.core.principals import Device, User
 from chalicelib.domain.devices import HOSTNAME_PATTERN, DeviceKind, DeviceRecord, StatusEntry
-from chalicelib.domain.errors import InvalidInput, NotAuthenticated
 
 DEFAULT_CODE_TTL_MINUTES = 60
 MAX_CODE_TTL_MINUTES = 24 * 60

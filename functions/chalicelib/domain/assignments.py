@@ -15,8 +15,8 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from chalicelib.auth.principals import Device, Principal
-from chalicelib.domain.errors import Conflict, Forbidden, NotFound
+from chalicelib.core.errors import Conflict, Forbidden, NotFound
+from chalicelib.core.principals import Device, Principal
 from chalicelib.domain.racer_models import DOWNLOAD_EXPIRES_S, ModelRecord, ModelService, ModelStatus, utc_now
 
 MAX_MODELS_PER_CAR = 10

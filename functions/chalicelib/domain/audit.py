@@ -14,7 +14,7 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.views.public_views import lap_time
+from chalicelib.formats.figures import lap_time
 from drem_leaderboard.models import Lap
 
 AuditAction = Literal["lap_edit", "lap_validity", "race_delete", "recompute", "import"]

@@ -33,10 +33,10 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
-from chalicelib.auth.principals import Principal
+from chalicelib.core.errors import Conflict, DremError, Forbidden, NotFound, RateLimited, ServiceUnavailable
+from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_runs import RUN_ID_PATTERN, NewRun, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN
-from chalicelib.domain.errors import Conflict, DremError, Forbidden, NotFound, RateLimited, ServiceUnavailable
 
 MAX_LIVE = 6
 IDLE_S = 120.0

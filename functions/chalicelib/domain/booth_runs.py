@@ -21,9 +21,9 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from chalicelib.auth.principals import Principal
+from chalicelib.core.errors import Conflict, InvalidInput, NotFound, PayloadTooLarge, RateLimited
+from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN, TrackService
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, PayloadTooLarge, RateLimited
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.domain.racer_models import MODEL_STAFF, DownloadLike, ModelService, ModelStatus, utc_now
 

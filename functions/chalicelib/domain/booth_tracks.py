@@ -11,7 +11,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.domain.errors import NotFound, ServiceUnavailable
+from chalicelib.core.errors import NotFound, ServiceUnavailable
 
 TRACK_ID_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
 _OUTLINE_POINTS = 120  # enough for a recognisable map in a list, small enough for a JSON answer

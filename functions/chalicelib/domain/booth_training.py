@@ -19,9 +19,9 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.principals import Principal
+from chalicelib.core.errors import Conflict, InvalidInput, NotFound
+from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_runs import ListRunsQuery, RecordChanged, RunMode, RunService, RunStatus, new_record_id
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelService, ModelStatus, utc_now
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import pycountry
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 
 def _short_name(country: Any) -> str:  # a pycountry record: its fields are set at run time

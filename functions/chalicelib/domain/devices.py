@@ -16,8 +16,8 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
-from chalicelib.auth.principals import Device, User
-from chalicelib.domain.errors import InvalidInput, NotFound
+from chalicelib.core.errors import InvalidInput, NotFound
+from chalicelib.core.principals import Device, User
 
 ONLINE_WINDOW_MS = 15_000
 HOSTNAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9-]{0,62}$"

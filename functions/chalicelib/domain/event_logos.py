@@ -11,7 +11,7 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.domain.errors import NotFound
+from chalicelib.core.errors import NotFound
 from chalicelib.domain.events import EventRepository
 from chalicelib.formats.logo_image import LogoImage, normalised_logo
 

@@ -16,8 +16,8 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
-from chalicelib.auth.principals import User
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
+from chalicelib.core.errors import Conflict, InvalidInput, NotFound
+from chalicelib.core.principals import User
 from drem_leaderboard.models import RaceConfig
 
 COMBINED_TRACK_ID = "combined"

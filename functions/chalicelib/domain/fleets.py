@@ -11,9 +11,9 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import InvalidInput, NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.devices import StatusEntry
-from chalicelib.domain.errors import InvalidInput, NotFound
 
 
 class FleetInput(BaseModel):

@@ -18,11 +18,12 @@ import threading
 import time
 from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.domain.errors import Conflict
+from chalicelib.core.errors import Conflict
 from drem_leaderboard.models import Race, RaceStatus, RankingMethod
 from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile, rank
@@ -205,6 +206,55 @@ def _dumps(value: Any) -> str:
 
 def empty_board_body(event_id: str, track_id: str) -> str:
     return _dumps({"event_id": event_id, "track_id": track_id, "version": 0, "entries": []})
+
+
+# The overlay statuses of a race on track (drem_leaderboard RaceStatus values).
+LIVE_STATUSES = frozenset({"READY", "RUNNING", "PAUSED"})
+# Overlay bodies parsed and kept per process: every poll of every screen reads the same few.
+PARSED_OVERLAYS = 64
+
+
+class OverlaySnapshot(BaseModel):
+    """A materialised overlay body (`GET /api/overlay/{event}`, written by `publish_overlay`): the live race of one
+    track."""
+    model_config = ConfigDict(extra="ignore")
+    track_id: str = "1"
+    version: int = 0
+    status: str = "NO_RACE"
+    race_id: str | None = None
+    username: str = ""
+    raced_by_proxy: bool = False
+    laps: int = 0
+    valid_laps: int = 0
+    last_lap_ms: int | None = None
+    fastest_lap_ms: int | None = None
+    fastest_average_ms: int | None = None
+    ranking_method: str = "BEST_LAP_TIME"
+    as_of_ms: int = 0
+    running: bool = False
+    time_left_ms: int = 0
+    current_lap_ms: int = 0
+    position: int | None = None
+    gap_to_leader_ms: int | None = None
+
+    @classmethod
+    def parse(cls, body: str) -> OverlaySnapshot:
+        return _parse_overlay(body)
+
+    @property
+    def is_live(self) -> bool:
+        return self.status in LIVE_STATUSES
+
+    def clocks_at(self, now_ms: int) -> tuple[int, int]:
+        """(time left, current lap) at `now_ms`: the stored readings, advanced while the race runs."""
+        elapsed = max(0, now_ms - self.as_of_ms) if self.running else 0
+        return max(0, self.time_left_ms - elapsed), self.current_lap_ms + elapsed
+
+
+@lru_cache(maxsize=PARSED_OVERLAYS)
+def _parse_overlay(body: str) -> OverlaySnapshot:
+    return OverlaySnapshot.model_validate(json.loads(body))
+
 
 
 class LeaderboardPublisher:

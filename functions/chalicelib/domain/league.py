@@ -19,8 +19,8 @@ from typing import Annotated, Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.core.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.core.principals import Principal, Role
 from chalicelib.domain.league_tracks import DREM_TRACK_LENGTHS_M, RegisteredTrack, TrackSet
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
@@ -57,7 +57,7 @@ class EvaluationTrial(BaseModel):
 
 
 class SubmissionInput(BaseModel):
-    """One submission as the server assembled it from the uploaded export (chalicelib.formats.league_assembler)."""
+    """One submission as the server assembled it from the uploaded export (chalicelib.domain.league_assembler)."""
     model_config = ConfigDict(extra="forbid")
 
     racer: str = Field(pattern=NAME_PATTERN)

@@ -3,7 +3,7 @@ and assembled here on the server (never on the racer's machine, whose JSON could
 
 The upload is hostile input: it is read in memory with the bounds of chalicelib.formats.league_export (member count,
 decompressed bytes, size of each file read; unsafe names and links skipped), then assembled
-(chalicelib.formats.league_assembler: every missing file is named with where the racer's tool writes it) and
+(chalicelib.domain.league_assembler: every missing file is named with where the racer's tool writes it) and
 checked by LeagueService.push like every submission.
 
 With `model_id` (a model the racer uploaded: a console archive, driven through its ONNX conversion, or a drem ONNX
@@ -22,13 +22,13 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import Conflict, Forbidden, NotFound, PayloadTooLarge
+from chalicelib.core.errors import Conflict, Forbidden, NotFound, PayloadTooLarge
+from chalicelib.core.principals import Principal
 from chalicelib.domain.league import NAME_PATTERN, LeagueService, Submission, VerifiedDrive
+from chalicelib.domain.league_assembler import assemble
 from chalicelib.domain.model_scrutiny import DriveOutcome, ScrutineerService
 from chalicelib.domain.racer_models import ModelRecord, ModelStatus
 from chalicelib.domain.scrutineer_queue import MAX_ATTEMPTS, ScrutineerJob, ScrutineerQueue
-from chalicelib.formats.league_assembler import assemble
 from chalicelib.formats.league_export import ExportFiles, ExportLimits, MiB, read_tar_gz
 
 # An upload holds logs, metrics and evaluation sim-traces (no model graph, no checkpoints, no training sim-traces:

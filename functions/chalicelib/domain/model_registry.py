@@ -12,15 +12,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from markupsafe import Markup
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import DremError, InvalidInput
+from chalicelib.core.errors import DremError, InvalidInput
+from chalicelib.core.principals import Principal
 from chalicelib.domain.league import TRACK_PATTERN
 from chalicelib.domain.racer_models import ModelRecord, ModelService, ModelStatus, utc_now
 from chalicelib.formats.league_export import ExportLimits, read_tar_gz
-from chalicelib.views import svg_plots
 
 LINEAGE_MEMBER = "training/lineage.json"
 _LINEAGE_LIMITS = ExportLimits(max_file_bytes=2 * 1024 * 1024, max_total_read_bytes=2 * 1024 * 1024)
@@ -70,13 +68,22 @@ class RegistryRow:
 
 
 @dataclass(frozen=True)
+class Curve:
+    """One line of a chart: (x index into the chart's x labels, value) per point."""
+    label: str
+    points: list[tuple[int, float]]
+
+
+@dataclass(frozen=True)
 class RegistryView:
+    """The registry's rows and the figures its charts show (chalicelib.views.registry_views draws them)."""
     everyone: bool
     rows: list[RegistryRow]
-    lap_time_plot: Markup
-    completion_plot: Markup
-    track_plot: Markup
     detail_base: str
+    version_labels: list[str] = field(default_factory=list)  # the x axis: model versions in upload order
+    lap_curves: list[Curve] = field(default_factory=list)  # best lap (s) per track over versions
+    completion_curves: list[Curve] = field(default_factory=list)  # completion (%) per track over versions
+    track_bests: list[tuple[str, float]] = field(default_factory=list)  # best lap (s) per track, all versions
 
 
 @dataclass(frozen=True)
@@ -86,7 +93,7 @@ class ModelDetail:
     evaluations: list[Evaluation]
     lineage: list[tuple[str, str]]
     dataset_runs: list[str]
-    loss_plot: Markup | None
+    loss_curves: list[Curve]  # train and validation loss per epoch (empty without a lineage)
     lineage_note: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -138,7 +145,7 @@ class RegistryService:
         rows = [RegistryRow(m, _latest_per_track([e for e in evaluations if e.model_id == m.model_id]), verdict(m))
                 for m in reversed(models)]
         return RegistryView(everyone=everyone, rows=rows, detail_base="/models/registry",
-                            **_plots(models, evaluations))
+                            **_figures(models, evaluations))
 
     def detail(self, principal: Principal, model_id: str) -> ModelDetail:
         model = self.models.get(principal, model_id)
@@ -149,7 +156,7 @@ class RegistryService:
         except DremError as error:  # a damaged lineage file must not hide the rest of the dashboard
             lineage, note = None, f"training/lineage.json could not be read: {error.message}"
         if lineage is None:
-            return ModelDetail(model, verdict(model), evaluations, [], [], None,
+            return ModelDetail(model, verdict(model), evaluations, [], [], [],
                                note or "No training lineage: this model was not trained by drem.")
         shown: list[tuple[str, str]] = [
             (key, str(lineage[key])) for key in ("network", "parameters", "seed", "epochs_run", "batch_size",
@@ -160,12 +167,9 @@ class RegistryService:
         runs = [str(r.get("run_id") or r.get("run")) + (f" ({r.get('track_id') or r.get('track')})"
                                                         if r.get("track_id") or r.get("track") else "")
                 for r in (dataset.get("runs") or []) if isinstance(r, dict)][:50]
-        curves = [svg_plots.Series(label, list(enumerate(_floats(lineage.get(key)))))
+        curves = [Curve(label, list(enumerate(_floats(lineage.get(key)))))
                   for label, key in (("train", "train_losses"), ("validation", "validation_losses"))]
-        epochs = max((len(c.points) for c in curves), default=0)
-        loss_plot = svg_plots.line_chart([c for c in curves if c.points], [str(i + 1) for i in range(epochs)],
-                                         title="Training loss per epoch", y_label="loss", testid="plot-loss")
-        return ModelDetail(model, verdict(model), evaluations, shown, runs, loss_plot)
+        return ModelDetail(model, verdict(model), evaluations, shown, runs, curves)
 
 
 def _training_recipe(lineage: dict[str, Any]) -> list[tuple[str, str]]:
@@ -236,12 +240,11 @@ def _latest_per_track(evaluations: list[Evaluation]) -> list[Evaluation]:
     return [latest[track] for track in sorted(latest)]
 
 
-def _plots(models: list[ModelRecord], evaluations: list[Evaluation]) -> dict[str, Markup]:
-    """Lap time and completion over model versions (one line per track), and the newest evaluated model per track."""
+def _figures(models: list[ModelRecord], evaluations: list[Evaluation]) -> dict[str, Any]:
+    """Lap time and completion over model versions (one curve per track), and the best lap per track."""
     versions = [m for m in models if any(e.model_id == m.model_id for e in evaluations)]
-    labels = [m.name for m in versions]
     tracks = sorted({e.track for e in evaluations})
-    lap_series, completion_series = [], []
+    lap_curves, completion_curves = [], []
     for track in tracks:
         laps, completion = [], []
         for index, model in enumerate(versions):
@@ -250,23 +253,15 @@ def _plots(models: list[ModelRecord], evaluations: list[Evaluation]) -> dict[str
                 completion.append((index, mine[0].completion_pct))
                 if mine[0].best_lap_s is not None:
                     laps.append((index, mine[0].best_lap_s))
-        lap_series.append(svg_plots.Series(track, laps))
-        completion_series.append(svg_plots.Series(track, completion))
-    bars: list[tuple[str, float]] = []
+        lap_curves.append(Curve(track, laps))
+        completion_curves.append(Curve(track, completion))
+    bests: list[tuple[str, float]] = []
     for track in tracks:
         on_track = [e for e in evaluations if e.track == track and e.best_lap_s is not None]
         if on_track:
-            bars.append((track, min(e.best_lap_s for e in on_track)))  # type: ignore[type-var, arg-type]  # none is None
-    return {
-        "lap_time_plot": svg_plots.line_chart([s for s in lap_series if s.points], labels,
-                                              title="Best lap over model versions", y_label="seconds",
-                                              testid="plot-lap-times"),
-        "completion_plot": svg_plots.line_chart([s for s in completion_series if s.points], labels,
-                                                title="Completion over model versions", y_label="%",
-                                                testid="plot-completion"),
-        "track_plot": svg_plots.bar_chart(bars, title="Best lap per track (all versions)", y_label="seconds",
-                                          testid="plot-tracks"),
-    }
+            bests.append((track, min(e.best_lap_s for e in on_track)))  # type: ignore[type-var, arg-type]  # none is None
+    return {"version_labels": [m.name for m in versions], "lap_curves": lap_curves,
+            "completion_curves": completion_curves, "track_bests": bests}
 
 
 def _floats(values: Any) -> list[float]:

@@ -23,8 +23,8 @@ from typing import Any, Protocol
 from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import logs
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import Conflict, NotFound
+from chalicelib.core.errors import Conflict, NotFound
+from chalicelib.core.principals import Principal
 from chalicelib.domain.events import Event
 from chalicelib.domain.racer_models import (
     ModelChanged,

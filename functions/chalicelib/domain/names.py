@@ -10,7 +10,7 @@ import unicodedata
 
 import regex  # type: ignore[import-untyped]  # no stubs in the dev lock; one call, typed below
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 USERNAME_MIN, USERNAME_MAX = 2, 20
 DISPLAY_NAME_MAX = 40

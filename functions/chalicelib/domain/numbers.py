@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import re
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 
 def whole_number(raw: str | None, *, field: str, message: str, maximum: int, minimum: int = 0) -> int:

@@ -12,10 +12,10 @@ from __future__ import annotations
 import uuid
 from typing import Any, Protocol
 
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import Conflict, DremError
+from chalicelib.core.principals import User
 from chalicelib.domain.assignments import MAX_MODELS_PER_CAR, Assignment, AssignmentService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
-from chalicelib.domain.errors import Conflict, DremError
 from chalicelib.domain.racer_queue import AddToQueue, MoveInQueue, QueueEntry, RacerQueue, RacerQueueService
 from chalicelib.domain.races import CreateRaceInput, RaceService
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Forbidden
+from chalicelib.core.errors import Forbidden
+from chalicelib.core.principals import Principal, Role
 
 
 def require_owner_or_role(principal: Principal, owner_sub: str, roles: Iterable[Role]) -> None:

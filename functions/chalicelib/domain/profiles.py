@@ -10,12 +10,12 @@ from typing import Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from chalicelib.auth.principals import Role, User
+from chalicelib.core.errors import InvalidInput, NotFound
+from chalicelib.core.principals import Role, User
 from chalicelib.domain.countries import normalise_country_code
-from chalicelib.domain.errors import InvalidInput, NotFound
 from chalicelib.domain.names import check_display_name
 from chalicelib.domain.ownership import require_owner_or_role
-from chalicelib.views.avatars import avatar_seed, identicon_svg
+from chalicelib.formats.avatars import avatar_seed, identicon_svg
 from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-from chalicelib.domain.errors import Conflict
+from chalicelib.core.errors import Conflict
 
 WRITE_ATTEMPTS = 3
 T = TypeVar("T")

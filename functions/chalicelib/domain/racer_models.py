@@ -23,8 +23,8 @@ from typing import IO, Any, NoReturn, Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib import logs
-from chalicelib.auth.principals import Principal, Role
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound, RateLimited
+from chalicelib.core.errors import Conflict, InvalidInput, NotFound, RateLimited
+from chalicelib.core.principals import Principal, Role
 from chalicelib.domain.model_conversion import ConversionOutcome
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits

@@ -17,8 +17,8 @@ from typing import Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.principals import User
-from chalicelib.domain.errors import Conflict, InvalidInput, NotFound
+from chalicelib.core.errors import Conflict, InvalidInput, NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.events import Event
 from chalicelib.domain.model_scrutiny import scrutiny_doubt
 from chalicelib.domain.racer_models import ModelRecord

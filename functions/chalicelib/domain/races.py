@@ -25,9 +25,9 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from chalicelib.auth.principals import Principal, Role, User
+from chalicelib.core.errors import Conflict, DremError, Forbidden, InvalidInput, NotFound
+from chalicelib.core.principals import Principal, Role, User
 from chalicelib.domain.audit import AuditLog, AuditTrail, lap_state, standings
-from chalicelib.domain.errors import Conflict, DremError, Forbidden, InvalidInput, NotFound
 from chalicelib.domain.events import Event
 from chalicelib.domain.leaderboards import BoardRow, LeaderboardPublisher
 from chalicelib.domain.ownership import require_owner_or_role

@@ -14,8 +14,8 @@ from pydantic import BaseModel, ConfigDict
 
 from chalicelib.domain.events import Event
 from chalicelib.domain.profiles import PublicProfile
-from chalicelib.views.avatars import DEFAULT_COLOUR, NEUTRAL_COLOUR, avatar_seed, identicon_cells
-from chalicelib.views.public_views import gap_time, lap_time, safe_colour
+from chalicelib.formats.avatars import DEFAULT_COLOUR, NEUTRAL_COLOUR, avatar_seed, identicon_cells
+from chalicelib.formats.figures import gap_time, lap_time, safe_colour
 from drem_leaderboard.models import Race, RaceConfig, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, RacerProfile, rank
 from drem_leaderboard.summary import RaceSummary, summarise_racer

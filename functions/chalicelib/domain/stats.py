@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib.domain.countries import country_name
 from chalicelib.domain.events import Event, EventType, TrackDirection
 from chalicelib.domain.races import RaceRecord
-from chalicelib.views.public_views import lap_time
+from chalicelib.formats.figures import lap_time
 from drem_leaderboard.models import Race, RaceStatus
 
 MIN_LAP_MS = 5_000

@@ -21,9 +21,9 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.principals import Device
+from chalicelib.core.errors import DremError, Forbidden, MaybeStored, NotFound
+from chalicelib.core.principals import Device
 from chalicelib.domain.devices import DeviceKind, DeviceRecord
-from chalicelib.domain.errors import DremError, Forbidden, MaybeStored, NotFound
 from chalicelib.domain.race_writes import with_retries
 from chalicelib.domain.races import EventSource, RaceRecord, RaceService
 from drem_leaderboard.models import Lap

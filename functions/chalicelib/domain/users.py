@@ -11,9 +11,9 @@ from typing import Annotated, Protocol
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
-from chalicelib.auth.principals import USER_ROLES, Role, User
+from chalicelib.core.errors import Conflict, Forbidden, InvalidInput, NotFound
+from chalicelib.core.principals import USER_ROLES, Role, User
 from chalicelib.domain.countries import normalise_country_code
-from chalicelib.domain.errors import Conflict, Forbidden, InvalidInput, NotFound
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.domain.names import check_display_name, check_sign_in_name
 from drem_infra import resources

@@ -21,7 +21,7 @@ import qrcode
 from fpdf import FPDF
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats import pdf_fonts
 
 QUIET_ZONE = 4

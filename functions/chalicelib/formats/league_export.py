@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from chalicelib.domain.errors import InvalidInput, PayloadTooLarge
+from chalicelib.core.errors import InvalidInput, PayloadTooLarge
 from chalicelib.formats.member_names import RefusedMember, vet_member_name, vet_member_type
 
 MiB = 1024 * 1024

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from PIL import Image, ImageOps, UnidentifiedImageError
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 MAX_UPLOAD_BYTES = 2 * 1024 * 1024
 MAX_SOURCE_PIXELS = 25_000_000  # a 25-megapixel photo is the most a logo file plausibly is

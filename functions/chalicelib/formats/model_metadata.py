@@ -24,7 +24,7 @@ from pydantic import (
     model_validator,
 )
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 # Console limits (simapp agent_ctrl/constants.py): steering in degrees, positive = left; speed in m/s.
 MAX_STEERING_DEG = 30.0

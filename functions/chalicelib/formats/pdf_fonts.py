@@ -21,7 +21,7 @@ from pathlib import Path
 
 from fontTools.ttLib import TTFont
 
-from chalicelib.domain.errors import ServiceUnavailable
+from chalicelib.core.errors import ServiceUnavailable
 
 MAIN = "noto"
 FONT_FILES = {

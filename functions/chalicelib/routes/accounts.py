@@ -5,7 +5,7 @@ from chalice import Blueprint
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, SIGNED_IN, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 
 bp = Blueprint(__name__)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.openapi import build_document, operation_rows
 from drem_web import render
 

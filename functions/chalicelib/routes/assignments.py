@@ -9,7 +9,7 @@ from chalice import Blueprint
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, STAFF, route
-from chalicelib.auth.principals import Device, User
+from chalicelib.core.principals import Device, User
 from chalicelib.domain.assignments import AssignInput, AssignmentQuery, StatusReport
 
 bp = Blueprint(__name__)

@@ -11,7 +11,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, body_bytes, route
-from chalicelib.auth.principals import Principal, User
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.booth_drive import DriveControl, StartDrive
 from chalicelib.domain.booth_runs import ListRunsQuery, NewRun, RunRecord
 from chalicelib.domain.booth_tracks import TrackDetail, TrackInfo

@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import services
 from chalicelib.auth.access import SIGNED_IN, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.booth_runs import ListRunsQuery
 from chalicelib.domain.racer_models import MODEL_STAFF
 from chalicelib.views import booth_views

@@ -11,7 +11,7 @@ from pydantic import Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.routes.public_pages import event_or_404, fragment_headers, read_race, unchanged
 from chalicelib.views import public_views as views
 from chalicelib.views.live_regions import PageOptions, live_race, live_url, read_live

@@ -5,7 +5,7 @@ queueing commands and reading their outcome. Devices (`Authorization: Device <id
 code is the credential), heartbeat, rotate their own secret, fetch and acknowledge their own commands. Every `self`
 route acts on the caller's own device id, taken from its verified credential.
 
-`verify_device_credential` is what `chalicelib.auth.principals.set_device_credential_verifier` must be given.
+`verify_device_credential` is what `chalicelib.core.principals.set_device_credential_verifier` must be given.
 """
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, CAR, OPERATOR, PUBLIC, TIMER, route
-from chalicelib.auth.principals import Device, Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_activation
+from chalicelib.core.errors import InvalidInput
+from chalicelib.core.principals import Device, Principal, User
 from chalicelib.domain.activation import (
     ActivationCodeRequest,
     ActivationExchange,
@@ -24,7 +25,6 @@ from chalicelib.domain.activation import (
     IssuedCredential,
 )
 from chalicelib.domain.devices import Command, CommandAck, CommandRequest, DeviceView, MoveToFleet, Telemetry
-from chalicelib.domain.errors import InvalidInput
 
 bp = Blueprint(__name__)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.routes.event_logos import logo_path
 from chalicelib.routes.public_pages import event_or_404
 from chalicelib.views.event_landing import landing_view

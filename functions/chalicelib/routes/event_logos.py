@@ -8,7 +8,7 @@ from pydantic import BaseModel, Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, body_bytes, route
-from chalicelib.auth.principals import Principal, User
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.event_logos import LogoVersion
 from chalicelib.formats import logo_image
 from chalicelib.routes.responses import etag_matches

@@ -5,7 +5,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.fleets import Fleet, FleetInput
 
 bp = Blueprint(__name__)

@@ -8,7 +8,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, STAFF, route
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.domain.health import check_health
 from chalicelib.settings import get_settings
 from chalicelib.storage.health import fetch_durable_health

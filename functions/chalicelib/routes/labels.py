@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.names import check_display_name
 from chalicelib.formats.labels_pdf import (

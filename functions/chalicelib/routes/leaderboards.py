@@ -10,8 +10,8 @@ from pydantic import BaseModel, Field
 
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import NotFound
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import Principal
 from chalicelib.domain.leaderboards import PublicView
 from chalicelib.routes.responses import etag_matches
 from drem_leaderboard.ranking import COMBINED_TRACK_ID

@@ -11,7 +11,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, body_bytes, route
-from chalicelib.auth.principals import Principal, User
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.league import Board, BoardQuery, LeaguePolicy, Submission
 from chalicelib.domain.league_intake import UPLOAD_CONTENT_TYPES, PushOptions
 from chalicelib.domain.league_tracks import RegisteredTrack

@@ -12,11 +12,11 @@ from chalicelib import services
 from chalicelib.auth import cookies, known_devices
 from chalicelib.auth import csrf as double_submit
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
 from chalicelib.auth.rate_limits import client_address, guarded_sign_in
 from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.tokens import unverified_claim
-from chalicelib.domain.errors import InvalidInput, TokenExpired
+from chalicelib.core.errors import InvalidInput, TokenExpired
+from chalicelib.core.principals import Principal
 from chalicelib.domain.identity import NewPasswordChallenge, NewPasswordForm, SignInForm, Tokens, password_policy_text
 from chalicelib.http_errors import retry_after_headers
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from chalicelib.auth.access import ADMIN, OPERATOR, REGISTRATION, SIGNED_IN, STAFF, Allow, as_allow
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.domain.countries import country_label, country_name
 from drem_web import render
 

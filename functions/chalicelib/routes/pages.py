@@ -7,8 +7,8 @@ import re
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import NotFound
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import Principal
 from chalicelib.routes.navigation import links_for
 from drem_web import favicon, render
 

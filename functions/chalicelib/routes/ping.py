@@ -6,7 +6,7 @@ from __future__ import annotations
 from chalice import Blueprint, Response
 
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 
 bp = Blueprint(__name__)
 

@@ -5,7 +5,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, PUBLIC, SIGNED_IN, route
-from chalicelib.auth.principals import Principal, User
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.profiles import Profile, ProfileUpdate, PublicProfile, public_view
 
 bp = Blueprint(__name__)

@@ -27,8 +27,8 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import PUBLIC, route
-from chalicelib.auth.principals import Principal
-from chalicelib.domain.errors import NotFound
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import Principal
 from chalicelib.domain.events import Event
 from chalicelib.routes.event_logos import logo_path
 from chalicelib.routes.responses import etag_matches

@@ -12,7 +12,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import logs, services
 from chalicelib.auth.access import SIGNED_IN, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.model_scrutiny import ScrutineerRequest
 from chalicelib.domain.racer_models import ListQuery, UploadRequest
 from chalicelib.settings import get_settings

@@ -9,7 +9,7 @@ from pydantic import RootModel
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, SIGNED_IN, route
-from chalicelib.auth.principals import Principal, User
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.numbers import lap_number
 from chalicelib.domain.races import CreateRaceInput, LapEdit
 from drem_leaderboard.commands import RaceCommand

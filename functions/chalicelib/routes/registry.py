@@ -10,8 +10,9 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.model_registry import Evaluation, EvaluationInput
+from chalicelib.views.registry_views import loss_plot, registry_plots
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -20,19 +21,22 @@ bp = Blueprint(__name__)
 @route(bp, "/console/models/registry", allow={ADMIN, OPERATOR})
 def staff_registry(principal: User) -> Response:
     """Every racer's model versions"""
-    return render.page("registry", view=services.registry_service().registry(principal, everyone=True))
+    view = services.registry_service().registry(principal, everyone=True)
+    return render.page("registry", view=view, plots=registry_plots(view))
 
 
 @route(bp, "/models/registry", allow=SIGNED_IN)
 def my_registry(principal: User) -> Response:
     """Your model versions"""
-    return render.page("registry", view=services.registry_service().registry(principal, everyone=False))
+    view = services.registry_service().registry(principal, everyone=False)
+    return render.page("registry", view=view, plots=registry_plots(view))
 
 
 @route(bp, "/models/registry/{model_id}", allow=SIGNED_IN)
 def model_detail(principal: User, model_id: str) -> Response:
     """One model: lineage, loss curve, evaluations (htmx fragment; owner or model staff)"""
-    return render.fragment("registry_model", detail=services.registry_service().detail(principal, model_id))
+    detail = services.registry_service().detail(principal, model_id)
+    return render.fragment("registry_model", detail=detail, loss_plot=loss_plot(detail))
 
 
 @route(bp, "/api/models/{model_id}/evaluations", methods=["POST"], allow=SIGNED_IN, body=EvaluationInput,

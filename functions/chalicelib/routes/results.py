@@ -9,11 +9,11 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
-from chalicelib.domain.errors import NotFound
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.results import EventResults, event_results
 from chalicelib.formats.race_export import slug
-from chalicelib.formats.results_pdf import render_document
+from chalicelib.views.results_pdf import render_document
 
 bp = Blueprint(__name__)
 

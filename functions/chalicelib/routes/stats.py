@@ -8,7 +8,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, PUBLIC, route
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.domain.stats import ShownRacer, StatsFilter, compute, visible_events
 from chalicelib.views.stats_view import stats_page
 from drem_web import render

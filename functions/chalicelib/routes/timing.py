@@ -5,7 +5,7 @@ from chalice import Blueprint
 
 from chalicelib import services
 from chalicelib.auth.access import CAR, TIMER, route
-from chalicelib.auth.principals import Device
+from chalicelib.core.principals import Device
 from chalicelib.domain.timing import StripAnswer, StripPost
 
 bp = Blueprint(__name__)

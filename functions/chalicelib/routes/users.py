@@ -8,8 +8,8 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, PUBLIC, REGISTRATION, SIGNED_IN, route
-from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.numbers import whole_number
 from chalicelib.domain.users import (
     MAX_PAGE,

@@ -10,9 +10,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from chalicelib.core.errors import NotFound
 from chalicelib.domain.assignments import AssignedModel, Assignment, AssignmentChanged, ModelProgress
 from chalicelib.domain.devices import DeviceKind
-from chalicelib.domain.errors import NotFound
 from chalicelib.storage.aws_errors import batch_items, call, write_if
 from chalicelib.storage.devices import DynamoDeviceStore
 from chalicelib.storage.events import DynamoEventStore

@@ -9,7 +9,7 @@ from typing import Any
 from botocore.exceptions import BotoCoreError, ClientError, EndpointConnectionError
 
 from chalicelib import logs
-from chalicelib.domain.errors import (
+from chalicelib.core.errors import (
     DremError,
     MaybeStored,
     RateLimited,

@@ -6,7 +6,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import (
+from chalicelib.core.errors import (
     AccountNotReady,
     DremError,
     InvalidCredentials,

@@ -14,9 +14,9 @@ from typing import Any
 
 from boto3.dynamodb.types import TypeDeserializer, TypeSerializer
 
+from chalicelib.core.errors import Conflict
 from chalicelib.domain.activation import ActivationExchange, ActivationRecord
 from chalicelib.domain.devices import Command, CommandAck, CommandStatus, DeviceRecord, StatusEntry, Telemetry
-from chalicelib.domain.errors import Conflict
 from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The fleet table"

@@ -16,7 +16,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats.event_export.records import Account, Item
 from chalicelib.formats.logo_image import LogoImage
 from chalicelib.storage.aws_errors import all_items, error_code, translate_common, write_if

@@ -9,7 +9,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import Conflict, NotFound
+from chalicelib.core.errors import Conflict, NotFound
 from chalicelib.domain.events import Event
 from chalicelib.storage.aws_errors import all_items, translate_common, write_if
 from chalicelib.storage.event_logos import logo_key

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from chalicelib.domain.errors import Conflict
+from chalicelib.core.errors import Conflict
 from chalicelib.domain.league import BoardEntry, EvidenceTaken, LeaguePolicy, Submission
 from chalicelib.domain.league_tracks import RegisteredTrack
 from chalicelib.storage.aws_errors import all_items, call, write_if

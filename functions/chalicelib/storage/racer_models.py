@@ -12,7 +12,7 @@ import base64
 import json
 from typing import Any
 
-from chalicelib.domain.errors import InvalidInput, NotFound
+from chalicelib.core.errors import InvalidInput, NotFound
 from chalicelib.domain.racer_models import ModelChanged, ModelPage, ModelRecord, ModelStatus
 from chalicelib.storage.aws_errors import all_items, call, write_if
 

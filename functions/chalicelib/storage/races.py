@@ -24,7 +24,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from chalicelib.domain.errors import Conflict
+from chalicelib.core.errors import Conflict
 from chalicelib.domain.race_writes import StaleRace
 from chalicelib.domain.races import PublishIntent, RaceRecord
 from chalicelib.storage.aws_errors import all_items, call, write_if

@@ -8,7 +8,7 @@ from typing import Any
 
 from botocore.exceptions import BotoCoreError, ClientError
 
-from chalicelib.domain.errors import Conflict, DremError, InvalidInput, NotFound
+from chalicelib.core.errors import Conflict, DremError, InvalidInput, NotFound
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.domain.users import DirectoryUser, UserPage
 from chalicelib.storage.aws_errors import error_code, is_write, translate_common

@@ -6,7 +6,7 @@ from typing import Any
 
 from markupsafe import Markup
 
-from chalicelib.auth.principals import Principal
+from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService

@@ -6,7 +6,7 @@ from datetime import UTC, datetime
 
 from pydantic import BaseModel
 
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.assignments import AssignmentService, CarModelStatus
 from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.fleets import FleetService

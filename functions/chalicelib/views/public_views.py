@@ -17,6 +17,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict
 
+from chalicelib.domain.leaderboards import OverlaySnapshot
+from chalicelib.formats.figures import gap_time, lap_time, safe_colour
 from drem_leaderboard.models import Lap, Race
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, DEFAULT_HIGHLIGHT_COLOUR, LeaderboardEntry
 
@@ -28,12 +30,10 @@ DEFAULT_CHROMA = "#00ff00"
 POST_RACE_HIGHLIGHT_MS = 30_000
 DEFAULT_SUMMARY_SECONDS = 12  # DREM's leaderboard holds its race-summary footer for 12 s after a new entry
 OVERLAY_TOP = 4
-LIVE_STATUSES = frozenset({"READY", "RUNNING", "PAUSED"})
 FINISHED_STATUSES = frozenset({"OVER", "SUBMITTED"})
 _STATUS_LABELS = {"READY": "ready_to_start", "RUNNING": "now_racing", "PAUSED": "paused", "OVER": "finished",
                   "SUBMITTED": "finished"}
 _PODIUM = {1: "gold", 2: "silver", 3: "bronze"}
-_HEX_COLOUR = re.compile(r"#?([0-9a-fA-F]{3}|[0-9a-fA-F]{6})")
 _ALPHA2 = re.compile(r"[A-Za-z]{2}")
 _REGIONAL_INDICATOR_A = 0x1F1E6
 # Every poll parses the board/overlay bodies it was handed (for the version token); the poll cache hands out the same
@@ -45,27 +45,10 @@ PARSED_BODIES = 64
 # --- formatting ------------------------------------------------------------------------------------------------------
 
 
-def lap_time(ms: int | None, dnf: str = "DNF") -> str:
-    """1:02.345, 0:09.876; None → DNF."""
-    if ms is None:
-        return dnf
-    minutes, rest = divmod(max(0, ms), 60_000)
-    return f"{minutes}:{rest // 1000:02d}.{rest % 1000:03d}"
-
-
 def clock_time(ms: int) -> str:
     """A countdown as m:ss (whole seconds, rounded up so 0:00 means the time is really over)."""
     seconds = (max(0, ms) + 999) // 1000
     return f"{seconds // 60}:{seconds % 60:02d}"
-
-
-def gap_time(ms: int | None) -> str:
-    """+0.123, +1:02.345; the leader and DNF show nothing."""
-    if not ms:
-        return ""
-    if ms < 60_000:
-        return f"+{ms // 1000}.{ms % 1000:03d}"
-    return f"+{lap_time(ms)}"
 
 
 def signed_gap(ms: int | None) -> str:
@@ -75,12 +58,6 @@ def signed_gap(ms: int | None) -> str:
     if ms == 0:
         return "±0.000"
     return gap_time(ms) if ms > 0 else "-" + gap_time(-ms)[1:]
-
-
-def safe_colour(value: str | None, default: str) -> str:
-    """`#rgb`/`#rrggbb` (the `#` optional in the input) or `default`: nothing else ever reaches a stylesheet."""
-    match = _HEX_COLOUR.fullmatch((value or "").strip())
-    return f"#{match.group(1).lower()}" if match else default
 
 
 def flag_emoji(country_code: str | None) -> str:
@@ -110,50 +87,9 @@ class BoardSnapshot(BaseModel):
         return min((e.fastest_lap_ms for e in self.entries if e.fastest_lap_ms is not None), default=None)
 
 
-class OverlaySnapshot(BaseModel):
-    """A materialised overlay body (`GET /api/overlay/{event}`): the live race of one track."""
-    model_config = ConfigDict(extra="ignore")
-    track_id: str = "1"
-    version: int = 0
-    status: str = "NO_RACE"
-    race_id: str | None = None
-    username: str = ""
-    raced_by_proxy: bool = False
-    laps: int = 0
-    valid_laps: int = 0
-    last_lap_ms: int | None = None
-    fastest_lap_ms: int | None = None
-    fastest_average_ms: int | None = None
-    ranking_method: str = "BEST_LAP_TIME"
-    as_of_ms: int = 0
-    running: bool = False
-    time_left_ms: int = 0
-    current_lap_ms: int = 0
-    position: int | None = None
-    gap_to_leader_ms: int | None = None
-
-    @classmethod
-    def parse(cls, body: str) -> OverlaySnapshot:
-        return _parse_overlay(body)
-
-    @property
-    def is_live(self) -> bool:
-        return self.status in LIVE_STATUSES
-
-    def clocks_at(self, now_ms: int) -> tuple[int, int]:
-        """(time left, current lap) at `now_ms`: the stored readings, advanced while the race runs."""
-        elapsed = max(0, now_ms - self.as_of_ms) if self.running else 0
-        return max(0, self.time_left_ms - elapsed), self.current_lap_ms + elapsed
-
-
 @lru_cache(maxsize=PARSED_BODIES)
 def _parse_board(body: str) -> BoardSnapshot:
     return BoardSnapshot.model_validate(json.loads(body))
-
-
-@lru_cache(maxsize=PARSED_BODIES)
-def _parse_overlay(body: str) -> OverlaySnapshot:
-    return OverlaySnapshot.model_validate(json.loads(body))
 
 
 def version_token(*versions: int | str) -> str:

@@ -12,9 +12,9 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.devices import CommandRequest, CommandType, DeviceKind, DeviceService, DeviceView
-from chalicelib.domain.errors import NotFound
 from chalicelib.domain.events import Event, Track
 from chalicelib.domain.races import CreateRaceInput, RaceService
 from drem_leaderboard.commands import parse_command

@@ -12,22 +12,25 @@ vendor/; `cdk synth` refuses a stale one instead of downloading.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import shutil
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
-from drem_local.app_source import FUNCTIONS_DIR, REPO_ROOT
+from drem_infra.lambda_bundle import (
+    DEPENDENCY_STAMP,
+    LAMBDA_LOCK,
+    dependencies_current,
+    lock_digest,
+    python_version,
+    vendor_packages,
+)
+from drem_local.app_source import FUNCTIONS_DIR
 
 HELP = ("copy drem_infra, drem_leaderboard, drem_web and the PDF fonts into functions/vendor/ for the Lambda bundle")
 
 HTMX_RELATIVE = Path("static/vendor/htmx.min.js")
-LAMBDA_LOCK = REPO_ROOT / "requirements" / "lambda.txt"
-# Which lock filled vendor/ with wheels (its sha256), and which top-level names those wheels installed.
-DEPENDENCY_STAMP = ".drem-dependencies.json"
 # Lambda's python3.11 runs on x86_64 Amazon Linux 2 (glibc 2.26): manylinux2014 (glibc 2.17) wheels, which the lock
 # was resolved for. Chalice picks the function's runtime from the Python that packages it, so the wheels are for this
 # interpreter's version.
@@ -36,60 +39,6 @@ LAMBDA_PLATFORMS = ("manylinux2014_x86_64",)
 
 class BuildError(RuntimeError):
     """The bundle could not be built; the message says why and what to do."""
-
-
-@dataclass(frozen=True)
-class VendoredPackage:
-    name: str
-    source: Path
-    # None copies the whole package; otherwise only these files (drem_infra's stack.py imports aws_cdk, which
-    # Lambda neither has nor needs).
-    only: tuple[str, ...] | None = None
-
-
-def packages(repo_root: Path = REPO_ROOT) -> tuple[VendoredPackage, ...]:
-    return (
-        VendoredPackage("drem_infra", repo_root / "infra_cdk" / "drem_infra", only=("__init__.py", "resources.py")),
-        VendoredPackage("drem_leaderboard", repo_root / "leaderboard" / "drem_leaderboard"),
-        VendoredPackage("drem_web", repo_root / "web" / "drem_web"),
-    )
-
-
-def vendor_packages(functions_dir: Path = FUNCTIONS_DIR, repo_root: Path = REPO_ROOT) -> list[Path]:
-    """Replace functions_dir/vendor/<package> with a fresh copy of each package; returns the copied dirs."""
-    vendor = functions_dir / "vendor"
-    vendor.mkdir(parents=True, exist_ok=True)
-    copied = []
-    for package in packages(repo_root):
-        if not (package.source / "__init__.py").is_file():
-            raise FileNotFoundError(f"package {package.name} not found at {package.source}")
-        target = vendor / package.name
-        if target.exists():
-            shutil.rmtree(target)
-        if package.only is None:
-            shutil.copytree(package.source, target, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        else:
-            target.mkdir()
-            for name in package.only:
-                shutil.copy2(package.source / name, target / name)
-        copied.append(target)
-    return copied
-
-
-def lock_digest(lock: Path = LAMBDA_LOCK) -> str:
-    return hashlib.sha256(lock.read_bytes()).hexdigest()
-
-
-def dependencies_current(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA_LOCK) -> bool:
-    """True when vendor/ holds exactly the wheels of this lock for this Python (no download needed)."""
-    import json
-
-    stamp = functions_dir / "vendor" / DEPENDENCY_STAMP
-    try:
-        recorded = json.loads(stamp.read_text())
-    except (OSError, ValueError):
-        return False
-    return recorded.get("lock_sha256") == lock_digest(lock) and recorded.get("python") == _python_version()
 
 
 def vendor_dependencies(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA_LOCK) -> list[str]:
@@ -102,7 +51,7 @@ def vendor_dependencies(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA
     with tempfile.TemporaryDirectory(prefix="drem-lambda-deps-") as scratch:
         target = Path(scratch) / "site"
         command = [sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-compile",
-                   "--target", str(target), "--implementation", "cp", "--python-version", _python_version(),
+                   "--target", str(target), "--implementation", "cp", "--python-version", python_version(),
                    "--only-binary=:all:", "--no-deps", "--require-hashes", "-r", str(lock)]
         for platform in LAMBDA_PLATFORMS:
             command[4:4] = ["--platform", platform]
@@ -119,13 +68,9 @@ def vendor_dependencies(functions_dir: Path = FUNCTIONS_DIR, lock: Path = LAMBDA
         for name in installed:
             _remove(vendor / name)
             shutil.move(str(target / name), vendor / name)
-    stamp.write_text(json.dumps({"lock_sha256": lock_digest(lock), "python": _python_version(),
+    stamp.write_text(json.dumps({"lock_sha256": lock_digest(lock), "python": python_version(),
                                  "installed": installed}, indent=1) + "\n")
     return installed
-
-
-def _python_version() -> str:
-    return f"{sys.version_info.major}.{sys.version_info.minor}"
 
 
 def _remove(path: Path) -> None:
@@ -156,7 +101,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from chalicelib.domain.errors import ServiceUnavailable
+    from chalicelib.core.errors import ServiceUnavailable
 
     try:
         copied = vendor_packages(args.functions_dir)

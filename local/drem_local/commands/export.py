@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from chalicelib.domain.errors import DremError
+    from chalicelib.core.errors import DremError
     from chalicelib.domain.event_transfer.export import collect_event
     from chalicelib.formats.event_export.writer import write_export
 

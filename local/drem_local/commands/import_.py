@@ -132,7 +132,8 @@ def journal_for(folder: Path, event_id: str) -> FileImportJournal:
 
 
 def run(args: argparse.Namespace) -> int:
-    from chalicelib.domain.errors import DremError
+    from chalicelib.core.errors import DremError
+    from chalicelib.domain.event_transfer.checks import check_bundle
     from chalicelib.domain.event_transfer.import_plan import plan_import
     from chalicelib.domain.event_transfer.import_run import PartialImport, run_import
     from chalicelib.domain.event_transfer.passwords import parse_password_file
@@ -141,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         passwords = parse_password_file(args.password_file.read_text()) if args.password_file else {}
         bundle = read_export(args.folder)
+        check_bundle(bundle)  # every record as drem would have written it, before anything is stored
         target = open_stack(args)
         journal = journal_for(args.folder, args.event_id or bundle.event_id)
         plan = plan_import(bundle, target, new_event_id=args.event_id, passwords=passwords,

@@ -55,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from chalicelib.domain.errors import DremError
+    from chalicelib.core.errors import DremError
     from drem_local.api_client import ApiError
 
     try:

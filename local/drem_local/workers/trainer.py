@@ -179,7 +179,7 @@ class Trainer:
     def _race_version(self, job: Any, model: Any) -> tuple[Any, str | None]:
         """Scrutineer the job's version and drive its autonomous run (the one recorded on the job, if a restart
         came after it was made), then finish the job."""
-        from chalicelib.auth.principals import User
+        from chalicelib.core.principals import User
         from chalicelib.domain.booth_runs import NewRun, RunMode, RunStatus
         from chalicelib.domain.model_scrutiny import ScrutineerRequest
 
@@ -256,7 +256,7 @@ class Trainer:
 
     def _record_evaluation(self, run: Any) -> None:
         """The run's metrics as the version's evaluation: the registry's timeline and per-track plots show it."""
-        from chalicelib.auth.principals import User
+        from chalicelib.core.principals import User
         from chalicelib.domain.model_registry import EvaluationInput
 
         metrics = run.metrics

@@ -4,7 +4,7 @@ from __future__ import annotations
 import hashlib
 import json
 
-from chalicelib.domain.errors import Conflict, NotFound
+from chalicelib.core.errors import Conflict, NotFound
 from chalicelib.domain.event_transfer.ports import StackReader
 from chalicelib.formats.event_export.records import ArchiveEntry, EventBundle, Item, archive_file, sorted_items
 

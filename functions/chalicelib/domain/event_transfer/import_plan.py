@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from chalicelib.domain.errors import Conflict, InvalidInput
+from chalicelib.core.errors import Conflict, InvalidInput
 from chalicelib.domain.event_transfer.passwords import password_problem
 from chalicelib.domain.event_transfer.ports import ImportJournal, StackReader, StackWriter
 from chalicelib.formats.event_export.records import EVENT_ID, Account, EventBundle, Item

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from chalicelib.domain.errors import Conflict, DremError
+from chalicelib.core.errors import Conflict, DremError
 from chalicelib.domain.event_transfer.import_plan import ImportPlan
 from chalicelib.domain.event_transfer.ports import ImportJournal, StackWriter
 from chalicelib.formats.event_export.records import EVENT_SCOPED_TABLES, ITEM_FILES

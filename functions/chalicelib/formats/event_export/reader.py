@@ -1,9 +1,10 @@
 """Reading an event export folder: every listed file checked (name, kind, checksum), every record parsed.
 
-A tampered export is hostile input: checksums only catch accidents, so `read_export` also re-validates every item
-and archive (`checks`: the app's own models, keys only under their expected prefixes, every archive through the
-upload validator). Listed names go through the one member-name vetting of `chalicelib.formats.member_names`, and
-every file is opened without following links: a link or device in the folder is refused, never read.
+A tampered export is hostile input: checksums only catch accidents, so what `read_export` returns is re-validated
+(`chalicelib.domain.event_transfer.checks.check_bundle`: the app's own models, keys only under their expected
+prefixes, every archive through the upload validator) before `drem import` writes anything. Listed names go
+through the one member-name vetting of `chalicelib.formats.member_names`, and every file is opened without
+following links: a link or device in the folder is refused, never read.
 """
 from __future__ import annotations
 
@@ -14,8 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from chalicelib.domain.errors import InvalidInput
-from chalicelib.formats.event_export.checks import check_bundle
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats.event_export.records import (
     ALLOWED_PK,
     ARCHIVES_FILE,
@@ -82,7 +82,6 @@ def read_export(folder: Path) -> EventBundle:
         raise InvalidExport(f"{USERS_FILE}: a username appears twice.", field="username")
     bundle = EventBundle(event_id=event_id, items=items, accounts=accounts, archives=archives,
                          archive_data=archive_data, logo=_logo(manifest.get("logo"), contents))
-    check_bundle(bundle)
     return bundle
 
 

@@ -9,7 +9,7 @@ from typing import IO
 
 from pydantic import BaseModel
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.formats.model_archive.layout import METADATA_FALLBACK_MEMBER, METADATA_MEMBER
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
 from chalicelib.formats.model_archive.report import ArchiveReport, not_valid, quarantine

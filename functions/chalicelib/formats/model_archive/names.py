@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import re
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 
 MODEL_NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 ARCHIVE_SUFFIX = ".tar.gz"

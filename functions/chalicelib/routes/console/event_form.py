@@ -11,8 +11,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.countries import country_code_from_text, unknown_country_message
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.events import DEFAULT_LINKS, Event, EventInput, EventType
 from drem_leaderboard.models import RaceConfig, RankingMethod, TrackType
 from drem_web import labels

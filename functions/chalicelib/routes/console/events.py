@@ -6,7 +6,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route, uploaded_file
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.formats import logo_image
 from chalicelib.routes.console import event_form

@@ -8,10 +8,10 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import NotFound
+from chalicelib.core.principals import User
 from chalicelib.domain.activation import ActivationCodeRequest
 from chalicelib.domain.devices import CommandRequest
-from chalicelib.domain.errors import NotFound
 from chalicelib.domain.fleets import FleetInput
 from chalicelib.routes.console.forms import (
     SHOWN_ON_FORM,

@@ -24,8 +24,8 @@ from chalice.app import Request
 from pydantic import ValidationError
 
 from chalicelib.auth.access import form_fields
+from chalicelib.core.errors import DremError, NotFound
 from chalicelib.domain.countries import country_code_from_text
-from chalicelib.domain.errors import DremError, NotFound
 from chalicelib.http_errors import status_for
 from chalicelib.routes import responses
 

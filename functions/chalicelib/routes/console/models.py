@@ -8,10 +8,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import InvalidInput
+from chalicelib.core.principals import User
 from chalicelib.domain.assignments import Assignment
 from chalicelib.domain.devices import DeviceKind
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
 from chalicelib.domain.racer_models import MODEL_STAFF as MODEL_STAFF_ROLES
 from chalicelib.domain.racer_models import ListQuery, ModelRecord, ModelStatus

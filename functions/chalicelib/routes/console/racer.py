@@ -12,8 +12,8 @@ from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth import cookies
 from chalicelib.auth.access import PUBLIC, SIGNED_IN, route
-from chalicelib.auth.principals import Principal, User
 from chalicelib.auth.rate_limits import client_address, guarded_sign_up
+from chalicelib.core.principals import Principal, User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.identity import password_policy_text
 from chalicelib.domain.passwords import PasswordChangeForm

@@ -11,7 +11,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.racer_queue import AddToQueue, MoveInQueue, QueueEntryRef
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
 from chalicelib.views.on_deck_panel import queue_panel

@@ -12,9 +12,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.errors import InvalidInput
+from chalicelib.core.principals import User
 from chalicelib.domain import audit
-from chalicelib.domain.errors import InvalidInput
 from chalicelib.domain.numbers import lap_number, whole_number
 from chalicelib.domain.profiles import PublicProfile
 from chalicelib.domain.races import LapEdit

@@ -6,7 +6,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, REGISTRATION, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.countries import COUNTRY_CHOICES
 from chalicelib.domain.users import RegisteredUser, StaffRegistrationForm
 from chalicelib.htmx import is_htmx

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
-from chalicelib.auth.principals import User
+from chalicelib.core.principals import User
 from chalicelib.domain.races import CreateRaceInput
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, checkbox, error_status, field_errors, optional, submitted
 from chalicelib.views.on_deck_panel import queue_panel

@@ -8,7 +8,7 @@ from chalice import Blueprint, Response
 
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, route
-from chalicelib.auth.principals import USER_ROLES, User
+from chalicelib.core.principals import USER_ROLES, User
 from chalicelib.domain.users import DirectoryUser, RoleChange
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
 from drem_web import labels, render

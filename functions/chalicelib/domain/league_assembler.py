@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.league import EvaluationTrial, SubmissionInput
 from chalicelib.formats.league_export import ExportFiles
 from chalicelib.formats.model_metadata import ModelMetadata, ModelMetadataError, parse_model_metadata_json

@@ -22,10 +22,10 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from chalicelib.auth.principals import Role
-from chalicelib.domain.errors import DremError
+from chalicelib.core.errors import DremError
+from chalicelib.core.principals import Role
 from chalicelib.domain.events import Event
-from chalicelib.domain.leaderboards import BoardRow, BoardState, board_item_content
+from chalicelib.domain.leaderboards import BoardRow, BoardState, OverlaySnapshot, board_item_content
 from chalicelib.domain.names import check_display_name
 from chalicelib.domain.profiles import anonymised_name
 from chalicelib.domain.racer_models import (
@@ -39,7 +39,6 @@ from chalicelib.domain.races import RaceRecord
 from chalicelib.formats.event_export.records import EventBundle, InvalidExport, Item, archive_file
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
 from chalicelib.formats.model_archive.verdict import inspect_archive
-from chalicelib.views.public_views import OverlaySnapshot
 from drem_leaderboard.models import TERMINAL_STATUSES, Race, RankingMethod
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 

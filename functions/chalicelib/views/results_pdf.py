@@ -12,7 +12,7 @@ from typing import Any
 
 from fpdf import FPDF
 
-from chalicelib.domain.errors import InvalidInput
+from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.results import EventResults, ResultEntry, ResultsBoard
 from chalicelib.formats import pdf_fonts
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
