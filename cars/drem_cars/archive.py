@@ -1,14 +1,17 @@
 """Unpack a model archive on the car, trusting none of its member names.
 
 The server validated the archive at upload and the car verified its md5 before calling this, so a bad archive here
-means tampering or a bug; the extractor still re-checks every member (defence in depth): regular files only (no
-links, devices, fifos), relative names without `..`, backslashes or NULs, bounded count and size. It writes into a
+means tampering or a bug; the extractor still re-checks every member (defence in depth) with the server's own rules
+(drem_archive.member_names: regular files and folders only, no links, devices or fifos; relative names without `..`,
+backslashes, drive letters, control or invisible characters), bounded count and size. It writes into a
 directory it is given (a fresh staging directory), never anywhere else.
 """
 from __future__ import annotations
 
 import tarfile
 from pathlib import Path, PurePosixPath
+
+from drem_archive.member_names import RefusedMember, vet_member_name, vet_member_type
 
 MAX_MEMBERS = 64
 MAX_TOTAL_BYTES = 512 * 1024 * 1024
@@ -18,16 +21,15 @@ class UnsafeArchive(ValueError):
     """The archive has a member the car refuses to write."""
 
 
-def _safe_relative(name: str) -> PurePosixPath:
-    if not name or "\\" in name or "\x00" in name or any(ord(c) < 32 for c in name):
-        raise UnsafeArchive(f"member name {name!r} has forbidden characters")
-    path = PurePosixPath(name)
-    if path.is_absolute() or any(part == ".." for part in path.parts) or (path.parts and ":" in path.parts[0]):
-        raise UnsafeArchive(f"member {name!r} points outside the model folder")
-    parts = [p for p in path.parts if p not in ("", ".")]
-    if not parts:
-        raise UnsafeArchive(f"member name {name!r} is empty")
-    return PurePosixPath(*parts)
+def _vetted(member: tarfile.TarInfo) -> PurePosixPath | None:
+    """The member's relative path (None: a folder, written as its files are), by the one vetting every drem reader
+    of archives uses (drem_archive.member_names)."""
+    try:
+        name = vet_member_name(member.name)
+        vet_member_type(member, name)
+    except RefusedMember as refused:
+        raise UnsafeArchive(refused.reason) from None
+    return None if member.isdir() or name is None else PurePosixPath(name)
 
 
 def safe_extract(archive: Path, destination: Path) -> list[str]:
@@ -38,11 +40,9 @@ def safe_extract(archive: Path, destination: Path) -> list[str]:
     try:
         with tarfile.open(archive, mode="r|gz") as stream:
             for member in stream:
-                relative = _safe_relative(member.name)
-                if member.isdir():
+                relative = _vetted(member)
+                if relative is None:
                     continue
-                if not member.isreg():
-                    raise UnsafeArchive(f"member {member.name!r} is not a regular file (links and devices refused)")
                 if len(written) >= MAX_MEMBERS:
                     raise UnsafeArchive(f"more than {MAX_MEMBERS} files")
                 total += member.size

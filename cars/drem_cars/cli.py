@@ -95,17 +95,17 @@ def _activate(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from drem_cars.client import DeviceApiError, DeviceClient
-    from drem_cars.credentials import CredentialStore, NotActivated
-    from drem_cars.runner import open_agent_files
+    from drem_cars.client import DeviceApiError
+    from drem_cars.credentials import NotActivated
+    from drem_cars.startup import start_device
 
-    store = CredentialStore(args.config_dir)
     try:
-        client = DeviceClient(store)
+        device = start_device(args.config_dir)
     except NotActivated as exc:
         print(exc, file=sys.stderr)
         return 1
-    outbox, models = open_agent_files(store.directory)
+    client, outbox, models = device.client, device.outbox, device.models
+    assert models is not None  # a car runs models
     local = {"device_id": client.device_id, "api": client.api, "hostname": client.credential.hostname,
              "fleet_id": client.credential.fleet_id, "outbox_pending": outbox.count("pending"),
              "outbox_rejected": outbox.count("rejected"),

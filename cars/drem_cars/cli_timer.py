@@ -29,23 +29,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from drem_cars.agent import CarAgent
-    from drem_cars.client import DeviceClient
-    from drem_cars.credentials import CredentialStore, NotActivated
+    from drem_cars.credentials import NotActivated
     from drem_cars.drivers.timer_device import TimerDriver
-    from drem_cars.drivers.timing_strips import TimingStrips
-    from drem_cars.outbox import Outbox
+    from drem_cars.parts.timing_strips import TimingStrips
     from drem_cars.runner import run_until_stopped
+    from drem_cars.startup import start_device
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    store = CredentialStore(args.config_dir)
     try:
-        client = DeviceClient(store, api=api_from_arguments(args.api, args.aws, args.stage))
+        device = start_device(args.config_dir, api=api_from_arguments(args.api, args.aws, args.stage),
+                              runs_models=False)
     except (NotActivated, NoDeploymentRecord) as exc:
         print(f"drem timer: {exc}", file=sys.stderr)
         return 1
+    client, outbox = device.client, device.outbox
     print(f"timer {client.credential.hostname}: event {args.event}, track {args.track}, strips on GPIO "
           f"{args.pins}, posting to {client.api}", flush=True)
-    outbox = Outbox(store.directory / "outbox.sqlite3")
     pins = tuple(int(p) for p in args.pins.split(","))
     strips = TimingStrips(outbox, args.event, args.track, client.device_id, pins)
     agent = CarAgent(client, TimerDriver(), outbox, store=None)

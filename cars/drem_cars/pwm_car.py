@@ -13,9 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from drem_cars import channels as ch
-from drem_cars.drivers.camera_cv import CameraUnavailable, OpenCvCamera
 from drem_cars.drivers.local import LocalDriver
-from drem_cars.drivers.pwm import (
+from drem_cars.parts.camera_cv import CameraUnavailable, OpenCvCamera
+from drem_cars.parts.drive_mapping import ActionToDrive
+from drem_cars.parts.pilot_slot import PilotSlot
+from drem_cars.parts.pwm import (
     DEEPRACER_SERVO_ENABLE_GPIO,
     DEEPRACER_STEERING_CHANNEL,
     DEEPRACER_THROTTLE_CHANNEL,
@@ -31,8 +33,6 @@ from drem_cars.drivers.pwm import (
     load_calibration,
     pwm_chip_dir,
 )
-from drem_cars.parts.drive_mapping import ActionToDrive
-from drem_cars.parts.pilot_slot import PilotSlot
 from drem_cars.parts.safety import Safety
 from drem_cars.parts.telemetry import Telemetry
 from drem_cars.vehicle import Vehicle

@@ -12,16 +12,13 @@ from pathlib import Path
 from drem_cars.agent import CarAgent
 from drem_cars.car_tls import CarTrust, CertificateProblem
 from drem_cars.client import DeviceClient
-from drem_cars.credentials import CredentialStore, NotActivated
+from drem_cars.credentials import NotActivated
 from drem_cars.drivers.deepracer_console import ConsoleError, ConsoleUnreachable, DeepRacerConsole
 from drem_cars.model_store import ModelStore
 from drem_cars.outbox import Outbox
+from drem_cars.startup import start_device
 
 EXIT_REVOKED = 3
-
-
-def open_agent_files(config_dir: Path) -> tuple[Outbox, ModelStore]:
-    return Outbox(config_dir / "outbox.sqlite3"), ModelStore(config_dir / "models")
 
 
 def run_until_stopped(agent: CarAgent, deadline: float | None) -> None:
@@ -37,13 +34,13 @@ def run_until_stopped(agent: CarAgent, deadline: float | None) -> None:
 
 
 def run_agent(args: argparse.Namespace) -> int:
-    store = CredentialStore(args.config_dir)
     try:
-        client = DeviceClient(store)
+        device = start_device(args.config_dir)
     except NotActivated as exc:
         print(exc, file=sys.stderr)
         return 1
-    outbox, models = open_agent_files(store.directory)
+    client, outbox, models = device.client, device.outbox, device.models
+    assert models is not None  # a car runs models
     deadline = time.monotonic() + args.seconds if args.seconds else None
     driving = (f"the DeepRacer at {args.deepracer}" if args.deepracer else "camera + PWM" if args.pwm
                else "the simulator" if args.sim else None)
@@ -53,7 +50,7 @@ def run_agent(args: argparse.Namespace) -> int:
               f"{driving}, reporting to {client.api}; {outbox.count()} crossing(s) waiting to be sent. "
               "Ctrl-C stops.", flush=True)
     if args.deepracer:
-        return _run_deepracer(args, client, outbox, models, deadline, store.directory)
+        return _run_deepracer(args, client, outbox, models, deadline, device.config_dir)
     if args.pwm:
         return _run_pwm(args, client, outbox, models, deadline)
     if not args.sim:
@@ -85,8 +82,8 @@ def _sim_car(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, tra
 
 def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, models: ModelStore,
              deadline: float | None) -> int:
-    from drem_cars.drivers.camera_cv import camera_source
-    from drem_cars.drivers.pwm import DEEPRACER_CALIBRATION
+    from drem_cars.parts.camera_cv import camera_source
+    from drem_cars.parts.pwm import DEEPRACER_CALIBRATION
     from drem_cars.parts.safety import Safety
     from drem_cars.pwm_car import HardwareUnavailable, PwmWiring, build_pwm_car
 

@@ -1,11 +1,13 @@
 """Running untrusted work (a racer's model graph) in a child process that cannot take the machine with it: the limits
 the child sets on itself before exec, and how its parent stops it with everything it started. Used by the console
-model conversion (domain/model_conversion) and the scrutineering drive (drem_local.workers.scrutineer)."""
+model conversion (domain/model_conversion) and the scrutineering drive (drem_local.workers.scrutineer), which also
+read a child's death the same way (`child_death`)."""
 from __future__ import annotations
 
 import os
 import signal
 import subprocess
+from dataclasses import dataclass
 
 
 def limit_resources(memory_bytes: int, cpu_seconds: int) -> None:
@@ -23,3 +25,27 @@ def kill_group(process: subprocess.Popen[bytes]) -> None:
         os.killpg(process.pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
+
+
+@dataclass(frozen=True)
+class ChildDeath:
+    """Why a contained child ended badly, read from its exit status and stderr (one reading for every caller, which
+    then says it in its own words). `cause` is "cpu" (its CPU limit, SIGXCPU), "memory" (an allocation failed under
+    its address-space limit), "signal" (killed otherwise; `how` names the signal) or "exit" (`how`: "exit N")."""
+    cause: str
+    how: str
+    stderr: str
+
+    @property
+    def last_line(self) -> str:
+        return next((line for line in reversed(self.stderr.strip().splitlines()) if line.strip()), "")
+
+
+def child_death(returncode: int, stderr: bytes) -> ChildDeath:
+    text = stderr.decode("utf-8", "replace")
+    if returncode < 0:
+        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
+        return ChildDeath("cpu" if name == "SIGXCPU" else "signal", name, text)
+    if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
+        return ChildDeath("memory", f"exit {returncode}", text)
+    return ChildDeath("exit", f"exit {returncode}", text)

@@ -50,6 +50,7 @@ BOOTH_IMAGE_FILES: tuple[str, ...] = (
     "!infra_cdk/drem_infra/__init__.py",
     "!infra_cdk/drem_infra/resources.py",
     "!leaderboard/drem_leaderboard",
+    "!archive/drem_archive",
     "!web/drem_web",
     "!sim/drem_sim",
     "!local/drem_local",

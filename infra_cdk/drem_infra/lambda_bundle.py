@@ -35,6 +35,7 @@ def packages(repo_root: Path = REPO_ROOT) -> tuple[VendoredPackage, ...]:
     return (
         VendoredPackage("drem_infra", repo_root / "infra_cdk" / "drem_infra", only=("__init__.py", "resources.py")),
         VendoredPackage("drem_leaderboard", repo_root / "leaderboard" / "drem_leaderboard"),
+        VendoredPackage("drem_archive", repo_root / "archive" / "drem_archive"),
         VendoredPackage("drem_web", repo_root / "web" / "drem_web"),
     )
 

@@ -55,6 +55,7 @@ LIVE_IMAGE_FILES: tuple[str, ...] = (
     "!infra_cdk/drem_infra/__init__.py",
     "!infra_cdk/drem_infra/resources.py",
     "!leaderboard/drem_leaderboard",
+    "!archive/drem_archive",
     "!web/drem_web",
     "!functions/chalicelib",
     "**/__pycache__",

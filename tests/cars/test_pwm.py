@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from drem_cars.drivers.pwm import (
+from drem_cars.parts.pwm import (
     MOTOR_DEFAULT,
     SERVO_DEFAULT,
     PwmActuator,

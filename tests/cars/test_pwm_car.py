@@ -16,10 +16,10 @@ import pytest
 from drem_cars import channels as ch
 from drem_cars import cli
 from drem_cars.credentials import CredentialStore, StoredCredential
-from drem_cars.drivers.pwm import MOTOR_DEFAULT, SERVO_DEFAULT
 from drem_cars.model_store import InstalledModel, ModelStore, md5_of
 from drem_cars.parts.drive_mapping import unit_throttle
 from drem_cars.parts.pilot_onnx import OnnxPilot
+from drem_cars.parts.pwm import MOTOR_DEFAULT, SERVO_DEFAULT
 from drem_cars.pwm_car import PwmCar, PwmWiring, build_pwm_car
 
 pytestmark = pytest.mark.unit

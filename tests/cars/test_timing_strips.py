@@ -6,8 +6,8 @@ import pytest
 from gpiozero import Device
 from gpiozero.pins.mock import MockFactory
 
-from drem_cars.drivers.timing_strips import CrossingFilter, TimingStrips
 from drem_cars.outbox import Outbox
+from drem_cars.parts.timing_strips import CrossingFilter, TimingStrips
 
 pytestmark = pytest.mark.unit
 

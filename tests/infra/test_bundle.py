@@ -84,7 +84,7 @@ def lambda_runtime(tmp_path_factory):
 
 def test_app_and_every_backend_module_import_in_a_lambda_like_interpreter(bundle, lambda_runtime):
     unzipped, names, _ = bundle
-    modules = ["app", *_modules_in(names, ("chalicelib", "drem_infra", "drem_leaderboard", "drem_web"))]
+    modules = ["app", *_modules_in(names, ("chalicelib", "drem_infra", "drem_leaderboard", "drem_archive", "drem_web"))]
 
     # -I: ignore PYTHON* env and the user site; -S: no site-packages at all, so only the bundle can satisfy imports.
     result = subprocess.run(
@@ -108,6 +108,7 @@ def test_bundle_carries_the_shared_packages_and_nothing_dev_only(bundle):
     assert "app.py" in names
     assert "drem_infra/resources.py" in names
     assert any(n.startswith("drem_leaderboard/") for n in names)
+    assert "drem_archive/member_names.py" in names  # the archive vetting every upload goes through
     assert any(n.startswith("drem_web/templates/") for n in names)
     if HTMX_SOURCE.is_file():
         assert "drem_web/static/vendor/htmx.min.js" in names

@@ -14,15 +14,15 @@ from chalicelib.formats.event_export.reader import read_export as read_event_exp
 from chalicelib.formats.event_export.records import FORMAT, FORMAT_VERSION, MANIFEST, InvalidExport
 from chalicelib.formats.event_export.writer import checksums, json_bytes
 from chalicelib.formats.league_export import read_export as read_league_export
-from chalicelib.formats.member_names import (
+from chalicelib.formats.model_archive.report import ArchiveStatus
+from chalicelib.formats.model_archive.verdict import inspect_archive
+from drem_archive.member_names import (
     HostileMember,
     MalformedMember,
     vet_folder_file,
     vet_member_name,
     vet_member_type,
 )
-from chalicelib.formats.model_archive.report import ArchiveStatus
-from chalicelib.formats.model_archive.verdict import inspect_archive
 from tests.unit.league_helpers import raw_tar_gz
 
 pytestmark = pytest.mark.unit

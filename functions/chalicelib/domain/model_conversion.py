@@ -14,7 +14,6 @@ import importlib.util
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -25,7 +24,7 @@ from typing import IO, Literal
 
 from pydantic import BaseModel, ValidationError
 
-from chalicelib.contained import kill_group, limit_resources
+from chalicelib.contained import child_death, kill_group, limit_resources
 from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extract
 
 GiB = 1024 ** 3
@@ -154,16 +153,14 @@ def _limit(limits: ConversionLimits) -> Callable[[], None]:  # a preexec_fn
 
 
 def _crash_reason(returncode: int, stderr: bytes, limits: ConversionLimits) -> str:
-    text = stderr.decode("utf-8", "replace")
-    if returncode < 0:
-        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
-        if name == "SIGXCPU":
-            return f"the conversion used more than {limits.cpu_seconds} s of CPU and was stopped"
-        return f"the converter crashed ({name})"
-    if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
+    death = child_death(returncode, stderr)
+    if death.cause == "cpu":
+        return f"the conversion used more than {limits.cpu_seconds} s of CPU and was stopped"
+    if death.cause == "signal":
+        return f"the converter crashed ({death.how})"
+    if death.cause == "memory":
         return f"the conversion needed more than {limits.memory_bytes // GiB} GiB of memory and was stopped"
-    last = next((line for line in reversed(text.strip().splitlines()) if line.strip()), "")
-    return f"the converter failed (exit {returncode}): {last[:200]}".rstrip(": ")
+    return f"the converter failed (exit {returncode}): {death.last_line[:200]}".rstrip(": ")
 
 
 __all__ = ["ConsoleConverter", "ConversionLimits", "ConversionOutcome", "Scrutiny", "converter_installed"]

@@ -3,7 +3,7 @@
 An export is hostile input. Nothing is ever extracted to disk: a folder is walked without following links, an
 archive is streamed member by member and only small regular files whose names the assembler asks for are read,
 each capped, with caps on member count and on decompressed bytes (a gzip bomb stops at the cap). Names are
-normalised ("./a/b" → "a/b"); a member refused by the one vetting of `chalicelib.formats.member_names` (absolute
+normalised ("./a/b" → "a/b"); a member refused by the one vetting of `drem_archive.member_names` (absolute
 names, "..", backslashes, control or bidi characters, links, devices) is skipped, never read.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import IO
 
 from chalicelib.core.errors import InvalidInput, PayloadTooLarge
-from chalicelib.formats.member_names import RefusedMember, vet_member_name, vet_member_type
+from drem_archive.member_names import RefusedMember, vet_member_name, vet_member_type
 
 MiB = 1024 * 1024
 

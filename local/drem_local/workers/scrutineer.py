@@ -132,15 +132,16 @@ def _failed(failure: PlainFailure) -> Any:
 
 def _crash_reason(returncode: int, stderr: bytes, limits: ScrutineerLimits) -> PlainFailure:
     """Why the drive's child died, in a racer's words (and the child's own last lines for staff)."""
-    text = stderr.decode("utf-8", "replace")
-    if returncode < 0:
-        name = signal.Signals(-returncode).name if -returncode in signal.valid_signals() else str(-returncode)
-        if name == "SIGXCPU":
-            return scrutiny_words.drive_out_of_cpu(limits.cpu_seconds)
-        return scrutiny_words.simulator_crashed(f"killed by {name}", text)
-    if "MemoryError" in text or "bad_alloc" in text or "Cannot allocate memory" in text:
-        return scrutiny_words.drive_out_of_memory(limits.memory_bytes, text)
-    return scrutiny_words.simulator_crashed(f"exit {returncode}", text)
+    from chalicelib.contained import child_death
+
+    death = child_death(returncode, stderr)
+    if death.cause == "cpu":
+        return scrutiny_words.drive_out_of_cpu(limits.cpu_seconds)
+    if death.cause == "signal":
+        return scrutiny_words.simulator_crashed(f"killed by {death.how}", death.stderr)
+    if death.cause == "memory":
+        return scrutiny_words.drive_out_of_memory(limits.memory_bytes, death.stderr)
+    return scrutiny_words.simulator_crashed(death.how, death.stderr)
 
 
 class _Stop(BaseException):

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from drem_archive.member_names import RefusedMember, vet_member_name
 from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH, INPUT_NAME, NETWORK_NAME, OUTPUT_NAME
 from drem_sim.learn.dataset import ActionScale
 
@@ -96,7 +97,10 @@ def read_model_files(source: Path) -> dict[str, bytes]:
     try:
         with tarfile.open(source, "r:*") as archive:
             for member in archive:
-                name = _normalise_member_name(member.name)
+                try:  # the one vetting every drem reader of archives uses; a refused member is skipped here
+                    name = vet_member_name(member.name)
+                except RefusedMember:
+                    continue
                 if name is None or not member.isreg() or name not in (METADATA_MEMBER, ONNX_MEMBER, TENSORFLOW_MEMBER):
                     continue
                 if member.size > MAX_MEMBER_BYTES:
@@ -107,14 +111,6 @@ def read_model_files(source: Path) -> dict[str, bytes]:
     except (tarfile.TarError, OSError, EOFError) as error:
         raise ArchiveError(f"{source.name}: not a readable tar.gz archive ({error})") from error
     return files
-
-
-def _normalise_member_name(name: str) -> str | None:
-    # Console archives are sometimes packed with a "./" prefix; anything absolute or escaping is ignored.
-    name = name[2:] if name.startswith("./") else name
-    if not name or name.startswith("/") or ".." in name.split("/"):
-        return None
-    return name
 
 
 def load_metadata(files: dict[str, bytes]) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 A tampered export is hostile input: checksums only catch accidents, so what `read_export` returns is re-validated
 (`chalicelib.domain.event_transfer.checks.check_bundle`: the app's own models, keys only under their expected
 prefixes, every archive through the upload validator) before `drem import` writes anything. Listed names go
-through the one member-name vetting of `chalicelib.formats.member_names`, and every file is opened without
+through the one member-name vetting of `drem_archive.member_names`, and every file is opened without
 following links: a link or device in the folder is refused, never read.
 """
 from __future__ import annotations
@@ -36,7 +36,7 @@ from chalicelib.formats.event_export.records import (
 )
 from chalicelib.formats.event_export.writer import checksums
 from chalicelib.formats.logo_image import LogoImage, normalised_logo
-from chalicelib.formats.member_names import RefusedMember, vet_folder_file
+from drem_archive.member_names import RefusedMember, vet_folder_file
 
 
 def read_export(folder: Path) -> EventBundle:

@@ -6,7 +6,7 @@ long-name / pax headers of any declared size straight into memory. Here every by
 decompressor, declared sizes are checked from each header before its data is touched, and meta headers have their
 own small cap, so a gzip bomb is stopped after a few KiB instead of being inflated.
 
-Member names and kinds go through the one vetting of `chalicelib.formats.member_names`: a trick quarantines the
+Member names and kinds go through the one vetting of `drem_archive.member_names`: a trick quarantines the
 archive, an unusable name makes it NOT_VALID. Data after the tar end marker quarantines it too.
 """
 from __future__ import annotations
@@ -19,10 +19,10 @@ import zlib
 from collections.abc import Callable, Collection
 from typing import IO, BinaryIO
 
-from chalicelib.formats.member_names import HostileMember, RefusedMember, vet_member_name, vet_member_type
 from chalicelib.formats.model_archive.limits import ArchiveLimits, size_text
 from chalicelib.formats.model_archive.report import ArchiveProblem, not_valid, quarantine
 from chalicelib.formats.model_archive.streams import CountingReader, Prefixed, TailWindow
+from drem_archive.member_names import HostileMember, RefusedMember, vet_member_name, vet_member_type
 
 ArchiveSource = str | os.PathLike[str] | BinaryIO | IO[bytes]
 OpenOutput = Callable[[str], IO[bytes]]  # vetted member name → where its bytes go (extraction)
