@@ -58,7 +58,8 @@ def test_operator_runs_a_race_with_keyboard_shortcuts_and_finds_it_in_race_admin
     page.wait_for_function("() => document.querySelector('[data-testid=resets]').textContent.trim() === '2 / 0'")
     page.keyboard.press("Shift+R")  # ... one taken back
     page.wait_for_function("() => document.querySelector('[data-testid=resets]').textContent.trim() === '1 / 0'")
-    page.wait_for_timeout(300)
+    # the take-back's answer is swapped in and settled (htmx drops its request class) before the next key
+    page.wait_for_function("() => !document.querySelector('.htmx-request, .htmx-settling, .htmx-swapping')")
     page.keyboard.press("Enter")  # lap 2: one reset, over the limit of 0 → invalid
     _wait_laps(page, 2)
     page.keyboard.press("l")  # a false finish (lap 3) ...

@@ -13,6 +13,8 @@ from typing import Any
 
 import pytest
 
+from tests.waiting import wait_until
+
 pytestmark = pytest.mark.browser
 
 REPO = Path(__file__).resolve().parents[2]
@@ -131,10 +133,10 @@ def test_leaderboard_and_overlay_show_a_timer_lap_live_in_their_own_tabs(live_st
 
     # The clock ticks locally between polls that change nothing.
     first = overlay.get_by_test_id("time-left").inner_text()
-    overlay.wait_for_timeout(2_200)
-    assert overlay.get_by_test_id("time-left").inner_text() != first
-    idle = live_polls(overlay)
-    assert len(idle) >= 2 and {p["status"] for p in idle} == {204}, idle
+    wait_until(lambda: overlay.get_by_test_id("time-left").inner_text() != first, 30, "the overlay's clock to tick")
+    idle = wait_until(lambda: [polls for polls in [live_polls(overlay)] if len(polls) >= 2], 30,
+                      "two polls of the live region")[0]
+    assert {p["status"] for p in idle} == {204}, idle
 
     seed = int(time.time() * 1000)
     assert strip(pages_url, timer, eid, seed, "crossing-1")["action"] != "rejected"

@@ -19,6 +19,7 @@ from drem_sim import drive_server
 from drem_sim.learn.dataset import load_snapshot
 from drem_sim.runs import upload_run
 from drem_sim.tracks import load_track
+from tests.waiting import wait_until
 
 pytestmark = pytest.mark.sim
 
@@ -92,8 +93,8 @@ def test_the_car_stops_when_controls_stop_arriving(tmp_path: Path) -> None:
     session = drive_server.DriveSession(load_track("drem_oval"), tmp_path, control_timeout_s=0.2)
     session.set_control(drive_server.Control(steering=0.3, throttle=1.0))
     assert session.action()["speed"] == pytest.approx(drive_server.FULL_THROTTLE_SPEED)
-    time.sleep(0.3)
-    assert session.action() == {"steering_angle": 0.0, "speed": 0.0}
+    wait_until(lambda: session.action() == {"steering_angle": 0.0, "speed": 0.0}, 30,
+               "the car to stop once no control arrived for 0.2 s")
 
 
 @pytest.mark.parametrize(("body", "message"), [

@@ -7,7 +7,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import urllib.request
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import pytest
 from chalicelib.formats.model_archive.report import ArchiveStatus
 from chalicelib.formats.model_archive.verdict import inspect_archive
 from drem_local.cli import main
+from tests.waiting import wait_until
 
 pytestmark = pytest.mark.sim
 
@@ -50,11 +50,12 @@ def test_drive_serves_the_page_until_interrupted(tmp_path: Path) -> None:
                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
         assert f"driving drem_oval at http://127.0.0.1:{port}/" in process.stdout.readline()
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=5) as response:
-            first = json.loads(response.read())["steps"]
-        time.sleep(0.3)
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=5) as response:
-            assert json.loads(response.read())["steps"] > first  # the simulation runs in real time
+        def steps() -> int:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=5) as response:
+                return int(json.loads(response.read())["steps"])
+
+        first = steps()
+        wait_until(lambda: steps() > first, 60, "the simulation to step on by itself (it runs in real time)")
     finally:
         process.send_signal(signal.SIGINT)
         _, err = process.communicate(timeout=10)
