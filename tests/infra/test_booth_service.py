@@ -179,8 +179,9 @@ def test_the_image_is_built_from_drems_own_code_only(staged_image_context):
             "functions/chalicelib/routes/booth.py", "local/drem_local/appserver.py",
             "local/drem_local/workers/trainer.py", "sim/drem_sim/env.py", "sim/drem_sim/tracks/drem_oval.yaml",
             "infra_cdk/drem_infra/resources.py"} <= files
-    assert {f.split("/")[0] for f in files} == {"booth", "requirements", "infra_cdk", "leaderboard", "web", "sim",
-                                               "local", "functions"}
+    assert {f.split("/")[0] for f in files} == {"booth", "requirements", "infra_cdk", "leaderboard", "archive", "web",
+                                               "sim", "local", "functions"}
+    assert "archive/drem_archive/member_names.py" in files  # the upload check's member vetting
     forbidden = (".venv/", ".drem", "node_modules/", "functions/vendor/", "cdk.out", "__pycache__", "static/vendor/",
                  "samples/", "functions/.chalice/deployments")
     assert not [f for f in files if any(part in f for part in forbidden)]
