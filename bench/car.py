@@ -249,7 +249,7 @@ def main() -> int:
     frame_ms = 1000 / 15
     print(f"assign→loaded  {len(waits)} fresh pulls of {SAMPLE.name} ({SAMPLE.stat().st_size // 1024} KiB): "
           f"p50 {assign_p50:.2f} s  p95 {assign_p95:.2f} s  max {waits_a.max():.2f} s "
-          f"(assignment by long poll)")
+          f"(assignment pushed to the waiting agent)")
     print(f"inference      {len(infer)} frames: p50 {infer_p50:.3f} ms  p99 {infer_p99:.3f} ms  "
           f"= {infer_p99 / frame_ms:.1%} of a 15 Hz frame")
     print(f"loop jitter    {loops} ticks at 15 Hz during the pulls: p50 {jitter_p50:.2f} ms  p99 {jitter_p99:.2f} ms  "
