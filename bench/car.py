@@ -5,8 +5,8 @@ One run, side by side, on the real local stack (durable moto + app server on fre
 assigned 20 times,
   alternating between two uploads of it so every assignment is a fresh pull (download, md5, unpack, swap, load);
   the time runs from the staff's `PUT /api/cars/{id}/models` answer to the first `GET` that shows `loaded`, as staff
-  see it. The agent holds a long poll on its assignment (the server answers the moment it changes, reading it every
-  0.1 s); rounds start at random phases, as staff clicks do.
+  see it. The agent holds a request open on its assignment, and the staff's write wakes it (a push; storage is
+  re-read every 5 s only for writes made elsewhere); rounds start at random phases, as staff clicks do.
 - inference: `OnnxPilot.run` of the sample model over 1000 simulator camera frames (1 intra-op thread).
 - loop jitter: lateness of each 15 Hz tick of the car's drive loop (sim world + camera + model + safety), measured
   in the car process while the assignments above ran (its agent threads and the model swaps share that process).
@@ -249,7 +249,7 @@ def main() -> int:
     frame_ms = 1000 / 15
     print(f"assign→loaded  {len(waits)} fresh pulls of {SAMPLE.name} ({SAMPLE.stat().st_size // 1024} KiB): "
           f"p50 {assign_p50:.2f} s  p95 {assign_p95:.2f} s  max {waits_a.max():.2f} s "
-          f"(assignment by long poll)")
+          f"(assignment pushed to the waiting agent)")
     print(f"inference      {len(infer)} frames: p50 {infer_p50:.3f} ms  p99 {infer_p99:.3f} ms  "
           f"= {infer_p99 / frame_ms:.1%} of a 15 Hz frame")
     print(f"loop jitter    {loops} ticks at 15 Hz during the pulls: p50 {jitter_p50:.2f} ms  p99 {jitter_p99:.2f} ms  "

@@ -20,6 +20,7 @@ from chalicelib.auth.revocation import REVOKED
 from chalicelib.auth.sessions import use_session_backends
 from chalicelib.core.errors import ServiceUnavailable
 from chalicelib.domain.activation import ActivationService
+from chalicelib.domain.assignment_signals import AssignmentSignals
 from chalicelib.domain.assignments import AssignmentService
 from chalicelib.domain.booth_drive import DriveService, LiveDrives
 from chalicelib.domain.booth_runs import RunService
@@ -275,7 +276,14 @@ def assignment_service(settings: Settings | None = None) -> AssignmentService:
     fleet_table, dynamodb = settings.table("fleet"), clients.dynamodb()
     directory = FleetCarDirectory(DynamoDeviceStore(dynamodb, fleet_table),
                                   DynamoEventStore(dynamodb, settings.table("events")))
-    return AssignmentService(DynamoAssignmentStore(dynamodb, fleet_table), model_service(settings), directory)
+    return AssignmentService(DynamoAssignmentStore(dynamodb, fleet_table), model_service(settings), directory,
+                             signals=assignment_signals(), recheck_s=settings.assignment_recheck_s)
+
+
+@functools.cache
+def assignment_signals() -> AssignmentSignals:
+    """One per process: every request thread's writes wake the cars' long polls held on the other threads."""
+    return AssignmentSignals()
 
 
 def league_service(settings: Settings | None = None) -> LeagueService:

@@ -11,7 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from pydantic import BaseModel, ConfigDict, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib import base_path
 from drem_infra import resources
@@ -43,6 +43,10 @@ class Settings(BaseModel):
     # A scrutineering worker drives queued models although this process has no simulator: on AWS, the learning booth's
     # task runs one (drem_infra.booth_service), so the functions queue new models for it.
     scrutineering_worker: bool = False
+    # How often a car's long poll re-reads its assignment from storage, for writes its own process did not make (a
+    # write in the same process wakes it at once: chalicelib.domain.assignment_signals). On AWS every write is made
+    # elsewhere (another Lambda), so this interval is how late a car hears of a change there.
+    assignment_recheck_s: float = Field(default=5.0, gt=0.0, le=20.0)
 
     @classmethod
     def from_env(cls, env: Mapping[str, str]) -> Settings:
@@ -63,6 +67,7 @@ class Settings(BaseModel):
             "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
             "live_wake_dir": env.get("DREM_LIVE_WAKE_DIR") or "",
             "scrutineering_worker": env.get(resources.SCRUTINEERING_WORKER_ENV) == "1",
+            "assignment_recheck_s": env.get(resources.ASSIGNMENT_RECHECK_ENV) or 5.0,
         }
         settings = cls.model_validate(values)
         if settings.base_path and urlsplit(settings.public_url).path in ("", "/"):

@@ -212,6 +212,9 @@ def stage_environment(stage: str, user_pool_id: str, user_pool_client_id: str,
 # AWS, when the stage has the learning booth's task (drem_infra.booth_service), which runs that worker.
 SCRUTINEERING_WORKER_ENV = "DREM_SCRUTINEERING_WORKER"
 
+# Seconds between a waiting car's storage re-reads of its assignment (chalicelib.domain.assignment_signals).
+ASSIGNMENT_RECHECK_ENV = "DREM_ASSIGNMENT_RECHECK_S"
+
 # Local stacks only: the per-installation RSA key the local Cognito signs tokens with and the app pins (0600 JWK in
 # the state dir, generated at the first `drem up`). On AWS, Cognito's own keys (its JWKS) are used instead.
 TOKEN_SIGNING_KEY_FILE = "token-signing-key.json"

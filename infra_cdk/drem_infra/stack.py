@@ -283,6 +283,9 @@ class DremStack(cdk.Stack):
         env["DREM_LIVE_URL"] = ""
         if self.with_booth:  # its task runs the scrutineering worker, so the functions queue new models for it
             env[resources.SCRUTINEERING_WORKER_ENV] = "1"
+        # A car's long poll runs in one Lambda and staff's assignment in another, which cannot wake it: the poll's
+        # storage re-read is all there is, so it runs every second (one GetItem per waiting car per second).
+        env[resources.ASSIGNMENT_RECHECK_ENV] = "1"
         return env
 
     def _public_url_parameter(self, distribution: cloudfront.Distribution) -> ssm.StringParameter:

@@ -26,14 +26,18 @@ and what the community console (aws-deepracer-community/deepracer-custom-console
 common/helpers/api-helper.ts) expects: form field `password`, the answer "failure" and no cookie on a wrong
 password, one `deepracer_token` cookie with max_age 1 h, 401 on /api calls without the current token.
 
-A restart (`FakeConsole.restart()`, what a battery swap does): the web server process starts again with a new random
-SECRET_KEY, so every Flask session and with it every CSRF token is void, and the login token (held in the server's
-memory) is gone. (The key drawn per start is how this fake has always modelled [webserver.py]'s SECRET_KEY; that file
-was not in our source index when the restart was added, so this one point is not re-read upstream.) The nodes boot as
-at power-on: manual mode, `modelLoadingStatus_ = "error"`, no model loaded, throttle_scale 0 ([ctrl_node.cpp] init(),
-[ctrl_state.hpp], [deepracer_navigation_node.py]). What is on disk stays: the model folders under
-/opt/aws/deepracer/artifacts, which `/api/uploaded_model_list` lists by reading that directory ([webserver models.py]
-get_uploaded_models_list, get_file_and_folder_info). While it restarts the car answers nothing (connection refused).
+A restart (`FakeConsole.restart()`, what a battery swap does; `power_off()` then `power_on()` when a test needs to
+see the car down in between): the web server process starts again. What it keeps of the logins follows what we could
+read upstream: [webserver constants.py] keeps the login token in a file, TOKEN_PATH = /opt/aws/deepracer/token.txt,
+which a restart does not remove; the Flask session (and with it the CSRF secret) is signed with a SECRET_KEY that the
+copies of [webserver.py] we could read set to a constant, "secret_" (UNSW-Sunswift/aws-deepracer-webserver-pkg
+webserver_pkg/webserver_pkg/webserver.py, a fork keeping Amazon's header; Amazon's own webserver.py and login.py are
+not in our index). So a plain restart keeps our login and session; `restart(forget_logins=True)` is the case we cannot
+rule out without login.py (a token cleared at boot): a fresh key and no token. The nodes boot as at power-on: manual
+mode, `modelLoadingStatus_ = "error"`, no model loaded, throttle_scale 0 ([ctrl_node.cpp] init(), [ctrl_state.hpp],
+[deepracer_navigation_node.py]). What is on disk stays: the model folders under /opt/aws/deepracer/artifacts, which
+`/api/uploaded_model_list` lists by reading that directory ([webserver models.py] get_uploaded_models_list,
+get_file_and_folder_info). While it is off the car answers nothing (connection refused).
 
 Time: `FakeConsole.advance_clock(seconds)` moves the clock that Flask-WTF's token check (itsdangerous) and the
 login's cookie age read, so a test can pass the one-hour limits without waiting an hour.
@@ -159,11 +163,13 @@ class CarState:
             if found:
                 self.loaded_model = folder
 
-    def boot(self) -> None:
-        """Power-on state of the nodes (see the module docstring); the artifacts on disk are kept."""
+    def boot(self, *, forget_logins: bool = False) -> None:
+        """Power-on state of the nodes (see the module docstring); the artifacts on disk are kept, and the login
+        token too (token.txt) unless `forget_logins`."""
         with self.lock:
             self.load_requests += 1  # a load still running in the old process never finishes
-            self.token, self.token_issued = None, 0.0
+            if forget_logins:
+                self.token, self.token_issued = None, 0.0
             self.mode = MANUAL
             self.active = {MANUAL: True, AUTONOMOUS: False, CALIBRATION: False}
             self.auto_loading_status = "error"
@@ -195,11 +201,14 @@ class CarState:
             self.artifacts[model_name] = installed
 
 
-def create_app(state: CarState) -> Flask:
+SECRET_KEY = "secret_"  # [webserver.py] as the fork we could read sets it: the same key at every start
+
+
+def create_app(state: CarState, secret_key: str = SECRET_KEY) -> Flask:
     app = Flask(__name__)
     # [webserver.py] SECRET_KEY, SESSION_COOKIE_SECURE, CSRFProtect().init_app(app); WTF_CSRF_TIME_LIMIT is
     # Flask-WTF's default 3600 s.
-    app.config.update(SECRET_KEY=os.urandom(16).hex(), SESSION_COOKIE_SECURE=True, WTF_CSRF_TIME_LIMIT=3600)
+    app.config.update(SECRET_KEY=secret_key, SESSION_COOKIE_SECURE=True, WTF_CSRF_TIME_LIMIT=3600)
     CSRFProtect(app)
 
     def logged_in() -> bool:
@@ -484,15 +493,22 @@ class FakeConsole:
     def _serving_thread(self) -> threading.Thread:
         return threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
 
-    def restart(self, tls: ssl.SSLContext | None = None) -> None:
-        """The car's console restarts (battery swap): a new web server process, sessions and logins lost, the nodes
-        at their power-on state, the model folders kept. Same address and port, as the car's. `tls`: a new
-        certificate (a re-imaged car, or someone else answering at its address)."""
+    def restart(self, tls: ssl.SSLContext | None = None, *, forget_logins: bool = False) -> None:
+        """The car's console restarts (battery swap): a new web server process, the nodes at their power-on state,
+        the model folders and (unless `forget_logins`) the login kept. Same address and port, as the car's. `tls`: a
+        new certificate (a re-imaged car, or someone else answering at its address)."""
+        self.power_off()
+        self.power_on(tls, forget_logins=forget_logins)
+
+    def power_off(self) -> None:
         self.server.shutdown()
         self.server.server_close()  # connection refused from here until the new process listens
-        self.state.boot()
+
+    def power_on(self, tls: ssl.SSLContext | None = None, *, forget_logins: bool = False) -> None:
+        self.state.boot(forget_logins=forget_logins)
         self.tls = tls or self.tls
-        self.server = make_server("127.0.0.1", self.port, create_app(self.state), threaded=True,
+        key = os.urandom(16).hex() if forget_logins else SECRET_KEY
+        self.server = make_server("127.0.0.1", self.port, create_app(self.state, key), threaded=True,
                                   ssl_context=self.tls)
         self.thread = self._serving_thread()
         self.thread.start()

@@ -142,6 +142,44 @@ def test_assigned_models_are_pulled_verified_loaded_and_reported(live_stack, adm
         agent.stop()
 
 
+def pushed_assignment(client: DeviceClient, admin: ApiClient, device_id: str, model_ids: list[list[str]]) -> dict:
+    """Hold the car's long poll open, assign while it waits, and return its answer. A poll that had not read its
+    assignment yet when staff assigned is answered "at once" (nothing was waited for): then try again with the next
+    list, a few times."""
+    answer: dict = {}
+    for listed in model_ids:
+        version = client.assignment()["version"]
+        answers: list[dict] = []
+        poll = threading.Thread(target=lambda v=version, into=answers: into.append(
+            client.assignment(wait_for_version=v, wait_s=20)), daemon=True)
+        poll.start()
+        admin.put(f"/api/cars/{device_id}/models", {"model_ids": listed})
+        poll.join(60)
+        assert answers, "the car's long poll was answered"
+        answer = answers[0]
+        assert answer["change_seen_by"] in ("push", "at once"), answer
+        if answer["change_seen_by"] == "push":
+            return answer
+    return answer
+
+
+def test_an_assignment_reaches_a_waiting_car_by_push_before_any_storage_recheck_and_after_an_app_restart(
+        live_stack, admin, tmp_path) -> None:
+    """The app (waitress, several threads): the staff request's thread wakes the car's poll on another thread. The
+    poll's storage re-read comes every 5 s (DREM_ASSIGNMENT_RECHECK_S): "push" means the write woke it first."""
+    _fleet, device_id = activate_car(live_stack, admin, tmp_path, "car-push")
+    model = upload_model(admin, "pushed.tar.gz", onnx_archive(0.25))
+    client = DeviceClient(CredentialStore(tmp_path))
+    lists = [[model["model_id"]], []] * 3
+    answer = pushed_assignment(client, admin, device_id, lists)
+    assert answer["change_seen_by"] == "push", answer
+    running = live_stack.running
+    running.app.stop()
+    running.restart_app(timeout=APP_START_BOUND_S)  # a new process: its wake-ups start empty, storage is the truth
+    answer = pushed_assignment(client, admin, device_id, lists)
+    assert answer["change_seen_by"] == "push", answer
+
+
 def laps_of(admin: ApiClient, event_id: str, race_id: str) -> list[dict]:
     view = admin.get(f"/api/events/{event_id}/races/{race_id}")
     race = view.get("race", view)

@@ -409,27 +409,34 @@ def test_a_strange_battery_answer_is_a_fault_not_a_broken_heartbeat(fake: FakeCo
 
 # --- a restarted car (every battery swap) ---
 
-def test_fake_restart_loses_sessions_and_the_loaded_model_and_keeps_the_folders(fake: FakeConsole,
-                                                                                 tmp_path: Path) -> None:
-    session, headers = logged_in_session(fake)
+@pytest.mark.parametrize("forget_logins", [False, True], ids=["login kept (token.txt)", "login lost"])
+def test_fake_restart_loses_the_loaded_model_and_keeps_the_folders(fake: FakeConsole, tmp_path: Path,
+                                                                   forget_logins: bool) -> None:
     driver = make_driver(fake)
     driver.load_model(console_model(tmp_path))
-    fake.restart()
-    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).status_code == 401, "the login is gone"
-    session, headers = logged_in_session(fake)
-    assert session.get(f"{fake.url}/api/isModelLoading", timeout=5).json()["isModelLoading"] == "error"
+    session, _headers = logged_in_session(fake)  # the car's one login is now this session's
+    fake.restart(forget_logins=forget_logins)
+    answer = session.get(f"{fake.url}/api/isModelLoading", timeout=5)
+    if forget_logins:
+        assert answer.status_code == 401, "the login is gone"
+        session, _headers = logged_in_session(fake)
+        answer = session.get(f"{fake.url}/api/isModelLoading", timeout=5)
+    assert answer.json()["isModelLoading"] == "error"
     listed = session.get(f"{fake.url}/api/uploaded_model_list", timeout=5).json()
     assert [entry["name"] for entry in listed] == ["racer-fast"], "the model folders stay on the car's disk"
     assert fake.state.mode == MANUAL and fake.state.loaded_model is None and fake.state.throttle_scale == 0.0
 
 
+@pytest.mark.parametrize("forget_logins", [False, True], ids=["login kept (token.txt)", "login lost"])
 def test_a_restarted_car_is_told_apart_from_another_login_and_refuses_to_start_without_a_model(
-        fake: FakeConsole, tmp_path: Path) -> None:
+        fake: FakeConsole, tmp_path: Path, forget_logins: bool) -> None:
     driver = make_driver(fake)
     model = console_model(tmp_path)
     driver.load_model(model)
-    fake.restart()
-    assert driver.battery_pct() == 70.0, "nobody else holds a restarted car: drem logs in again at once"
+    fake.power_off()  # the battery swap: the car is off for a while, and the heartbeat notices
+    assert driver.battery_pct() is None
+    fake.power_on(forget_logins=forget_logins)
+    assert driver.battery_pct() == 70.0, "nobody else holds a restarted car: drem logs in again at once if it must"
     assert not any("someone else" in fault for fault in driver.faults())
     assert driver.console.restarts == 1
     with pytest.raises(ConsoleError, match="not started: the car has no model loaded"):
@@ -446,6 +453,18 @@ def test_a_restarted_car_is_told_apart_from_another_login_and_refuses_to_start_w
     Telemetry(faults=driver.faults())
     driver.start_car()
     assert fake.state.driving
+
+
+def test_a_young_login_refused_without_the_car_going_away_is_another_clients_even_with_a_fresh_session_key(
+        fake: FakeConsole, tmp_path: Path) -> None:
+    """The car's session cookie is no evidence of a restart (its key may be the same at every start): only the car
+    going away and coming back is."""
+    driver = make_driver(fake)
+    driver.load_model(console_model(tmp_path))
+    fake.log_in_elsewhere()
+    assert driver.battery_pct() is None, "a poll leaves the car to whoever logged in"
+    assert any("someone else logged in" in fault for fault in driver.faults()) and driver.console.restarts == 0
+    assert fake.state.loaded_model == "racer-fast"
 
 
 class AssignmentClient(AckRecorder):
@@ -482,7 +501,9 @@ def test_the_agent_reloads_the_model_a_restarted_car_lost_and_says_so(fake: Fake
     agent = CarAgent(client, driver, Outbox(tmp_path / "outbox.sqlite3"), ModelStore(tmp_path / "models"))  # type: ignore[arg-type]
     agent.sync_models()
     assert [r["status"] for r in client.reports][-1] == "loaded" and fake.state.loaded_model == "racer-fast"
-    fake.restart()
+    fake.power_off()  # a battery swap: the heartbeat finds the car gone, then back
+    assert "battery_pct" not in agent.telemetry()
+    fake.power_on()
     agent.run_command({"command_id": "c1", "type": "START_CAR"})
     ok, message = client.acks["c1"]
     assert not ok and "no model loaded" in message and not fake.state.driving
@@ -597,18 +618,19 @@ def test_a_car_restarted_in_the_middle_of_a_load_is_loaded_again_not_blamed_on_t
 
     armed = [False]
 
-    def restart_once_while_waiting(seconds: float) -> None:  # the battery is swapped during the load
+    def switch_off_once_while_waiting(seconds: float) -> None:  # the battery is swapped during the load
         if armed[0]:
             armed[0] = False
-            fake.restart()
+            fake.power_off()
 
     driver = DeepRacerConsoleDriver(DeepRacerConsole(fake.url, "car-password"), poll_s=0.05, settle_s=1.0,
-                                    load_timeout_s=10.0, sleep=restart_once_while_waiting)
+                                    load_timeout_s=10.0, sleep=switch_off_once_while_waiting)
     model = console_model(tmp_path)
     driver.console.login()
     armed[0] = True
-    with pytest.raises(CarUnreachable, match="restarted while loading racer-fast/model"):
+    with pytest.raises(CarUnreachable, match="stopped answering while loading racer-fast/model"):
         driver.load_model(model)
+    fake.power_on()
     driver.load_model(model)  # the agent's next check: the folder is on the car, the load is all it takes
     assert fake.state.loaded_model == "racer-fast" and fake.state.auto_loading_status == "loaded"
     assert paths(fake).count("PUT /api/uploadModels") == 1

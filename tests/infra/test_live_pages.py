@@ -125,6 +125,7 @@ def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_it
     lambda_env = [f["Properties"]["Environment"]["Variables"] for f in functions]
 
     assert all(v["DREM_LIVE_URL"] == "" for v in lambda_env), "same origin: CloudFront routes /live/* to the server"
+    assert all(v["DREM_ASSIGNMENT_RECHECK_S"] == "1" for v in lambda_env), "no wake-up between Lambdas: re-read often"
     for name in (n for n in lambda_env[0] if n.startswith("DREM_")):
         assert env[name] == lambda_env[0][name], name
     assert "AWS_DEFAULT_REGION" in env

@@ -233,50 +233,107 @@ def test_a_console_model_reaches_a_drem_car_with_its_onnx_conversion(racer: Mode
                       converted=(fetch(entry["onnx"]["url"]), "0" * 32))
 
 
-class VersionsStore:
-    """An assignment store whose item changes version after `changes_after` reads (staff assigning meanwhile)."""
+class MemoryAssignments:
+    """The assignment store in memory; `first_read` is set once a car's poll has read its assignment."""
 
-    def __init__(self, changes_after: int | None) -> None:
-        self.reads = 0
-        self.changes_after = changes_after
+    def __init__(self) -> None:
+        import threading
 
-    def get(self, device_id: str):  # type: ignore[no-untyped-def]
         from chalicelib.domain.assignments import Assignment
 
-        self.reads += 1
-        changed = self.changes_after is not None and self.reads > self.changes_after
-        return Assignment(device_id=device_id, version=2 if changed else 1)
+        self.items: dict[str, Assignment] = {}
+        self.first_read = threading.Event()
+
+    def get(self, device_id: str):  # type: ignore[no-untyped-def]
+        self.first_read.set()
+        return self.items.get(device_id)
+
+    def put(self, assignment, *, expected_version: int) -> None:  # type: ignore[no-untyped-def]
+        self.items[assignment.device_id] = assignment
+
+    def written_elsewhere(self, device_id: str) -> None:
+        """Another process (or on AWS another Lambda) changes the item: nothing in this process hears of it."""
+        from chalicelib.domain.assignments import Assignment
+
+        current = self.items.get(device_id) or Assignment(device_id=device_id)
+        self.items[device_id] = current.model_copy(update={"version": current.version + 1})
 
 
-def _waiting_service(store: VersionsStore):  # type: ignore[no-untyped-def]
-    from chalicelib.domain.assignments import AssignmentService
+class OneModel:
+    """What assign and a car's read need of the model service: one AVAILABLE model."""
 
-    now = [0.0]
+    def __init__(self) -> None:
+        from types import SimpleNamespace
 
-    def sleep(seconds: float) -> None:
-        now[0] += seconds
+        from chalicelib.domain.racer_models import ModelStatus
 
-    return AssignmentService(store, models=None, cars=None, monotonic=lambda: now[0], sleep=sleep), now  # type: ignore[arg-type]
+        self.record = SimpleNamespace(model_id="m1", name="fast", owner_sub="sub-1", owner_username="ana",
+                                      model_md5=None, archive_md5=None, status=ModelStatus.AVAILABLE,
+                                      converted_md5=None)
+        self.store = SimpleNamespace(get=lambda owner_sub, model_id: self.record)
+
+    def available_model(self, model_id: str):  # type: ignore[no-untyped-def]
+        return self.record
+
+    def download_url(self, record) -> str:  # type: ignore[no-untyped-def]
+        return "https://storage.example/m1"
+
+    def converted_download_url(self, record) -> None:  # type: ignore[no-untyped-def]
+        return None
 
 
-def test_a_waiting_car_gets_its_new_assignment_as_soon_as_staff_change_it() -> None:
+def _waiting_car(recheck_s: float):  # type: ignore[no-untyped-def]
+    """A service, its store, and a car's long poll (wait_for_version=0, 20 s) running on its own thread."""
+    import threading
+    from types import SimpleNamespace
+
     from chalicelib.core.principals import Device
-    from chalicelib.domain.assignments import WAIT_CHECK_S, AssignmentQuery
+    from chalicelib.domain.assignments import AssignmentQuery, AssignmentService
 
-    store = VersionsStore(changes_after=3)
-    service, now = _waiting_service(store)
-    answer = service.for_car(Device(device_id="car-1", device_kind="car"),
-                             AssignmentQuery(wait_for_version=1, wait_s=20))
-    assert answer["version"] == 2, "answered with the change, not at the end of the wait"
-    assert now[0] == pytest.approx(3 * WAIT_CHECK_S)
+    store = MemoryAssignments()
+    service = AssignmentService(store, OneModel(), SimpleNamespace(require_car=lambda device_id: None),  # type: ignore[arg-type]
+                                recheck_s=recheck_s)
+    answers: list[dict] = []
+    poll = threading.Thread(target=lambda: answers.append(service.for_car(
+        Device(device_id="car-1", device_kind="car"), AssignmentQuery(wait_for_version=0, wait_s=20))), daemon=True)
+    poll.start()
+    assert store.first_read.wait(30), "the car's poll reads its assignment"
+    return service, store, poll, answers
 
-    unchanged, now = _waiting_service(VersionsStore(changes_after=None))
-    answer = unchanged.for_car(Device(device_id="car-1", device_kind="car"), AssignmentQuery(wait_for_version=1,
-                                                                                            wait_s=2))
-    assert answer["version"] == 1 and 2.0 <= now[0] < 2.0 + WAIT_CHECK_S + 1e-9, "no change: the same, after wait_s"
-    answer = unchanged.for_car(Device(device_id="car-1", device_kind="car"), AssignmentQuery(wait_for_version=0,
-                                                                                            wait_s=20))
-    assert answer["version"] == 1, "a car behind the current version is answered at once"
+
+def test_staff_assigning_wakes_the_waiting_car_before_any_storage_recheck() -> None:
+    from chalicelib.core.principals import User
+
+    # The storage re-read comes only after an hour: an answer before the 20 s wait ends was pushed by the write.
+    service, _store, poll, answers = _waiting_car(recheck_s=3600)
+    service.assign(User(sub="op", username="op", groups=frozenset({"operator"})), "car-1", ["m1"])
+    poll.join(30)
+    assert answers, "the car was answered"
+    assert answers[0]["change_seen_by"] == "push", "woken by the write, not by a re-read or the end of the wait"
+    assert answers[0]["version"] == 1 and [m["name"] for m in answers[0]["models"]] == ["fast"]
+
+
+def test_a_change_made_in_another_process_reaches_the_car_by_the_storage_recheck() -> None:
+    _service, store, poll, answers = _waiting_car(recheck_s=0.05)
+    store.written_elsewhere("car-1")
+    poll.join(30)
+    assert answers and answers[0]["change_seen_by"] == "recheck" and answers[0]["version"] == 1
+
+
+def test_a_car_behind_is_answered_at_once_and_an_unchanged_one_at_the_end_of_its_wait() -> None:
+    from types import SimpleNamespace
+
+    from chalicelib.core.principals import Device
+    from chalicelib.domain.assignments import AssignmentQuery, AssignmentService
+
+    store = MemoryAssignments()
+    store.written_elsewhere("car-1")
+    service = AssignmentService(store, OneModel(), SimpleNamespace(), recheck_s=0.05)  # type: ignore[arg-type]
+    car = Device(device_id="car-1", device_kind="car")
+    behind = service.for_car(car, AssignmentQuery(wait_for_version=0, wait_s=20))
+    assert behind["version"] == 1 and behind["change_seen_by"] == "at once"
+    unchanged = service.for_car(car, AssignmentQuery(wait_for_version=1, wait_s=0.2))
+    assert unchanged["version"] == 1 and unchanged["change_seen_by"] == "deadline"
 
 
 def test_the_car_route_takes_the_wait_and_refuses_a_wait_longer_than_the_gateway_allows(

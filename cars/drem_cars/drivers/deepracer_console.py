@@ -16,12 +16,16 @@ What the car does, read in its source (aws-deepracer/aws-deepracer-webserver-pkg
   `start_stop: start`. The tail light changes only in calibration mode (elsewhere the call "succeeds" and nothing
   happens), and entering calibration mode stops the car.
 
-- A restart (every battery swap) voids every login and CSRF token (the web server draws a new session key) and boots
-  the car in manual mode with nothing loaded; the model folders stay on its disk.
+- A restart (every battery swap) boots the car in manual mode with nothing loaded; the model folders stay on its disk.
+  Whether our login survives it we could not read upstream (login.py is not in the index): the token lives in a file,
+  /opt/aws/deepracer/token.txt ([webserver constants.py] TOKEN_PATH), and the copies of webserver.py we could read sign
+  sessions with a constant key, so it probably does; the driver works either way (tests/cars/fake_deepracer_console.py
+  models both).
 
 drem's decisions: a model is reported loaded only when `isModelLoading` says `loaded`, and the agent asks the car
-again every check (`model_lost`), reloading a model a restarted car lost; a refused young login is told apart from
-another client's by whether the console hands out a new session cookie (it restarted) or not; START_CAR is refused
+again every check (`model_lost`), reloading a model a restarted car lost; a restart is known by the car having stopped
+answering and then answering again (a battery swap takes minutes; no login or session key is relied on), so a refused
+young login after that is the restart's, and one without it is another client's; START_CAR is refused
 unless the car says `loaded`; HTTPS only with the car's certificate pinned (drem_cars.car_tls); the car is left
 stopped in autonomous mode with the staff throttle cap (100 % by default) applied; it starts on the staff START_CAR
 command and stops on EMERGENCY_STOP (race start does not start it). The tail light is set only while the car is
@@ -49,7 +53,6 @@ _META_TAG = re.compile(r"<meta\s[^>]*>", re.I)
 _META_NAME = re.compile(r"""\bname\s*=\s*["']csrf-token["']""", re.I)
 _META_CONTENT = re.compile(r"""\bcontent\s*=\s*["']([^"']+)["']""", re.I)
 LOGIN_COOKIE = "deepracer_token"
-SESSION_COOKIE = "session"   # Flask's signed session cookie: it carries the CSRF secret
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
 FAULT_MAX = 120              # the heartbeat refuses longer fault lines
@@ -92,8 +95,11 @@ class DeepRacerConsole:
         self.csrf_token: str | None = None
         self.logged_in_at: float | None = None
         self.held_by_other_since: float | None = None  # when a young login of ours was replaced by someone else's
-        self.restarts = 0  # restarts of the console noticed (it forgot our session); the driver re-checks the car
+        # Times the car stopped answering and then answered again (a battery swap restarts it; a WiFi gap looks the
+        # same, which only matters if the model is gone too): the driver then re-checks the car.
+        self.restarts = 0
         self.restarted_at: float | None = None
+        self._unanswered = False
         # The agent calls from two threads (commands + heartbeat, model loads). Logins are serialised, requests are
         # not (an emergency stop must not wait for an upload).
         self._login_lock = threading.Lock()
@@ -129,11 +135,17 @@ class DeepRacerConsole:
         except requests.exceptions.SSLError as exc:
             if self.fingerprint and "fingerprint" in str(exc).lower():
                 raise ConsoleError(changed_certificate_message(self.base_url, str(exc))) from None
+            self._unanswered = True
             raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} over TLS "
                                      f"({_short(str(exc))})") from None
         except requests.RequestException as exc:
+            self._unanswered = True
             raise ConsoleUnreachable(f"cannot reach the DeepRacer console at {self.base_url} "
                                      f"({exc.__class__.__name__})") from None
+        if self._unanswered:
+            self._unanswered = False
+            self.restarts += 1
+            self.restarted_at = self._clock()
         if self.base_url.startswith("http://"):
             # The car marks its cookies Secure (it is HTTPS behind nginx); reached over plain http (nginx bypassed,
             # a bench replica) they must still come back, or every CSRF check fails.
@@ -165,23 +177,19 @@ class DeepRacerConsole:
             if self.csrf_token is not None and self._credentials_in_use() != sent:
                 return  # our other thread logged in meanwhile: retry with its login
             if refused is not None and self.held_by_other_since is None and self._login_was_young():
-                if self._console_forgot_our_session(refused):
-                    self.restarts += 1  # nobody else holds the car: log in at once, whatever the call
-                    self.restarted_at = self._clock()
-                    self.login()
+                if self._came_back_since_login():
+                    self.login()  # the restart forgot us; nobody else holds the car: log in at once, whatever the call
                     return
                 if refused.status_code == 401:
                     self.held_by_other_since = self._clock()
             self._login_unless_held(take_back)
 
-    def _console_forgot_our_session(self, refused: requests.Response) -> bool:
-        """A young login refused: did the console restart, or did someone else log in? The console's Flask session
-        (which carries the CSRF secret) is signed with a key drawn at each start: after a restart it cannot read our
-        session cookie and hands out a new one with its page; after another client's login our session still reads
-        and no new cookie comes. A GET of the login page asks without logging anyone out."""
-        sent = _cookie_sent(refused, SESSION_COOKIE)
-        self._send("GET", "/login")
-        return sent is not None and self._http.cookies.get(SESSION_COOKIE) != sent
+    def _came_back_since_login(self) -> bool:
+        """A young login refused: did the car restart, or did someone else log in? Restarted if the car stopped
+        answering after our login and came back (a battery swap); the session cookie is no evidence, as the car's
+        session key may well be the same at every start."""
+        return (self.restarted_at is not None and self.logged_in_at is not None
+                and self.restarted_at >= self.logged_in_at)
 
     def _authed(self, method: str, path: str, **kwargs: Any) -> requests.Response:
         headers = {**self._headers(), **kwargs.pop("headers", {})}
@@ -335,6 +343,7 @@ class DeepRacerConsoleDriver:
         for folder in [f for f in self._uploaded if f not in folders]:
             del self._uploaded[folder]  # deleted on the car: the next racers' are put back by the agent's preload
         if status in ("loaded", "loading"):
+            self._restarts_seen = self.console.restarts  # a WiFi gap that lost nothing
             if model.folder not in folders:
                 self.upload(model)  # a restart would otherwise find nothing to load
             return None
@@ -360,7 +369,11 @@ class DeepRacerConsoleDriver:
         seen_loading = False
         restarts = self.console.restarts
         while True:
-            status = self.console.model_loading_status()
+            try:
+                status = self.console.model_loading_status()
+            except ConsoleUnreachable:
+                raise ConsoleUnreachable(f"the car stopped answering while loading {folder}/model (restarted?); "
+                                         "loading it again when it is back") from None
             if self.console.restarts != restarts:  # a battery swap mid-load: not the model's fault, load it again
                 raise ConsoleUnreachable(f"the car restarted while loading {folder}/model; loading it again")
             seen_loading = seen_loading or status == "loading"
@@ -488,16 +501,6 @@ def csrf_meta_token(page: str) -> str | None:
         content = _META_CONTENT.search(tag)
         if _META_NAME.search(tag) and content:
             return content.group(1)
-    return None
-
-
-def _cookie_sent(reply: requests.Response, name: str) -> str | None:
-    """The value of cookie `name` in the request that got `reply`."""
-    header = reply.request.headers.get("Cookie", "") if reply.request is not None else ""
-    for part in str(header).split(";"):
-        key, _, value = part.strip().partition("=")
-        if key == name:
-            return value
     return None
 
 

@@ -15,8 +15,9 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from chalicelib.core.errors import Conflict, Forbidden, NotFound
 from chalicelib.core.principals import Device, Principal
+from chalicelib.domain.assignment_signals import AssignmentSignals
+from chalicelib.core.errors import Conflict, Forbidden, NotFound
 from chalicelib.domain.racer_models import DOWNLOAD_EXPIRES_S, ModelRecord, ModelService, ModelStatus, utc_now
 
 MAX_MODELS_PER_CAR = 10
@@ -102,12 +103,16 @@ class StatusReport(BaseModel):
 
 
 MAX_WAIT_S = 20.0  # under API Gateway's 29 s limit; the agent asks again at once
-WAIT_CHECK_S = 0.1  # how often a waiting car's assignment item is read (one GetItem: ~10 reads/s per waiting car)
+# A waiting car is woken by the write itself (AssignmentSignals); storage is re-read this often only to catch writes
+# made elsewhere (another process; on AWS, another Lambda). settings.assignment_recheck_s overrides it.
+RECHECK_S = 5.0
 
 
 class AssignmentQuery(BaseModel):
     """A car that already holds `wait_for_version` waits for the next one: the answer comes the moment staff change
-    its assignment (or after `wait_s`, unchanged), so it learns of a new racer at once without polling."""
+    its assignment (or after `wait_s`, unchanged), so it learns of a new racer at once without polling. The answer's
+    `change_seen_by` says how: "push" (the write woke the poll), "recheck" (the storage fallback found it), "at once"
+    (it was changed before the car asked) or "deadline" (nothing changed)."""
     model_config = ConfigDict(extra="forbid")
     wait_for_version: int | None = Field(default=None, ge=0)
     wait_s: float = Field(default=0.0, ge=0.0, le=MAX_WAIT_S)
@@ -143,13 +148,14 @@ class AssignmentChanged(Exception):
 class AssignmentService:
     def __init__(self, store: AssignmentStore, models: ModelService, cars: CarDirectory,
                  clock: Callable[[], str] = utc_now, *, monotonic: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 signals: AssignmentSignals | None = None, recheck_s: float = RECHECK_S) -> None:
         self._store = store
         self._models = models
         self._cars = cars
         self._clock = clock
         self._monotonic = monotonic
-        self._sleep = sleep
+        self._signals = signals or AssignmentSignals()
+        self._recheck_s = recheck_s
 
     def assign(self, principal: Principal, device_id: str, model_ids: list[str]) -> Assignment:
         self._cars.require_car(device_id)
@@ -165,9 +171,10 @@ class AssignmentService:
                                  assigned_at=now, version=current.version + 1)
             try:
                 self._store.put(updated, expected_version=current.version)
-                return updated
             except AssignmentChanged:
                 continue
+            self._signals.changed(device_id)
+            return updated
         raise Conflict("The car's assignment is changing right now; try again.", field="device_id")
 
     def for_staff(self, device_id: str) -> Assignment:
@@ -178,12 +185,11 @@ class AssignmentService:
         """The calling car's models with a short-lived download URL each (withdrawn models are left out); with
         `wait_for_version`, once the assignment is another version than that one (or `wait_s` passed)."""
         car = _require_car_device(device)
+        mark = self._signals.mark(car.device_id)
         assignment = self._store.get(car.device_id) or Assignment(device_id=car.device_id)
+        seen_by: dict[str, str] = {}
         if query is not None and query.wait_for_version is not None:
-            deadline = self._monotonic() + query.wait_s
-            while assignment.version == query.wait_for_version and self._monotonic() < deadline:
-                self._sleep(WAIT_CHECK_S)
-                assignment = self._store.get(car.device_id) or Assignment(device_id=car.device_id)
+            assignment, seen_by["change_seen_by"] = self._wait_for_change(car.device_id, assignment, mark, query)
         models, withdrawn = [], []
         for model in assignment.models:
             record = self._models.store.get(model.owner_sub, model.model_id)
@@ -197,7 +203,23 @@ class AssignmentService:
                            "progress": _progress_json(assignment.progress_of(model.model_id)),
                            **self._converted(record)})
         return {"device_id": car.device_id, "assigned_at": assignment.assigned_at, "version": assignment.version,
-                "models": models, "withdrawn": withdrawn}
+                "models": models, "withdrawn": withdrawn, **seen_by}
+
+    def _wait_for_change(self, device_id: str, assignment: Assignment, mark: int,
+                         query: AssignmentQuery) -> tuple[Assignment, str]:
+        """Sleep until a write to the car's assignment wakes us (or the storage re-read every recheck_s finds one
+        made elsewhere, or wait_s ends); the assignment as then stored, and how the change was seen."""
+        deadline = self._monotonic() + query.wait_s
+        seen_by = "at once"  # the car was behind already
+        while assignment.version == query.wait_for_version:
+            remaining = deadline - self._monotonic()
+            if remaining <= 0:
+                return assignment, "deadline"
+            woken = self._signals.wait(device_id, mark, min(remaining, self._recheck_s))
+            seen_by = "push" if woken else "recheck"
+            mark = self._signals.mark(device_id)
+            assignment = self._store.get(device_id) or Assignment(device_id=device_id)
+        return assignment, seen_by
 
     def _converted(self, record: ModelRecord) -> dict[str, Any]:
         """Console models: the ONNX conversion too, so a drem car agent can drive them (a DeepRacer takes the .pb)."""
@@ -219,6 +241,7 @@ class AssignmentService:
                           f"{model.archive_md5}"})
         if not self._store.record_progress(car.device_id, report.model_id, progress):
             raise NotFound(f"Model {report.model_id!r} is no longer assigned to this car.", field="model_id")
+        self._signals.changed(car.device_id)
         return progress
 
     def event_status(self, event_id: str) -> list[StatusRow]:
