@@ -149,8 +149,54 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
     return response
 
 
-def add_video_routes(app: web.Application, access: Any | None = None, *, threads: int = 4) -> None:
-    """Mount the camera routes; `access` defaults to the app's (drem_live.video_access.VideoAccess)."""
+HUB_ENV = "DREM_LIVE_VIDEO_HUB"
+HUB_SESSION: web.AppKey[Any] = web.AppKey("video_hub_session", object)
+_FORWARDED = ("Authorization", "Cookie", "Content-Type", "Content-Length", "X-Frame-Time")
+_RETURNED = ("Content-Type", "Cache-Control", "Access-Control-Allow-Origin", "X-Content-Type-Options")
+
+
+async def via_hub(request: web.Request) -> web.StreamResponse:
+    """In a worker that is not the hub: the camera routes are the hub's (one process holds every car's feed, so one
+    upload reaches the viewers of every worker); the request and its answer pass through unchanged."""
+    import aiohttp
+
+    body = None
+    if request.method == "POST":
+        if (request.content_length or 0) > MAX_FRAME_BYTES:
+            return refuse(413, f"A frame is one JPEG of at most {MAX_FRAME_BYTES} bytes, with its Content-Length.")
+        body = await request.content.read(MAX_FRAME_BYTES)
+    headers = {name: request.headers[name] for name in _FORWARDED if name in request.headers}
+    try:
+        upstream = await request.app[HUB_SESSION].request(
+            request.method, request.app[HUB_URL] + request.path_qs, headers=headers, data=body,
+            timeout=aiohttp.ClientTimeout(total=None, connect=5, sock_read=None))
+    except aiohttp.ClientError:
+        return refuse(503, "The cars' cameras are not available right now; try again shortly.")
+    async with upstream:
+        response = web.StreamResponse(status=upstream.status, headers={
+            name: upstream.headers[name] for name in _RETURNED if name in upstream.headers})
+        await response.prepare(request)
+        try:
+            async for chunk in upstream.content.iter_any():
+                await asyncio.wait_for(response.write(chunk), WRITE_TIMEOUT_S)
+        except (ConnectionResetError, TimeoutError, aiohttp.ClientError):
+            pass
+    return response
+
+
+HUB_URL: web.AppKey[str] = web.AppKey("video_hub_url", str)
+
+
+def add_video_routes(app: web.Application, access: Any | None = None, *, threads: int = 4,
+                     hub_url: str | None = None) -> None:
+    """Mount the camera routes; `access` defaults to the app's (drem_live.video_access.VideoAccess). With `hub_url`
+    (default $DREM_LIVE_VIDEO_HUB, which the first of several workers gives the others) they pass to that hub."""
+    import os
+
+    hub_url = hub_url if hub_url is not None else os.environ.get(HUB_ENV, "")
+    if hub_url:
+        _add_hub_proxy(app, hub_url)
+        return
     if access is None:
         from drem_live.video_access import VideoAccess
 
@@ -168,3 +214,23 @@ def add_video_routes(app: web.Application, access: Any | None = None, *, threads
         executor.shutdown(wait=False, cancel_futures=True)
 
     app.on_shutdown.append(close)
+
+
+def _add_hub_proxy(app: web.Application, hub_url: str) -> None:
+    import aiohttp
+
+    app[HUB_URL] = hub_url.rstrip("/")
+
+    async def open_session(_app: web.Application) -> None:
+        # Each viewer holds one connection to the hub while it watches: no pool limit (the hub caps viewers).
+        app[HUB_SESSION] = aiohttp.ClientSession(connector=aiohttp.TCPConnector(limit=0), auto_decompress=False)
+
+    async def close_session(_app: web.Application) -> None:
+        await app[HUB_SESSION].close()
+
+    app.on_startup.append(open_session)
+    app.on_cleanup.append(close_session)
+    app.router.add_post("/live/video/car/frame", via_hub)
+    app.router.add_get("/live/video/car/demand", via_hub)
+    app.router.add_get("/live/video/cars/{device_id}", via_hub)
+    app.router.add_get("/live/video/{event_id}", via_hub)
