@@ -60,7 +60,8 @@ class CarFeed:
             return self.latest
         waiter = self._next
         try:
-            await asyncio.wait_for(waiter.wait(), timeout_s)
+            async with asyncio.timeout(timeout_s):  # not wait_for: on 3.11 that makes a task per viewer per frame
+                await waiter.wait()
         except TimeoutError:
             return None
         return self.latest if self.latest is not None and self.latest.seq > seq else None

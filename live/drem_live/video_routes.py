@@ -130,7 +130,8 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
             else:
                 frame = await feed.next_after(shown, RECHECK_S)
                 if frame is not None:
-                    await asyncio.wait_for(response.write(frame.part), WRITE_TIMEOUT_S)
+                    async with asyncio.timeout(WRITE_TIMEOUT_S):  # no task per write, unlike wait_for on 3.11
+                        await response.write(frame.part)
                     shown = frame.seq
             now = asyncio.get_running_loop().time()
             if now - checked >= RECHECK_S:
