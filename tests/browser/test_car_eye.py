@@ -105,6 +105,22 @@ def test_staff_see_each_cars_camera_on_the_cars_page(chromium: Any, racing_car: 
     page.context.close()
 
 
+def test_the_big_screen_shows_it_beside_the_board_and_the_commentator_sees_it(
+        chromium: Any, racing_car: dict[str, Any], app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    page.goto(f"{app_url}/leaderboard/{racing_car['event_id']}?track=1&carEye=true")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    eye, board = page.locator("[data-car-eye]").bounding_box(), page.locator(".public-board").bounding_box()
+    assert eye is not None and board is not None
+    assert board["x"] + board["width"] <= eye["x"]  # beside the board, not over it
+    sign_in(page, app_url, racing_car["operator"])
+    page.goto(f"{app_url}/commentator/{racing_car['event_id']}?track=1")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    page.context.close()
+
+
 def test_the_camera_falls_back_to_nothing_when_the_race_ends(chromium: Any, racing_car: dict[str, Any],
                                                              app_url: str) -> None:
     page = chromium.new_context(viewport=SIZES[0]).new_page()
