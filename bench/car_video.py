@@ -8,7 +8,8 @@ side in one run:
 - without video: no relay, the stream overlay (no car's eye) open in headless Chromium;
 - with video: the car's video relay (drem_cars.video_relay: 480×360 JPEG at 15 fps, the sim's rendered frames) sends
   to the live server, 500 MJPEG viewers watch the racing car (bench/_mjpeg_crowd.py, one asyncio child process, the
-  URL the overlay's car's eye reads), and the overlay with the car's eye is open in Chromium.
+  URL the overlay's car's eye reads; at nice 10, as they stand in for other machines), and the overlay with the
+  car's eye is open in Chromium.
 
 In each phase: lap-to-screen (a timer's strip crossing → the lap painted in the overlay; bench/live_latency.py's
 observer and clock calibration) and the car loop's jitter (how late each 15 Hz tick started). With video also:

@@ -21,7 +21,7 @@ from typing import Any
 
 from aiohttp import web
 
-from drem_live.video_feeds import MAX_FRAME_BYTES, MJPEG_CONTENT_TYPE, CarFeed, Feeds, looks_like_jpeg
+from drem_live.video_feeds import MAX_FRAME_BYTES, MJPEG_CONTENT_TYPE, Feeds, Sink, looks_like_jpeg
 
 FEEDS: web.AppKey[Feeds] = web.AppKey("video_feeds", Feeds)
 ACCESS: web.AppKey[Any] = web.AppKey("video_access", object)
@@ -118,34 +118,40 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
     response = web.StreamResponse(headers={
         **(CORS if public else {}), **NO_SNIFF, "Content-Type": MJPEG_CONTENT_TYPE,
         "Cache-Control": "no-store", "X-Accel-Buffering": "no"})
-    watching = car
+    chunked = request.version >= (1, 1)
+    if chunked:
+        response.enable_chunked_encoding()  # the feed writes whole HTTP/1.1 chunks to the connection itself
+    watching, feed = car, None
     feeds.watch(watching)
     try:
         await response.prepare(request)
-        shown, checked = 0, asyncio.get_running_loop().time()
-        while True:
-            feed: CarFeed | None = feeds.find(watching)
-            if feed is None:
-                await asyncio.sleep(0.1)  # the car has not called yet; demand wakes it
-            else:
-                frame = await feed.next_after(shown, RECHECK_S)
-                if frame is not None:
-                    async with asyncio.timeout(WRITE_TIMEOUT_S):  # no task per write, unlike wait_for on 3.11
-                        await response.write(frame.part)
-                    shown = frame.seq
-            now = asyncio.get_running_loop().time()
-            if now - checked >= RECHECK_S:
-                checked = now
-                current = await racing()
-                if current is None:
-                    break  # the race ended: the page's player falls back to nothing
-                if current != watching:  # the next race's car: follow it
-                    feeds.unwatch(watching)
-                    watching, shown = current, 0
-                    feeds.watch(watching)
-    except (ConnectionResetError, TimeoutError):
+        if request.transport is None:
+            return response
+        # From here the feed writes each frame to this connection as it arrives (CarFeed.publish); this coroutine
+        # only follows which car to show, and notices the viewer leaving.
+        sink = Sink(request.transport, chunked=chunked)
+        while not sink.closed.is_set():
+            if feed is None and (feed := feeds.find(watching)) is not None:
+                feed.attach(sink)
+            try:
+                async with asyncio.timeout(RECHECK_S if feed is not None else 0.1):
+                    await sink.closed.wait()
+            except TimeoutError:
+                pass
+            current = await racing()
+            if current is None:
+                break  # the race ended: the page's player falls back to nothing
+            if current != watching:  # the next race's car: follow it
+                if feed is not None:
+                    feed.sinks.discard(sink)
+                feeds.unwatch(watching)
+                watching, feed = current, None
+                feeds.watch(watching)
+    except ConnectionResetError:
         pass
     finally:
+        if feed is not None:
+            feed.sinks.discard(sink)
         feeds.unwatch(watching)
     return response
 

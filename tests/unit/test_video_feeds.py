@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from drem_live.video_feeds import Feeds, looks_like_jpeg
+from drem_live.video_feeds import Feeds, Sink, looks_like_jpeg
 
 JPEG = b"\xff\xd8\xff\xe0" + b"x" * 10 + b"\xff\xd9"
 
@@ -53,3 +53,41 @@ def test_only_a_whole_jpeg_counts_as_a_frame() -> None:
     assert looks_like_jpeg(JPEG)
     assert not looks_like_jpeg(b"<svg onload=alert(1)>")
     assert not looks_like_jpeg(JPEG[:-2])
+
+
+class Connection:
+    """A viewer's connection as the event loop's transport shows it: what was written, and how much is unsent."""
+
+    def __init__(self, unsent: int = 0) -> None:
+        self.unsent, self.written, self.closed = unsent, [], False
+
+    def is_closing(self) -> bool:
+        return self.closed
+
+    def get_write_buffer_size(self) -> int:
+        return self.unsent
+
+    def write(self, data: bytes) -> None:
+        self.written.append(data)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_a_frame_is_written_once_per_viewer_as_one_http_chunk_and_a_stuck_viewer_skips_then_is_dropped() -> None:
+    async def run() -> tuple[Connection, Connection, Sink]:
+        feed = Feeds().feed("car-1")
+        quick, stuck = Connection(), Connection(unsent=10 * 1024 * 1024)
+        stuck_sink = Sink(stuck)  # type: ignore[arg-type]
+        feed.attach(Sink(quick))  # type: ignore[arg-type]
+        feed.attach(stuck_sink)
+        feed.publish(JPEG, 1.0)
+        stuck_sink.behind_since = 0.0  # it has been behind since long ago
+        feed.publish(JPEG, 2.0)
+        return quick, stuck, stuck_sink
+
+    quick, stuck, stuck_sink = asyncio.run(run())
+    assert len(quick.written) == 2
+    size, rest = quick.written[0].split(b"\r\n", 1)
+    assert int(size, 16) == len(rest) - 2 and rest.startswith(b"--drem-frame\r\n") and JPEG in rest
+    assert stuck.written == [] and stuck.closed and stuck_sink.closed.is_set()
