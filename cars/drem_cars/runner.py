@@ -66,6 +66,8 @@ def run_agent(args: argparse.Namespace) -> int:
     deadline = time.monotonic() + args.seconds if args.seconds else None
     try:
         parse_size(getattr(args, "video_size", "480x360"))
+        if not 1 <= getattr(args, "video_fps", 15.0) <= 30:
+            raise ValueError(f"--video-fps {args.video_fps:g}: give 1 to 30 frames a second")
     except ValueError as exc:
         print(f"drem car run: {exc}", file=sys.stderr)
         return 2
