@@ -130,14 +130,19 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
         # From here the feed writes each frame to this connection as it arrives (CarFeed.publish); this coroutine
         # only follows which car to show, and notices the viewer leaving.
         sink = Sink(request.transport, chunked=chunked)
+        loop = asyncio.get_running_loop()
+        checked = loop.time()
         while not sink.closed.is_set():
             if feed is None and (feed := feeds.find(watching)) is not None:
                 feed.attach(sink)
-            try:
+            try:  # a car not heard from yet is looked for every 0.1 s; the race is re-read every RECHECK_S
                 async with asyncio.timeout(RECHECK_S if feed is not None else 0.1):
                     await sink.closed.wait()
             except TimeoutError:
                 pass
+            if loop.time() - checked < RECHECK_S:
+                continue
+            checked = loop.time()
             current = await racing()
             if current is None:
                 break  # the race ended: the page's player falls back to nothing
@@ -145,7 +150,7 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
                 if feed is not None:
                     feed.sinks.discard(sink)
                 feeds.unwatch(watching)
-                watching, feed = current, None
+                watching, feed, sink.shown = current, None, 0
                 feeds.watch(watching)
     except ConnectionResetError:
         pass
