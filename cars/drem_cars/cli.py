@@ -44,6 +44,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--deepracer-cert", metavar="FILE",
                      help="--deepracer: the car's certificate (PEM, or its SHA-256 fingerprint) to trust; by default "
                           "drem trusts the one the car shows at first contact and refuses any other later")
+    run.add_argument("--live-url", default=os.environ.get("DREM_LIVE_URL"),
+                     help="the live server the camera goes to (default $DREM_LIVE_URL, else the API's address, "
+                          "where a proxy routes /live/ to it)")
+    run.add_argument("--no-video", action="store_true",
+                     help="never send the camera (by default it goes only while the car races or staff preview it)")
+    run.add_argument("--video-fps", type=float, default=15.0, help="camera frames a second sent (default 15)")
+    run.add_argument("--video-size", default="480x360", help="camera picture size WIDTHxHEIGHT (default 480x360)")
+    run.add_argument("--video-view", choices=("camera", "model"), default="camera",
+                     help="camera: the picture in colour; model: what the model sees (160x120 grey)")
     run.add_argument("--pwm", action="store_true",
                      help="drive a DIY car: OpenCV camera + steering servo and motor on Linux sysfs PWM")
     run.add_argument("--camera", default="0", help="--pwm: camera index (0 = /dev/video0), video file or URL")

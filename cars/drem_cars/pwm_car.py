@@ -36,6 +36,7 @@ from drem_cars.parts.pwm import (
 from drem_cars.parts.safety import Safety
 from drem_cars.parts.telemetry import Telemetry
 from drem_cars.vehicle import Vehicle
+from drem_cars.video_sources import FrameTap
 
 
 class HardwareUnavailable(RuntimeError):
@@ -62,6 +63,7 @@ class PwmCar:
     pilot: PilotSlot
     driver: LocalDriver
     safety: Safety
+    camera_tap: FrameTap  # the camera's newest frame, for the video relay
 
 
 def build_pwm_car(camera: int | str, wiring: PwmWiring = PwmWiring(), *, safety: Safety | None = None,
@@ -83,6 +85,8 @@ def build_pwm_car(camera: int | str, wiring: PwmWiring = PwmWiring(), *, safety:
     driver = LocalDriver(slot, safety, telemetry)
     vehicle = Vehicle()
     vehicle.add(capture, outputs=[ch.CAMERA_IMAGE, ch.CAMERA_FRAME_TIME], name="OpenCvCamera")
+    tap = FrameTap()
+    vehicle.add(tap, inputs=[ch.CAMERA_IMAGE], name="CameraTap")
     vehicle.add(slot, inputs=[ch.CAMERA_IMAGE], outputs=[ch.PILOT_STEERING, ch.PILOT_SPEED, ch.PILOT_INFERENCE_MS],
                 name="OnnxPilot")
     vehicle.add(ActionToDrive(slot.action_space), inputs=[ch.PILOT_STEERING, ch.PILOT_SPEED],
@@ -93,7 +97,7 @@ def build_pwm_car(camera: int | str, wiring: PwmWiring = PwmWiring(), *, safety:
     vehicle.add(telemetry, inputs=[ch.CAMERA_FRAME_TIME, ch.PILOT_INFERENCE_MS],
                 outputs=[ch.TELEMETRY_FPS, ch.TELEMETRY_INFERENCE_MS])
     vehicle.add(driver, inputs=[ch.SAFETY_STOPPED, ch.SAFETY_REASON])
-    return PwmCar(vehicle, capture, actuator, slot, driver, safety)
+    return PwmCar(vehicle, capture, actuator, slot, driver, safety, tap)
 
 
 def _open_actuator(wiring: PwmWiring, servo_cal: Calibration, motor_cal: Calibration) -> PwmActuator:

@@ -6,7 +6,8 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from drem_cars.agent import CarAgent
@@ -17,6 +18,8 @@ from drem_cars.drivers.deepracer_console import ConsoleError, ConsoleUnreachable
 from drem_cars.model_store import ModelStore
 from drem_cars.outbox import Outbox
 from drem_cars.startup import start_device
+from drem_cars.video_relay import VideoRelay, VideoSettings, parse_size
+from drem_cars.video_sources import ConsoleCamera, FrameSource
 
 EXIT_REVOKED = 3
 
@@ -33,6 +36,22 @@ def run_until_stopped(agent: CarAgent, deadline: float | None) -> None:
     agent.stop()
 
 
+@contextmanager
+def video_relay(args: argparse.Namespace, client: DeviceClient, source: FrameSource) -> Iterator[VideoRelay | None]:
+    """The camera relay next to the drive loop, for as long as it runs (`--no-video`: none)."""
+    if getattr(args, "no_video", True):
+        yield None
+        return
+    width, height = parse_size(args.video_size)
+    relay = VideoRelay(args.live_url or client.api, client.credential.credential, source,
+                       VideoSettings(args.video_fps, width, height, args.video_view))
+    relay.start()
+    try:
+        yield relay
+    finally:
+        relay.stop()
+
+
 def run_agent(args: argparse.Namespace) -> int:
     try:
         device = start_device(args.config_dir)
@@ -42,6 +61,13 @@ def run_agent(args: argparse.Namespace) -> int:
     client, outbox, models = device.client, device.outbox, device.models
     assert models is not None  # a car runs models
     deadline = time.monotonic() + args.seconds if args.seconds else None
+    try:
+        parse_size(getattr(args, "video_size", "480x360"))
+        if not 1 <= getattr(args, "video_fps", 15.0) <= 30:
+            raise ValueError(f"--video-fps {args.video_fps:g}: give 1 to 30 frames a second")
+    except ValueError as exc:
+        print(f"drem car run: {exc}", file=sys.stderr)
+        return 2
     driving = (f"the DeepRacer at {args.deepracer}" if args.deepracer else "camera + PWM" if args.pwm
                else "the simulator" if args.sim else None)
     if driving:  # the operator at the car sees at once that it started, and where it reports to
@@ -66,7 +92,8 @@ def run_agent(args: argparse.Namespace) -> int:
         return 2
     agent = CarAgent(client, car.driver, outbox, models)
     agent.times_laps = car.strips is not None
-    stats = _drive(agent, car.vehicle, args.rate_hz, deadline)
+    with video_relay(args, client, car.camera_tap):
+        stats = _drive(agent, car.vehicle, args.rate_hz, deadline)
     print(f"drive loop: {stats.summary()}; sim laps crossed: {car.strips.queued if car.strips else 0}; "
           f"outbox pending {outbox.count()}")
     return _finish(agent)
@@ -102,7 +129,8 @@ def _run_pwm(args: argparse.Namespace, client: DeviceClient, outbox: Outbox, mod
         print(f"drem car run --pwm: {exc}", file=sys.stderr)
         return 1
     agent = CarAgent(client, car.driver, outbox, models)
-    stats = _drive(agent, car.vehicle, args.rate_hz, deadline)  # the loop's shutdown: motor neutral, PWM disabled
+    with video_relay(args, client, car.camera_tap):
+        stats = _drive(agent, car.vehicle, args.rate_hz, deadline)  # the loop's shutdown: motor neutral, PWM off
     print(f"drive loop: {stats.summary()}; camera frames read: {car.camera.frames_read}; "
           f"outbox pending {outbox.count()}")
     return _finish(agent)
@@ -147,7 +175,8 @@ def _run_deepracer(args: argparse.Namespace, client: DeviceClient, outbox: Outbo
     if console is None:  # the deadline passed while waiting
         return 0
     agent = CarAgent(client, DeepRacerConsoleDriver(console), outbox, models)
-    run_until_stopped(agent, deadline)
+    with video_relay(args, client, ConsoleCamera(console)):
+        run_until_stopped(agent, deadline)
     return _finish(agent)
 
 

@@ -20,6 +20,7 @@ from drem_cars.parts.sim_world import SimWorld
 from drem_cars.parts.strips import StripEventsToOutbox
 from drem_cars.parts.telemetry import Telemetry
 from drem_cars.vehicle import Vehicle
+from drem_cars.video_sources import FrameTap
 
 # The stand-in driver's action space: speeds 0..1 relative, steering ±30°.
 LINE_FOLLOWER_SPACE = ActionSpace("continuous", steering=(-30.0, 30.0), speed=(0.0, 1.0))
@@ -41,6 +42,7 @@ class SimCar:
     driver: LocalDriver
     safety: Safety
     strips: StripEventsToOutbox | None
+    camera_tap: FrameTap  # the rendered camera's newest frame, for the video relay
 
 
 def build_sim_car(track: str, *, safety: Safety | None = None, outbox: Outbox | None = None,
@@ -53,6 +55,8 @@ def build_sim_car(track: str, *, safety: Safety | None = None, outbox: Outbox | 
     driver = LocalDriver(slot, safety, telemetry)
     vehicle = Vehicle()
     vehicle.add(SimCamera(world), outputs=[ch.CAMERA_IMAGE, ch.CAMERA_FRAME_TIME, ch.SIM_LAP_CROSSINGS])
+    tap = FrameTap()
+    vehicle.add(tap, inputs=[ch.CAMERA_IMAGE], name="CameraTap")
     vehicle.add(PilotPresence(slot), outputs=[ch.PILOT_ENABLED, ch.PILOT_ABSENT])
     vehicle.add(slot, inputs=[ch.CAMERA_IMAGE], outputs=[ch.PILOT_STEERING, ch.PILOT_SPEED, ch.PILOT_INFERENCE_MS],
                 run_condition=ch.PILOT_ENABLED, name="OnnxPilot")
@@ -70,4 +74,4 @@ def build_sim_car(track: str, *, safety: Safety | None = None, outbox: Outbox | 
     vehicle.add(telemetry, inputs=[ch.CAMERA_FRAME_TIME, ch.PILOT_INFERENCE_MS],
                 outputs=[ch.TELEMETRY_FPS, ch.TELEMETRY_INFERENCE_MS])
     vehicle.add(driver, inputs=[ch.SAFETY_STOPPED, ch.SAFETY_REASON])
-    return SimCar(vehicle, world, driver, safety, strips)
+    return SimCar(vehicle, world, driver, safety, strips, tap)

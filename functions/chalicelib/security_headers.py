@@ -49,13 +49,15 @@ def add_security_headers(response: Response, request: Request, settings: Setting
 
 def content_security_policy(settings: Settings, *, embeddable: bool) -> str:
     connect = ["'self'", _upload_origin(settings)]
+    images = ["'self'", "data:", "blob:"]  # blob: the car's eye paints each camera frame from one (car_eye.js)
     if settings.live_origin and settings.live_origin not in connect:
         connect.append(settings.live_origin)  # the live pages' event stream (drem_live) on its own port
+        images.append(settings.live_origin)  # staff's camera previews (an MJPEG <img> on the Cars page)
     directives = {
         "default-src": "'self'",
         "script-src": "'self'",
         "style-src": "'self' 'unsafe-inline'",
-        "img-src": "'self' data:",
+        "img-src": " ".join(images),
         "connect-src": " ".join(connect),
         "object-src": "'none'",
         "base-uri": "'self'",

@@ -11,6 +11,7 @@ import ctypes
 import logging
 import os
 import signal
+import socket
 import subprocess
 import sys
 
@@ -29,9 +30,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reuse-port", action="store_true", help=argparse.SUPPRESS)  # a worker started by the first
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s drem_live %(message)s")
+    hub = _video_hub_socket() if args.workers > 1 and not args.reuse_port else None
     others = [_start_worker(args) for _ in range(max(0, args.workers - 1))]
     try:
-        _serve(args.host, args.port, reuse_port=args.workers > 1 or args.reuse_port)
+        _serve(args.host, args.port, reuse_port=args.workers > 1 or args.reuse_port, hub=hub)
     finally:
         for worker in others:
             worker.terminate()
@@ -41,6 +43,15 @@ def main(argv: list[str] | None = None) -> int:
             except subprocess.TimeoutExpired:
                 worker.kill()
     return 0
+
+
+def _video_hub_socket() -> socket.socket:
+    """The first worker holds the cars' camera feeds (drem_live.video_routes): the others pass the camera routes to it
+    on this loopback socket, so a car uploads once whichever worker it reaches."""
+    hub = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    hub.bind(("127.0.0.1", 0))
+    os.environ["DREM_LIVE_VIDEO_HUB"] = f"http://127.0.0.1:{hub.getsockname()[1]}"  # for the workers started next
+    return hub
 
 
 def _start_worker(args: argparse.Namespace) -> subprocess.Popen[bytes]:
@@ -54,7 +65,7 @@ def _start_worker(args: argparse.Namespace) -> subprocess.Popen[bytes]:
     return subprocess.Popen(command, preexec_fn=die_with_parent)
 
 
-def _serve(host: str, port: int, *, reuse_port: bool) -> None:
+def _serve(host: str, port: int, *, reuse_port: bool, hub: socket.socket | None = None) -> None:
     from aiohttp import web
 
     from drem_live.app_code import AppCode
@@ -69,12 +80,14 @@ def _serve(host: str, port: int, *, reuse_port: bool) -> None:
     poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
     namespace = os.environ.get("DREM_LIVE_METRICS_NAMESPACE") or ""
     metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None
+    if hub is not None:
+        os.environ.pop("DREM_LIVE_VIDEO_HUB", None)  # this process is the hub itself
     app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits(), wake_dir=wake_dir,
                    metrics=metrics)
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
     web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,
-                access_log=None, backlog=1024, keepalive_timeout=keepalive_s,
+                access_log=None, backlog=1024, keepalive_timeout=keepalive_s, sock=hub,
                 handler_cancellation=True)  # a viewer leaving frees its stream at once
 
 

@@ -32,6 +32,7 @@ from drem_live.limits import Limits, StreamCount
 from drem_live.metrics import publish_streams
 from drem_live.polls import PollViews
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, clock_message
+from drem_live.video_routes import add_video_routes
 from drem_live.wake import WAKE, listen_for_wakes
 
 log = logging.getLogger("drem_live")
@@ -250,6 +251,7 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
     for kind in ("leaderboard", "overlay"):
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))
         app.router.add_get(f"/live/api/{kind}/{{event_id}}", public(poll_handler(kind)))
+    add_video_routes(app)  # the cars' cameras (docs/racing.md "The car's eye")
     app.router.add_route("OPTIONS", "/live/{tail:.*}", preflight)
 
     async def close(_app: web.Application) -> None:

@@ -14,6 +14,11 @@ of:
   model_install_state,model_loader_config}.py, deepracer_systems_pkg/file_system_utils.py
 - aws-deepracer/aws-deepracer-model-optimizer-pkg  model_optimizer_pkg/model_optimizer_node.py
 - aws-deepracer/aws-deepracer-i2c-pkg         i2c_pkg/src/battery_node.cpp
+- aws-deepracer/aws-deepracer-camera-pkg      camera_pkg/src/camera_node.cpp (publishes the `display_mjpeg` topic)
+- RobotWebTools/web_video_server              src/multipart_stream.cpp (the MJPEG the console hands out): the car's
+  camera is `GET /route?topic=/camera_pkg/display_mjpeg&width=480&height=360`, behind the console login, as DREM's
+  device links and the community console (deepracer-custom-console) open it; the route itself is in [webserver.py],
+  which our index does not hold, so only its URL and the login in front of it are modelled, not its code
 - aws-deepracer/aws-deepracer-navigation-pkg  deepracer_navigation_pkg/deepracer_navigation_node.py (throttle_scale
   starts at 0.0), as recorded in ../shared/reference/deepracer-formats.md §2.2 (that file was not in our index)
 
@@ -60,7 +65,16 @@ from functools import wraps
 from typing import Any
 
 import itsdangerous.timed
-from flask import Flask, jsonify, make_response, redirect, render_template_string, request
+from flask import (
+    Flask,
+    Response,
+    jsonify,
+    make_response,
+    redirect,
+    render_template_string,
+    request,
+    stream_with_context,
+)
 from flask_wtf.csrf import CSRFProtect
 from werkzeug.serving import make_server
 
@@ -77,6 +91,11 @@ ACTION_SPACE_TYPES = {"discrete": "Discrete", "continuous": "Continuous"}
 # [ctrl_node.cpp] enum CtrlState
 MANUAL, AUTONOMOUS, CALIBRATION = 0, 1, 2
 COOKIE_MAX_AGE_S = 3600
+# [camera_node.cpp] DISPLAY_MSG_TOPIC "display_mjpeg" in the camera_pkg namespace; [multipart_stream.cpp] and
+# web_video_server's MJPEG streamer use the boundary "boundarydonotcross"; the camera delivers 15 fps.
+DISPLAY_TOPIC = "/camera_pkg/display_mjpeg"
+VIDEO_BOUNDARY = "boundarydonotcross"
+CAMERA_FPS = 15
 
 PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>AWS DeepRacer</title>
 <meta name="csrf-token" content="{{ csrf_token() }}"></head><body>{{ body }}</body></html>"""
@@ -101,6 +120,7 @@ class CarState:
     optimizer_fails: bool = False              # [ctrl_state.cpp] "Model optimizer failed." -> "error"
     battery_level: int = 7                     # [battery_node.cpp] 0..11, -1 when the chip cannot be read
     camera_connected: bool = True
+    frames_served: int = 0                     # camera frames sent on /route, all viewers together
     token: str | None = None                   # [login] one token at a time: a new login replaces it
     token_issued: float = 0.0
     mode: int = MANUAL                         # [ctrl_node.cpp] init(): the manual state is active at boot
@@ -473,7 +493,55 @@ def create_app(state: CarState, secret_key: str = SECRET_KEY) -> Flask:
             return jsonify({"success": True, "message": "Model is installed"})
         return jsonify({"success": False, "message": "Model is not installed"})
 
+    # --- the camera: [camera_node.cpp] publishes /camera_pkg/display_mjpeg at the camera's rate; the console's
+    # `/route?topic=…&width=&height=` hands it out as web_video_server's MJPEG ([multipart_stream.cpp]) ---
+    @app.get("/route")
+    @authenticated
+    def video_route():  # type: ignore[no-untyped-def]
+        record(request.query_string.decode())
+        try:
+            width, height = int(request.args.get("width", 640)), int(request.args.get("height", 480))
+        except ValueError:
+            return "width and height must be numbers", 400
+        if request.args.get("topic") != DISPLAY_TOPIC or not (0 < width <= 1920 and 0 < height <= 1080):
+            return "Unknown topic or size", 404
+        return Response(stream_with_context(camera_parts(state, width, height)),
+                        headers={"Connection": "close", "Server": "web_video_server", "Pragma": "no-cache",
+                                 "Cache-Control": "no-cache, no-store, must-revalidate, pre-check=0, post-check=0, "
+                                                  "max-age=0",
+                                 "Content-type": f"multipart/x-mixed-replace;boundary={VIDEO_BOUNDARY}",
+                                 "Access-Control-Allow-Origin": "*"})
+
     return app
+
+
+def camera_frame(width: int, height: int, number: int) -> bytes:
+    """A JPEG that differs frame to frame (a bar moving across, the frame number in its grey), as a camera's do."""
+    import cv2
+    import numpy as np
+
+    image = np.full((height, width, 3), 40, np.uint8)
+    x = (number * 7) % max(1, width - 20)
+    image[:, x:x + 20] = (number * 13) % 200 + 55
+    ok, encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
+    assert ok
+    return encoded.tobytes()
+
+
+def camera_parts(state: CarState, width: int, height: int):  # type: ignore[no-untyped-def]
+    """[multipart_stream.cpp] send_initial_header writes `--boundary\r\n`; each part is the headers Content-type,
+    X-Timestamp (`%.06lf` seconds) and Content-Length, a blank line, the JPEG, then `\r\n--boundary\r\n`. Frames
+    come at the camera's 15 fps ([camera_node.cpp] produceFrames publishes every captured frame)."""
+    yield f"--{VIDEO_BOUNDARY}\r\n".encode()
+    number = 0
+    while not state.stopping.is_set() and state.camera_connected:
+        number += 1
+        jpeg = camera_frame(width, height, number)
+        with state.lock:
+            state.frames_served += 1
+        yield (f"Content-type: image/jpeg\r\nX-Timestamp: {time.time():.06f}\r\n"
+               f"Content-Length: {len(jpeg)}\r\n\r\n").encode() + jpeg + f"\r\n--{VIDEO_BOUNDARY}\r\n".encode()
+        state.stopping.wait(1 / CAMERA_FPS)
 
 
 class FakeConsole:

@@ -56,6 +56,7 @@ LOGIN_COOKIE = "deepracer_token"
 LOGIN_LIFE_S = 3600.0        # the car's cookie max_age and Flask-WTF's token time limit
 BATTERY_FULL_LEVEL = 10      # the battery node reports 0..11 (11 = above full), -1 when it cannot read the chip
 FAULT_MAX = 120              # the heartbeat refuses longer fault lines
+CAMERA_ROUTE = "/route?topic=/camera_pkg/display_mjpeg"  # the console's camera (see tests/cars/fake_deepracer_console)
 EVENT_SHOWN_S = 600.0        # how long the Cars page keeps saying what happened to the car (a restart, a reload)
 
 
@@ -221,6 +222,12 @@ class DeepRacerConsole:
         return body
 
     # --- the console API ---
+    def camera_stream(self, width: int, height: int, *, timeout_s: float = 5.0) -> requests.Response:
+        """The car's camera as the console streams it (MJPEG, web_video_server's `multipart/x-mixed-replace`), on
+        the session drem already holds; never takes the login back from someone else (video is not worth it)."""
+        return self._call("GET", f"{CAMERA_ROUTE}&width={int(width)}&height={int(height)}", take_back=False,
+                          stream=True, timeout=timeout_s)
+
     def upload_model(self, archive: Path, folder: str) -> dict[str, Any]:
         data = archive.read_bytes()  # bytes, not a file handle: a retry after logging in again resends it whole
         return self._api("PUT", "/api/uploadModels", timeout=self.upload_timeout_s,

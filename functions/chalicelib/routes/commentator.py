@@ -13,6 +13,7 @@ from chalicelib import services
 from chalicelib.auth.access import ADMIN, COMMENTATOR, OPERATOR, route
 from chalicelib.core.principals import User
 from chalicelib.routes.public_pages import event_or_404, fragment_headers, read_race, unchanged
+from chalicelib.views import car_video
 from chalicelib.views import public_views as views
 from chalicelib.views.live_regions import PageOptions, live_race, live_url, read_live
 from drem_web import i18n, render
@@ -50,7 +51,8 @@ def commentator_page(principal: User, event_id: str, query: CommentatorQuery) ->
     _token, context = commentator_live(event_id, query)
     tracks = [(t.track_id, event.track_name(t.track_id or "")) for t in event.tracks]
     return render.page("commentator", title=event.name, track=query.track, tracks=tracks,
-                       lang=i18n.resolve_language(query.lang), **context())
+                       lang=i18n.resolve_language(query.lang),
+                       car_eye_url=car_video.racing_video_url(event_id, query.track), **context())
 
 
 @route(bp, "/commentator/{event_id}/live", allow=COMMENTATORS, query=CommentatorQuery)

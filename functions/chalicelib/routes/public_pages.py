@@ -33,6 +33,7 @@ from chalicelib.domain.events import Event
 from chalicelib.routes.event_logos import logo_path
 from chalicelib.routes.responses import etag_matches
 from chalicelib.settings import get_settings
+from chalicelib.views import car_video
 from chalicelib.views import live_regions as regions
 from chalicelib.views import public_views as views
 from chalicelib.views.event_landing import landing_url
@@ -135,7 +136,9 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
         query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url,
         track_title=shown.leaderboard_title if shown else "",
         board_footer=(shown or event.tracks[0]).leaderboard_footer, stream_url=stream_url(live["poll_url"]),
-        sponsor=event.sponsor, logo_url=logo_path(event_id), links=event.landing_page_links, **live)
+        sponsor=event.sponsor, logo_url=logo_path(event_id), links=event.landing_page_links,
+        car_eye_url=car_video.shown_when_asked(event_id, shown.track_id or "1" if shown else "1",
+                                               bp.current_request.query_params), **live)
 
 
 @route(bp, "/leaderboard/{event_id}/live", allow=PUBLIC, query=LeaderboardQuery)
@@ -158,7 +161,9 @@ def overlay_page(principal: Principal, event_id: str, query: OverlayQuery) -> Re
     live = regions.overlay_region(services.publisher(), read_race, event_id, query, services.now_ms()).context()
     chroma = views.safe_colour(query.chroma_color, views.DEFAULT_CHROMA) if query.chroma else ""
     return render.page("overlay", title=event.name, chroma=chroma, lang=i18n.resolve_language(query.lang),
-                       stream_url=stream_url(live["poll_url"]), logo_url=logo_path(event_id), **live)
+                       stream_url=stream_url(live["poll_url"]), logo_url=logo_path(event_id),
+                       car_eye_url=car_video.shown_when_asked(event_id, query.overlay_track,
+                                                              bp.current_request.query_params), **live)
 
 
 @route(bp, "/overlay/{event_id}/live", allow=PUBLIC, query=OverlayQuery)

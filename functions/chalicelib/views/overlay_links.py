@@ -1,7 +1,7 @@
 """The overlay's options as the console's link builder offers them, and the address they make (pure).
 
 The overlay page (`routes/public_pages.OverlayQuery`) reads the same names: `trackId`, `chroma`, `chromaColor`,
-`gapToLeader`, `showLeaderboard`, `lang`.
+`gapToLeader`, `showLeaderboard`, `lang`, and `carEye` (read by the page route itself, not the live region's query).
 """
 from __future__ import annotations
 
@@ -25,6 +25,8 @@ class OverlayLinkOptions(BaseModel):
     gap_to_leader: bool = Field(default=True, description="show each racer's gap to the leader in the top list")
     show_leaderboard: bool = Field(default=True, description="show the top list between races")
     lang: str = Field(default="en", max_length=2)
+    car_eye: bool = Field(default=False, description="the racing car's camera, picture in picture (left, under the "
+                                                     "title; never over the lower third)")
 
     @field_validator("chroma_color")
     @classmethod
@@ -49,4 +51,6 @@ def overlay_link(public_url: str, event_id: str, options: OverlayLinkOptions) ->
         params["showLeaderboard"] = "false"
     if options.lang != "en":
         params["lang"] = options.lang
+    if options.car_eye:
+        params["carEye"] = "true"
     return f"{public_url.rstrip('/')}/overlay/{quote(event_id, safe='')}?{urlencode(params)}"

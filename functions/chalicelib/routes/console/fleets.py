@@ -25,6 +25,7 @@ from chalicelib.routes.console.forms import (
 from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
 from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
+from chalicelib.views.car_video import preview_video_url
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -147,7 +148,7 @@ def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notic
     overview = cars_overview(principal, services.device_service(), services.fleet_service(),
                              services.assignment_service(), services.model_service(), services.now_ms())
     return render.page("console/cars", status=status, overview=overview, errors=errors,
-                       is_admin=ADMIN in principal.roles, notice=notice)
+                       is_admin=ADMIN in principal.roles, notice=notice, camera_url=preview_video_url)
 
 
 def _activation_page(errors: dict[str, str], values: dict[str, str], issued: object, status: int = 200) -> Response:

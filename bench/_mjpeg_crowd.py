@@ -1,0 +1,77 @@
+"""A crowd of MJPEG viewers in one asyncio child process (bench/car_video.py): each opens the live server's car video
+(`multipart/x-mixed-replace`, chunked) on its own connection, reads every part, and records how long after the car took
+the frame (its X-Timestamp) the part arrived, and the longest gap between two frames (a stall)."""
+from __future__ import annotations
+
+import asyncio
+import random
+import time
+from typing import Any
+from urllib.parse import urlsplit
+
+
+async def _viewer(url: str, stop: Any, stats: dict[str, Any], rng: random.Random, spread_s: float) -> None:
+    await asyncio.sleep(rng.uniform(0, spread_s))  # arrive spread out, not as one burst
+    parts = urlsplit(url)
+    try:
+        reader, writer = await asyncio.open_connection(parts.hostname, parts.port)
+        writer.write(f"GET {parts.path}?{parts.query} HTTP/1.1\r\nHost: {parts.netloc}\r\n\r\n".encode())
+        head = await reader.readuntil(b"\r\n\r\n")
+        status = int(head.split(b" ", 2)[1])
+        if status != 200:
+            raise ValueError(f"status {status}")
+        stats["connected"] += 1
+        body, last_arrival = b"", None
+        while not stop.is_set():
+            size = int((await reader.readuntil(b"\r\n")).strip(), 16)  # chunked transfer encoding
+            if size == 0:
+                raise ValueError("the server ended the stream")
+            body += (await reader.readexactly(size + 2))[:-2]
+            while True:
+                head_end = body.find(b"\r\n\r\n")
+                if head_end < 0:
+                    break
+                fields = dict(line.split(b": ", 1) for line in body[:head_end].split(b"\r\n")[1:] if b": " in line)
+                length = int(fields[b"Content-Length"])
+                if len(body) < head_end + 4 + length + 2:
+                    break
+                now = time.time()
+                stats["delays_ms"].append((now - float(fields[b"X-Timestamp"])) * 1000)
+                if last_arrival is not None:
+                    stats["max_gap_s"] = max(stats["max_gap_s"], now - last_arrival)
+                    if now - last_arrival > 1.0:
+                        stats["stalls"] += 1
+                last_arrival = now
+                stats["frames"] += 1
+                body = body[head_end + 4 + length + 2:]
+        writer.close()
+    except (OSError, asyncio.IncompleteReadError, ValueError, KeyError) as exc:
+        if not stop.is_set():
+            stats["errors"].append(repr(exc))
+
+
+async def _crowd(url: str, viewers: int, stop: Any) -> dict[str, Any]:
+    stats: dict[str, Any] = {"connected": 0, "frames": 0, "stalls": 0, "max_gap_s": 0.0, "delays_ms": [],
+                             "errors": []}
+    rng = random.Random(35)
+    tasks = [asyncio.create_task(_viewer(url, stop, stats, rng, 3.0)) for _ in range(viewers)]
+    while not stop.is_set():
+        await asyncio.sleep(0.2)
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
+    return stats
+
+
+def run_crowd(url: str, viewers: int, stop: Any, queue: Any) -> None:
+    """Child process entry: watch until `stop` is set, then put the stats (delays sampled down to 20 000) on `queue`.
+    The viewers stand in for 500 other machines (phones, OBS PCs), so here they yield the CPU (nice 10) to what does
+    run on the event laptop: the live server, the app and the car."""
+    import os
+
+    os.nice(10)
+    stats = asyncio.run(_crowd(url, viewers, stop))
+    delays = stats["delays_ms"]
+    step = max(1, len(delays) // 20_000)
+    stats["delays_ms"] = delays[::step]
+    queue.put(stats)

@@ -1,0 +1,135 @@
+"""Issue 35 in Chromium: the racing car's camera on the stream overlay (picture in picture, clear of the lower third)
+and on the staff's Cars page, fed end to end by a stock DeepRacer (the tests' fake console, its MJPEG route) through
+the car's video relay and the live server. Screenshots at 1920×1080 and 390×844 go to docs/screenshots/."""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drem_cars.drivers.deepracer_console import DeepRacerConsole
+from drem_cars.video_relay import VideoRelay, VideoSettings
+from drem_cars.video_sources import ConsoleCamera
+from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.cars.fake_deepracer_console import FakeConsole
+
+pytestmark = pytest.mark.browser
+
+SCREENSHOTS = Path(__file__).resolve().parents[2] / "docs" / "screenshots"
+SIZES = ({"width": 1920, "height": 1080}, {"width": 390, "height": 844})
+
+
+@pytest.fixture(scope="module")
+def racing_car(live_stack: Any) -> Iterator[dict[str, Any]]:
+    url = live_stack.url
+    operator = create_user(live_stack, "eye-op", "operator")
+    token = access_token(live_stack, operator)
+    racer = create_user(live_stack, "eye-racer", "racer")
+    fleet = call(url, "POST", "/api/fleets", token=token, body={"name": "Eye fleet"}, expect=201)
+    event = call(url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Car's Eye Cup", "event_type": "AWS_SUMMIT", "date": "2026-06-02", "country_code": "SE",
+        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
+    code = call(url, "POST", "/api/devices/activation-codes", token=token, expect=201,
+                body={"fleet_id": fleet["fleet_id"], "hostname": "eye-car", "device_kind": "car"})["code"]
+    credential = call(url, "POST", "/api/devices/activate", expect=201,
+                      body={"code": code, "hostname": "eye-car", "device_kind": "car"})["credential"]
+    eid = event["event_id"]
+    race = call(url, "POST", f"/api/events/{eid}/races", token=token, expect=201,
+                body={"track_id": "1", "racer_username": racer, "car": "eye-car"})
+    with FakeConsole() as console:
+        camera = ConsoleCamera(DeepRacerConsole(console.url, "car-password"))
+        relay = VideoRelay(live_stack.live_url, credential, camera, VideoSettings(fps=15), demand_wait_s=5)
+        relay.start()
+        try:
+            call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=token,
+                 body={"kind": "start"})
+            yield {"event_id": eid, "race_id": race["race_id"], "token": token, "operator": operator}
+        finally:
+            relay.stop()
+
+
+def frames_painted(page: Any) -> int:
+    return int(page.locator("[data-car-eye]").get_attribute("data-frames") or 0)
+
+
+def shoot(page: Any, name: str) -> None:
+    for size in SIZES:
+        page.set_viewport_size(size)
+        page.wait_for_timeout(300)  # a screenshot only: let the resized layout settle
+        page.screenshot(path=str(SCREENSHOTS / f"{name}-{size['width']}x{size['height']}.png"))
+
+
+def test_the_overlay_shows_the_racing_cars_camera_frame_after_frame_above_the_lower_third(
+        chromium: Any, racing_car: dict[str, Any], app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    page.goto(f"{app_url}/overlay/{racing_car['event_id']}?trackId=1&chroma=true&carEye=true")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    first = frames_painted(page)
+    # Frames keep arriving: ten more painted (at 15 fps, under a second on a quiet machine).
+    page.wait_for_function(f"() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= {first + 10}",
+                           timeout=30_000)
+    eye = page.locator("[data-car-eye]")
+    assert eye.is_visible()
+    box, bar = eye.bounding_box(), page.locator("[data-testid=lower-third]").bounding_box()
+    assert box is not None and bar is not None
+    assert box["y"] + box["height"] <= 1080 * 2 / 3  # never in the lower third
+    assert box["y"] + box["height"] < bar["y"]
+    assert page.evaluate("() => document.querySelector('[data-car-eye] img').naturalWidth") == 480
+    shoot(page, "car-eye-overlay")
+    page.context.close()
+
+
+def test_an_overlay_link_without_the_option_shows_no_camera(chromium: Any, racing_car: dict[str, Any],
+                                                            app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    page.goto(f"{app_url}/overlay/{racing_car['event_id']}?trackId=1")
+    page.locator("[data-testid=lower-third]").wait_for()
+    assert page.locator("[data-car-eye]").count() == 0
+    page.context.close()
+
+
+def test_staff_see_each_cars_camera_on_the_cars_page(chromium: Any, racing_car: dict[str, Any],
+                                                     app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    sign_in(page, app_url, racing_car["operator"])
+    page.goto(f"{app_url}/console/cars")
+    thumbnail = page.locator("[data-testid=camera-eye-car] img")
+    thumbnail.wait_for()
+    page.wait_for_function("() => document.querySelector('[data-testid=camera-eye-car] img').naturalWidth > 0",
+                           timeout=30_000)
+    assert page.locator("[data-testid=camera-eye-car]").get_attribute("target") == "_blank"  # full size on click
+    shoot(page, "car-eye-cars-page")
+    page.context.close()
+
+
+def test_the_big_screen_shows_it_beside_the_board_and_the_commentator_sees_it(
+        chromium: Any, racing_car: dict[str, Any], app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    page.goto(f"{app_url}/leaderboard/{racing_car['event_id']}?track=1&carEye=true")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    eye, board = page.locator("[data-car-eye]").bounding_box(), page.locator(".public-board").bounding_box()
+    assert eye is not None and board is not None
+    assert board["x"] + board["width"] <= eye["x"]  # beside the board, not over it
+    sign_in(page, app_url, racing_car["operator"])
+    page.goto(f"{app_url}/commentator/{racing_car['event_id']}?track=1")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    page.context.close()
+
+
+def test_the_camera_falls_back_to_nothing_when_the_race_ends(chromium: Any, racing_car: dict[str, Any],
+                                                             app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    page.goto(f"{app_url}/overlay/{racing_car['event_id']}?trackId=1&carEye=true")
+    page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 3",
+                           timeout=30_000)
+    path = f"/api/events/{racing_car['event_id']}/races/{racing_car['race_id']}/commands"
+    for kind in ("end", "submit"):
+        call(app_url, "POST", path, token=racing_car["token"], body={"kind": kind})
+    page.wait_for_function("() => document.querySelector('[data-car-eye]').hidden", timeout=30_000)
+    assert not page.locator("[data-car-eye]").is_visible()
+    page.context.close()

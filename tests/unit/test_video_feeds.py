@@ -1,0 +1,93 @@
+"""The live server's camera feeds without a network: a viewer that falls behind gets the newest frame, not a backlog;
+a car is wanted exactly while someone watches it, under its device id or the hostname a race names it by."""
+from __future__ import annotations
+
+import asyncio
+
+from drem_live.video_feeds import Feeds, Sink, looks_like_jpeg
+
+JPEG = b"\xff\xd8\xff\xe0" + b"x" * 10 + b"\xff\xd9"
+
+
+def test_a_viewer_that_fell_behind_gets_only_the_newest_frame() -> None:
+    async def run() -> list[int]:
+        feed = Feeds().feed("car-1", "eye-car")
+        for taken in (1.0, 2.0, 3.0):  # three frames arrive while the viewer is busy writing
+            feed.publish(JPEG, taken)
+        first = await feed.next_after(0, 1.0)
+        assert first is not None
+        nothing = await feed.next_after(first.seq, 0.05)  # nothing newer: it waits, then gives up
+        return [first.seq, 0 if nothing is None else nothing.seq]
+
+    assert asyncio.run(run()) == [3, 0]
+
+
+def test_every_viewer_gets_the_same_bytes_of_a_frame() -> None:
+    async def run() -> bool:
+        feed = Feeds().feed("car-1")
+        waiting = [asyncio.create_task(feed.next_after(0, 2.0)) for _ in range(3)]
+        await asyncio.sleep(0)
+        feed.publish(JPEG, 5.0)
+        frames = await asyncio.gather(*waiting)
+        return all(f is frames[0] for f in frames) and frames[0] is not None and JPEG in frames[0].part
+
+    assert asyncio.run(run())
+
+
+def test_a_car_is_wanted_while_watched_by_its_hostname_or_id() -> None:
+    async def run() -> list[bool]:
+        feeds = Feeds()
+        feeds.feed("car-1", "eye-car")  # the car asked once: its hostname is known
+        seen = [feeds.wanted("car-1")]
+        feeds.watch("eye-car")  # a race names the car by hostname
+        seen.append(feeds.wanted("car-1"))
+        seen.append(await feeds.demand_change("car-1", reported=False, timeout_s=5))  # answers at once
+        feeds.unwatch("eye-car")
+        seen.append(feeds.wanted("car-1"))
+        return seen
+
+    assert asyncio.run(run()) == [False, True, True, False]
+
+
+def test_only_a_whole_jpeg_counts_as_a_frame() -> None:
+    assert looks_like_jpeg(JPEG)
+    assert not looks_like_jpeg(b"<svg onload=alert(1)>")
+    assert not looks_like_jpeg(JPEG[:-2])
+
+
+class Connection:
+    """A viewer's connection as the event loop's transport shows it: what was written, and how much is unsent."""
+
+    def __init__(self, unsent: int = 0) -> None:
+        self.unsent, self.written, self.closed = unsent, [], False
+
+    def is_closing(self) -> bool:
+        return self.closed
+
+    def get_write_buffer_size(self) -> int:
+        return self.unsent
+
+    def write(self, data: bytes) -> None:
+        self.written.append(data)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_a_frame_is_written_once_per_viewer_as_one_http_chunk_and_a_stuck_viewer_skips_then_is_dropped() -> None:
+    async def run() -> tuple[Connection, Connection, Sink]:
+        feed = Feeds().feed("car-1")
+        quick, stuck = Connection(), Connection(unsent=10 * 1024 * 1024)
+        stuck_sink = Sink(stuck)  # type: ignore[arg-type]
+        feed.attach(Sink(quick))  # type: ignore[arg-type]
+        feed.attach(stuck_sink)
+        feed.publish(JPEG, 1.0)
+        stuck_sink.behind_since = 0.0  # it has been behind since long ago
+        feed.publish(JPEG, 2.0)
+        return quick, stuck, stuck_sink
+
+    quick, stuck, stuck_sink = asyncio.run(run())
+    assert len(quick.written) == 2
+    size, rest = quick.written[0].split(b"\r\n", 1)
+    assert int(size, 16) == len(rest) - 2 and rest.startswith(b"--drem-frame\r\n") and JPEG in rest
+    assert stuck.written == [] and stuck.closed and stuck_sink.closed.is_set()

@@ -1,0 +1,108 @@
+// The car's eye: plays the racing car's camera (the live server's MJPEG, multipart/x-mixed-replace) in the page's
+// <figure data-car-eye="URL">. It reads the stream with fetch, so it knows when frames stop: the figure is shown only
+// while frames arrive and hidden (nothing, no error) when none came for STALL_MS, when no car races (204), or when the
+// live server is away; it then asks again every RETRY_MS. Latest frame wins: while one frame decodes, only the newest
+// that arrives meanwhile is kept. Each painted frame counts in data-frames, and data-delay-ms is how long after the
+// car took it (its X-Timestamp) it was painted.
+(function () {
+  "use strict";
+  var STALL_MS = 2000;
+  var RETRY_MS = 3000;
+  var CRLF2 = [13, 10, 13, 10];
+
+  function indexOf(bytes, pattern, from) {
+    outer: for (var i = from; i <= bytes.length - pattern.length; i++) {
+      for (var j = 0; j < pattern.length; j++) {
+        if (bytes[i + j] !== pattern[j]) { continue outer; }
+      }
+      return i;
+    }
+    return -1;
+  }
+  function ascii(text) {
+    var out = new Uint8Array(text.length);
+    for (var i = 0; i < text.length; i++) { out[i] = text.charCodeAt(i); }
+    return out;
+  }
+  function headers(bytes) {
+    var fields = {};
+    String.fromCharCode.apply(null, bytes).split("\r\n").forEach(function (line) {
+      var colon = line.indexOf(":");
+      if (colon > 0) { fields[line.slice(0, colon).trim().toLowerCase()] = line.slice(colon + 1).trim(); }
+    });
+    return fields;
+  }
+
+  function play(figure) {
+    var img = figure.querySelector("img");
+    var url = figure.dataset.carEye;
+    var frames = 0;
+    var lastPaint = 0;
+    var decoding = false;
+    var waiting = null;  // the newest frame that arrived while another decoded
+    figure.dataset.frames = "0";
+
+    setInterval(function () {
+      if (!figure.hidden && performance.now() - lastPaint > STALL_MS) { figure.hidden = true; }
+    }, 500);
+
+    function paint(frame) {
+      if (decoding) { waiting = frame; return; }
+      decoding = true;
+      var previous = img.src;
+      img.src = URL.createObjectURL(new Blob([frame.jpeg], { type: "image/jpeg" }));
+      img.decode().then(function () {
+        requestAnimationFrame(function () {
+          frames += 1;
+          lastPaint = performance.now();
+          figure.dataset.frames = String(frames);
+          if (frame.takenMs > 0) { figure.dataset.delayMs = String(Math.round(Date.now() - frame.takenMs)); }
+          figure.hidden = false;
+        });
+      }).catch(function () { /* a frame that does not decode is skipped */ }).then(function () {
+        if (previous && previous.indexOf("blob:") === 0) { URL.revokeObjectURL(previous); }
+        decoding = false;
+        if (waiting) { var next = waiting; waiting = null; paint(next); }
+      });
+    }
+
+    function again() { setTimeout(connect, RETRY_MS); }
+
+    function connect() {
+      fetch(url, { cache: "no-store", credentials: "omit" }).then(function (response) {
+        var type = response.headers.get("Content-Type") || "";
+        var boundary = (type.split("boundary=")[1] || "").replace(/"/g, "").trim();
+        if (response.status !== 200 || !response.body || !boundary) { again(); return; }
+        var marker = ascii("--" + boundary.replace(/^--/, ""));
+        var reader = response.body.getReader();
+        var buffer = new Uint8Array(0);
+        function pump() {
+          return reader.read().then(function (step) {
+            if (step.done) { figure.hidden = true; again(); return; }
+            var joined = new Uint8Array(buffer.length + step.value.length);
+            joined.set(buffer); joined.set(step.value, buffer.length);
+            buffer = joined;
+            for (;;) {
+              var start = indexOf(buffer, marker, 0);
+              var headEnd = start < 0 ? -1 : indexOf(buffer, CRLF2, start);
+              if (headEnd < 0) { break; }
+              var fields = headers(buffer.subarray(start + marker.length, headEnd));
+              var length = Number(fields["content-length"]);
+              var bodyStart = headEnd + 4;
+              if (!(length > 0) || buffer.length < bodyStart + length) { break; }
+              var stamp = Number(fields["x-timestamp"]);
+              paint({ jpeg: buffer.slice(bodyStart, bodyStart + length), takenMs: stamp > 0 ? stamp * 1000 : 0 });
+              buffer = buffer.slice(bodyStart + length);
+            }
+            return pump();
+          });
+        }
+        return pump();
+      }).catch(function () { figure.hidden = true; again(); });
+    }
+    connect();
+  }
+
+  function start() { document.querySelectorAll("[data-car-eye]").forEach(play); }
+  if (document.readyState === "loading") { document.addEventListener("DOMContentLoaded", start); } else { start(); }
+})();
