@@ -15,9 +15,9 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from chalicelib.core.errors import Conflict, Forbidden, NotFound
 from chalicelib.core.principals import Device, Principal
 from chalicelib.domain.assignment_signals import AssignmentSignals
-from chalicelib.core.errors import Conflict, Forbidden, NotFound
 from chalicelib.domain.racer_models import DOWNLOAD_EXPIRES_S, ModelRecord, ModelService, ModelStatus, utc_now
 
 MAX_MODELS_PER_CAR = 10
