@@ -33,3 +33,23 @@ def test_a_lap_edit_of_an_older_race_leaves_the_current_race_on_the_overlay(desk
     # The live race always shows, and editing the race the overlay shows keeps it there with the new figures.
     live = scenario.add_race("vera", [12_000]).race_id
     assert _overlay(desk, eid)["race_id"] == live
+
+
+def test_a_crash_replay_of_an_older_race_publishes_its_row_but_leaves_the_current_race_on_the_overlay(
+        desk: Desk, scenario: Scenario, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The replay of a publish a crash cut off goes through the same step as the write: the board catches up, the
+    overlay keeps showing the race after it (before, the replay put the older race back on the stream)."""
+    from chalicelib import services
+    from chalicelib.domain.races import RaceService
+
+    scenario.add_racers("vera", "omar").add_event()
+    eid = scenario.event_id
+    with monkeypatch.context() as crash:
+        crash.setattr(RaceService, "publish", lambda *args: None)  # dies between the race write and the board write
+        scenario.submitted_race("vera", [10_000, 11_000])
+    newer = scenario.submitted_race("omar", [9_000])  # its publish may already finish vera's (2 s old) intent
+
+    services.race_service().complete_pending_publishes()  # what the sweeper runs
+
+    assert sorted(e["username"] for e in desk.board(eid)["entries"]) == ["omar", "vera"]
+    assert _overlay(desk, eid)["race_id"] == newer
