@@ -47,10 +47,9 @@ def test_a_crash_replay_of_an_older_race_publishes_its_row_but_leaves_the_curren
     with monkeypatch.context() as crash:
         crash.setattr(RaceService, "publish", lambda *args: None)  # dies between the race write and the board write
         scenario.submitted_race("vera", [10_000, 11_000])
-    newer = scenario.submitted_race("omar", [9_000])
-    assert [e["username"] for e in desk.board(eid)["entries"]] == ["omar"]
+    newer = scenario.submitted_race("omar", [9_000])  # its publish may already finish vera's (2 s old) intent
 
-    assert services.race_service().complete_pending_publishes() >= 1
+    services.race_service().complete_pending_publishes()  # what the sweeper runs
 
     assert sorted(e["username"] for e in desk.board(eid)["entries"]) == ["omar", "vera"]
     assert _overlay(desk, eid)["race_id"] == newer
