@@ -9,13 +9,17 @@ import signal
 import subprocess
 from dataclasses import dataclass
 
+CPU_GRACE_S = 5
+
 
 def limit_resources(memory_bytes: int, cpu_seconds: int) -> None:
     """In the child, before exec: address space and CPU time capped (the kernel ends it past either), no core dump."""
     import resource
 
     resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
-    resource.setrlimit(resource.RLIMIT_CPU, (cpu_seconds, cpu_seconds))
+    # SIGXCPU comes at the soft limit only when the hard one is above it (equal limits mean a bare SIGKILL, which
+    # reads as "killed", not "used more than its CPU time"); the hard limit still ends a child that ignores SIGXCPU.
+    resource.setrlimit(resource.RLIMIT_CPU, (cpu_seconds, cpu_seconds + CPU_GRACE_S))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
 
 
