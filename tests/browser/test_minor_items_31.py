@@ -1,0 +1,108 @@
+"""Issue 31 in the browser, as the user met it: the commentator keeps the current race while race admin edits an older
+race's lap; a second track's timekeeper does not claim the sim car that times track 1 (both were covered only below
+the browser); two racers of one display name are told apart on the big screen."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.browser.console_api import access_token, call, create_user, sign_in, submitted_race
+
+pytestmark = pytest.mark.browser
+
+BIG_SCREEN = {"width": 1920, "height": 1080}
+SCREENSHOTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "big-screen"
+
+
+def test_the_commentator_keeps_the_current_race_while_race_admin_edits_an_older_one(chromium: Any, live_stack: Any,
+                                                                                    app_url: str) -> None:
+    create_user(live_stack, "minor-op", "operator")
+    for racer in ("minor-vera", "minor-omar"):
+        create_user(live_stack, racer, "racer")
+    token = access_token(live_stack, "minor-op")
+    event_id = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Commentator Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-03", "country_code": "SE",
+        "tracks": [{"track_id": "1"}]})["event_id"]
+    older = submitted_race(app_url, token, event_id, "minor-vera", [10_000])
+    submitted_race(app_url, token, event_id, "minor-omar", [9_000])
+
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    commentator = context.new_page()
+    sign_in(commentator, app_url, "minor-op")
+    commentator.goto(f"{app_url}/commentator/{event_id}?track=1")
+    commentator.wait_for_selector("[data-testid=racer-stats] h2:text-is('minor-omar')")
+
+    admin = context.new_page()  # race admin, as staff correct a lap of vera's older race
+    admin.goto(f"{app_url}/console/races/{event_id}/{older}")
+    row = admin.get_by_test_id("lap-editor").get_by_test_id("lap-row").first
+    row.locator("input[name=time_s]").fill("8.5")
+    row.get_by_role("button", name="Save lap 1").click()
+    admin.wait_for_load_state()
+    assert admin.get_by_test_id("lap-row").first.locator("input[name=time_s]").input_value() == "8.500"
+
+    # The edit counts (vera leads the board) ...
+    board = context.new_page()
+    board.goto(f"{app_url}/leaderboard/{event_id}?summary_seconds=0")
+    board.wait_for_selector(".board-row:first-child[data-racer='minor-vera']")
+    # ... and the commentator (its save answered only after the boards and overlay were written) still shows omar's
+    # race as the current one, polled and freshly loaded alike.
+    commentator.wait_for_selector("[data-testid=racer-stats] h2:text-is('minor-omar')")
+    commentator.reload()
+    assert commentator.locator("[data-testid=racer-stats] h2").inner_text() == "minor-omar"
+    context.close()
+
+
+def test_the_second_track_does_not_claim_the_sim_car_of_the_first(chromium: Any, live_stack: Any,
+                                                                  app_url: str) -> None:
+    create_user(live_stack, "sim-op", "operator")
+    create_user(live_stack, "sim-two", "racer")
+    token = access_token(live_stack, "sim-op")
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "Sim fleet"}, expect=201)
+    code = call(app_url, "POST", "/api/devices/activation-codes", token=token, expect=201, body={
+        "fleet_id": fleet["fleet_id"], "hostname": "sim-car-1", "device_kind": "car"})["code"]
+    credential = call(app_url, "POST", "/api/devices/activate", expect=201,
+                      body={"code": code, "hostname": "sim-car-1", "device_kind": "car"})["credential"]
+    call(app_url, "POST", "/api/devices/self/heartbeat", device=credential, body={"times_laps": True})
+    event_id = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Two Tracks Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-04", "country_code": "SE",
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}, {"track_id": "2", "fleet_id": fleet["fleet_id"]}]}
+    )["event_id"]
+    call(app_url, "POST", f"/api/events/{event_id}/races", token=token, expect=201,
+         body={"track_id": "2", "racer_username": "sim-two"})  # readied without a car
+
+    context = chromium.new_context(viewport=BIG_SCREEN)
+    page = context.new_page()
+    sign_in(page, app_url, "sim-op")
+    page.goto(f"{app_url}/console/timekeeper/{event_id}/2")
+    page.get_by_test_id("race-panel").wait_for()
+    panel = page.get_by_test_id("race-panel").inner_text()
+    assert "No timer for this race" in page.content() and "Timed by sim car" not in page.content(), panel
+    context.close()
+
+
+def test_two_racers_called_bjorn_are_told_apart_on_the_big_screen(chromium: Any, live_stack: Any,
+                                                                  app_url: str) -> None:
+    from tests.browser.test_real_names import _admin_token
+
+    admin = _admin_token(live_stack)
+    create_user(live_stack, "bjorn-op", "operator")
+    token = access_token(live_stack, "bjorn-op")
+    event_id = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "Björn Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-05", "country_code": "SE",
+        "tracks": [{"track_id": "1", "leaderboard_title": "Main stage"}]})["event_id"]
+    for username, name, lap_ms in (("bjorn_a", "Björn", 8_700), ("anna_l", "Anna", 9_100), ("bjorn_b", "björn", 9_400)):
+        call(app_url, "POST", "/api/users", token=admin, expect=201, body={
+            "username": username, "email": f"{username}@example.test", "country_code": "SE", "display_name": name})
+        submitted_race(app_url, token, event_id, username, [lap_ms])
+
+    for size in (BIG_SCREEN, {"width": 390, "height": 844}):
+        page = chromium.new_context(viewport=size).new_page()
+        page.goto(f"{app_url}/leaderboard/{event_id}?summary_seconds=0")
+        names = [n.strip() for n in page.locator(".board-row .racer").all_inner_texts()]
+        assert names == ["Björn (bjorn_a)", "Anna", "björn (bjorn_b)"], names
+        assert page.evaluate("() => document.documentElement.scrollWidth") <= size["width"]
+        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SCREENSHOTS / f"same-names-{size['width']}x{size['height']}.png"))
+        page.context.close()
