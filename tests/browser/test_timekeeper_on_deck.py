@@ -184,6 +184,11 @@ def test_with_one_car_the_ready_button_names_the_car_a_race_ended_elsewhere_free
     page.wait_for_function("() => document.querySelector('[data-testid=start-head]')?.textContent"
                            " === 'Ready race for solo-ben on solo-car'", timeout=20_000)
     assert "No free car" not in page.get_by_test_id("queue-panel").inner_text()
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "timekeeper-one-car-1920x1080.png"))
+    page.set_viewport_size(PHONE)
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= PHONE["width"]
+    page.screenshot(path=str(ARTIFACTS / "timekeeper-one-car-390x844.png"), full_page=True)
     button.click()
     page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'solo-ben'")
     assert "solo-car" in page.get_by_test_id("race-panel").inner_text()
