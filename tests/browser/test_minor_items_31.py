@@ -106,3 +106,44 @@ def test_two_racers_called_bjorn_are_told_apart_on_the_big_screen(chromium: Any,
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOTS / f"same-names-{size['width']}x{size['height']}.png"))
         page.context.close()
+
+
+def test_the_cars_page_marks_only_the_driven_model_loaded_and_fits_a_phone(chromium: Any, live_stack: Any,
+                                                                           app_url: str) -> None:
+    """Issue 31: every assigned model showed "(loaded)" at once, and a long model chip made a phone scroll sideways
+    (409 px)."""
+    import hashlib
+
+    from tests.browser.test_timekeeper_on_deck import _car, _upload_model
+    from tests.unit.models_helpers import onnx_archive
+
+    create_user(live_stack, "chip-op", "operator")
+    create_user(live_stack, "chip-racer", "racer")
+    racer_token, token = access_token(live_stack, "chip-racer"), access_token(live_stack, "chip-op")
+    long_name = "console-training-run-with-a-very-long-descriptive-name-v12"
+    archives = {"chip-short": onnx_archive(0.11), long_name: onnx_archive(0.12)}
+    models = {name: _upload_model(app_url, racer_token, f"{name}.tar.gz", archive)
+              for name, archive in archives.items()}
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "Chip fleet"}, expect=201)
+    car = _car(app_url, token, fleet["fleet_id"], "chip-car")
+    device_id = next(d["device_id"] for d in call(app_url, "GET", "/api/devices", token=token)["devices"]
+                     if d["hostname"] == "chip-car")
+    call(app_url, "PUT", f"/api/cars/{device_id}/models", token=token,
+         body={"model_ids": [models["chip-short"]["model_id"], models[long_name]["model_id"]]})
+    for model in models.values():  # the car loaded both once; it drives the short one now
+        call(app_url, "POST", "/api/devices/self/assignment/status", device=car,
+             body={"model_id": model["model_id"], "status": "loaded"})
+    call(app_url, "POST", "/api/devices/self/heartbeat", device=car, body={
+        "battery_pct": 70, "model": {"name": "chip-short", "md5": hashlib.md5(archives["chip-short"]).hexdigest()}})
+
+    context = chromium.new_context(viewport={"width": 390, "height": 844})
+    page = context.new_page()
+    sign_in(page, app_url, "chip-op")
+    page.goto(f"{app_url}/console/cars")
+    chips = page.get_by_test_id("models-chip-car").get_by_test_id("assigned-models").inner_text()
+    assert "chip-short (loaded)" in chips and f"{long_name} (on the car)" in chips, chips
+    assert chips.count("(loaded)") == 1, chips
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= 390  # the long chip wraps
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS.parent / "cars-long-model-390x844.png"), full_page=True)
+    context.close()
