@@ -147,3 +147,33 @@ def test_the_cars_page_marks_only_the_driven_model_loaded_and_fits_a_phone(chrom
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SCREENSHOTS.parent / "cars-long-model-390x844.png"), full_page=True)
     context.close()
+
+
+def test_the_desk_refuses_the_24_character_name_sign_up_refuses_with_the_same_message(live_stack: Any, app_url: str,
+                                                                                     page: Any) -> None:
+    """Issue 31: the desk accepted a 24-character sign-in name that sign-up refused ("2 to 20")."""
+    from tests.browser.test_journey_registration import sign_in as sign_in_as
+
+    too_long = "Mary-Kate_Longname_Racr"[:20] + "2026"  # 24 characters
+    assert len(too_long) == 24
+    sign_in_as(page, app_url, live_stack.admin_username, live_stack.admin_password)
+    page.goto(app_url + "/console/registration")
+    page.fill("#username", too_long)
+    page.fill("#email", "mary@example.test")
+    page.fill("#country_code", "Sweden")
+    page.focus("#email")
+    page.keyboard.press("Enter")
+    page.locator("#username-error").wait_for()
+    desk_says = page.locator("#username-error").inner_text()
+    assert page.input_value("#email") == "mary@example.test"  # nothing typed is lost
+
+    signup = page.context.browser.new_context().new_page()
+    signup.goto(app_url + "/signup")
+    signup.fill("#username", too_long)
+    signup.fill("#email", "mary@example.test")
+    signup.fill("#country_code", "Sweden")
+    signup.fill("#password", "Racer-Pass-2026")
+    signup.get_by_role("button", name="Sign up").click()
+    signup.locator("#username-error").wait_for()
+    assert signup.locator("#username-error").inner_text() == desk_says == "A sign-in name has 2 to 20 characters."
+    signup.context.close()
