@@ -110,8 +110,8 @@ def test_two_racers_called_bjorn_are_told_apart_on_the_big_screen(chromium: Any,
 
 def test_the_cars_page_marks_only_the_driven_model_loaded_and_fits_a_phone(chromium: Any, live_stack: Any,
                                                                            app_url: str) -> None:
-    """Issue 31: every assigned model showed "(loaded)" at once, and a long model chip made a phone scroll sideways
-    (409 px)."""
+    """Issue 31: every assigned model showed "(loaded)" at once, a long model chip made a phone scroll sideways
+    (409 px), and the Models page named the sensor and algorithm by their raw values."""
     import hashlib
 
     from tests.browser.test_timekeeper_on_deck import _car, _upload_model
@@ -146,6 +146,11 @@ def test_the_cars_page_marks_only_the_driven_model_loaded_and_fits_a_phone(chrom
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 390  # the long chip wraps
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SCREENSHOTS.parent / "cars-long-model-390x844.png"), full_page=True)
+    # The staff Models page says the models' sensor and algorithm in words (it showed
+    # "FRONT_FACING_CAMERA · behaviour_cloning").
+    page.goto(f"{app_url}/console/models")
+    listed = page.locator("main").inner_text()
+    assert "Front camera · Behaviour cloning" in listed and "FRONT_FACING_CAMERA" not in listed, listed[:2000]
     context.close()
 
 
