@@ -22,6 +22,7 @@ from chalicelib.core.errors import ServiceUnavailable
 from chalicelib.domain.activation import ActivationService
 from chalicelib.domain.assignment_signals import AssignmentSignals
 from chalicelib.domain.assignments import AssignmentService
+from chalicelib.domain.big_screen import ScreenPublisher
 from chalicelib.domain.booth_drive import DriveService, LiveDrives
 from chalicelib.domain.booth_runs import RunService
 from chalicelib.domain.booth_tracks import TrackService
@@ -160,11 +161,25 @@ def event_store() -> DynamoEventStore:
 def event_service() -> EventService:
     settings, dynamodb = get_settings(), clients.dynamodb()
     return EventService(event_store(), DynamoLiveRaceProbe(dynamodb, settings.table("races")),
-                        DynamoFleetStore(dynamodb, settings.table("fleet")), now_ms)
+                        DynamoFleetStore(dynamodb, settings.table("fleet")), now_ms,
+                        on_saved=screen_publisher().publish)
+
+
+def logo_store() -> DynamoLogoStore:
+    return DynamoLogoStore(clients.dynamodb(), get_settings().table("events"))
 
 
 def event_logo_service() -> EventLogoService:
-    return EventLogoService(event_store(), DynamoLogoStore(clients.dynamodb(), get_settings().table("events")))
+    return EventLogoService(event_store(), logo_store(), on_changed=screen_publisher().publish)
+
+
+def screen_publisher() -> ScreenPublisher:
+    """Publishes the big screen's settings after an event or logo edit (open screens show it without a reload)."""
+    def logo_version(event_id: str) -> str | None:
+        found = logo_store().version(event_id)
+        return found.version if found else None
+
+    return ScreenPublisher(publisher(), logo_version)
 
 
 def device_store() -> DynamoDeviceStore:

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, computed_field
 
 from drem_leaderboard.averages import AverageWindow
 from drem_leaderboard.models import RankingMethod
+from drem_leaderboard.names import told_apart
 from drem_leaderboard.summary import RaceSummary
 
 COMBINED_TRACK_ID = "combined"
@@ -36,6 +37,9 @@ class LeaderboardEntry(BaseModel):
 
     position: int = Field(ge=1)
     username: str
+    # Whose entry this is, for the server alone (the overlay finds its racer's entry by it, not by a name two racers
+    # may share): never in the public JSON, nor in the etag.
+    racer_sub: str = Field(default="", exclude=True)
     country_code: str | None = None
     highlight_colour: str = DEFAULT_HIGHLIGHT_COLOUR
     avatar_url: str | None = None
@@ -100,6 +104,12 @@ def _display_name(summary: RaceSummary, profiles: Mapping[str, RacerProfile]) ->
     return profile.username if profile and profile.username else summary.username
 
 
+def shown_names(summaries: Iterable[RaceSummary], profiles: Mapping[str, RacerProfile]) -> dict[str, str]:
+    """{racer sub: the name a board shows}: the display name, with the sign-in name after it when another racer
+    on the same board goes by the same display name (drem_leaderboard.names)."""
+    return told_apart({s.racer_sub: (_display_name(s, profiles), s.username) for s in summaries})
+
+
 def rank(
     summaries: Iterable[RaceSummary],
     method: RankingMethod,
@@ -112,7 +122,8 @@ def rank(
     once, with their best result on any track."""
     profiles = profiles or {}
     chosen = [s for s in summaries if track_id == COMBINED_TRACK_ID or s.track_id == track_id]
-    keyed = [(_sort_key(s, method, _display_name(s, profiles)), s) for s in chosen]
+    shown = shown_names(chosen, profiles)
+    keyed = [(_sort_key(s, method, shown[s.racer_sub]), s) for s in chosen]
     if track_id == COMBINED_TRACK_ID:
         best: dict[str, tuple[tuple[Any, ...], RaceSummary]] = {}
         for key, summary in keyed:
@@ -124,13 +135,13 @@ def rank(
     return Leaderboard(
         track_id=track_id,
         ranking_method=method,
-        entries=tuple(_entries(ordered, method, profiles)),
+        entries=tuple(_entries(ordered, method, profiles, shown)),
         version=version,
     )
 
 
 def _entries(
-    ordered: list[RaceSummary], method: RankingMethod, profiles: Mapping[str, RacerProfile]
+    ordered: list[RaceSummary], method: RankingMethod, profiles: Mapping[str, RacerProfile], shown: Mapping[str, str]
 ) -> Iterable[LeaderboardEntry]:
     leader_time = _ranked_time(ordered[0], method) if ordered else None
     leader_laps = _laps(ordered[0], method) if ordered else 0
@@ -141,7 +152,8 @@ def _entries(
         comparable = method is not RankingMethod.LAP_COUNT or laps == leader_laps
         yield LeaderboardEntry(
             position=position,
-            username=_display_name(summary, profiles),
+            username=shown[summary.racer_sub],
+            racer_sub=summary.racer_sub,
             country_code=profile.country_code,
             highlight_colour=profile.highlight_colour or DEFAULT_HIGHLIGHT_COLOUR,
             avatar_url=profile.avatar_url,

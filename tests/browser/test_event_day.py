@@ -180,6 +180,7 @@ def test_my_races_names_the_event_and_writes_lap_times_like_every_other_page(chr
     row = page.get_by_test_id("race-row").first
     text = row.inner_text()
     assert "Event Day Cup" in text and event_day["event_id"] not in text
+    assert "Main stage" in text and "Track 1" not in text  # issue 31: the track by its name, not its number
     assert "0:08.838" in text and "Submitted" in text
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]  # nothing cut off on a phone
     row.get_by_role("button", name="Show laps").click()

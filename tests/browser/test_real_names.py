@@ -121,6 +121,14 @@ def test_landing_and_statistics_name_countries_and_each_racers_own(app_url, page
         assert page.locator("[data-testid=stats-activity] rect").count() >= 2
     page.set_viewport_size(BIG_SCREEN)
     assert page.locator("[data-testid=stats-page]").bounding_box()["width"] > 1200
+    # Every axis label is drawn inside its chart (one was cut at the chart's edge at 1920).
+    cut = page.locator("svg[data-testid=stats-activity]").evaluate("""svg => {
+        const box = svg.getBoundingClientRect();
+        return [...svg.querySelectorAll('text')].map(t => [t.textContent, t.getBoundingClientRect()])
+            .filter(([, r]) => r.left < box.left - 1 || r.right > box.right + 1 || r.top < box.top - 1
+                               || r.bottom > box.bottom + 1).map(([text]) => text);
+    }""")
+    assert cut == [], f"axis labels outside the chart: {cut}"
     _shot(page, "statistics")
 
 

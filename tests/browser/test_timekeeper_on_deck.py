@@ -152,3 +152,43 @@ def test_the_timekeeper_lines_racers_up_and_the_next_model_loads_on_a_free_car(l
     page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'deck-dee'")
     page.wait_for_function("() => !document.querySelector('#tk-queue-list').textContent.includes('deck-dee')")
     assert _on_deck(page) == ["deck-cy", "deck-ben", "deck-eve"]
+
+
+def test_with_one_car_the_ready_button_names_the_car_a_race_ended_elsewhere_freed(live_stack, app_url, page):
+    """Issue 31: one car; while it raced, the next racer waited with "No free car"; the race was ended elsewhere
+    (here through the API, as race admin or a timer does) and "Ready race for X" named no car, yet used car-1."""
+    create_user(live_stack, "solo-op", "operator")
+    for index, racer in enumerate(("solo-ann", "solo-ben")):
+        create_user(live_stack, racer, "racer")
+        _upload_model(app_url, access_token(live_stack, racer), f"{racer}-fast.tar.gz", onnx_archive(0.1 * (index + 1)))
+    token = access_token(live_stack, "solo-op")
+    fleet = call(app_url, "POST", "/api/fleets", token=token, body={"name": "One-car fleet"}, expect=201)
+    _car(app_url, token, fleet["fleet_id"], "solo-car")
+    event = call(app_url, "POST", "/api/events", token=token, expect=201, body={
+        "name": "One-car Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-07-02", "country_code": "SE",
+        "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
+    page.set_viewport_size(BIG_SCREEN)
+    sign_in(page, app_url, "solo-op")
+    page.goto(f"{app_url}/console/timekeeper/{event['event_id']}/1")
+    _add_anyway(page, "solo-ann", "solo-ann-fast")
+    page.get_by_test_id("start-head").click()
+    page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'solo-ann'")
+    race_id = page.locator("[data-race-id]").first.get_attribute("data-race-id")
+    _add_anyway(page, "solo-ben", "solo-ben-fast")
+    page.wait_for_function("() => document.querySelector('[data-testid=preload]')?.dataset.state === 'no car'")
+
+    for kind in ("end", "submit"):
+        call(app_url, "POST", f"/api/events/{event['event_id']}/races/{race_id}/commands", token=token,
+             body={"kind": kind})
+    button = page.get_by_test_id("start-head")
+    page.wait_for_function("() => document.querySelector('[data-testid=start-head]')?.textContent"
+                           " === 'Ready race for solo-ben on solo-car'", timeout=20_000)
+    assert "No free car" not in page.get_by_test_id("queue-panel").inner_text()
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "timekeeper-one-car-1920x1080.png"))
+    page.set_viewport_size(PHONE)
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= PHONE["width"]
+    page.screenshot(path=str(ARTIFACTS / "timekeeper-one-car-390x844.png"), full_page=True)
+    button.click()
+    page.wait_for_function("() => document.querySelector('[data-testid=racer]')?.textContent === 'solo-ben'")
+    assert "solo-car" in page.get_by_test_id("race-panel").inner_text()

@@ -153,6 +153,38 @@ def test_export_then_import_under_a_new_id(live_stack, as_admin, outside: Path, 
     assert "Exported Cup" in ok(drem("events", "show", "exported-cup-copy", cwd=outside, env=as_admin))
 
 
+def test_export_and_import_count_the_same_races(live_stack, as_admin, outside: Path, tmp_path: Path) -> None:
+    """Issue 31: export reported 25 races and import 26 (the audit entry of a lap edit was counted as a race)."""
+    url = live_stack.url
+    bearer = {"Authorization": "Bearer " + requests.post(url + "/api/auth/token", timeout=10, json={
+        "username": live_stack.admin_username, "password": live_stack.admin_password}).json()["access_token"]}
+
+    def api(method: str, path: str, body: dict) -> dict:
+        reply = requests.request(method, url + path, json=body, headers=bearer, timeout=15)
+        assert reply.status_code in (200, 201), reply.text
+        return reply.json()
+
+    api("POST", "/api/users", {"username": "cli-count", "email": "count@example.test", "country_code": "GB"})
+    event = api("POST", "/api/events", {"name": "Counted Cup", "event_type": "OFFICIAL_TRACK_RACE",
+                                        "date": "2026-11-25", "country_code": "GB"})
+    for _ in range(2):
+        race = api("POST", f"/api/events/{event['event_id']}/races", {"track_id": "1", "racer_username": "cli-count"})
+        path = f"/api/events/{event['event_id']}/races/{race['race_id']}"
+        for kind in ("start", "capture_lap", "end", "submit"):
+            api("POST", path + "/commands", {"kind": kind})
+    api("PUT", path + "/laps/0", {"time_ms": 9_500, "is_valid": True})  # race admin's lap edit: an audit entry
+
+    folder = tmp_path / "counted"
+    exported = ok(drem("export", event["event_id"], "--out", str(folder), "--state-dir", str(live_stack.state_dir),
+                       cwd=outside))
+    imported = ok(drem("import", str(folder), "--event-id", "counted-cup-copy", "--state-dir",
+                       str(live_stack.state_dir), "--report", str(tmp_path / "counted.json"), cwd=outside))
+    exported_races = re.search(r"\b(\d+) races\b", exported)
+    imported_races = re.search(r"\b(\d+) races\b", imported)
+    assert exported_races and imported_races, (exported, imported)
+    assert exported_races.group(1) == imported_races.group(1) == "2", (exported, imported)
+
+
 def test_league_pull_answers_for_a_track(as_admin, outside: Path) -> None:
     board = json.loads(ok(drem("league", "pull", "--track", "reinvent_base", "--json", cwd=outside, env=as_admin)))
     assert isinstance(board, (dict, list))
@@ -193,6 +225,17 @@ def test_car_run_says_it_started_and_where_it_reports(live_stack, as_admin, outs
     config = tmp_path / "car-config"
     ok(drem("car", "--config-dir", str(config), "activate", "--code", code["code"], "--api", live_stack.url,
             "--hostname", "cli-run-car", "--kind", "car", cwd=outside))
-    ran = ok(drem("car", "--config-dir", str(config), "run", "--sim", "--seconds", "1", cwd=outside))
+    # A crossing the car recorded for an event the server does not know (as after the event was deleted): refused.
+    from drem_cars.outbox import STRIP_EVENT, Outbox
+
+    waiting = Outbox(config / "outbox.sqlite3")
+    waiting.enqueue(STRIP_EVENT, {"event_id": "no-such-event", "track_id": "1", "timestamp_ms": 1_700_000_000_000,
+                                  "sensor": 17}, "cli-refused-1")
+    waiting.close()
+    result = drem("car", "--config-dir", str(config), "run", "--sim", "--seconds", "1", cwd=outside)
+    ran = ok(result)
     first = ran.splitlines()[0]
     assert first.startswith("drem car run: cli-run-car (car ") and f"reporting to {live_stack.url}" in first, ran
+    assert "1 crossing(s) waiting to be sent" in first, ran
+    # Issue 31: a refused crossing showed only in `drem car status`; it is said where the agent runs.
+    assert "drem car: the server refused strip_event #1" in result.stderr, result.stderr

@@ -131,3 +131,55 @@ def test_boards_overlay_results_and_statistics_show_the_display_name(client, des
     assert 'filename="summit-stockholm-2026-summary.pdf"' in summary.headers["Content-Disposition"]
     laps_csv = desk.call("GET", f"/api/events/{eid}/export/summary.csv").body.decode()
     assert "山田太郎" in laps_csv and "نور" in laps_csv and "yamada" not in laps_csv
+
+
+# --- two racers of one display name (issue 31) ---------------------------------------------------------------------
+
+
+def test_only_display_names_that_collide_carry_the_sign_in_name() -> None:
+    from drem_leaderboard.names import told_apart
+
+    shown = told_apart({"a": ("Björn", "bjorn_a"), "b": ("björn", "bjorn_b"), "c": ("Bjo\u0308rn", "bjorn_c"),
+                        "d": ("Zoë", "zoe"), "e": ("STRASSE", "s1"), "f": ("Straße", "s2")})
+    # Case, and é typed as e + combining accent, do not make two names: the first three collide, as do the last two.
+    assert shown == {"a": "Björn (bjorn_a)", "b": "björn (bjorn_b)", "c": "Bjo\u0308rn (bjorn_c)", "d": "Zoë",
+                     "e": "STRASSE (s1)", "f": "Straße (s2)"}
+    assert told_apart({"a": ("Björn", "bjorn_a")}) == {"a": "Björn"}  # alone: the name as it is
+
+
+def test_two_racers_called_bjorn_are_told_apart_on_boards_overlay_results_and_csv(client, desk: Desk,
+                                                                                   scenario: Scenario,
+                                                                                   tmp_path: Path) -> None:
+    staff = desk.token("desk", "registration")
+    for username in ("bjorn_a", "bjorn_b", "zoe_m"):
+        name = {"zoe_m": "Zoë"}.get(username, "Björn")
+        status, body = call(client, "POST", "/api/users", {"username": username, "email": f"{username}@example.test",
+                                                           "country_code": "SE", "display_name": name}, token=staff)
+        assert status == 201, body
+    scenario.add_event()
+    eid = scenario.event_id
+    scenario.submitted_race("bjorn_a", [9_000])
+    scenario.submitted_race("zoe_m", [9_500])
+    scenario.add_race("bjorn_b", [12_000])  # live, and slower: the overlay must show the second Björn's place
+
+    board = desk.board(eid)
+    assert [e["username"] for e in board["entries"]] == ["Björn (bjorn_a)", "Zoë", "Björn (bjorn_b)"]
+    assert "racer_sub" not in board["entries"][0]  # whose entry it is stays on the server
+    overlay = json.loads(desk.anonymous_get(f"/api/overlay/{eid}").body)
+    assert (overlay["username"], overlay["position"]) == ("Björn (bjorn_b)", 3)
+    page = desk.anonymous_get(f"/leaderboard/{eid}").body.decode()
+    assert "Björn (bjorn_a)" in page and "Björn (bjorn_b)" in page
+    commentator = desk.call("GET", f"/commentator/{eid}").body.decode()
+    assert "Björn (bjorn_b)" in commentator
+
+    for kind in ("end", "submit"):  # results and CSVs count submitted races
+        desk.ok(desk.command(eid, scenario.race_id, kind))
+    summary = desk.call("GET", f"/api/events/{eid}/results/summary.pdf", headers={"Accept": "application/pdf"})
+    text = pdf_text(summary.body, tmp_path)
+    assert "Björn (bjorn_a)" in text and "Björn (bjorn_b)" in text and "Zoë" in text and "(zoe_m)" not in text
+    csv_text = desk.call("GET", f"/api/events/{eid}/export/summary.csv").body.decode()
+    assert "Björn (bjorn_a)" in csv_text and "Björn (bjorn_b)" in csv_text and "(zoe_m)" not in csv_text
+    certificates = desk.call("GET", f"/api/events/{eid}/results/certificates.pdf?track=1",
+                             headers={"Accept": "application/pdf"})
+    (tmp_path / "certificates").mkdir()
+    assert "Björn (bjorn_b)" in pdf_text(certificates.body, tmp_path / "certificates")

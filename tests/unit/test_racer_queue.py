@@ -210,6 +210,26 @@ def test_with_one_car_the_next_racer_gets_it_once_the_race_is_over(console):
     assert track.car_models("car-1")[0] == track.models["bob"]["model_id"]  # first: the one the car drives
 
 
+def test_with_one_car_a_race_ended_outside_the_timekeeper_frees_the_car_the_ready_button_names(console):
+    """Issue 31: with one car, "Ready race for bob" named no car but then used car-1. Here the race is ended and
+    submitted through the JSON API (race admin, a timer): the queue's next poll gives car-1 to bob and says so."""
+    track = _track(console, "car-1")
+    track.add("alice")
+    track.press("start", "alice")
+    state = console.web.get(f"{track.base}/state").body.decode()
+    race_id = state.split('data-race-id="', 1)[1].split('"', 1)[0]
+    track.add("bob")
+    assert "No free car" in html.unescape(text_of(track.panel()))
+    for kind in ("end", "submit"):
+        console.desk.ok(console.desk.command(track.event_id, race_id, kind))
+
+    panel = html.unescape(text_of(track.panel()))
+    assert "Ready race for bob on car-1" in panel and "No free car" not in panel
+    assert track.car_models("car-1")[0] == track.models["bob"]["model_id"]
+    assert track.press("start", "bob").status_code == 200
+    assert "Car: car-1" in text_of(console.web.get(f"{track.base}/state").body.decode())
+
+
 def test_a_refused_race_leaves_the_head_in_the_queue(console):
     track = _track(console, "car-1")
     console.desk.ok(console.desk.create_race(track.event_id, "bob"), 201)  # a race is live on the track already

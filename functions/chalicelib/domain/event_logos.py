@@ -7,12 +7,13 @@ each version for good.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict
 
 from chalicelib.core.errors import NotFound
-from chalicelib.domain.events import EventRepository
+from chalicelib.domain.events import Event, EventRepository
 from chalicelib.formats.logo_image import LogoImage, normalised_logo
 
 
@@ -33,20 +34,29 @@ class LogoRepository(Protocol):
 
 
 class EventLogoService:
-    def __init__(self, events: EventRepository, logos: LogoRepository) -> None:
+    def __init__(self, events: EventRepository, logos: LogoRepository,
+                 on_changed: Callable[[Event], None] | None = None) -> None:
+        """`on_changed(event)` after a logo is saved or removed: the big screen shows it (big_screen.py)."""
         self._events = events
         self._logos = logos
+        self._on_changed = on_changed
 
     def save(self, event_id: str, upload: bytes) -> LogoVersion:
         """Store `upload` as the event's logo; InvalidInput (field "logo") for a file that is not a usable image."""
-        self._require_event(event_id)
+        event = self._require_event(event_id)
         logo = normalised_logo(upload)
         self._logos.put(event_id, logo)
+        self._changed(event)
         return LogoVersion(version=logo.version, width=logo.width, height=logo.height)
 
     def remove(self, event_id: str) -> None:
-        self._require_event(event_id)
+        event = self._require_event(event_id)
         self._logos.delete(event_id)
+        self._changed(event)
+
+    def _changed(self, event: Event) -> None:
+        if self._on_changed is not None:
+            self._on_changed(event)
 
     def logo(self, event_id: str) -> LogoImage:
         logo = self._logos.get(event_id)
@@ -57,6 +67,8 @@ class EventLogoService:
     def version(self, event_id: str) -> LogoVersion | None:
         return self._logos.version(event_id)
 
-    def _require_event(self, event_id: str) -> None:
-        if self._events.get(event_id) is None:
+    def _require_event(self, event_id: str) -> Event:
+        event = self._events.get(event_id)
+        if event is None:
             raise NotFound(f"There is no event {event_id}.", field="event_id")
+        return event

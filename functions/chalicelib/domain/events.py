@@ -188,7 +188,9 @@ class FleetLookup(Protocol):
 
 class EventService:
     def __init__(self, events: EventRepository, live_races: LiveRaceProbe, fleets: FleetLookup,
-                 clock_ms: Callable[[], int]) -> None:
+                 clock_ms: Callable[[], int], on_saved: Callable[[Event], None] | None = None) -> None:
+        """`on_saved(event)` after each create or update: the big screen's settings are published (big_screen.py)."""
+        self._on_saved = on_saved
         self._events = events
         self._live = live_races
         self._fleets = fleets
@@ -209,6 +211,7 @@ class EventService:
         event = Event(event_id=uuid.uuid4().hex[:12], created_at_ms=now, created_by=principal.sub, updated_at_ms=now,
                       **self._fields(data))
         self._events.create(event)
+        self._saved(event)
         return event
 
     def update_event(self, principal: User, event_id: str, data: EventInput) -> Event:
@@ -221,7 +224,12 @@ class EventService:
         updated = Event.model_validate({**current.model_dump(), **fields, "updated_at_ms": self._clock_ms(),
                                         "version": current.version + 1})
         self._events.replace(updated, expected_version=current.version)
+        self._saved(updated)
         return updated
+
+    def _saved(self, event: Event) -> None:
+        if self._on_saved is not None:
+            self._on_saved(event)
 
     def delete_event(self, principal: User, event_id: str) -> None:
         event = self.get_event(event_id)

@@ -13,6 +13,7 @@ entry in the writing process, so that process serves its own writes at once; oth
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import threading
 import time
@@ -25,8 +26,9 @@ from pydantic import BaseModel, ConfigDict
 
 from chalicelib.core.errors import Conflict
 from drem_leaderboard.models import Race, RaceStatus, RankingMethod
+from drem_leaderboard.names import name_key, with_sign_in_name
 from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
-from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile, rank
+from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, LeaderboardEntry, RacerProfile, rank
 from drem_leaderboard.summary import RaceSummary
 
 BOARD_ATTEMPTS = 4
@@ -187,6 +189,9 @@ class PublicViewCache:
 PROCESS_CACHE = PublicViewCache()
 
 
+SCREEN_KEY = "SCREEN"  # the big screen's settings around the board (domain/big_screen.py)
+
+
 def board_key(track_id: str) -> str:
     return f"BOARD#{track_id}"
 
@@ -287,7 +292,18 @@ class LeaderboardPublisher:
         return found or PublicView(version=0, etag='"v0"', body=_dumps(
             {"event_id": event_id, "track_id": track_id, "version": 0, "status": "NO_RACE"}))
 
+    def screen(self, event_id: str) -> PublicView:
+        """The big screen's published settings (domain/big_screen.py); version 0 with an empty body when none."""
+        return self._public(event_id, SCREEN_KEY) or PublicView(version=0, etag='"v0"', body="")
+
     # --- writes ------------------------------------------------------------------------------------------------
+
+    def publish_screen(self, event_id: str, body: str) -> None:
+        """Publish the big screen's settings (a new version only when they changed); open screens are woken."""
+        etag = '"' + hashlib.sha256(body.encode()).hexdigest()[:32] + '"'
+        self._write(event_id, SCREEN_KEY, lambda version, _state: (
+            json.dumps({**json.loads(body), "version": version}, separators=(",", ":"), sort_keys=True), etag, ""),
+            skip_unchanged=True)
 
     def refresh_racer(self, event_id: str, track_id: str, racer_sub: str, row: BoardRow | None,
                       method: RankingMethod, *, all_tracks: Iterable[str] = (), combined: bool = True) -> Leaderboard:
@@ -339,7 +355,7 @@ class LeaderboardPublisher:
         return boards
 
     def publish_overlay(self, race: Race, now_ms: int, board: Leaderboard | None, display_name: str) -> None:
-        entry = next((e for e in board.entries if e.username == display_name), None) if board else None
+        display_name, entry = overlay_name(board, display_name, race.racer.sub, race.racer.username)
         fastest = race.fastest_valid_lap
         average = race.fastest_average
         state = {
@@ -428,6 +444,20 @@ class LeaderboardPublisher:
                 # Also after a failed put: its outcome is unknown (a timeout may have written it).
                 self._invalidate(event_id, sort_key)
         raise Conflict("The leaderboard is being updated by someone else; try again.")
+
+
+def overlay_name(board: Leaderboard | None, display_name: str, racer_sub: str,
+                 sign_in_name: str) -> tuple[str, LeaderboardEntry | None]:
+    """(the name the overlay shows, the racer's board entry): the name the board shows them by, so two racers of one
+    display name are told apart there too ("Björn (bjorn_b)", drem_leaderboard.names)."""
+    entries = board.entries if board else ()
+    entry = next((e for e in entries if e.racer_sub == racer_sub), None)
+    if entry is not None:
+        return entry.username, entry
+    # Not on the board yet (no lap): told apart when someone on it goes by the same display name.
+    key = name_key(display_name)
+    taken = any(name_key(e.username) == key or name_key(e.username).startswith(key + " (") for e in entries)
+    return (with_sign_in_name(display_name, sign_in_name) if taken else display_name), None
 
 
 def board_item_content(event_id: str, track_id: str, rows: Iterable[BoardRow], method: RankingMethod, version: int,

@@ -19,6 +19,9 @@ from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_queue import AddToQueue, MoveInQueue, QueueEntry, RacerQueue, RacerQueueService
 from chalicelib.domain.races import CreateRaceInput, RaceService
 
+NO_FREE_CAR = ("No free car in this track's fleet: every car is racing or the fleet has none. Give the model to a "
+               "car by hand (Cars), or start the race without a car.")
+
 
 class LiveRacePointer(Protocol):
     def live_race_id(self, event_id: str, track_id: str) -> str | None: ...
@@ -78,9 +81,9 @@ class OnDeck:
         racing = self.racing_car(event_id, track_id)
         cars = [car for car in self.fleet_cars(event_id, track_id) if car.device_id != racing]
         if not cars:
-            why = ("No free car in this track's fleet: every car is racing or the fleet has none. Give the model to "
-                   "a car by hand (Cars), or start the race without a car.")
-            return self._queue.set_car(event_id, track_id, head.entry_id, None, why)
+            if head.car is None and head.preload_problem == NO_FREE_CAR:
+                return queue  # already said: the queue's poll asks again every 2 s without writing each time
+            return self._queue.set_car(event_id, track_id, head.entry_id, None, NO_FREE_CAR)
         held = self.assignments_of(cars)
         if head.car in held and _first_model(held[head.car]) == head.model_id:
             return queue if head.preload_problem is None else self._queue.set_car(
@@ -115,14 +118,20 @@ class OnDeck:
         return race
 
     def finish_interrupted_starts(self, principal: User, event_id: str, track_id: str) -> RacerQueue:
-        """Take off the queue a head whose race a crashed Start already created (the queue change never happened);
-        the queue pages call this before showing the queue, so nobody sees a racer on deck who is racing."""
+        """Before the queue is shown (its list polls this): take off a head whose race a crashed Start already created
+        (the queue change never happened), so nobody sees a racer on deck who is racing; and give a head left without
+        a car (every car was racing) the car a race ended elsewhere freed (race admin, the API, a timer), so "Ready
+        race for X" names the car it will use."""
         queue = self._queue.queue(event_id, track_id)
         head = queue.head
-        if head is None or not head.starting_race_id or not self._races.existing_race(event_id, head.starting_race_id):
+        if head is None:
             return queue
-        self._queue.remove(event_id, track_id, head.entry_id, missing_ok=True)
-        return self.preload_head(principal, event_id, track_id)
+        if head.starting_race_id and self._races.existing_race(event_id, head.starting_race_id):
+            self._queue.remove(event_id, track_id, head.entry_id, missing_ok=True)
+            return self.preload_head(principal, event_id, track_id)
+        if head.car is None and head.preload_problem == NO_FREE_CAR and not self.race_live(event_id, track_id):
+            return self.preload_head(principal, event_id, track_id)
+        return queue
 
     def _finish_start(self, principal: User, event_id: str, track_id: str, entry_id: str,
                       race_id: str) -> dict[str, Any]:

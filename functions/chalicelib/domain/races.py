@@ -37,6 +37,7 @@ from drem_leaderboard import race_machine
 from drem_leaderboard.commands import RaceCommand, SetLapValidity
 from drem_leaderboard.errors import LapNotFoundError, RaceRuleError
 from drem_leaderboard.models import TERMINAL_STATUSES, LapSource, Race, Racer, RaceStatus, new_race
+from drem_leaderboard.names import told_apart
 from drem_leaderboard.race_clock import current_lap_ms, race_time_left_ms
 from drem_leaderboard.ranking import COMBINED_TRACK_ID, Leaderboard, RacerProfile
 from drem_leaderboard.summary import summarise_racer
@@ -359,11 +360,11 @@ class RaceService:
             raise InvalidInput("Export laps.csv or summary.csv.", field="file_name")
         event = self.event(event_id)
         races = [r.race for r in self._races.list_event(event_id)]
-        # The CSVs name racers as the boards do: their display name (a deleted racer anonymised).
-        shown = {race.racer.sub: self._profiles.racer_profile(race.racer.sub, race.racer.username).username
-                 for race in races}
-        named = [race.model_copy(update={"racer": Racer(sub=race.racer.sub,
-                                                        username=shown[race.racer.sub] or race.racer.username)})
+        # The CSVs name racers as the boards do: their display name (a deleted racer anonymised), with the sign-in
+        # name after it when two racers of the event go by the same display name.
+        shown = told_apart({race.racer.sub: (self._profiles.racer_profile(race.racer.sub, race.racer.username)
+                                             .username or race.racer.username, race.racer.username) for race in races})
+        named = [race.model_copy(update={"racer": Racer(sub=race.racer.sub, username=shown[race.racer.sub])})
                  for race in races]
         return export_csv(event.name, named, kinds[file_name], self.clock_ms())
 

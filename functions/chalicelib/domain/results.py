@@ -98,12 +98,9 @@ def _board(board_id: str, title: str, ranking: str, summaries: list[RaceSummary]
            public: dict[str, PublicProfile | None], method: RankingMethod) -> ResultsBoard:
     profiles = {sub: _racer_profile(p) for sub, p in public.items() if p is not None}
     board = rank(summaries, method, track_id=board_id, profiles=profiles)
-    sub_by_name = {(profiles[s.racer_sub].username if s.racer_sub in profiles else None) or s.username: s.racer_sub
-                   for s in summaries}
     entries = []
     for entry in board.entries:
-        sub = sub_by_name.get(entry.username, "")
-        profile = public.get(sub)
+        profile = public.get(entry.racer_sub)
         avatar = profile is not None and profile.avatar_url is not None and not profile.deleted
         entries.append(ResultEntry(
             position=entry.position, username=entry.username, country_code=(entry.country_code or "").upper(),

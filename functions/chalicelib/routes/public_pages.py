@@ -129,14 +129,14 @@ def leaderboard_page(principal: Principal, event_id: str, query: LeaderboardQuer
     footer_tracks = [track] if track != COMBINED_TRACK_ID else [t.track_id or "" for t in event.tracks]
     region = regions.leaderboard_region(services.publisher(), event_id, track, query,
                                         footer_tracks[:MAX_FOOTER_TRACKS], services.now_ms())
-    live = region.context()
+    # The header and footer as the event says now; the live region carries later edits (domain/big_screen.py).
+    settings = services.screen_publisher().caught_up(event)
+    live = {**region.context(), "pushed_screen": None}
     page_url = landing_url(get_settings().public_url, event_id, query.lang)  # the QR opens the event's landing page
     shown = next((t for t in event.tracks if t.track_id == track), None)  # None on the combined board
     return render.page("leaderboard", title=event.name, track=track, tracks=event.boards, lang=i18n.resolve_language(
         query.lang), qr=query.qr, qr_svg=qr_svg(page_url) if query.qr != "none" else "", page_url=page_url,
-        track_title=shown.leaderboard_title if shown else "",
-        board_footer=(shown or event.tracks[0]).leaderboard_footer, stream_url=stream_url(live["poll_url"]),
-        sponsor=event.sponsor, logo_url=logo_path(event_id), links=event.landing_page_links,
+        view=settings.view(event_id, track), stream_url=stream_url(live["poll_url"]),
         car_eye_url=car_video.shown_when_asked(event_id, shown.track_id or "1" if shown else "1",
                                                bp.current_request.query_params), **live)
 

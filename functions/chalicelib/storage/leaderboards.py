@@ -6,6 +6,7 @@
 | page N (2, 3, ...) of a board longer than one page | `EVENT#{eventId}` | `BOARD#{trackId}~PAGE#{N}` |
 | part I of a big board's ranking state, written by write REF | `EVENT#{eventId}` | `BOARD#{trackId}~STATE#{REF}#{I}` |
 | overlay (live race state) of a track | `EVENT#{eventId}` | `OVERLAY#{trackId}` |
+| the big screen's settings around the board (name, sponsor, logo, footers) | `EVENT#{eventId}` | `SCREEN` |
 
 The head item holds `version` (bumped on every visible change), `etag`, `body` (the public JSON of the first page,
 already serialised, so a poll is GetItem + return) and, for track boards, the racer summaries the board was ranked

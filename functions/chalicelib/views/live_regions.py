@@ -22,6 +22,7 @@ from urllib.parse import quote, urlencode
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from chalicelib.domain.big_screen import ScreenSettings, parse_screen
 from chalicelib.domain.leaderboards import LeaderboardPublisher
 from chalicelib.views import public_views as views
 from chalicelib.views.render_cache import LIVE_FRAGMENTS, LIVE_RACES
@@ -103,6 +104,8 @@ def token_is_newer(candidate: str, shown: str | None) -> bool:
 class LiveItems:
     board: views.BoardSnapshot
     overlays: list[views.OverlaySnapshot]
+    screen: ScreenSettings | None = None
+    screen_version: int = 0
 
     @property
     def overlay(self) -> views.OverlaySnapshot:
@@ -121,10 +124,14 @@ class LiveRegion:
         return render.fragment(self.template, **self.context()).body
 
 
-def read_live(publisher: LeaderboardPublisher, event_id: str, board_track: str, overlay_tracks: list[str]) -> LiveItems:
+def read_live(publisher: LeaderboardPublisher, event_id: str, board_track: str, overlay_tracks: list[str], *,
+              screen: bool = False) -> LiveItems:
+    """The items a live region is built from; `screen`: also the big screen's settings (name, sponsor, footer)."""
+    shown = publisher.screen(event_id) if screen else None
     return LiveItems(board=views.BoardSnapshot.parse(publisher.board(event_id, board_track).body),
                      overlays=[views.OverlaySnapshot.parse(publisher.overlay(event_id, t).body)
-                               for t in overlay_tracks])
+                               for t in overlay_tracks],
+                     screen=parse_screen(shown.body) if shown else None, screen_version=shown.version if shown else 0)
 
 
 def live_race(read_race: Callable[[str, str], Race | None], event_id: str,
@@ -161,11 +168,13 @@ def leaderboard_fragment_tracks(query: LeaderboardQuery) -> tuple[str, list[str]
 def leaderboard_region(publisher: LeaderboardPublisher, event_id: str, track: str, query: LeaderboardQuery,
                        footer_tracks: list[str], now_ms: int) -> LiveRegion:
     """The leaderboard's live region: board rows, race footers and held race summaries."""
-    items = read_live(publisher, event_id, track, footer_tracks)
+    items = read_live(publisher, event_id, track, footer_tracks, screen=True)
     # A held summary is part of the token (0 while held, 1 after): its end changes the token, so viewers re-render.
+    # The big screen's settings come last: an edited footer or sponsor changes the token like a lap does.
     held = [o for o in items.overlays if views.summary_held(o, now_ms, query.summary_seconds * 1000)]
     token = views.version_token(items.board.version,
-                                *(f"{o.version}-{0 if o in held else 1}" for o in items.overlays))
+                                *(f"{o.version}-{0 if o in held else 1}" for o in items.overlays),
+                                items.screen_version)
 
     def context() -> dict[str, Any]:
         t = i18n.translator(query.lang)
@@ -178,7 +187,9 @@ def leaderboard_region(publisher: LeaderboardPublisher, event_id: str, track: st
             "summary_seconds": query.summary_seconds, "v": token})
         return {"rows": views.board_rows(items.board, query.format, t, show_flags=query.flag), "footers": footers,
                 "summaries": summaries, "poll_url": poll, "token": token, "scroll": query.scroll, "t": t,
-                "clock_at": now_ms, "page_ms": query.page_seconds * 1000}
+                "clock_at": now_ms, "page_ms": query.page_seconds * 1000,
+                # Swapped in out of band beside the rows (partials/board_screen.html); None: the page's stay.
+                "pushed_screen": items.screen.view(event_id, track) if items.screen else None, "board_track": track}
 
     return LiveRegion(token, context, "leaderboard_live")
 

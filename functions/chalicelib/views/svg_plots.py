@@ -30,9 +30,11 @@ def _scale(values: list[float]) -> tuple[float, float]:
 
 def _frame(title: str, y_label: str, low: float, high: float, y_of) -> list[str]:
     parts = [f'<text x="{LEFT}" y="16" class="plot-title">{escape(title)}</text>',
-             f'<text x="12" y="{TOP + (HEIGHT - TOP - BOTTOM) / 2:.0f}" transform="rotate(-90 12 '
-             f'{TOP + (HEIGHT - TOP - BOTTOM) / 2:.0f})" text-anchor="middle" class="plot-axis">'
-             f'{escape(y_label)}</text>',
+             # Turned to read upwards, its glyphs hang to the right of x=4 (a baseline at x=12 let the page's
+             # font push them past the chart's left edge, issue 31: the axis label cut at 1920).
+             f'<text x="4" y="{TOP + (HEIGHT - TOP - BOTTOM) / 2:.0f}" transform="rotate(-90 4 '
+             f'{TOP + (HEIGHT - TOP - BOTTOM) / 2:.0f})" text-anchor="middle" dominant-baseline="hanging" '
+             f'font-size="13" class="plot-axis">{escape(y_label)}</text>',
              f'<line x1="{LEFT}" y1="{HEIGHT - BOTTOM}" x2="{WIDTH - RIGHT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>',
              f'<line x1="{LEFT}" y1="{TOP}" x2="{LEFT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>']
     for step in range(5):

@@ -23,7 +23,9 @@ def collect_event(source: StackReader, event_id: str) -> EventBundle:
     races = [i for i in race_items if i["sk"]["S"].startswith("RACE#")]
     audit_trail = [i for i in race_items if i["sk"]["S"].startswith("AUDIT#")]  # who changed results, carried along
     # A long board's further pages and parts are its storage layout: the import recomputes the boards from the races.
-    boards = [i for i in source.partition("leaderboards", pk) if "~" not in i["sk"]["S"]]
+    # The big screen's settings (SCREEN) are published again from the event on its next edit.
+    boards = [i for i in source.partition("leaderboards", pk) if "~" not in i["sk"]["S"] and
+              i["sk"]["S"].startswith(("BOARD#", "OVERLAY#"))]
     too_big = sorted(i["sk"]["S"] for i in boards if "state_ref" in i)
     if too_big:
         raise Conflict(f"Event {event_id}'s board(s) {', '.join(too_big)} hold too many racers to export yet (their "
