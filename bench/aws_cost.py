@@ -41,7 +41,7 @@ List prices, us-east-1 (CloudFront: United States edge), read on 2026-11-24 thro
   cloud-horizons.com/blog/alb-the-line-item-nobody-watches (May 2026), handbook.vantage.sh/aws/services/elb-pricing
 - Fargate Linux/x86 $0.04048 per vCPU-hour, $0.004445 per GB-hour: vantage.sh/blog/fargate-pricing;
   factualminds.com/blog/amazon-fargate-ecs-task-pricing-2026 (June 2026)
-- Public IPv4 addresses $0.005 per hour each (the ALB has one per subnet, the task one): nwobodo.me/notes/
+- Public IPv4 addresses $0.005 per hour each (each task has one; the internal ALB none): nwobodo.me/notes/
   aws-extra-ipv4-cost-per-hour; vishalvyas.com/understand-aws-public-ipv4-address-usage-and-pricing
 
 Goals (issue #34): push <= $20 per 8-hour day at 2,000 spectators and <= $100 at 20,000.
@@ -109,7 +109,7 @@ class Profile:
     task_vcpu: float = 0.5
     task_memory_gb: float = 1.0
     viewers_per_task: int = 2_000
-    alb_public_ips: int = 2  # one per subnet/AZ
+    alb_public_ips: int = 0  # internal (a CloudFront VPC origin): no public address; was one per subnet/AZ
     infrastructure_hours: float = 24.0
     framing_bytes: int = 40  # per delivered message: HTTP/2 DATA frame + TLS record overhead
 

@@ -4,10 +4,15 @@ Application Load Balancer, served through the app's CloudFront distribution at `
 Spectators hold one Server-Sent-Events stream each; the server reads the materialised boards and overlays once per
 channel and pushes each change to every viewer, so a spectator costs data transfer, not requests (bench/aws_cost.py).
 
-- Network: a VPC with public subnets only and no NAT gateway (a NAT costs more a day than the whole live design); the
-  task gets a public IP to reach DynamoDB and ECR. Only CloudFront reaches the load balancer: its security group admits
-  the CloudFront origin-facing managed prefix list, looked up at deploy time (synth stays offline), and the task's
-  security group admits only the load balancer.
+- Network: a VPC with public subnets for the task and isolated subnets for the load balancer, and no NAT gateway (a
+  NAT costs more a day than the whole live design); the task gets a public IP to reach DynamoDB and ECR.
+- CloudFront reaches the load balancer as a **VPC origin**: the load balancer is internal (no public address, in the
+  isolated subnets), and CloudFront connects to it from network interfaces it places in this VPC, over AWS's own
+  network. No hop of a viewer's request crosses the internet unencrypted: the viewer's is HTTPS, CloudFront's to the
+  load balancer stays inside AWS (the booth's session and refresh cookies travel this way). HTTPS to the load
+  balancer would need a certificate for a domain it answers on, which a stage without a custom domain does not
+  have. The load balancer's security group admits only this VPC's own addresses (where CloudFront's VPC-origin
+  interfaces live) on port 80; nothing on the internet can open a connection to it at all.
 - CloudFront `/live/*`: CachingDisabled (every stream and JSON read goes to the server; no request collapsing), with
   an origin request policy forwarding all viewer headers (so the viewer's `Accept-Encoding` reaches the server, which
   gzips each message once for everyone), the query string, and no cookies (public pages; session cookies stay with
@@ -18,7 +23,7 @@ channel and pushes each change to every viewer, so a spectator costs data transf
   always the load balancer that closes one, never the server under a request the load balancer is sending (a 502).
 - Only this stage's distribution gets through the load balancer: CloudFront adds a secret header (ORIGIN_SECRET_HEADER,
   a value generated in Secrets Manager at deploy time) to every origin request, and the listener forwards only requests
-  that carry it (anything else: 403). The security group alone would admit every CloudFront distribution.
+  that carry it (anything else: 403), so even something else inside the VPC is refused.
 - Scaling: on CPU and on the streams each task carries (the server publishes its open streams as a CloudWatch metric
   through its log, embedded metric format), so a task full of quiet streams scales out too.
 """
@@ -39,7 +44,6 @@ from aws_cdk import aws_elasticloadbalancingv2 as elbv2
 from aws_cdk import aws_iam as iam
 from aws_cdk import aws_logs as logs
 from aws_cdk import aws_secretsmanager as secretsmanager
-from aws_cdk import custom_resources as cr
 from constructs import Construct
 
 from drem_infra import permissions
@@ -90,8 +94,7 @@ SERVER_KEEPALIVE_SECONDS = 130  # longer than ALB_IDLE_TIMEOUT
 ORIGIN_SECRET_HEADER = "X-Drem-Origin-Secret"
 LIVE_RULE_PRIORITY = 50  # after the booth's rules (drem_infra.booth_service)
 LOG_RETENTION = logs.RetentionDays.ONE_MONTH
-# AWS's managed prefix list of CloudFront's origin-facing addresses (one per region; its id differs per region).
-CLOUDFRONT_PREFIX_LIST = "com.amazonaws.global.cloudfront.origin-facing"
+ORIGIN_SUBNETS = "origin"  # the isolated subnets the internal load balancer lives in
 
 
 class LivePages(Construct):
@@ -105,8 +108,11 @@ class LivePages(Construct):
         stack = cdk.Stack.of(self)
         self.vpc = ec2.Vpc(
             self, "Vpc", max_azs=2, nat_gateways=0,
-            subnet_configuration=[ec2.SubnetConfiguration(name="public", subnet_type=ec2.SubnetType.PUBLIC,
-                                                          cidr_mask=24)])
+            subnet_configuration=[
+                ec2.SubnetConfiguration(name="public", subnet_type=ec2.SubnetType.PUBLIC, cidr_mask=24),
+                # No route to the internet at all: a VPC origin must be in a private subnet (it costs nothing).
+                ec2.SubnetConfiguration(name=ORIGIN_SUBNETS, subnet_type=ec2.SubnetType.PRIVATE_ISOLATED,
+                                        cidr_mask=24)])
         self.log_group = logs.LogGroup(self, "Logs", retention=LOG_RETENTION, removal_policy=cdk.RemovalPolicy.DESTROY)
         self.task_role = self._task_role(tables)
         task = ecs.FargateTaskDefinition(
@@ -151,12 +157,15 @@ class LivePages(Construct):
 
         self.alb_security_group = ec2.SecurityGroup(
             self, "LoadBalancerSecurityGroup", vpc=self.vpc, allow_all_outbound=False,
-            description=f"drem {stage} live pages: HTTP from CloudFront only")
-        self.alb_security_group.add_ingress_rule(ec2.Peer.prefix_list(self._cloudfront_prefix_list()),
-                                                 ec2.Port.tcp(80), "CloudFront origin-facing servers")
+            description=f"drem {stage} live pages: HTTP from the CloudFront VPC origin only")
+        # CloudFront's VPC-origin interfaces sit in this VPC's subnets (security group CloudFront-VPCOrigins-Service-SG,
+        # which exists only once the VPC origin does): the VPC's own range admits them, and nothing outside the VPC
+        # can reach an internal load balancer anyway.
+        self.alb_security_group.add_ingress_rule(ec2.Peer.ipv4(self.vpc.vpc_cidr_block), ec2.Port.tcp(80),
+                                                 "CloudFront VPC origin (interfaces inside this VPC)")
         self.load_balancer = elbv2.ApplicationLoadBalancer(
-            self, "LoadBalancer", vpc=self.vpc, internet_facing=True, security_group=self.alb_security_group,
-            idle_timeout=ALB_IDLE_TIMEOUT, vpc_subnets=ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC))
+            self, "LoadBalancer", vpc=self.vpc, internet_facing=False, security_group=self.alb_security_group,
+            idle_timeout=ALB_IDLE_TIMEOUT, vpc_subnets=ec2.SubnetSelection(subnet_group_name=ORIGIN_SUBNETS))
         self.listener = self.load_balancer.add_listener(
             "Http", port=80, open=False, default_action=elbv2.ListenerAction.fixed_response(
                 403, content_type="text/plain", message_body="Only drem's CloudFront distribution reaches this."))
@@ -185,22 +194,6 @@ class LivePages(Construct):
         return iam.Role(self, "TaskRole", assumed_by=iam.ServicePrincipal("ecs-tasks.amazonaws.com"),
                         description="drem live pages: read the materialised boards, overlays, events and races",
                         inline_policies={"DremLiveReads": iam.PolicyDocument(statements=statements)})
-
-    def _cloudfront_prefix_list(self) -> str:
-        """The region's id of CLOUDFRONT_PREFIX_LIST, asked of EC2 at deploy time (a synth-time lookup would need AWS
-        credentials and cache the answer in cdk.context.json)."""
-        call = cr.AwsSdkCall(
-            service="EC2", action="describeManagedPrefixLists",
-            parameters={"Filters": [{"Name": "prefix-list-name", "Values": [CLOUDFRONT_PREFIX_LIST]}]},
-            physical_resource_id=cr.PhysicalResourceId.of(CLOUDFRONT_PREFIX_LIST),
-            output_paths=["PrefixLists.0.PrefixListId"])
-        lookup = cr.AwsCustomResource(
-            self, "CloudFrontPrefixList", on_create=call, on_update=call, install_latest_aws_sdk=False,
-            log_group=logs.LogGroup(self, "PrefixListLookupLogs", retention=LOG_RETENTION,
-                                    removal_policy=cdk.RemovalPolicy.DESTROY),
-            # Describe* calls have no resource-level permissions in IAM: "*" is the only resource they accept.
-            policy=cr.AwsCustomResourcePolicy.from_sdk_calls(resources=cr.AwsCustomResourcePolicy.ANY_RESOURCE))
-        return lookup.get_response_field("PrefixLists.0.PrefixListId")
 
     def _alarms(self, stage: str) -> None:
         """A task failing its health checks, and 5xx answers from the server or the load balancer itself."""
@@ -231,7 +224,9 @@ class LivePages(Construct):
         HTTP header in the viewer request" (CloudFront API reference, ParametersInCacheKeyAndForwardedToOrigin), so a
         policy forwarding all viewer headers passes the viewer's own Accept-Encoding to the server, and the server's
         gzip passes back untouched (`compress=False`: CloudFront compresses nothing itself)."""
-        self.origin = origins.LoadBalancerV2Origin(
+        # A VPC origin: CloudFront reaches the internal load balancer over AWS's network, never the internet (HTTP
+        # on that hop, as AWS's VPC-origin setup for a load balancer without a certificate of its own).
+        self.origin = origins.VpcOrigin.with_application_load_balancer(
             self.load_balancer, protocol_policy=cloudfront.OriginProtocolPolicy.HTTP_ONLY, http_port=80,
             read_timeout=ORIGIN_READ_TIMEOUT, keepalive_timeout=ORIGIN_KEEPALIVE_TIMEOUT,
             custom_headers={ORIGIN_SECRET_HEADER: self.origin_secret_value()})

@@ -58,12 +58,11 @@ def test_live_pages_reach_the_load_balancer_uncached_with_the_viewers_accept_enc
 
 def test_timeouts_outlast_the_heartbeat_so_a_quiet_stream_stays_open(app_template):
     _, origin = _live_behaviour(app_template)
-    custom = origin["CustomOriginConfig"]
+    vpc_origin = origin["VpcOriginConfig"]
     heartbeat = live_pages.HEARTBEAT_SECONDS
 
-    assert custom["OriginProtocolPolicy"] == "http-only" and custom["HTTPPort"] == 80
-    assert custom["OriginReadTimeout"] >= 2 * heartbeat, "a missed heartbeat must not cut the stream"
-    assert custom["OriginKeepaliveTimeout"] >= heartbeat
+    assert vpc_origin["OriginReadTimeout"] >= 2 * heartbeat, "a missed heartbeat must not cut the stream"
+    assert vpc_origin["OriginKeepaliveTimeout"] >= heartbeat
     assert "ResponseCompletionTimeout" not in origin, "a stream has no total time limit"
     _, alb = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
     attributes = {a["Key"]: a["Value"] for a in alb["Properties"]["LoadBalancerAttributes"]}
@@ -82,7 +81,8 @@ def test_one_small_fargate_task_in_public_subnets_and_no_nat_gateway(app_templat
     assert network["AssignPublicIp"] == "ENABLED", "without a NAT gateway the task reaches DynamoDB and ECR itself"
     assert app_template.find_resources("AWS::EC2::NatGateway") == {}
     subnets = app_template.find_resources("AWS::EC2::Subnet")
-    assert subnets and all(s["Properties"]["MapPublicIpOnLaunch"] for s in subnets.values())
+    public = {name for name, subnet in subnets.items() if subnet["Properties"]["MapPublicIpOnLaunch"]}
+    assert {subnet["Ref"] for subnet in network["Subnets"]} == public
     _, task = _one(app_template, "AWS::ECS::TaskDefinition")
     assert int(task["Properties"]["Cpu"]) <= 1024 and int(task["Properties"]["Memory"]) <= 2048
     assert task["Properties"]["RuntimePlatform"]["CpuArchitecture"] == "X86_64"
@@ -94,6 +94,45 @@ def test_one_small_fargate_task_in_public_subnets_and_no_nat_gateway(app_templat
             if "PredefinedMetricSpecification" in t] == ["ECSServiceAverageCPUUtilization"]
 
 
+def _routes_to_the_internet(app_template) -> set[str]:
+    """Route tables with a route to the internet gateway (or any NAT): what a subnet needs to be reachable at all."""
+    routes = app_template.find_resources("AWS::EC2::Route").values()
+    return {json.dumps(r["Properties"]["RouteTableId"]) for r in routes
+            if r["Properties"].get("DestinationCidrBlock") == "0.0.0.0/0"}
+
+
+def test_the_load_balancer_is_internal_so_no_listener_serves_plain_http_to_the_internet(app_template):
+    """CloudFront reaches it as a VPC origin; nothing on the internet can open a connection to it."""
+    balancers = app_template.find_resources("AWS::ElasticLoadBalancingV2::LoadBalancer")
+    assert balancers and all(b["Properties"]["Scheme"] == "internal" for b in balancers.values())
+    listeners = app_template.find_resources("AWS::ElasticLoadBalancingV2::Listener").values()
+    assert [(one["Properties"]["Protocol"], one["Properties"]["Port"]) for one in listeners] == [("HTTP", 80)]
+    _, alb = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
+    subnets = app_template.find_resources("AWS::EC2::Subnet")
+    associations = {a["Properties"]["SubnetId"]["Ref"]: json.dumps(a["Properties"]["RouteTableId"])
+                    for a in app_template.find_resources("AWS::EC2::SubnetRouteTableAssociation").values()}
+    for subnet in alb["Properties"]["Subnets"]:
+        assert subnets[subnet["Ref"]]["Properties"]["MapPublicIpOnLaunch"] is False
+        assert associations[subnet["Ref"]] not in _routes_to_the_internet(app_template), "an isolated subnet"
+
+
+def test_booth_and_live_requests_cross_no_plain_hop(app_template):
+    """Viewer to CloudFront: HTTPS. CloudFront to the load balancer: a VPC origin (AWS's network, never the internet),
+    which the booth's session and refresh cookies travel too. Every other origin: HTTPS only."""
+    behaviour, origin = _live_behaviour(app_template)
+    alb_id, _ = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
+    assert "CustomOriginConfig" not in origin, "not a public custom origin"
+    vpc_origin_id = origin["VpcOriginConfig"]["VpcOriginId"]["Fn::GetAtt"][0]
+    endpoint = app_template.find_resources("AWS::CloudFront::VpcOrigin")[vpc_origin_id]["Properties"][
+        "VpcOriginEndpointConfig"]
+    assert endpoint["Arn"] == {"Ref": alb_id}
+    config = _one(app_template, "AWS::CloudFront::Distribution")[1]["Properties"]["DistributionConfig"]
+    assert all(b["ViewerProtocolPolicy"] == "redirect-to-https"
+               for b in [config["DefaultCacheBehavior"], *config["CacheBehaviors"]])
+    others = [o for o in config["Origins"] if o["Id"] != origin["Id"]]
+    assert others and all(o["CustomOriginConfig"]["OriginProtocolPolicy"] == "https-only" for o in others)
+
+
 def test_only_cloudfront_reaches_the_load_balancer_and_only_the_load_balancer_the_task(app_template):
     alb_id, alb = _one(app_template, "AWS::ElasticLoadBalancingV2::LoadBalancer")
     [alb_group] = [g["Fn::GetAtt"][0] for g in alb["Properties"]["SecurityGroups"]]
@@ -102,13 +141,12 @@ def test_only_cloudfront_reaches_the_load_balancer_and_only_the_load_balancer_th
     ingress += [(r["Properties"]["GroupId"]["Fn::GetAtt"][0], r["Properties"])
                 for r in app_template.find_resources("AWS::EC2::SecurityGroupIngress").values()]
 
-    assert not any("CidrIp" in rule or "CidrIpv6" in rule for _, rule in ingress), "nothing open to the internet"
+    assert not any(isinstance(rule.get("CidrIp"), str) or "CidrIpv6" in rule for _, rule in ingress), \
+        "no address range outside the VPC is admitted anywhere"
     [(_, to_alb)] = [(g, r) for g, r in ingress if g == alb_group]
     assert to_alb["FromPort"] == to_alb["ToPort"] == 80
-    lookup = json.dumps(to_alb["SourcePrefixListId"])
-    lookups = app_template.find_resources("Custom::AWS")
-    [lookup_id] = [i for i in lookups if i in lookup]
-    assert live_pages.CLOUDFRONT_PREFIX_LIST in json.dumps(lookups[lookup_id]["Properties"])
+    [vpc_id] = app_template.find_resources("AWS::EC2::VPC")
+    assert to_alb["CidrIp"] == {"Fn::GetAtt": [vpc_id, "CidrBlock"]}, "CloudFront's VPC-origin interfaces, in the VPC"
     _, service = _one(app_template, "AWS::ECS::Service")
     [task_group] = [g["Fn::GetAtt"][0] for g in
                     service["Properties"]["NetworkConfiguration"]["AwsvpcConfiguration"]["SecurityGroups"]]

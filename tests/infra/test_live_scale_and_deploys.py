@@ -79,8 +79,8 @@ def test_only_requests_carrying_the_stages_secret_get_past_the_load_balancer(app
         assert sum(len(c.get("Values", [])) + len(c.get("PathPatternConfig", {}).get("Values", []))
                    + len(c.get("HttpHeaderConfig", {}).get("Values", [])) for c in conditions) <= 5
     config = next(iter(app_template.find_resources("AWS::CloudFront::Distribution").values()))
-    origins = [o for o in config["Properties"]["DistributionConfig"]["Origins"] if "CustomOriginConfig" in o
-               and "LoadBalancer" in json.dumps(o["DomainName"])]
+    origins = [o for o in config["Properties"]["DistributionConfig"]["Origins"]
+               if "LoadBalancer" in json.dumps(o["DomainName"])]
     assert origins
     for origin in origins:
         headers = {h["HeaderName"]: json.dumps(h["HeaderValue"]) for h in origin["OriginCustomHeaders"]}

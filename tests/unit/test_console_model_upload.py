@@ -160,3 +160,20 @@ def test_a_spare_converter_worker_is_ready_before_the_upload_and_replaced_after_
     if converter._spare is not None:  # no stray process left behind by the test
         converter._spare.kill()
         converter._spare.wait(timeout=30)
+
+
+def test_the_converter_runs_at_the_lowest_cpu_priority_so_the_public_pages_stay_fast() -> None:
+    """A console upload loads OpenVINO and converts in a worker the app server starts; on a 2-core venue laptop it
+    must take only the CPU the pages being watched do not want (SCHED_IDLE, niced), never compete with them."""
+    import os
+
+    converter = ConsoleConverter(keep_spare=True)
+    converter.warm_up()
+    spare = converter._spare
+    assert spare is not None
+    try:
+        assert os.sched_getscheduler(spare.pid) == os.SCHED_IDLE
+        assert os.getpriority(os.PRIO_PROCESS, spare.pid) >= os.getpriority(os.PRIO_PROCESS, 0) + 10
+    finally:
+        spare.kill()
+        spare.wait(timeout=30)

@@ -6,6 +6,7 @@ throw the in-memory backends away and recover from the state dir, as a restarted
 from __future__ import annotations
 
 import json
+import threading
 
 import pytest
 from moto.core.base_backend import BackendDict
@@ -89,6 +90,87 @@ def test_snapshot_then_journal_tail_is_replayed_once_in_order(tmp_path, fresh_mo
     assert _hits(client) == 3
     report = app.state.recovery
     assert (report.replayed, report.skipped, report.failed) == (2, 0, 0)
+
+
+def test_requests_are_answered_while_a_snapshot_writes_its_files_and_what_they_change_survives(tmp_path, fresh_moto):
+    """Writing a snapshot (seconds once S3 holds model archives) does not hold up requests: the public board reads
+    storage meanwhile. A write answered during that time is in the journal and then in the next round's snapshot."""
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    writing, go_on = threading.Event(), threading.Event()
+    real_write_files = app.state.snapshots.write_files
+
+    def slow_first_write(capture):
+        if not writing.is_set():
+            writing.set()
+            assert go_on.wait(60), "the test never let the snapshot finish"
+        return real_write_files(capture)
+
+    app.state.snapshots.write_files = slow_first_write
+    snapshot = threading.Thread(target=app.snapshot_if_dirty)
+    snapshot.start()
+    try:
+        assert writing.wait(60), "the snapshot never started writing"
+        assert _add_hit(client) == 2  # answered while the snapshot's files are being written
+        assert _hits(client) == 2
+    finally:
+        go_on.set()
+        snapshot.join(60)
+    assert not snapshot.is_alive()
+    assert app.state.journal.records == 0  # the next round took the hit in: the journal is empty again
+    app.state.close()
+    BackendDict.reset()
+
+    app, client = _server(tmp_path)
+
+    assert _hits(client) == 2
+    assert app.state.recovery.journal_records == 0
+
+
+def test_a_user_created_while_a_snapshot_writes_survives_even_though_the_snapshot_held_an_older_user_pool(
+        tmp_path, fresh_moto, monkeypatch):
+    """The snapshot being written holds the user pool as it was; a user created meanwhile is snapshotted at once (its
+    sub is random). The older file must neither replace the newer one, nor be removed as unreferenced by that
+    immediate snapshot before it is committed, or the state would not load (or the user be gone) after a restart."""
+    from drem_local.durable import snapshot as snapshot_module
+
+    app, client = _server(tmp_path)
+    pool_id = _cognito(client, "CreateUserPool", {"PoolName": "racers"})["UserPool"]["Id"]
+    _cognito(client, "CreateGroup", {"UserPoolId": pool_id, "GroupName": "racer"})  # cognito dirty: in the capture
+    _create_table(client)
+    _add_hit(client)  # and DynamoDB: its file is the one written last
+    writing, go_on = threading.Event(), threading.Event()
+    real_write = snapshot_module.write_atomically
+
+    def slow_after_the_first_file(path, data):
+        real_write(path, data)
+        if threading.current_thread() is snapshot and path.name.startswith("dynamodb") and not writing.is_set():
+            # both files are there, not committed yet
+            writing.set()
+            assert go_on.wait(60), "the test never let the snapshot finish"
+
+    monkeypatch.setattr(snapshot_module, "write_atomically", slow_after_the_first_file)
+    snapshot = threading.Thread(target=app.snapshot_if_dirty)
+    snapshot.start()
+    try:
+        assert writing.wait(60), "the snapshot never started writing"
+        _cognito(client, "AdminCreateUser", {"UserPoolId": pool_id, "Username": "ada", "MessageAction": "SUPPRESS"})
+    finally:
+        go_on.set()
+        snapshot.join(60)
+    assert not snapshot.is_alive()
+    app.snapshot_if_dirty()
+    assert app.state.journal.records == 0
+    app.state.close()
+    BackendDict.reset()
+
+    _, client = _server(tmp_path)
+
+    assert _cognito(client, "AdminGetUser", {"UserPoolId": pool_id, "Username": "ada"})["Username"] == "ada"
+    groups = _cognito(client, "ListGroups", {"UserPoolId": pool_id})["Groups"]
+    assert [g["GroupName"] for g in groups] == ["racer"]
+    assert _hits(client) == 1
 
 
 def test_a_service_snapshotted_early_does_not_get_its_journal_records_twice(tmp_path, fresh_moto):

@@ -4,6 +4,8 @@ The conversion itself (OpenVINO reads the `.pb`, `onnx` writes the graph, both r
 `drem_sim.console.convert`; this module only decides how it runs. A `.pb` is hostile input and OpenVINO is native
 code, so the worker is a separate process with a wall-clock limit, a CPU-time limit and an address-space limit: a
 graph that crashes the converter, loops or balloons costs that process only, and the upload gets a clear verdict.
+The worker runs at the lowest CPU priority (chalicelib.contained.lowest_priority), so a console upload never slows
+the public pages the app serves meanwhile.
 
 The converter is optional: where OpenVINO is not installed (the Lambda bundle, a car), console models stay AVAILABLE
 for stock cars and are marked "cannot be scrutineered: the model converter is not installed on this server".
@@ -24,7 +26,7 @@ from typing import IO, Literal
 
 from pydantic import BaseModel, ValidationError
 
-from chalicelib.contained import child_death, kill_group, limit_resources
+from chalicelib.contained import child_death, kill_group, limit_resources, lowest_priority
 from chalicelib.formats.model_archive.extract import ArchiveRejected, safe_extract
 
 GiB = 1024 ** 3
@@ -148,6 +150,9 @@ class ConsoleConverter:
 
 def _limit(limits: ConversionLimits) -> Callable[[], None]:  # a preexec_fn
     def apply() -> None:
+        # The app server starts it, but it must not compete with the app for the CPU: its imports (seconds of
+        # OpenVINO) and the conversion run on CPU time the pages being watched do not want.
+        lowest_priority()
         limit_resources(limits.memory_bytes, limits.cpu_seconds)
     return apply
 

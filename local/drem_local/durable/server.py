@@ -25,6 +25,8 @@ from drem_local.durable.state import DurableState, replay_environ
 log = logging.getLogger("drem.durable")
 
 HEALTH_PATH = "/_drem/health"
+# Snapshot rounds written without the request lock before one holds it (writes kept coming during each round).
+SNAPSHOT_ROUNDS = 3
 
 
 def read_body(environ: dict[str, Any]) -> bytes:
@@ -47,6 +49,7 @@ class DurableApp:
         self.guard = guard  # None only in tests that drive the middleware in-process
         self.upload_guard = upload_guard
         self.lock = threading.Lock()
+        self._snapshotting = threading.Lock()
 
     def recover(self):
         with self.lock:
@@ -61,8 +64,28 @@ class DurableApp:
         return int(status.split(" ", 1)[0])
 
     def snapshot_if_dirty(self, *, force: bool = False) -> bool:
-        with self.lock:
-            return self.state.snapshot_all(force=force)
+        """Snapshot what changed and empty the journal. The files are written without the request lock (pickled under
+        it), so requests keep being answered meanwhile; what they change is caught by the next round, up to
+        `SNAPSHOT_ROUNDS`; past that the last round holds the lock throughout, so the journal is always emptied."""
+        with self._snapshotting:  # one snapshot at a time (the periodic one and the final one at stop)
+            did = False
+            for _ in range(SNAPSHOT_ROUNDS):
+                with self.lock:
+                    capture = self.state.begin_snapshot(force=force and not did)
+                if capture is None:
+                    return did
+                did = True
+                try:
+                    written = self.state.write_snapshot(capture)
+                except OSError:
+                    with self.lock:
+                        self.state.abandon_snapshot(capture)
+                    raise
+                with self.lock:
+                    if self.state.finish_snapshot(written):
+                        return True
+            with self.lock:
+                return self.state.snapshot_all() or did
 
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
         if environ.get("PATH_INFO") == HEALTH_PATH:

@@ -15,7 +15,7 @@ from typing import Any
 
 from drem_local.durable.classify import PERSISTED
 from drem_local.durable.journal import Journal, JournalRecord
-from drem_local.durable.snapshot import Manifest, SnapshotStore, register_picklers
+from drem_local.durable.snapshot import Capture, Manifest, SnapshotStore, Written, register_picklers
 
 log = logging.getLogger("drem.durable")
 
@@ -67,7 +67,8 @@ class RecoveryReport:
 
 
 class DurableState:
-    """Everything the middleware does to the disk. Every method runs under the server's one request lock."""
+    """Everything the middleware does to the disk. Every method runs under the server's one request lock, except
+    `write_snapshot` (see DurableApp.snapshot_if_dirty)."""
 
     def __init__(self, state_dir: Path, *, fsync: bool = True, seed_secret: bytes | None = None) -> None:
         """`seed_secret` keys the randomness moto draws for each journaled request (see `seed_randomness`); the
@@ -150,6 +151,36 @@ class DurableState:
         self.journal.truncate()
         self.dirty.clear()
         return True
+
+    def begin_snapshot(self, *, force: bool = False) -> Capture | None:
+        """Under the request lock: pickle every dirty service as of now (None when there is nothing to do). The
+        services count as clean from here; `abandon_snapshot` marks them dirty again if writing fails."""
+        if not self.dirty and not force and self.journal.records == 0:
+            return None
+        capture = self.snapshots.capture(sorted(self.dirty & set(PERSISTED)), self.last_seq)
+        self.dirty.clear()
+        return capture
+
+    def write_snapshot(self, capture: Capture) -> Written:
+        """Without the request lock: the slow part (files written and fsynced)."""
+        try:
+            return self.snapshots.write_files(capture)
+        except OSError as exc:
+            self.last_snapshot_error = f"{exc.strerror or exc} ({time.strftime('%H:%M:%S')})"
+            raise
+
+    def finish_snapshot(self, written: Written) -> bool:
+        """Under the request lock: commit the manifest; empty the journal if nothing was recorded since the capture
+        (else its newer records stay: recovery skips those a service's snapshot already holds). True if emptied."""
+        self.manifest = self._noting_disk_errors(lambda: self.snapshots.commit(self.manifest, written, full=True))
+        if self.last_seq != written.seq:
+            return False
+        self.journal.truncate()
+        return True
+
+    def abandon_snapshot(self, capture: Capture) -> None:
+        """Under the request lock, after a failed write: the captured services are dirty again."""
+        self.dirty.update(capture.pickles)
 
     def _noting_disk_errors(self, write: Callable[[], Manifest]) -> Manifest:
         try:

@@ -32,7 +32,7 @@ from drem_sim.learn import scrutiny_words
 from drem_sim.learn.scrutiny_words import GiB, PlainFailure
 
 DRIVE_MODULE = "drem_local.workers.scrutineer_drive"
-NICENESS = 10  # below the app server (0): the live pages win every contest for the CPU
+NICENESS = 10  # chalicelib.contained.BACKGROUND_NICENESS (chalicelib is importable only after use_app_source)
 _PR_SET_PDEATHSIG = 1
 LEASE_VARIABLE = "DREM_SCRUTINEER_LEASE_S"  # how long a taken job is the worker's (default 5 minutes)
 # How often the worker looks for model checks a crash cut short (uploads left UPLOADED); see resume_model_checks.
@@ -99,7 +99,8 @@ class BoundedClipDrive:
 
 
 def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: runs in the child before exec
-    from chalicelib.contained import limit_resources  # imported here, in the parent: the child only calls it
+    # imported here, in the parent: the child only calls them
+    from chalicelib.contained import limit_resources, lowest_priority
 
     def apply() -> None:
         import ctypes
@@ -108,20 +109,9 @@ def _limit(limits: ScrutineerLimits) -> Callable[[], None]:  # a preexec_fn: run
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
         except (OSError, AttributeError):
             pass
-        os.nice(limits.niceness)
-        lowest_priority()
+        lowest_priority(limits.niceness)
         limit_resources(limits.memory_bytes, limits.cpu_seconds)
     return apply
-
-
-def lowest_priority() -> None:
-    """SCHED_IDLE where Linux offers it: the process runs only on CPU time nothing else wants, and any other task that
-    wakes up (the app server answering a spectator) takes the CPU from it at once. `nice` alone still leaves a niced
-    task its small share and a wait for the scheduler's wake-up granularity."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        pass  # not Linux (or not allowed): the nice value stands
 
 
 def _failed(failure: PlainFailure) -> Any:
@@ -201,9 +191,9 @@ def _resume_checks_forever() -> None:
 def serve(poll_s: float, once: bool = False) -> int:
     use_app_source()
     from chalicelib import logs
+    from chalicelib.contained import lowest_priority
 
-    os.nice(NICENESS)
-    lowest_priority()
+    lowest_priority(NICENESS)
     drive = BoundedClipDrive()
     worker = background_scrutineer(drive)
     league = league_verifier(drive)
