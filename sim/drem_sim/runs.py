@@ -56,7 +56,7 @@ class RunRecorder:
                       "source": "sim", "seed": seed, "camera": camera.as_dict() if camera else None, **(extra or {})}
 
     def add(self, frame: np.ndarray, action: dict[str, float], params: dict[str, Any], *, t_ms: int, lap: int,
-            offtrack: bool, extra: dict[str, Any] | None = None) -> None:
+            offtrack: bool, car_speed: float | None = None, extra: dict[str, Any] | None = None) -> None:
         if frame.shape != (120, 160) or frame.dtype != np.uint8:
             raise RunError(f"a run frame is 160x120 uint8 grayscale, got {frame.shape} {frame.dtype}")
         name = f"frames/{self.frames:06d}.png"
@@ -67,6 +67,8 @@ class RunRecorder:
                "progress": round(float(params["progress"]), 3), "x": round(float(params["x"]), 4),
                "y": round(float(params["y"]), 4), "heading": round(float(params["heading"]), 3), "lap": lap,
                "offtrack": bool(offtrack), **(extra or {})}
+        if car_speed is not None:
+            row["car_speed"] = round(float(car_speed), 4)
         self._controls.write(json.dumps(row) + "\n")
         self.frames += 1
 

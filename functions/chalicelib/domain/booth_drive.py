@@ -97,7 +97,8 @@ class LiveDrive:
             t_ms, lap, seen, obs = round(self.env.sim_time * 1000), self.env.laps, self.params, self.obs
             self.obs, self.params, _, _, _ = self.env.step(action)
             assert obs is not None
-            self.recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(self.params["is_offtrack"]))
+            self.recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(self.params["is_offtrack"]),
+                              car_speed=self.env.car_state()["speed"])
             return self.state(frame=True)
 
     def state(self, *, frame: bool = False) -> dict[str, Any]:
@@ -105,7 +106,7 @@ class LiveDrive:
         answer: dict[str, Any] = {
             "run_id": self.record.run_id, "track_id": self.record.track_id, "frames": self.recorder.frames,
             "laps": env.laps, "lap_times_s": [round(t, 3) for t in env.lap_times_s], "resets": env.resets,
-            "progress": round(float(params["progress"]), 1), "speed": round(float(params["speed"]), 2),
+            "progress": round(float(params["progress"]), 1), "speed": round(env.car_state()["speed"], 2),
             "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"])}
         if frame:
             import cv2
