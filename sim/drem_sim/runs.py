@@ -108,7 +108,9 @@ def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: s
         next_obs, params, terminated, truncated, info = env.step(action)
         recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(params["is_offtrack"]))
         obs = next_obs
-        if env.laps >= laps or terminated or truncated:
+        # A row shows the lap the car was on when it saw its frame, so the crossing shows on the row after it: stop
+        # once a row has recorded the last lap (stopping on the crossing step itself would lose that lap).
+        if lap >= laps or terminated or truncated:
             break
     return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
 

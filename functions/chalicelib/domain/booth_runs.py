@@ -333,25 +333,31 @@ def parse_controls(data: bytes) -> list[dict[str, Any]]:
 
 
 def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
-    """A lap attempt starts on the line (or where the car was put back) and ends with a lap or an off-track; a lap
-    counts as completed only when it was driven cleanly from the line (as `drem sim eval` counts)."""
-    attempts: list[float] = []
-    lap_times: list[float] = []
-    clean, best, lap_started = True, 0.0, rows[0]["t_ms"]
-    for previous, row in zip([None, *rows[:-1]], rows, strict=True):
-        if previous is not None and row["lap"] > previous["lap"]:
-            if clean:
-                attempts.append(100.0)
-                lap_times.append(round((row["t_ms"] - lap_started) / 1000.0, 3))
-            elif best > 0:  # the attempt that began where the car was put back reached the line: not a lap
-                attempts.append(min(best, 99.9))
-            clean, best, lap_started = True, 0.0, row["t_ms"]
-        best = max(best, row["progress"])
+    """Lap attempts and laps by the whole-lap rule every figure uses (`drem_sim.laps`, as `drem sim eval` and
+    scrutineering count): a lap is driven whole from a timing-line crossing (or the standing start) to the next
+    without an off-track; the stretch from where the car was put back to the line is no attempt.
+
+    A row is the state the driver saw (its lap, progress and time) and whether what it did ended off the track; the
+    next row is where that decision took the car. A crossing is timed where the line lies between the two."""
+    from drem_sim.laps import LapAttempts  # pure Python: no simulator needed
+
+    laps = LapAttempts(start_s=rows[0]["t_ms"] / 1000.0)
+    for row, after in zip(rows, [*rows[1:], None], strict=True):
+        before = 100.0 * row["lap"] + row["progress"]
+        reached = before if after is None else 100.0 * after["lap"] + after["progress"]
+        if after is not None:  # where the last row's decision took the car was never recorded
+            laps.moved(reached)
         if row["offtrack"]:
-            attempts.append(min(best, 99.9))
-            clean, best = False, 0.0
-    if best > 0:
-        attempts.append(min(best, 99.9))
+            laps.left_track()
+        elif after is not None and after["lap"] > row["lap"]:
+            share = (100.0 * after["lap"] - before) / (reached - before) if reached > before else 1.0
+            laps.crossed((row["t_ms"] + min(max(share, 0.0), 1.0) * (after["t_ms"] - row["t_ms"])) / 1000.0,
+                         100.0 * after["lap"])
+    attempts = list(laps.attempts)
+    unfinished = laps.unfinished()
+    if unfinished:  # the attempt under way when the run stopped counts with what it reached
+        attempts.append(unfinished)
+    lap_times = laps.lap_times_s
     steering = [r["steering_angle"] for r in rows]
     changes = [b - a for a, b in zip(steering, steering[1:], strict=False)]
     mean_change = sum(changes) / len(changes) if changes else 0.0
