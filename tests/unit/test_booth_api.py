@@ -39,6 +39,18 @@ def png() -> bytes:
     return cv2.imencode(".png", np.full((120, 160), 38, np.uint8))[1].tobytes()
 
 
+def frames_tar(name: str) -> bytes:
+    import io
+    import tarfile
+
+    buffer, data = io.BytesIO(), png()
+    with tarfile.open(fileobj=buffer, mode="w") as bundle:
+        info = tarfile.TarInfo(name)
+        info.size = len(data)
+        bundle.addfile(info, io.BytesIO(data))
+    return buffer.getvalue()
+
+
 def drive(api: ModelsApi, track: str = "drem_oval", steps: int = 30) -> dict[str, Any]:
     started = api.call("POST", "/api/drive", {"track_id": track})
     assert started.status_code == 201, started.json_body
@@ -81,6 +93,11 @@ def test_a_live_drive_becomes_a_finalised_run_only_its_driver_and_staff_see(alic
     controls_link = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/controls.jsonl").headers["Location"]
     lines = requests.get(controls_link, timeout=10).text.splitlines()
     assert len(lines) == 40 and json.loads(lines[0])["frame"] == "frames/000000.png"
+    bundle_link = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/frames.tar").headers["Location"]
+    from drem_sim.runs import read_frames
+
+    frames = list(read_frames(requests.get(bundle_link, timeout=10).content))  # all 40 frames in one download
+    assert [name for name, _ in frames] == [f"frames/{i:06d}.png" for i in range(40)]
     page = client.http.get(f"/booth/runs/{run['run_id']}", headers={"Authorization": alice.headers["Authorization"]})
     html = page.body.decode()
     assert 'data-testid="run-topdown"' in html and "40 (" in html
@@ -101,6 +118,10 @@ def test_uploaded_artifacts_are_checked_and_finalising_computes_the_metrics(alic
     assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=b"GIF89a").status_code == 400
     assert put(f"/api/runs/{run_id}/artifacts/..%2Fescape", headers=headers, body=b"x").status_code == 400
     assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=png()).status_code == 200
+    escaping = put(f"/api/runs/{run_id}/artifacts/frames.tar", headers=headers, body=frames_tar("../../x.png"))
+    assert escaping.status_code == 400 and "is not a frames/NNNNNN.png file" in escaping.json_body["error"]["message"]
+    assert put(f"/api/runs/{run_id}/artifacts/frames.tar", headers=headers,
+               body=frames_tar("frames/000001.png")).status_code == 200
     rows = [row(i, progress=i * 2.0, steering=(5.0 if i % 2 else -5.0)) for i in range(50)]
     rows += [row(50, lap=1, progress=0.5), row(51, lap=1, progress=3.0, offtrack=True), row(52, lap=1, progress=1.0)]
     assert put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=controls(rows)).status_code == 200

@@ -226,15 +226,12 @@ class DriveService:
             shutil.rmtree(folder, ignore_errors=True)
 
     def _upload(self, record: RunRecord, folder: Path, replaced: dict[str, bytes] | None = None) -> None:
-        replaced = replaced or {}
-        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "metadata.json")
+        """The controls, the frames as one bundle and the first frame: three objects however long the drive."""
+        from drem_sim.runs import run_objects
 
-        def put(path: Path) -> None:
-            key = path.relative_to(folder).as_posix()
-            self.runs.files.put(record.prefix + key, replaced[key] if key in replaced else path.read_bytes())
-
-        with ThreadPoolExecutor(UPLOAD_THREADS) as pool:  # ~1000 small frames: a few seconds, not a minute
-            list(pool.map(put, files))
+        objects = {**run_objects(folder), **(replaced or {})}
+        with ThreadPoolExecutor(UPLOAD_THREADS) as pool:
+            list(pool.map(lambda item: self.runs.files.put(record.prefix + item[0], item[1]), objects.items()))
 
     def _finish_quietly(self, drive: LiveDrive) -> None:
         try:

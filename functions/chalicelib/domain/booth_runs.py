@@ -1,9 +1,10 @@
 """Runs of the learning booth: a person (manual) or a model version (autonomous) driving a track in the simulator.
 
-A run's artifacts are a `drem_sim` run folder in the runs bucket (`runs/{track}/{date}/{runId}/`: `frames/*.png`,
-`controls.jsonl`, `metadata.json`) plus `topdown.png`, the driven path on the track map; its record and metrics live
-in the booth table. Lifecycle: RECORDING (manual: artifacts may be uploaded) or QUEUED (autonomous: waiting for the
-booth worker) → RUNNING (the worker drives) → FINALISED (metrics computed) | FAILED (with the reason).
+A run's artifacts are a `drem_sim` run folder in the runs bucket (`runs/{track}/{date}/{runId}/`: `frames.tar`, all
+the frames in one object, or `frames/*.png` one by one; `controls.jsonl`, `metadata.json`) plus `topdown.png`, the
+driven path on the track map; its record and metrics live in the booth table. Lifecycle: RECORDING (manual:
+artifacts may be uploaded) or QUEUED (autonomous: waiting for the booth worker) → RUNNING (the worker drives) →
+FINALISED (metrics computed) | FAILED (with the reason).
 
 Finalising reads `controls.jsonl` (bounded, every row checked: hostile input), computes the metrics and writes the
 authoritative `metadata.json` and the picture. A racer sees only their own runs; admins and operators see all.
@@ -37,8 +38,11 @@ MAX_AUTONOMOUS_LAPS = 5
 MAX_OPEN_RUNS = 10
 OPEN_WINDOW_S = 3600
 FRAME_ARTIFACT = re.compile(r"^frame-(\d{6})\.png$")
-UPLOADABLE = ("controls.jsonl",)
-READABLE = ("controls.jsonl", "metadata.json", "topdown.png")
+# frames.tar: a five-minute drive (4,500 frames of ~2 KB, each in 512-byte tar blocks) is ~11 MB; the app's body limit
+# is 20 MiB (drem_local.http_front)
+MAX_FRAMES_BUNDLE_BYTES = 18 * 1024 * 1024
+UPLOADABLE = ("controls.jsonl", "frames.tar")
+READABLE = ("controls.jsonl", "metadata.json", "topdown.png", "frames.tar")
 
 
 class RecordChanged(Exception):
@@ -238,10 +242,13 @@ class RunService:
         if record.status is not RunStatus.RECORDING:
             raise Conflict(f"This run is {record.status.value}; artifacts are uploaded while it is RECORDING.")
         key = _uploadable_key(name)
-        if len(data) > (MAX_CONTROLS_BYTES if key == "controls.jsonl" else MAX_ARTIFACT_BYTES):
+        limits = {"controls.jsonl": MAX_CONTROLS_BYTES, "frames.tar": MAX_FRAMES_BUNDLE_BYTES}
+        if len(data) > limits.get(key, MAX_ARTIFACT_BYTES):
             raise PayloadTooLarge(f"{name} is larger than this artifact may be.", field="body")
         if key.endswith(".png") and not data.startswith(b"\x89PNG\r\n\x1a\n"):
             raise InvalidInput(f"{name} is not a PNG image.", field="body")
+        if key == "frames.tar":
+            _check_frames_bundle(data)
         self.files.put(record.prefix + key, data)
         return key
 
@@ -383,14 +390,25 @@ def _metadata(record: RunRecord, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "lap_times_ms": [round(t * 1000) for t in metrics.lap_times_s], "resets": metrics.offtrack_count}
 
 
+def _check_frames_bundle(data: bytes) -> None:
+    from drem_sim.runs import RunError, read_frames  # the run store's own reader: one rule for what a bundle holds
+
+    try:
+        for _ in read_frames(data):
+            pass
+    except RunError as error:
+        raise InvalidInput(str(error), field="body") from None
+
+
 def _uploadable_key(name: str) -> str:
     frame = FRAME_ARTIFACT.match(name)
     if frame:
         return f"frames/{frame.group(1)}.png"
     if name in UPLOADABLE:
         return name
-    raise InvalidInput(f"{name[:40]!r} is not a run artifact: upload controls.jsonl and frame-NNNNNN.png "
-                       "(metadata.json and topdown.png are written when the run is finalised).", field="name")
+    raise InvalidInput(f"{name[:40]!r} is not a run artifact: upload controls.jsonl and frames.tar (or "
+                       "frame-NNNNNN.png one by one); metadata.json and topdown.png are written when the run is "
+                       "finalised.", field="name")
 
 
 def _readable_key(name: str) -> str:
