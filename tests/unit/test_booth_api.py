@@ -275,3 +275,35 @@ def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsAp
     saved = service.finish(racer, run_id)
     assert saved.status.value == "FINALISED" and saved.metrics is not None and saved.metrics.frames == 7
     assert not (tmp_path / "drives" / run_id).exists()
+
+
+def test_train_is_off_with_the_reason_when_nothing_changed_since_the_last_version(alice: ModelsApi,
+                                                                                  client: Any) -> None:
+    from chalicelib import services
+    from chalicelib.domain.booth_training import JobStatus
+
+    def booth_page() -> str:
+        return client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
+
+    assert "drive a lap first" in booth_page()  # no drive yet: off, and says why
+    first = drive(alice, steps=10)
+    page = booth_page()
+    assert 'data-testid="train-why"' not in page and 'data-testid="train" >' in page.replace("  ", " ")
+    job = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 1}).json_body["job"]
+    training = services.training_service()  # the worker made v0001 from that drive
+    claimed = training.claim_next()
+    assert claimed is not None and claimed.job_id == job["job_id"]
+    training.store.replace_job(claimed.model_copy(update={"status": JobStatus.DONE, "model_name": "v0001",
+                                                          "finished_at": "2026-11-27T00:00:00Z"}),
+                               expected_status="RUNNING")
+
+    page = booth_page()
+    why = "Nothing changed since v0001: it learned from these same 1 drive."
+    assert why in page and "disabled" in page[page.index('data-testid="train"'):][:80]
+    again = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]]})  # at once, not after training
+    assert again.status_code == 409 and why in again.json_body["error"]["message"]
+
+    second = drive(alice, steps=10)  # something new to learn from: Train is on again
+    assert "Nothing changed" not in booth_page()
+    both = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"], second["run_id"]], "epochs": 1})
+    assert both.status_code == 201, both.json_body

@@ -27,6 +27,7 @@ class BoothView:
     active_model_id: str | None
     aggregates: list[dict[str, Any]]
     trainable: int  # finished manual runs of the caller
+    why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
 
@@ -45,7 +46,8 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
                      jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [],
+                     trainable=trainable, why_not_train=training.why_not_train(principal),
+                     active_versions=_active_versions(training, mine) if everyone else [],
                      cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [])
 
 
