@@ -334,6 +334,9 @@ def parse_controls(data: bytes) -> list[dict[str, Any]]:
         rows.append({"t_ms": float(row["t_ms"]), "steering_angle": float(row["steering_angle"]),
                      "speed": float(row["speed"]), "progress": float(row["progress"]), "x": float(row["x"]),
                      "y": float(row["y"]), "lap": int(row["lap"]), "offtrack": row.get("offtrack") is True})
+        car_speed = row.get("car_speed")  # a person's drive: the speed the car really went
+        if not isinstance(car_speed, bool) and isinstance(car_speed, int | float) and math.isfinite(car_speed):
+            rows[-1]["car_speed"] = float(car_speed)
     if not rows:
         raise InvalidInput("controls.jsonl has no rows: the run recorded nothing.", field="controls.jsonl")
     return rows
@@ -357,9 +360,7 @@ def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
         if row["offtrack"]:
             laps.left_track()
         elif after is not None and after["lap"] > row["lap"]:
-            share = (100.0 * after["lap"] - before) / (reached - before) if reached > before else 1.0
-            laps.crossed((row["t_ms"] + min(max(share, 0.0), 1.0) * (after["t_ms"] - row["t_ms"])) / 1000.0,
-                         100.0 * after["lap"])
+            laps.crossed(crossing_s(row["t_ms"], before, after["t_ms"], reached, after["lap"]), 100.0 * after["lap"])
     attempts = list(laps.attempts)
     unfinished = laps.unfinished()
     if unfinished:  # the attempt under way when the run stopped counts with what it reached
@@ -373,10 +374,17 @@ def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
         frames=len(rows), attempts=len(attempts), laps_completed=len(lap_times),
         completion_pct=round(sum(attempts) / len(attempts), 2) if attempts else 0.0,
         offtrack_count=sum(1 for r in rows if r["offtrack"]), stability_deg=round(jitter, 3),
-        mean_speed=round(sum(r["speed"] for r in rows) / len(rows), 3), lap_times_s=lap_times,
+        mean_speed=round(sum(r.get("car_speed", r["speed"]) for r in rows) / len(rows), 3), lap_times_s=lap_times,
         best_lap_s=min(lap_times) if lap_times else None,
         mean_lap_s=round(sum(lap_times) / len(lap_times), 3) if lap_times else None,
         seconds=round((rows[-1]["t_ms"] - rows[0]["t_ms"]) / 1000.0, 2))
+
+
+def crossing_s(t_ms: float, before: float, after_t_ms: float, reached: float, lap: int) -> float:
+    """When a decision that took the car from `before` to `reached` (laps × 100 + progress) crossed into `lap`: where
+    the line lies between the two, in time."""
+    share = (100.0 * lap - before) / (reached - before) if reached > before else 1.0
+    return (t_ms + min(max(share, 0.0), 1.0) * (after_t_ms - t_ms)) / 1000.0
 
 
 def _metadata(record: RunRecord, rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -51,7 +51,8 @@
 
   function show(state) {
     if (state.frame) { frame.src = state.frame; }
-    document.getElementById("drive-laps").textContent = state.laps;
+    // Counted as the saved run's page counts them: whole laps from the line, of the attempts so far.
+    document.getElementById("drive-laps").textContent = state.laps_completed + " of " + state.attempts + " attempts";
     document.getElementById("drive-progress").textContent = state.progress + " %";
     document.getElementById("drive-speed").textContent = state.speed + " m/s";
     document.getElementById("drive-frames").textContent = state.frames;
