@@ -123,7 +123,8 @@ class LiveDrive:
             "attempts": len(laps.attempts) + (1 if unfinished else 0), "lap_times_s": list(laps.lap_times_s),
             "resets": env.resets,
             "progress": round(float(params["progress"]), 1), "speed": round(env.car_state()["speed"], 2),
-            "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"])}
+            "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"]),
+            "x": round(float(params["x"]), 3), "y": round(float(params["y"]), 3)}  # for the page's top-down map
         if frame:
             import cv2
 

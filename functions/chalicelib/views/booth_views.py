@@ -12,8 +12,10 @@ from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunS
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
+from chalicelib.domain.errors import DremError
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
+from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
 
@@ -79,7 +81,9 @@ def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
     full-lock frames between two samples still shows."""
     size = max(1, -(-len(rows) // PLOT_POINTS))
     buckets = [rows[start:start + size] for start in range(0, len(rows), size)]
-    labels = [f"{bucket[0]['t_ms'] / 1000:.0f}s" if index % 10 == 0 else "" for index, bucket in enumerate(buckets)]
+    decimals = 0 if rows and rows[-1]["t_ms"] - rows[0]["t_ms"] > 20_000 else 1  # a short run's labels must differ too
+    labels = [f"{bucket[0]['t_ms'] / 1000:.{decimals}f}s" if index % 10 == 0 else ""
+              for index, bucket in enumerate(buckets)]
     steering = svg_plots.Series("steering °", _extremes(buckets, lambda r: r["steering_angle"]))
     speed = svg_plots.Series("speed m/s", _extremes(buckets, _car_speed))
     off = svg_plots.Series("off track", [(i, max(_car_speed(r) for r in bucket)) for i, bucket in enumerate(buckets)
@@ -104,3 +108,12 @@ def _extremes(buckets: list[list[dict[str, Any]]], value: Callable[[dict[str, An
         low, high = values.index(min(values)), values.index(max(values))
         points += [(index, values[i]) for i in sorted({low, high})]
     return points
+
+
+def run_map(tracks: TrackService, run: RunRecord, rows: list[dict[str, Any]]) -> Markup | None:
+    """The saved run on its track, seen from above (None where the simulator's tracks are not installed)."""
+    try:
+        track = tracks.get(run.track_id)
+    except DremError:
+        return None
+    return track_map(track, rows, testid="run-map")
