@@ -173,6 +173,8 @@ class Trainer:
             from chalicelib.domain.racer_models import new_model_id
 
             job = self.training.plan_version(job, new_model_id(), name)
+        job = self.training.report(job, progress=TRAIN_FROM, epoch=0, loss=None,
+                                   stage=f"reading the {job.frames} frames of your drives")
         progress = JobProgress(self.training, job)
         config = TrainConfig(epochs=job.epochs, seed=0, batch_size=32, num_threads=1)
         trained = train_to_archive(run_dirs, folder / "model", name, config, progress=cast(TextIO, progress),
@@ -300,6 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     trainer = Trainer(say)
+    if trainer.can_train:  # PyTorch takes seconds to import: once here, not in the first visitor's wait
+        import drem_sim.learn.pipeline  # noqa: F401
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
     requeued = False  # jobs a dead trainer left RUNNING go back to the queue once storage answers
