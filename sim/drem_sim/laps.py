@@ -41,7 +41,7 @@ class LapAttempts:
     def crossed(self, at_s: float, distance_pct: float) -> None:
         """The car crossed the timing line at `at_s`: a lap if it drove there whole from the line."""
         if self._line_s is not None:
-            self.lap_times_s.append(round(at_s - self._line_s, 3))
+            self.lap_times_s.append(at_s - self._line_s)
             self.attempts.append(100.0)
         self._line_s, self._line_distance, self._best = at_s, distance_pct, 0.0
 

@@ -120,8 +120,8 @@ class LiveDrive:
         answer: dict[str, Any] = {
             "run_id": self.record.run_id, "track_id": self.record.track_id, "frames": self.recorder.frames,
             "laps": env.laps, "laps_completed": laps.laps_completed,
-            "attempts": len(laps.attempts) + (1 if unfinished else 0), "lap_times_s": list(laps.lap_times_s),
-            "resets": env.resets,
+            "attempts": len(laps.attempts) + (1 if unfinished else 0),
+            "lap_times_s": [round(t, 3) for t in laps.lap_times_s], "resets": env.resets,
             "progress": round(float(params["progress"]), 1), "speed": round(env.car_state()["speed"], 2),
             "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"]),
             "x": round(float(params["x"]), 3), "y": round(float(params["y"]), 3)}  # for the page's top-down map

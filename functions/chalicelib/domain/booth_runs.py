@@ -365,7 +365,7 @@ def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
     unfinished = laps.unfinished()
     if unfinished:  # the attempt under way when the run stopped counts with what it reached
         attempts.append(unfinished)
-    lap_times = laps.lap_times_s
+    lap_times = [round(t, 3) for t in laps.lap_times_s]
     steering = [r["steering_angle"] for r in rows]
     changes = [b - a for a, b in zip(steering, steering[1:], strict=False)]
     mean_change = sum(changes) / len(changes) if changes else 0.0
