@@ -105,7 +105,8 @@ class DriveSession:
             if self._recorder is not None:
                 assert obs is not None, "a drive session's env always has a camera"
                 self._recorder.add(obs, action, seen, t_ms=t_ms - round(self._record_from[2] * 1000),
-                                   lap=lap - self._record_from[0], offtrack=bool(self._params["is_offtrack"]))
+                                   lap=lap - self._record_from[0], offtrack=bool(self._params["is_offtrack"]),
+                                   car_speed=self.env.car_state()["speed"])
             self._png = _encode_png(self._obs)
 
     def run(self) -> None:

@@ -3,19 +3,27 @@
 Layout `runs/{track_id}/{date}/{run_id}/` (the same keys under the runs bucket):
 - `frames/{index:06d}.png`: the 160x120 grayscale camera frame the driver acted on;
 - `controls.jsonl`: one row per frame (index, frame, t_ms, steering_angle, speed, progress, x, y,
-  heading, lap, offtrack); `offtrack` is true when the action taken on that frame ended off the
-  track, so a dataset can leave those bad examples out;
+  heading, lap, offtrack, and for a person's drive car_speed); `speed` is the speed commanded, `car_speed`
+  the speed the car really reached by the end of that decision (what a person did, whatever key they held);
+  `offtrack` is true when the action taken on that frame ended off the track, so a dataset can leave
+  those bad examples out;
 - `metadata.json`: track, direction, driver, start/end, frames, laps, lap times, seed, camera.
+In a bucket the frames travel as one object, `frames.tar` (an uncompressed tar of `frames/{index:06d}.png`: PNGs are
+compressed already), so a run of 1,800 frames is three objects, not 1,800; `download_run` unpacks it (and still reads
+runs stored frame by frame).
 This module is the only one in drem_sim that talks to S3; the boto3 client is injected (or built
 lazily from the environment, which honours AWS_ENDPOINT_URL for the local stack).
 """
 from __future__ import annotations
 
 import datetime as dt
+import io
 import json
 import os
+import re
 import secrets
-from collections.abc import Callable
+import tarfile
+from collections.abc import Callable, Iterator
 from pathlib import Path, PurePosixPath
 from typing import Any
 
@@ -27,6 +35,10 @@ from drem_sim.env import RaceEnv
 
 Policy = Callable[[np.ndarray, dict[str, Any]], dict[str, float]]
 RUN_FILES = ("controls.jsonl", "metadata.json")
+FRAMES_BUNDLE = "frames.tar"
+FRAME_MEMBER = re.compile(r"^frames/\d{6}\.png$")
+MAX_FRAME_BYTES = 1024 * 1024  # a 160x120 grayscale camera PNG is ~2 KB
+MAX_BUNDLE_FRAMES = 50_000  # as many as a run may have rows
 
 
 class RunError(ValueError):
@@ -56,7 +68,7 @@ class RunRecorder:
                       "source": "sim", "seed": seed, "camera": camera.as_dict() if camera else None, **(extra or {})}
 
     def add(self, frame: np.ndarray, action: dict[str, float], params: dict[str, Any], *, t_ms: int, lap: int,
-            offtrack: bool, extra: dict[str, Any] | None = None) -> None:
+            offtrack: bool, car_speed: float | None = None, extra: dict[str, Any] | None = None) -> None:
         if frame.shape != (120, 160) or frame.dtype != np.uint8:
             raise RunError(f"a run frame is 160x120 uint8 grayscale, got {frame.shape} {frame.dtype}")
         name = f"frames/{self.frames:06d}.png"
@@ -67,6 +79,8 @@ class RunRecorder:
                "progress": round(float(params["progress"]), 3), "x": round(float(params["x"]), 4),
                "y": round(float(params["y"]), 4), "heading": round(float(params["heading"]), 3), "lap": lap,
                "offtrack": bool(offtrack), **(extra or {})}
+        if car_speed is not None:
+            row["car_speed"] = round(float(car_speed), 4)
         self._controls.write(json.dumps(row) + "\n")
         self.frames += 1
 
@@ -106,7 +120,9 @@ def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: s
         next_obs, params, terminated, truncated, info = env.step(action)
         recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(params["is_offtrack"]))
         obs = next_obs
-        if env.laps >= laps or terminated or truncated:
+        # A row shows the lap the car was on when it saw its frame, so the crossing shows on the row after it: stop
+        # once a row has recorded the last lap (stopping on the crossing step itself would lose that lap).
+        if lap >= laps or terminated or truncated:
             break
     return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
 
@@ -121,14 +137,68 @@ def run_key_prefix(run_dir: Path) -> str:
     return f"runs/{track_id}/{date}/{run_id}/"
 
 
+def pack_frames(run_dir: Path) -> bytes:
+    """The run folder's frames as one uncompressed tar (`frames/{index:06d}.png` members, in order)."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w", format=tarfile.USTAR_FORMAT) as bundle:
+        for path in sorted((Path(run_dir) / "frames").glob("*.png")):
+            data = path.read_bytes()
+            info = tarfile.TarInfo(f"frames/{path.name}")
+            info.size, info.mode = len(data), 0o600
+            bundle.addfile(info, io.BytesIO(data))
+    return buffer.getvalue()
+
+
+def read_frames(data: bytes) -> Iterator[tuple[str, bytes]]:
+    """(name, PNG bytes) of each frame in a frames bundle; refuses anything but `frames/NNNNNN.png` files (no links,
+    no paths out of the folder, nothing but a PNG, bounded sizes and count): a bundle may come from anyone."""
+    try:
+        with tarfile.open(fileobj=io.BytesIO(data), mode="r:") as bundle:
+            for count, member in enumerate(bundle, start=1):
+                if count > MAX_BUNDLE_FRAMES:
+                    raise RunError(f"{FRAMES_BUNDLE} holds more than {MAX_BUNDLE_FRAMES} frames")
+                if not member.isfile() or not FRAME_MEMBER.fullmatch(member.name):
+                    raise RunError(f"{FRAMES_BUNDLE}: {member.name[:60]!r} is not a frames/NNNNNN.png file")
+                if member.size > MAX_FRAME_BYTES:
+                    raise RunError(f"{FRAMES_BUNDLE}: {member.name} is larger than a frame may be")
+                handle = bundle.extractfile(member)
+                png = handle.read() if handle is not None else b""
+                if not png.startswith(b"\x89PNG\r\n\x1a\n"):
+                    raise RunError(f"{FRAMES_BUNDLE}: {member.name} is not a PNG image")
+                yield member.name, png
+    except tarfile.TarError as error:
+        raise RunError(f"{FRAMES_BUNDLE} is not a tar of frames: {error}") from None
+
+
+def unpack_frames(data: bytes, run_dir: Path) -> int:
+    """Write a frames bundle's PNGs into `run_dir/frames/`; returns the number of frames."""
+    (Path(run_dir) / "frames").mkdir(parents=True, exist_ok=True)
+    frames = 0
+    for name, png in read_frames(data):
+        (Path(run_dir) / name).write_bytes(png)
+        frames += 1
+    return frames
+
+
+def run_objects(run_dir: Path) -> dict[str, bytes]:
+    """What a finished run folder stores in a bucket, metadata aside: the controls, the frames bundle and the first
+    frame on its own (the run page links to it)."""
+    run_dir = Path(run_dir)
+    objects = {FRAMES_BUNDLE: pack_frames(run_dir), "controls.jsonl": (run_dir / "controls.jsonl").read_bytes()}
+    first = run_dir / "frames" / "000000.png"
+    if first.is_file():
+        objects["frames/000000.png"] = first.read_bytes()
+    return objects
+
+
 def upload_run(s3_client: Any, bucket: str, run_dir: Path) -> str:
-    """Upload a run folder; returns its `s3://bucket/runs/.../` URI. Metadata goes last: its presence marks a
-    complete upload."""
+    """Upload a run folder (controls, one frames bundle, then metadata); returns its `s3://bucket/runs/.../` URI.
+    Metadata goes last: its presence marks a complete upload."""
     run_dir = Path(run_dir)
     prefix = run_key_prefix(run_dir)
-    files = sorted(p for p in run_dir.rglob("*") if p.is_file() and p.name != "metadata.json")
-    for path in [*files, run_dir / "metadata.json"]:
-        s3_client.upload_file(str(path), bucket, prefix + path.relative_to(run_dir).as_posix())
+    for name, data in run_objects(run_dir).items():
+        s3_client.put_object(Bucket=bucket, Key=prefix + name, Body=data)
+    s3_client.upload_file(str(run_dir / "metadata.json"), bucket, prefix + "metadata.json")
     return f"s3://{bucket}/{prefix}"
 
 
@@ -149,6 +219,10 @@ def download_run(uri: str, target: Path, s3_client: Any | None = None) -> Path:
         keys += [item["Key"] for item in page.get("Contents", [])]
     if prefix + "metadata.json" not in keys:
         raise RunError(f"{uri}: no complete run there (metadata.json missing)")
+    if prefix + FRAMES_BUNDLE in keys:  # one object for all the frames; loose ones (the first) are copies
+        body = client.get_object(Bucket=bucket, Key=prefix + FRAMES_BUNDLE)["Body"]
+        unpack_frames(body.read(), folder)
+        keys = [key for key in keys if not key.startswith(prefix + "frames/") and key != prefix + FRAMES_BUNDLE]
     for key in keys:
         relative = PurePosixPath(key[len(prefix):])
         if ".." in relative.parts or relative.is_absolute():

@@ -127,8 +127,12 @@ def test_a_recording_is_a_run_folder_the_trainer_reads(server: drive_server.Driv
     rows = [json.loads(line) for line in (run_dir / "controls.jsonl").read_text().splitlines()]
     assert rows[0]["t_ms"] == 0
     assert max(row["speed"] for row in rows) == pytest.approx(0.8 * drive_server.FULL_THROTTLE_SPEED, abs=1e-3)
-    snapshot = load_snapshot([run_dir])  # off-track and standing-still frames are left out of training data
-    assert len(snapshot) == sum(1 for row in rows if not row["offtrack"] and row["speed"] > 0) > 0
+    assert all(0.0 <= row["car_speed"] <= row["speed"] + 1e-6 for row in rows)  # the car picks up speed, no jump
+    snapshot = load_snapshot([run_dir])  # the car's real speeds are what the frames teach; off-track left out
+    moving = [index for index, row in enumerate(rows) if row["car_speed"] > 0]
+    driven = rows[moving[0]:moving[-1] + 1]
+    assert len(snapshot) == sum(1 for row in driven if not row["offtrack"]) > 0
+    assert snapshot.speed.tolist() == pytest.approx([row["car_speed"] for row in driven if not row["offtrack"]])
 
 
 def test_a_stopped_recording_is_uploaded_to_the_runs_bucket(tmp_path: Path) -> None:

@@ -1,7 +1,9 @@
 """Run folders: layout, rows a dataset can learn from, and an S3 round trip (moto in-process)."""
 from __future__ import annotations
 
+import io
 import json
+import tarfile
 
 import boto3
 import cv2
@@ -10,10 +12,11 @@ from moto import mock_aws
 
 from drem_sim.demonstrator import Demonstrator
 from drem_sim.env import EnvConfig, RaceEnv
-from drem_sim.runs import RunError, download_run, record_run, upload_run
+from drem_sim.runs import RunError, download_run, record_run, unpack_frames, upload_run
 
 pytestmark = pytest.mark.sim
 
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n" + bytes(20)
 ROW_KEYS = {"index", "frame", "t_ms", "steering_angle", "speed", "progress", "x", "y", "heading", "lap", "offtrack"}
 
 
@@ -55,12 +58,42 @@ def test_s3_round_trip(run_dir, tmp_path) -> None:
         s3.create_bucket(Bucket="drem-test-runs")
         uri = upload_run(s3, "drem-test-runs", run_dir)
         assert uri == f"s3://drem-test-runs/runs/drem_oval/{run_dir.parts[-2]}/run-a/"
+        stored = s3.list_objects_v2(Bucket="drem-test-runs")["Contents"]
+        assert len(stored) == 4  # controls, metadata, the frames in one bundle, the first frame (the run page's)
         back = download_run(uri, tmp_path, s3_client=s3)
         for name in ("controls.jsonl", "metadata.json", "frames/000007.png"):
             assert (back / name).read_bytes() == (run_dir / name).read_bytes()
         assert len(list((back / "frames").iterdir())) == len(list((run_dir / "frames").iterdir()))
         with pytest.raises(RunError, match="metadata.json missing"):
             download_run("s3://drem-test-runs/runs/drem_oval/2020-01-01/nothing/", tmp_path, s3_client=s3)
+
+
+@pytest.mark.parametrize("member, data, reason", [
+    ("../escape.png", PNG_MAGIC, "is not a frames/NNNNNN.png file"),
+    ("frames/000001.png", b"GIF89a", "is not a PNG image"),
+    ("frames/evil.sh", PNG_MAGIC, "is not a frames/NNNNNN.png file"),
+])
+def test_a_frames_bundle_holds_only_frames(tmp_path, member: str, data: bytes, reason: str) -> None:
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w") as bundle:
+        info = tarfile.TarInfo(member)
+        info.size = len(data)
+        bundle.addfile(info, io.BytesIO(data))
+    with pytest.raises(RunError, match=reason):
+        unpack_frames(buffer.getvalue(), tmp_path)
+    assert not any(tmp_path.rglob("*.png")) and not (tmp_path.parent / "escape.png").exists()
+
+
+def test_a_link_in_a_frames_bundle_is_refused(tmp_path) -> None:
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w") as bundle:
+        info = tarfile.TarInfo("frames/000000.png")
+        info.type, info.linkname = tarfile.SYMTYPE, "/etc/passwd"
+        bundle.addfile(info)
+    with pytest.raises(RunError, match="is not a frames/NNNNNN.png file"):
+        unpack_frames(buffer.getvalue(), tmp_path)
+    with pytest.raises(RunError, match="not a tar of frames"):
+        unpack_frames(b"not a tar at all" * 40, tmp_path)
 
 
 def test_recording_without_a_camera_is_refused(tmp_path) -> None:

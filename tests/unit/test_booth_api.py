@@ -39,6 +39,18 @@ def png() -> bytes:
     return cv2.imencode(".png", np.full((120, 160), 38, np.uint8))[1].tobytes()
 
 
+def frames_tar(name: str) -> bytes:
+    import io
+    import tarfile
+
+    buffer, data = io.BytesIO(), png()
+    with tarfile.open(fileobj=buffer, mode="w") as bundle:
+        info = tarfile.TarInfo(name)
+        info.size = len(data)
+        bundle.addfile(info, io.BytesIO(data))
+    return buffer.getvalue()
+
+
 def drive(api: ModelsApi, track: str = "drem_oval", steps: int = 30) -> dict[str, Any]:
     started = api.call("POST", "/api/drive", {"track_id": track})
     assert started.status_code == 201, started.json_body
@@ -81,6 +93,11 @@ def test_a_live_drive_becomes_a_finalised_run_only_its_driver_and_staff_see(alic
     controls_link = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/controls.jsonl").headers["Location"]
     lines = requests.get(controls_link, timeout=10).text.splitlines()
     assert len(lines) == 40 and json.loads(lines[0])["frame"] == "frames/000000.png"
+    bundle_link = alice.call("GET", f"/api/runs/{run['run_id']}/artifacts/frames.tar").headers["Location"]
+    from drem_sim.runs import read_frames
+
+    frames = list(read_frames(requests.get(bundle_link, timeout=10).content))  # all 40 frames in one download
+    assert [name for name, _ in frames] == [f"frames/{i:06d}.png" for i in range(40)]
     page = client.http.get(f"/booth/runs/{run['run_id']}", headers={"Authorization": alice.headers["Authorization"]})
     html = page.body.decode()
     assert 'data-testid="run-topdown"' in html and "40 (" in html
@@ -101,15 +118,20 @@ def test_uploaded_artifacts_are_checked_and_finalising_computes_the_metrics(alic
     assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=b"GIF89a").status_code == 400
     assert put(f"/api/runs/{run_id}/artifacts/..%2Fescape", headers=headers, body=b"x").status_code == 400
     assert put(f"/api/runs/{run_id}/artifacts/frame-000000.png", headers=headers, body=png()).status_code == 200
+    escaping = put(f"/api/runs/{run_id}/artifacts/frames.tar", headers=headers, body=frames_tar("../../x.png"))
+    assert escaping.status_code == 400 and "is not a frames/NNNNNN.png file" in escaping.json_body["error"]["message"]
+    assert put(f"/api/runs/{run_id}/artifacts/frames.tar", headers=headers,
+               body=frames_tar("frames/000001.png")).status_code == 200
     rows = [row(i, progress=i * 2.0, steering=(5.0 if i % 2 else -5.0)) for i in range(50)]
     rows += [row(50, lap=1, progress=0.5), row(51, lap=1, progress=3.0, offtrack=True), row(52, lap=1, progress=1.0)]
     assert put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=controls(rows)).status_code == 200
     run = alice.call("POST", f"/api/runs/{run_id}/finalise").json_body["run"]
     metrics = run["metrics"]
-    assert (metrics["laps_completed"], metrics["offtrack_count"], metrics["attempts"]) == (1, 1, 3)
-    assert metrics["completion_pct"] == pytest.approx((100 + 3.0 + 1.0) / 3, abs=0.01)
+    # the lap, then an attempt that left the track 3 % on; where the car was put back begins no attempt
+    assert (metrics["laps_completed"], metrics["offtrack_count"], metrics["attempts"]) == (1, 1, 2)
+    assert metrics["completion_pct"] == pytest.approx((100 + 3.0) / 2, abs=0.01)
     assert metrics["stability_deg"] == pytest.approx(10.0, abs=0.3)
-    assert metrics["lap_times_s"] == [round(50 * 1000 // 15 / 1000, 3)]
+    assert metrics["lap_times_s"] == pytest.approx([3.32], abs=0.005)  # the line lies 80 % into the 50th decision
     late = put(f"/api/runs/{run_id}/artifacts/controls.jsonl", headers=headers, body=controls(rows))
     assert late.status_code == 409  # a finalised run's artifacts no longer change
 
@@ -117,7 +139,9 @@ def test_uploaded_artifacts_are_checked_and_finalising_computes_the_metrics(alic
 def test_metrics_count_only_clean_laps() -> None:
     rows = [row(i, progress=min(99.0, i * 5.0), offtrack=i == 10) for i in range(30)] + [row(30, lap=1)]
     metrics = compute_metrics(parse_controls(controls(rows)))
-    assert metrics.laps_completed == 0 and metrics.offtrack_count == 1 and metrics.attempts == 2
+    # one attempt, off the track at 50 %; the stretch from where the car was put back to the line is no attempt
+    assert metrics.laps_completed == 0 and metrics.offtrack_count == 1 and metrics.attempts == 1
+    assert metrics.completion_pct == 55.0  # where the off-track decision (row 10) took the car: row 11's 55 %
     with pytest.raises(InvalidInput, match="no rows"):
         parse_controls(b"\n\n")
     with pytest.raises(InvalidInput, match="x must be a number"):
@@ -251,3 +275,35 @@ def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsAp
     saved = service.finish(racer, run_id)
     assert saved.status.value == "FINALISED" and saved.metrics is not None and saved.metrics.frames == 7
     assert not (tmp_path / "drives" / run_id).exists()
+
+
+def test_train_is_off_with_the_reason_when_nothing_changed_since_the_last_version(alice: ModelsApi,
+                                                                                  client: Any) -> None:
+    from chalicelib import services
+    from chalicelib.domain.booth_training import JobStatus
+
+    def booth_page() -> str:
+        return client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
+
+    assert "drive a lap first" in booth_page()  # no drive yet: off, and says why
+    first = drive(alice, steps=10)
+    page = booth_page()
+    assert 'data-testid="train-why"' not in page and 'data-testid="train" >' in page.replace("  ", " ")
+    job = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 1}).json_body["job"]
+    training = services.training_service()  # the worker made v0001 from that drive
+    claimed = training.claim_next()
+    assert claimed is not None and claimed.job_id == job["job_id"]
+    training.store.replace_job(claimed.model_copy(update={"status": JobStatus.DONE, "model_name": "v0001",
+                                                          "finished_at": "2026-11-27T00:00:00Z"}),
+                               expected_status="RUNNING")
+
+    page = booth_page()
+    why = "Nothing changed since v0001: it learned from these same 1 drive."
+    assert why in page and "disabled" in page[page.index('data-testid="train"'):][:80]
+    again = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]]})  # at once, not after training
+    assert again.status_code == 409 and why in again.json_body["error"]["message"]
+
+    second = drive(alice, steps=10)  # something new to learn from: Train is on again
+    assert "Nothing changed" not in booth_page()
+    both = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"], second["run_id"]], "epochs": 1})
+    assert both.status_code == 201, both.json_body

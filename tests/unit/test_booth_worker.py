@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 from drem_local.workers.trainer import NO_TORCH, JobProgress, Trainer
+from drem_sim.learn.pipeline import EXPORTING
 from tests.unit.models_helpers import ModelsApi
 
 pytestmark = pytest.mark.unit
@@ -54,23 +55,29 @@ def test_without_torch_the_job_fails_saying_what_to_install(alice: ModelsApi) ->
     assert job["status"] == "FAILED" and job["reason"] == NO_TORCH and "train extra" in NO_TORCH
 
 
+class Job:
+    def __init__(self, epoch: int, loss: float | None) -> None:
+        self.epoch, self.loss = epoch, loss
+
+
 class Reports:
     def __init__(self) -> None:
         self.seen: list[tuple[float, int, float | None]] = []
 
-    def report(self, job: Any, *, progress: float, epoch: int, loss: float | None) -> Any:
-        self.seen.append((round(progress, 3), epoch, loss))
-        return job
+    def report(self, job: Any, *, progress: float, epoch: int, loss: float | None, stage: str = "training") -> Any:
+        self.seen.append((round(progress, 3), epoch, loss) + (() if stage == "training" else (stage,)))
+        return Job(epoch, loss)
 
 
 def test_the_progress_bar_becomes_progress_epoch_and_loss() -> None:
     reports, now = Reports(), [0.0]
-    stream = JobProgress(reports, job=None, clock=lambda: now[0])
+    stream = JobProgress(reports, job=Job(0, None), clock=lambda: now[0])
     now[0] = 1.0
     stream.write("\repoch 1/2 [##########..........] loss 0.5000    3.0s")
     stream.write("\repoch 1/2 [###########.........] loss 0.4900    3.1s")  # too soon after the last: not sent
     stream.write("\repoch 1/2 train 0.4500 val 0.5100    6.0s\n")  # an epoch's end is always sent
-    assert reports.seen == [(0.225, 1, 0.5), (0.45, 1, 0.45)]
+    stream.write(f"{EXPORTING}\n")  # after the last epoch: the page says so instead of sitting on "epoch 2/2"
+    assert reports.seen == [(0.25, 1, 0.5), (0.45, 1, 0.45), (0.85, 1, 0.45, "exporting the model")]
 
 
 class _PowerCut(BaseException):

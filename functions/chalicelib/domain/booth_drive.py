@@ -35,7 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from chalicelib import logs
 from chalicelib.core.errors import Conflict, DremError, Forbidden, NotFound, RateLimited, ServiceUnavailable
 from chalicelib.core.principals import Principal
-from chalicelib.domain.booth_runs import RUN_ID_PATTERN, NewRun, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_runs import RUN_ID_PATTERN, NewRun, RunMode, RunRecord, RunService, RunStatus, crossing_s
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN
 
 MAX_LIVE = 6
@@ -66,6 +66,7 @@ class LiveDrive:
     def __init__(self, record: RunRecord, drive_dir: Path | None = None) -> None:
         try:
             from drem_sim.env import RaceEnv
+            from drem_sim.laps import LapAttempts
             from drem_sim.runs import RunRecorder
             from drem_sim.tracks import load_track
         except ModuleNotFoundError:
@@ -80,6 +81,7 @@ class LiveDrive:
             self.folder.mkdir(parents=True, mode=0o700)
         self.env = RaceEnv(load_track(record.track_id))
         self.obs, info = self.env.reset(seed=0)
+        self.laps = LapAttempts()  # the run's laps and attempts as its metrics will count them (drem_sim.laps)
         self.params = info["params"]
         assert self.env.camera is not None, "RaceEnv observes by default"
         self.recorder = RunRecorder(self.folder, record.track_id, direction="forward", driver="human", seed=0,
@@ -96,17 +98,33 @@ class LiveDrive:
                       "speed": max(0.0, control.throttle) * FULL_THROTTLE_SPEED}
             t_ms, lap, seen, obs = round(self.env.sim_time * 1000), self.env.laps, self.params, self.obs
             self.obs, self.params, _, _, _ = self.env.step(action)
+            self._count_laps(t_ms, lap, float(seen["progress"]))
             assert obs is not None
-            self.recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(self.params["is_offtrack"]))
+            self.recorder.add(obs, action, seen, t_ms=t_ms, lap=lap, offtrack=bool(self.params["is_offtrack"]),
+                              car_speed=self.env.car_state()["speed"])
             return self.state(frame=True)
 
+    def _count_laps(self, t_ms: int, lap: int, progress: float) -> None:
+        """The whole-lap rule, live, exactly as the finished run's metrics will count the same rows."""
+        before, reached = 100.0 * lap + progress, 100.0 * self.env.laps + float(self.params["progress"])
+        self.laps.moved(reached)
+        if self.params["is_offtrack"]:
+            self.laps.left_track()
+        elif self.env.laps > lap:
+            self.laps.crossed(crossing_s(t_ms, before, round(self.env.sim_time * 1000), reached, self.env.laps),
+                              100.0 * self.env.laps)
+
     def state(self, *, frame: bool = False) -> dict[str, Any]:
-        env, params = self.env, self.params
+        env, params, laps = self.env, self.params, self.laps
+        unfinished = laps.unfinished()
         answer: dict[str, Any] = {
             "run_id": self.record.run_id, "track_id": self.record.track_id, "frames": self.recorder.frames,
-            "laps": env.laps, "lap_times_s": [round(t, 3) for t in env.lap_times_s], "resets": env.resets,
-            "progress": round(float(params["progress"]), 1), "speed": round(float(params["speed"]), 2),
-            "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"])}
+            "laps": env.laps, "laps_completed": laps.laps_completed,
+            "attempts": len(laps.attempts) + (1 if unfinished else 0),
+            "lap_times_s": [round(t, 3) for t in laps.lap_times_s], "resets": env.resets,
+            "progress": round(float(params["progress"]), 1), "speed": round(env.car_state()["speed"], 2),
+            "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"]),
+            "x": round(float(params["x"]), 3), "y": round(float(params["y"]), 3)}  # for the page's top-down map
         if frame:
             import cv2
 
@@ -225,15 +243,12 @@ class DriveService:
             shutil.rmtree(folder, ignore_errors=True)
 
     def _upload(self, record: RunRecord, folder: Path, replaced: dict[str, bytes] | None = None) -> None:
-        replaced = replaced or {}
-        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "metadata.json")
+        """The controls, the frames as one bundle and the first frame: three objects however long the drive."""
+        from drem_sim.runs import run_objects
 
-        def put(path: Path) -> None:
-            key = path.relative_to(folder).as_posix()
-            self.runs.files.put(record.prefix + key, replaced[key] if key in replaced else path.read_bytes())
-
-        with ThreadPoolExecutor(UPLOAD_THREADS) as pool:  # ~1000 small frames: a few seconds, not a minute
-            list(pool.map(put, files))
+        objects = {**run_objects(folder), **(replaced or {})}
+        with ThreadPoolExecutor(UPLOAD_THREADS) as pool:
+            list(pool.map(lambda item: self.runs.files.put(record.prefix + item[0], item[1]), objects.items()))
 
     def _finish_quietly(self, drive: LiveDrive) -> None:
         try:

@@ -1,9 +1,10 @@
 """Runs of the learning booth: a person (manual) or a model version (autonomous) driving a track in the simulator.
 
-A run's artifacts are a `drem_sim` run folder in the runs bucket (`runs/{track}/{date}/{runId}/`: `frames/*.png`,
-`controls.jsonl`, `metadata.json`) plus `topdown.png`, the driven path on the track map; its record and metrics live
-in the booth table. Lifecycle: RECORDING (manual: artifacts may be uploaded) or QUEUED (autonomous: waiting for the
-booth worker) → RUNNING (the worker drives) → FINALISED (metrics computed) | FAILED (with the reason).
+A run's artifacts are a `drem_sim` run folder in the runs bucket (`runs/{track}/{date}/{runId}/`: `frames.tar`, all
+the frames in one object, or `frames/*.png` one by one; `controls.jsonl`, `metadata.json`) plus `topdown.png`, the
+driven path on the track map; its record and metrics live in the booth table. Lifecycle: RECORDING (manual:
+artifacts may be uploaded) or QUEUED (autonomous: waiting for the booth worker) → RUNNING (the worker drives) →
+FINALISED (metrics computed) | FAILED (with the reason).
 
 Finalising reads `controls.jsonl` (bounded, every row checked: hostile input), computes the metrics and writes the
 authoritative `metadata.json` and the picture. A racer sees only their own runs; admins and operators see all.
@@ -37,8 +38,11 @@ MAX_AUTONOMOUS_LAPS = 5
 MAX_OPEN_RUNS = 10
 OPEN_WINDOW_S = 3600
 FRAME_ARTIFACT = re.compile(r"^frame-(\d{6})\.png$")
-UPLOADABLE = ("controls.jsonl",)
-READABLE = ("controls.jsonl", "metadata.json", "topdown.png")
+# frames.tar: a five-minute drive (4,500 frames of ~2 KB, each in 512-byte tar blocks) is ~11 MB; the app's body limit
+# is 20 MiB (drem_local.http_front)
+MAX_FRAMES_BUNDLE_BYTES = 18 * 1024 * 1024
+UPLOADABLE = ("controls.jsonl", "frames.tar")
+READABLE = ("controls.jsonl", "metadata.json", "topdown.png", "frames.tar")
 
 
 class RecordChanged(Exception):
@@ -238,10 +242,13 @@ class RunService:
         if record.status is not RunStatus.RECORDING:
             raise Conflict(f"This run is {record.status.value}; artifacts are uploaded while it is RECORDING.")
         key = _uploadable_key(name)
-        if len(data) > (MAX_CONTROLS_BYTES if key == "controls.jsonl" else MAX_ARTIFACT_BYTES):
+        limits = {"controls.jsonl": MAX_CONTROLS_BYTES, "frames.tar": MAX_FRAMES_BUNDLE_BYTES}
+        if len(data) > limits.get(key, MAX_ARTIFACT_BYTES):
             raise PayloadTooLarge(f"{name} is larger than this artifact may be.", field="body")
         if key.endswith(".png") and not data.startswith(b"\x89PNG\r\n\x1a\n"):
             raise InvalidInput(f"{name} is not a PNG image.", field="body")
+        if key == "frames.tar":
+            _check_frames_bundle(data)
         self.files.put(record.prefix + key, data)
         return key
 
@@ -327,31 +334,38 @@ def parse_controls(data: bytes) -> list[dict[str, Any]]:
         rows.append({"t_ms": float(row["t_ms"]), "steering_angle": float(row["steering_angle"]),
                      "speed": float(row["speed"]), "progress": float(row["progress"]), "x": float(row["x"]),
                      "y": float(row["y"]), "lap": int(row["lap"]), "offtrack": row.get("offtrack") is True})
+        car_speed = row.get("car_speed")  # a person's drive: the speed the car really went
+        if not isinstance(car_speed, bool) and isinstance(car_speed, int | float) and math.isfinite(car_speed):
+            rows[-1]["car_speed"] = float(car_speed)
     if not rows:
         raise InvalidInput("controls.jsonl has no rows: the run recorded nothing.", field="controls.jsonl")
     return rows
 
 
 def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
-    """A lap attempt starts on the line (or where the car was put back) and ends with a lap or an off-track; a lap
-    counts as completed only when it was driven cleanly from the line (as `drem sim eval` counts)."""
-    attempts: list[float] = []
-    lap_times: list[float] = []
-    clean, best, lap_started = True, 0.0, rows[0]["t_ms"]
-    for previous, row in zip([None, *rows[:-1]], rows, strict=True):
-        if previous is not None and row["lap"] > previous["lap"]:
-            if clean:
-                attempts.append(100.0)
-                lap_times.append(round((row["t_ms"] - lap_started) / 1000.0, 3))
-            elif best > 0:  # the attempt that began where the car was put back reached the line: not a lap
-                attempts.append(min(best, 99.9))
-            clean, best, lap_started = True, 0.0, row["t_ms"]
-        best = max(best, row["progress"])
+    """Lap attempts and laps by the whole-lap rule every figure uses (`drem_sim.laps`, as `drem sim eval` and
+    scrutineering count): a lap is driven whole from a timing-line crossing (or the standing start) to the next
+    without an off-track; the stretch from where the car was put back to the line is no attempt.
+
+    A row is the state the driver saw (its lap, progress and time) and whether what it did ended off the track; the
+    next row is where that decision took the car. A crossing is timed where the line lies between the two."""
+    from drem_sim.laps import LapAttempts  # pure Python: no simulator needed
+
+    laps = LapAttempts(start_s=rows[0]["t_ms"] / 1000.0)
+    for row, after in zip(rows, [*rows[1:], None], strict=True):
+        before = 100.0 * row["lap"] + row["progress"]
+        reached = before if after is None else 100.0 * after["lap"] + after["progress"]
+        if after is not None:  # where the last row's decision took the car was never recorded
+            laps.moved(reached)
         if row["offtrack"]:
-            attempts.append(min(best, 99.9))
-            clean, best = False, 0.0
-    if best > 0:
-        attempts.append(min(best, 99.9))
+            laps.left_track()
+        elif after is not None and after["lap"] > row["lap"]:
+            laps.crossed(crossing_s(row["t_ms"], before, after["t_ms"], reached, after["lap"]), 100.0 * after["lap"])
+    attempts = list(laps.attempts)
+    unfinished = laps.unfinished()
+    if unfinished:  # the attempt under way when the run stopped counts with what it reached
+        attempts.append(unfinished)
+    lap_times = [round(t, 3) for t in laps.lap_times_s]
     steering = [r["steering_angle"] for r in rows]
     changes = [b - a for a, b in zip(steering, steering[1:], strict=False)]
     mean_change = sum(changes) / len(changes) if changes else 0.0
@@ -360,10 +374,17 @@ def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
         frames=len(rows), attempts=len(attempts), laps_completed=len(lap_times),
         completion_pct=round(sum(attempts) / len(attempts), 2) if attempts else 0.0,
         offtrack_count=sum(1 for r in rows if r["offtrack"]), stability_deg=round(jitter, 3),
-        mean_speed=round(sum(r["speed"] for r in rows) / len(rows), 3), lap_times_s=lap_times,
+        mean_speed=round(sum(r.get("car_speed", r["speed"]) for r in rows) / len(rows), 3), lap_times_s=lap_times,
         best_lap_s=min(lap_times) if lap_times else None,
         mean_lap_s=round(sum(lap_times) / len(lap_times), 3) if lap_times else None,
         seconds=round((rows[-1]["t_ms"] - rows[0]["t_ms"]) / 1000.0, 2))
+
+
+def crossing_s(t_ms: float, before: float, after_t_ms: float, reached: float, lap: int) -> float:
+    """When a decision that took the car from `before` to `reached` (laps × 100 + progress) crossed into `lap`: where
+    the line lies between the two, in time."""
+    share = (100.0 * lap - before) / (reached - before) if reached > before else 1.0
+    return (t_ms + min(max(share, 0.0), 1.0) * (after_t_ms - t_ms)) / 1000.0
 
 
 def _metadata(record: RunRecord, rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -377,14 +398,25 @@ def _metadata(record: RunRecord, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "lap_times_ms": [round(t * 1000) for t in metrics.lap_times_s], "resets": metrics.offtrack_count}
 
 
+def _check_frames_bundle(data: bytes) -> None:
+    from drem_sim.runs import RunError, read_frames  # the run store's own reader: one rule for what a bundle holds
+
+    try:
+        for _ in read_frames(data):
+            pass
+    except RunError as error:
+        raise InvalidInput(str(error), field="body") from None
+
+
 def _uploadable_key(name: str) -> str:
     frame = FRAME_ARTIFACT.match(name)
     if frame:
         return f"frames/{frame.group(1)}.png"
     if name in UPLOADABLE:
         return name
-    raise InvalidInput(f"{name[:40]!r} is not a run artifact: upload controls.jsonl and frame-NNNNNN.png "
-                       "(metadata.json and topdown.png are written when the run is finalised).", field="name")
+    raise InvalidInput(f"{name[:40]!r} is not a run artifact: upload controls.jsonl and frames.tar (or "
+                       "frame-NNNNNN.png one by one); metadata.json and topdown.png are written when the run is "
+                       "finalised.", field="name")
 
 
 def _readable_key(name: str) -> str:

@@ -29,6 +29,7 @@ JOB_ID_PATTERN = r"^[a-f0-9]{12,40}$"
 VERSION_NAME = re.compile(r"^v(\d{4})$")
 MAX_RUNS_PER_JOB = 50
 MAX_EPOCHS = 30
+NO_DRIVES = "You have no finished drive to learn from yet: drive a lap first."
 
 
 class JobStatus(StrEnum):
@@ -112,6 +113,9 @@ class TrainingService:
         waiting = [j for j in self.store.jobs_of(sub) if j.status in (JobStatus.QUEUED, JobStatus.RUNNING)]
         if waiting:
             raise Conflict("You already have a training job in the queue; wait for it to finish.", field="run_ids")
+        unchanged = self._unchanged_since(sub, [r.run_id for r in runs])
+        if unchanged:
+            raise Conflict(unchanged, field="run_ids")
         job = TrainingJob(job_id=self._new_id(), owner_sub=sub, owner_username=username,
                           run_ids=[r.run_id for r in runs], track_id=runs[0].track_id,
                           frames=sum(r.metrics.frames for r in runs if r.metrics), epochs=request.epochs,
@@ -121,12 +125,30 @@ class TrainingService:
 
     def train_on_my_runs(self, principal: Principal, *, epochs: int) -> JobView:
         """The booth's Train button: every finished manual run of the caller (the newest 50)."""
-        runs = self.runs.list_runs(principal, ListRunsQuery())
-        ids = [r.run_id for r in runs if r.owner_sub == principal.sub and r.mode is RunMode.MANUAL
-               and r.status is RunStatus.FINALISED][:MAX_RUNS_PER_JOB]
+        ids = self._my_drives(principal)
         if not ids:
-            raise InvalidInput("You have no finished drive to learn from yet: drive a lap first.", field="run_ids")
+            raise InvalidInput(NO_DRIVES, field="run_ids")
         return self.create(principal, NewJob(run_ids=ids, epochs=epochs))
+
+    def why_not_train(self, principal: Principal) -> str | None:
+        """Why the Train button is off, in words (None: it is on): no drive yet, or nothing new since the last
+        version (training again on the same drives makes the same model, which the upload check refuses)."""
+        ids = self._my_drives(principal)
+        return NO_DRIVES if not ids else self._unchanged_since(principal.sub or "", ids)
+
+    def _my_drives(self, principal: Principal) -> list[str]:
+        runs = self.runs.list_runs(principal, ListRunsQuery())
+        return [r.run_id for r in runs if r.owner_sub == principal.sub and r.mode is RunMode.MANUAL
+                and r.status is RunStatus.FINALISED][:MAX_RUNS_PER_JOB]
+
+    def _unchanged_since(self, owner_sub: str, run_ids: list[str]) -> str | None:
+        done = [j for j in self.store.jobs_of(owner_sub) if j.status is JobStatus.DONE and j.model_name]
+        last = max(done, key=lambda j: (j.finished_at or "", j.created_at), default=None)
+        if last is None or set(last.run_ids) != set(run_ids):
+            return None
+        drives = f"{len(run_ids)} drive{'s' if len(run_ids) != 1 else ''}"
+        return (f"Nothing changed since {last.model_name}: it learned from these same {drives}. "
+                "Drive again to give the next version something new to learn.")
 
     def list_jobs(self, principal: Principal, *, everyone: bool = False) -> list[JobView]:
         jobs = self.store.all_jobs() if everyone and principal.roles & MODEL_STAFF else \

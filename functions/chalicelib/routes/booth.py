@@ -19,7 +19,7 @@ from chalicelib.domain.booth_training import NewJob
 
 bp = Blueprint(__name__)
 ARTIFACT_TYPES = ["application/octet-stream", "image/png", "application/x-ndjson", "application/jsonl",
-                  "application/json"]
+                  "application/json", "application/x-tar"]
 
 
 @route(bp, "/api/tracks", allow=PUBLIC, response=list[TrackInfo], tags=("booth",))
@@ -62,14 +62,15 @@ def get_run(principal: User, run_id: str) -> dict:
 @route(bp, "/api/runs/{run_id}/artifacts/{name}", methods=["PUT"], allow=SIGNED_IN, content_types=ARTIFACT_TYPES,
        tags=("booth",))
 def put_artifact(principal: User, run_id: str, name: str) -> dict:
-    """Upload `controls.jsonl` or `frame-NNNNNN.png` (raw bytes) of your RECORDING run"""
+    """Upload `controls.jsonl`, `frames.tar` (every frame in one tar) or `frame-NNNNNN.png` of your RECORDING run"""
     data = body_bytes(bp.current_request)
     return {"stored": services.run_service().put_artifact(principal, run_id, name, data)}
 
 
 @route(bp, "/api/runs/{run_id}/artifacts/{name}", allow=SIGNED_IN, tags=("booth",))
 def get_artifact(principal: User, run_id: str, name: str) -> Response:
-    """Redirect to a 5-minute link of an artifact: controls.jsonl, metadata.json, topdown.png, frame-NNNNNN.png"""
+    """Redirect to a 5-minute link of an artifact: controls.jsonl, metadata.json, topdown.png, frames.tar, the first
+    frame (frame-000000.png)"""
     url = services.run_service().artifact_url(principal, run_id, name)
     return Response(body="", status_code=302, headers={"Location": url, "Cache-Control": "no-store"})
 

@@ -15,6 +15,7 @@ from chalicelib.core.principals import User
 from chalicelib.domain.booth_runs import ListRunsQuery
 from chalicelib.domain.racer_models import MODEL_STAFF
 from chalicelib.views import booth_views
+from chalicelib.views.track_map import track_map
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -51,15 +52,18 @@ def booth_train(principal: User, body: TrainForm) -> Response:
 @route(bp, "/booth/drive/{track_id}", allow=SIGNED_IN)
 def booth_drive(principal: User, track_id: str) -> Response:
     """Drive a track in the browser (keyboard, gamepad, touch); the run lands in your runs"""
-    return render.page("booth_drive", track=services.track_service().get(track_id))
+    track = services.track_service().get(track_id)
+    return render.page("booth_drive", track=track, track_map=track_map(track, testid="drive-map"))
 
 
 @route(bp, "/booth/runs/{run_id}", allow=SIGNED_IN)
 def booth_run(principal: User, run_id: str) -> Response:
     """One run: top-down picture, metrics, controls and links to its artifacts"""
     runs = services.run_service()
-    inspection = booth_views.run_inspection(runs.get(principal, run_id), runs.controls(principal, run_id))
-    return render.page("booth_run", run=inspection.run, inspection=inspection)
+    run, rows = runs.get(principal, run_id), runs.controls(principal, run_id)
+    inspection = booth_views.run_inspection(run, rows)
+    return render.page("booth_run", run=run, inspection=inspection,
+                       track_map=booth_views.run_map(services.track_service(), run, rows))
 
 
 @route(bp, "/booth/versions/{model_id}/active", methods=["POST"], allow=SIGNED_IN)

@@ -1,6 +1,7 @@
 """What the learning booth's pages show: the racer's runs, jobs, model versions and the tracks to drive."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,8 +12,10 @@ from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunS
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
+from chalicelib.domain.errors import DremError
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
+from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
 
@@ -27,6 +30,7 @@ class BoothView:
     active_model_id: str | None
     aggregates: list[dict[str, Any]]
     trainable: int  # finished manual runs of the caller
+    why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
 
@@ -45,7 +49,8 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
                      jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable, active_versions=_active_versions(training, mine) if everyone else [],
+                     trainable=trainable, why_not_train=training.why_not_train(principal),
+                     active_versions=_active_versions(training, mine) if everyone else [],
                      cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [])
 
 
@@ -71,16 +76,44 @@ class RunInspection:
 
 
 def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
-    """The run with its controls over time: steering (+ = left) and commanded speed, off-track moments marked."""
-    step = max(1, -(-len(rows) // PLOT_POINTS))
-    picked = rows[::step]
-    labels = [f"{r['t_ms'] / 1000:.0f}s" if index % 10 == 0 else "" for index, r in enumerate(picked)]
-    steering = svg_plots.Series("steering °", [(i, r["steering_angle"]) for i, r in enumerate(picked)])
-    speed = svg_plots.Series("speed m/s", [(i, r["speed"]) for i, r in enumerate(picked)])
-    off = svg_plots.Series("off track", [(i, r["speed"]) for i, r in enumerate(picked) if r["offtrack"]])
+    """The run with its controls over time: steering (+ = left) and the car's speed, off-track moments marked. A long
+    run is drawn in buckets of frames, each by its lowest and highest value in the order they came, so a burst of
+    full-lock frames between two samples still shows."""
+    size = max(1, -(-len(rows) // PLOT_POINTS))
+    buckets = [rows[start:start + size] for start in range(0, len(rows), size)]
+    decimals = 0 if rows and rows[-1]["t_ms"] - rows[0]["t_ms"] > 20_000 else 1  # a short run's labels must differ too
+    labels = [f"{bucket[0]['t_ms'] / 1000:.{decimals}f}s" if index % 10 == 0 else ""
+              for index, bucket in enumerate(buckets)]
+    steering = svg_plots.Series("steering °", _extremes(buckets, lambda r: r["steering_angle"]))
+    speed = svg_plots.Series("speed m/s", _extremes(buckets, _car_speed))
+    off = svg_plots.Series("off track", [(i, max(_car_speed(r) for r in bucket)) for i, bucket in enumerate(buckets)
+                                         if any(r["offtrack"] for r in bucket)])
     return RunInspection(
         run=run,
         steering_plot=svg_plots.line_chart([steering], labels, title="Steering over the run", y_label="degrees",
                                            testid="plot-steering"),
         speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels, title="Speed over the run",
                                         y_label="m/s", testid="plot-speed"))
+
+
+def _car_speed(row: dict[str, Any]) -> float:
+    """What the car really did (a person's drive records it), else the speed commanded."""
+    return float(row.get("car_speed", row["speed"]))
+
+
+def _extremes(buckets: list[list[dict[str, Any]]], value: Callable[[dict[str, Any]], float]) -> list[tuple[int, float]]:
+    points: list[tuple[int, float]] = []
+    for index, bucket in enumerate(buckets):
+        values = [value(row) for row in bucket]
+        low, high = values.index(min(values)), values.index(max(values))
+        points += [(index, values[i]) for i in sorted({low, high})]
+    return points
+
+
+def run_map(tracks: TrackService, run: RunRecord, rows: list[dict[str, Any]]) -> Markup | None:
+    """The saved run on its track, seen from above (None where the simulator's tracks are not installed)."""
+    try:
+        track = tracks.get(run.track_id)
+    except DremError:
+        return None
+    return track_map(track, rows, testid="run-map")

@@ -20,12 +20,25 @@ class Series:
     points: list[tuple[int, float]]  # (x index into the chart's x labels, value)
 
 
+MIN_SPAN = 0.5  # of the y axis, in the plotted unit: a constant 3.0 m/s draws as a flat line on ticks 2.75 … 3.25
+
+
 def _scale(values: list[float]) -> tuple[float, float]:
     low, high = min(values), max(values)
-    if low == high:
-        low, high = low - 1.0, high + 1.0
+    if high - low < MIN_SPAN:
+        middle = (low + high) / 2
+        low, high = middle - MIN_SPAN / 2, middle + MIN_SPAN / 2
     pad = (high - low) * 0.08
     return max(low - pad, 0.0) if low >= 0 else low - pad, high + pad
+
+
+def tick_labels(values: list[float]) -> list[str]:
+    """The fewest decimals (up to 3) that tell every tick apart: never five ticks all reading "3"."""
+    for decimals in range(4):
+        labels = [f"{value:.{decimals}f}" for value in values]
+        if len(set(labels)) == len(labels):
+            return labels
+    return labels
 
 
 def _frame(title: str, y_label: str, low: float, high: float, y_of) -> list[str]:
@@ -37,11 +50,11 @@ def _frame(title: str, y_label: str, low: float, high: float, y_of) -> list[str]
              f'font-size="13" class="plot-axis">{escape(y_label)}</text>',
              f'<line x1="{LEFT}" y1="{HEIGHT - BOTTOM}" x2="{WIDTH - RIGHT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>',
              f'<line x1="{LEFT}" y1="{TOP}" x2="{LEFT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>']
-    for step in range(5):
-        value = low + (high - low) * step / 4
+    ticks = [low + (high - low) * step / 4 for step in range(5)]
+    for value, label in zip(ticks, tick_labels(ticks), strict=True):
         y = y_of(value)
         parts.append(f'<line x1="{LEFT}" y1="{y:.1f}" x2="{WIDTH - RIGHT}" y2="{y:.1f}" stroke="#eee"/>')
-        parts.append(f'<text x="{LEFT - 4}" y="{y + 4:.1f}" text-anchor="end" class="plot-tick">{value:.3g}</text>')
+        parts.append(f'<text x="{LEFT - 4}" y="{y + 4:.1f}" text-anchor="end" class="plot-tick">{label}</text>')
     return parts
 
 

@@ -41,6 +41,10 @@ REPORT_EVERY_S = 0.5
 SECONDS_PER_LAP_LIMIT = 40.0  # an autonomous run ends after this much simulated time per lap attempt
 NO_TORCH = ("training needs PyTorch, which is not installed on this server: install the train extra "
             "(pip install -e '.[train]', or make install-test) and restart drem up")
+# The job's progress bar: downloading 0 → TRAIN_FROM, training → EXPORT_AT, exporting → CHECK_AT, checking it like an
+# upload, scrutineering and its autonomous run → 1.
+TRAIN_FROM, EXPORT_AT, CHECK_AT = 0.05, 0.85, 0.9
+_EXPORTING = "exporting the model"  # how drem_sim.learn.pipeline.EXPORTING begins (that module needs torch)
 _BAR = re.compile(r"epoch (\d+)/(\d+) \[([#.]+)\] loss ([0-9.]+)")
 _EPOCH = re.compile(r"epoch (\d+)/(\d+) train ([0-9.]+)")
 
@@ -76,7 +80,10 @@ class JobProgress(io.TextIOBase):
 
     def write(self, text: str) -> int:
         bar, summary = _BAR.findall(text), _EPOCH.findall(text)
-        if summary:
+        if _EXPORTING in text:
+            self.job = self.training.report(self.job, progress=EXPORT_AT, epoch=self.job.epoch, loss=self.job.loss,
+                                            stage="exporting the model")
+        elif summary:
             epoch, epochs, loss = summary[-1]
             self._report(int(epoch) / int(epochs), int(epoch), float(loss), force=True)
         elif bar:
@@ -89,7 +96,8 @@ class JobProgress(io.TextIOBase):
         if not force and self._clock() - self._reported_at < REPORT_EVERY_S:
             return
         self._reported_at = self._clock()
-        self.job = self.training.report(self.job, progress=0.9 * fraction, epoch=epoch, loss=loss)
+        self.job = self.training.report(self.job, progress=TRAIN_FROM + (EXPORT_AT - TRAIN_FROM) * fraction,
+                                        epoch=epoch, loss=loss)
 
 
 class Trainer:
@@ -152,9 +160,10 @@ class Trainer:
             self.say(f"trainer: job {job.job_id} had already submitted {submitted.name}; finishing it")
             return self._race_version(job, submitted)
         bucket = get_settings().bucket("runs")
-        job = self.training.report(job, progress=0.0, epoch=0, loss=None, stage="downloading the runs")
         run_dirs = []
-        for run_id in job.run_ids:
+        for number, run_id in enumerate(job.run_ids):
+            job = self.training.report(job, progress=TRAIN_FROM * number / len(job.run_ids), epoch=0, loss=None,
+                                       stage=f"downloading your drives ({number + 1} of {len(job.run_ids)})")
             record = self.runs.store.get_run(run_id)
             if record is None:
                 raise RuntimeError(f"run {run_id} no longer exists")
@@ -164,11 +173,13 @@ class Trainer:
             from chalicelib.domain.racer_models import new_model_id
 
             job = self.training.plan_version(job, new_model_id(), name)
+        job = self.training.report(job, progress=TRAIN_FROM, epoch=0, loss=None,
+                                   stage=f"reading the {job.frames} frames of your drives")
         progress = JobProgress(self.training, job)
         config = TrainConfig(epochs=job.epochs, seed=0, batch_size=32, num_threads=1)
         trained = train_to_archive(run_dirs, folder / "model", name, config, progress=cast(TextIO, progress),
                                    extra_lineage={"booth_job": job.job_id})
-        job = self.training.report(progress.job, progress=0.9, epoch=progress.job.epoch, loss=progress.job.loss,
+        job = self.training.report(progress.job, progress=CHECK_AT, epoch=progress.job.epoch, loss=progress.job.loss,
                                    stage="checking the model like an upload")
         model = models.submit_archive(job.owner_sub, job.owner_username, name, trained.archive.read_bytes(),
                                       model_id=job.model_id)
@@ -246,12 +257,10 @@ class Trainer:
         run_dir = record_run(env, lambda observation, _params: pilot.act(observation), folder / "runs",
                              laps=run.laps_requested, driver=f"model:{run.model_name}", max_steps=limit,
                              run_id=run.run_id)
-        from concurrent.futures import ThreadPoolExecutor
+        from drem_sim.runs import run_objects
 
-        files = sorted(p for p in run_dir.rglob("*") if p.is_file() and p.name != "metadata.json")
-        with ThreadPoolExecutor(4) as pool:
-            list(pool.map(lambda p: self.runs.files.put(run.prefix + p.relative_to(run_dir).as_posix(),
-                                                        p.read_bytes()), files))
+        for name, data in run_objects(run_dir).items():  # three objects: controls, the frames bundle, the first frame
+            self.runs.files.put(run.prefix + name, data)
         return self.runs.finalise_record(run)
 
     def _record_evaluation(self, run: Any) -> None:
@@ -293,6 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     trainer = Trainer(say)
+    if trainer.can_train:  # PyTorch takes seconds to import: once here, not in the first visitor's wait
+        import drem_sim.learn.pipeline  # noqa: F401
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
     requeued = False  # jobs a dead trainer left RUNNING go back to the queue once storage answers

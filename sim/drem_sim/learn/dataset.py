@@ -2,6 +2,9 @@
 
 A run folder (written by the simulator's recorder) holds ``frames/{i:06d}.png`` (120x160 grayscale),
 ``controls.jsonl`` (one row per frame: steering_angle, speed, offtrack, ...) and ``metadata.json``.
+The speed a frame teaches is what the driver really did: a person's drive records ``car_speed`` (the speed the car
+reached by the end of the decision), so letting go of ↑ teaches "slower here", not "skip this frame"; a program's
+run (the demonstrator) has only its commanded ``speed``, which its car follows.
 A snapshot freezes which runs and frames a model learned from; its manifest (runs, counts, content
 hash) travels next to the model so its lineage is always known.
 """
@@ -22,6 +25,7 @@ from drem_sim.learn.contract import IMAGE_HEIGHT, IMAGE_WIDTH
 
 MAX_STEERING_DEG = 30.0
 MIN_SPEED_SPREAD = 0.2  # m/s; a constant-speed demonstrator still gets a usable speed range
+MIN_MODEL_SPEED = 0.3  # m/s; the slowest a model is taught to go: a person who stopped mid-lap made no racing example
 
 
 class DatasetError(ValueError):
@@ -50,7 +54,9 @@ class ActionScale:
         if high - low < MIN_SPEED_SPREAD:
             middle = (high + low) / 2
             low, high = middle - MIN_SPEED_SPREAD / 2, middle + MIN_SPEED_SPREAD / 2
-        return cls(speed_low=round(max(low, 0.1), 3), speed_high=round(min(high, 4.0), 3))
+        low = max(low, MIN_MODEL_SPEED)
+        high = max(high, low + MIN_SPEED_SPREAD)
+        return cls(speed_low=round(low, 3), speed_high=round(min(high, 4.0), 3))
 
 
 def _to_unit(value: np.ndarray, low: float, high: float) -> np.ndarray:
@@ -91,21 +97,20 @@ def load_snapshot(runs: Sequence[str | Path], scale: ActionScale | None = None,
     for run_dir in run_dirs:
         rows = _read_controls(run_dir)
         used = 0
-        for row in rows:
+        for row in _driving_rows(rows):
             if row.get("offtrack") and not include_offtrack:
                 continue
-            if float(row["speed"]) <= 0.0:
-                continue  # a person standing still (before setting off, after braking) is not a racing example
             frame_path = _frame_path(run_dir, row)
             raw = frame_path.read_bytes()
             image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
             if image is None or image.shape != (IMAGE_HEIGHT, IMAGE_WIDTH):
                 raise DatasetError(f"{frame_path}: not a {IMAGE_WIDTH}x{IMAGE_HEIGHT} grayscale image")
             digest.update(raw)
-            digest.update(f"{row['steering_angle']:.6f},{row['speed']:.6f}".encode())
+            label = speed_label(row)
+            digest.update(f"{row['steering_angle']:.6f},{label:.6f}".encode())
             images.append(image)
             steering.append(float(row["steering_angle"]))
-            speed.append(float(row["speed"]))
+            speed.append(label)
             used += 1
         run_entries.append({"run": str(run_dir), **_run_identity(run_dir), "rows": len(rows), "frames_used": used})
     if not images:
@@ -120,6 +125,21 @@ def load_snapshot(runs: Sequence[str | Path], scale: ActionScale | None = None,
         "action_scale": scale.__dict__,
     }
     return DatasetSnapshot(np.stack(images), np.asarray(steering, dtype=np.float32), speeds, scale, manifest)
+
+
+def speed_label(row: dict[str, Any]) -> float:
+    """The speed a frame teaches: the car's real speed when the run recorded it, else the commanded speed."""
+    return float(row["car_speed"] if "car_speed" in row else row["speed"])
+
+
+def _driving_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows from the car's first movement to its last. A person's drive (rows with ``car_speed``) keeps every
+    frame in between, slow or stopped; only standing at the line before setting off and after the end is not
+    driving. A program's run without ``car_speed`` leaves out every frame it commanded no speed on."""
+    if not any("car_speed" in row for row in rows):
+        return [row for row in rows if float(row["speed"]) > 0.0]
+    moving = [index for index, row in enumerate(rows) if float(row.get("car_speed", 0.0)) > 0.0]
+    return rows[moving[0]:moving[-1] + 1] if moving else []
 
 
 def resolve_run(run: str | Path) -> Path:
@@ -151,7 +171,7 @@ def _read_controls(run_dir: Path) -> list[dict[str, Any]]:
                 continue
             try:
                 row = json.loads(line)
-                float(row["steering_angle"]), float(row["speed"])
+                float(row["steering_angle"]), float(row["speed"]), float(row.get("car_speed", 0.0))
             except (ValueError, KeyError, TypeError) as error:
                 raise DatasetError(f"{run_dir}/controls.jsonl line {number}: {error}") from error
             rows.append(row)

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
+from drem_sim.laps import LapAttempts
+
 Policy = Callable[[np.ndarray, dict[str, Any]], dict[str, float]]
 
 SIM_SECONDS_PER_LAP_LIMIT = 90.0  # an attempt slower than this is a stuck car, not a lap
@@ -64,46 +66,38 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
     params: dict[str, Any] = dict(info.get("params", {})) if isinstance(info, dict) else {}
     step_seconds = float(getattr(env, "step_seconds", 1.0 / 15.0))
     limit = max_steps or int(attempts * SIM_SECONDS_PER_LAP_LIMIT / step_seconds)
-    progress_log: list[float] = []
-    lap_times: list[float] = []
+    laps = LapAttempts()  # the whole-lap rule every figure uses (drem_sim.laps)
     steering: list[float] = []
     offtrack = 0
     resets_before = _resets(info)
-    # The running attempt left the timing line at sim time `line_t` (None: it started where the car was put back),
-    # when the env's distance from the episode's start read `line_progress` (laps × 100 + progress, in percent).
-    line_t: float | None = 0.0
-    line_progress = 0.0
-    best_progress = 0.0
     steps = 0
-    while len(progress_log) < attempts and steps < limit:
+    while len(laps.attempts) < attempts and steps < limit:
         action = policy(observation, params)
         steering.append(float(action["steering_angle"]))
         observation, params, terminated, truncated, info = env.step(action)
         steps += 1
-        progress_now = 100.0 * _laps(info) + float(params.get("progress", 0.0))  # never wraps, even backing up
-        if line_t is not None:
-            best_progress = max(best_progress, progress_now - line_progress)
+        distance = 100.0 * _laps(info) + float(params.get("progress", 0.0))  # never wraps, even backing up
+        laps.moved(distance)
         if _resets(info) > resets_before or params.get("is_offtrack"):
             offtrack += 1
-            if line_t is not None:
-                progress_log.append(min(best_progress, 99.9))
+            laps.left_track()
             observation, info = env.reset(options={"start_offset_m": float(params.get("projection_distance", 0.0))})
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
-            resets_before, line_t, best_progress = _resets(info), None, 0.0
+            resets_before = _resets(info)
             continue
         for event in info.get("strip_events", []) if isinstance(info, dict) else []:
-            crossed_s = float(event["timestamp_ms"]) / 1000.0
-            if line_t is not None and len(progress_log) < attempts:
-                lap_times.append(crossed_s - line_t)
-                progress_log.append(100.0)
-            line_t, line_progress, best_progress = crossed_s, progress_now, 0.0
+            if len(laps.attempts) < attempts:
+                laps.crossed(float(event["timestamp_ms"]) / 1000.0, distance)
         if terminated or truncated:
-            observation, info = env.reset(seed=seed + len(progress_log) + 1)
+            observation, info = env.reset(seed=seed + len(laps.attempts) + 1)
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
-            resets_before, line_t, line_progress, best_progress = _resets(info), 0.0, 0.0, 0.0
+            resets_before = _resets(info)
+            laps.restart_on_line(0.0)
+    progress_log = list(laps.attempts)
     if len(progress_log) < attempts:  # out of time: the unfinished attempt counts with what it reached
-        progress_log.append(min(best_progress, 99.9))
+        progress_log.append(laps.unfinished() or 0.0)
     progress_log = progress_log[:attempts]
+    lap_times = laps.lap_times_s
     completed = sum(1 for p in progress_log if p >= 100.0)
     deltas = np.diff(np.asarray(steering)) if len(steering) > 1 else np.zeros(1)
     lap_times = lap_times[:completed]

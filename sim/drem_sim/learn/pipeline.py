@@ -18,6 +18,7 @@ from drem_sim.learn.package import build_archive, build_metadata
 from drem_sim.learn.train import TrainConfig, TrainResult, plot_loss_curve, train_behaviour_cloning
 
 VERIFY_SAMPLES = 16
+EXPORTING = "exporting the model (ONNX, checked against the trained network)"
 
 
 @dataclass
@@ -40,6 +41,8 @@ def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, confi
     out_dir.mkdir(parents=True, exist_ok=True)
     snapshot = load_snapshot(runs, scale=scale)
     result = train_behaviour_cloning(snapshot, config, progress=progress, initial_state=initial_state)
+    if progress is not None:
+        progress.write(f"{EXPORTING}\n")
     onnx_path = export_onnx(result.model, out_dir / "model.onnx")
     picks = np.random.default_rng(config.seed).choice(len(snapshot), size=min(VERIFY_SAMPLES, len(snapshot)),
                                                       replace=False)

@@ -49,9 +49,32 @@
     return { steering: clip(steering), throttle: clip(throttle) };
   }
 
+  // The top-down map (server-built SVG, chalicelib/views/track_map.py): move the car, extend its trail, and mark
+  // where it left the track. Coordinates are the simulator's metres; the SVG flips y itself.
+  const mapTrail = document.querySelector('[data-map="trail"]');
+  const mapCar = document.querySelector('[data-map="car"]');
+  const mapOff = document.querySelector('[data-map="off"]');
+  function showOnMap(state) {
+    if (!mapCar || typeof state.x !== "number" || typeof state.y !== "number") { return; }
+    const point = state.x + "," + state.y;
+    mapTrail.setAttribute("points", (mapTrail.getAttribute("points") + " " + point).trim());
+    mapCar.setAttribute("cx", state.x);
+    mapCar.setAttribute("cy", state.y);
+    if (state.offtrack) {
+      const mark = document.createElementNS("http://www.w3.org/2000/svg", "circle");
+      mark.setAttribute("cx", state.x);
+      mark.setAttribute("cy", state.y);
+      mark.setAttribute("r", "0.09");
+      mark.setAttribute("class", "map-off");
+      mapOff.appendChild(mark);
+    }
+  }
+
   function show(state) {
     if (state.frame) { frame.src = state.frame; }
-    document.getElementById("drive-laps").textContent = state.laps;
+    showOnMap(state);
+    // Counted as the saved run's page counts them: whole laps from the line, of the attempts so far.
+    document.getElementById("drive-laps").textContent = state.laps_completed + " of " + state.attempts + " attempts";
     document.getElementById("drive-progress").textContent = state.progress + " %";
     document.getElementById("drive-speed").textContent = state.speed + " m/s";
     document.getElementById("drive-frames").textContent = state.frames;
@@ -79,6 +102,7 @@
     try {
       const state = await post("/api/drive", { track_id: page.dataset.track });
       runId = state.run_id;
+      if (mapTrail) { mapTrail.setAttribute("points", ""); mapOff.replaceChildren(); }  // a new drive, a new trail
       show(state);
       driving = true;
       finishButton.disabled = false;
