@@ -65,8 +65,8 @@ class LiveDrive:
 
     def __init__(self, record: RunRecord, drive_dir: Path | None = None) -> None:
         try:
+            from drem_leaderboard.laps import LapAttempts
             from drem_sim.env import RaceEnv
-            from drem_sim.laps import LapAttempts
             from drem_sim.runs import RunRecorder
             from drem_sim.tracks import load_track
         except ModuleNotFoundError:
@@ -81,7 +81,7 @@ class LiveDrive:
             self.folder.mkdir(parents=True, mode=0o700)
         self.env = RaceEnv(load_track(record.track_id))
         self.obs, info = self.env.reset(seed=0)
-        self.laps = LapAttempts()  # the run's laps and attempts as its metrics will count them (drem_sim.laps)
+        self.laps = LapAttempts()  # the run's laps and attempts as its metrics will count them (drem_leaderboard.laps)
         self.params = info["params"]
         assert self.env.camera is not None, "RaceEnv observes by default"
         self.recorder = RunRecorder(self.folder, record.track_id, direction="forward", driver="human", seed=0,

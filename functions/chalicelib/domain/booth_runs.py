@@ -27,6 +27,7 @@ from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_tracks import TRACK_ID_PATTERN, TrackService
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.domain.racer_models import MODEL_STAFF, DownloadLike, ModelService, ModelStatus, utc_now
+from drem_leaderboard.laps import LapAttempts
 
 RUN_ID_PATTERN = r"^[a-f0-9]{12,40}$"
 MAX_CONTROLS_BYTES = 16 * 1024 * 1024
@@ -343,14 +344,12 @@ def parse_controls(data: bytes) -> list[dict[str, Any]]:
 
 
 def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
-    """Lap attempts and laps by the whole-lap rule every figure uses (`drem_sim.laps`, as `drem sim eval` and
+    """Lap attempts and laps by the whole-lap rule every figure uses (`drem_leaderboard.laps`, as `drem sim eval` and
     scrutineering count): a lap is driven whole from a timing-line crossing (or the standing start) to the next
     without an off-track; the stretch from where the car was put back to the line is no attempt.
 
     A row is the state the driver saw (its lap, progress and time) and whether what it did ended off the track; the
     next row is where that decision took the car. A crossing is timed where the line lies between the two."""
-    from drem_sim.laps import LapAttempts  # pure Python: no simulator needed
-
     laps = LapAttempts(start_s=rows[0]["t_ms"] / 1000.0)
     for row, after in zip(rows, [*rows[1:], None], strict=True):
         before = 100.0 * row["lap"] + row["progress"]

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
-from drem_sim.laps import LapAttempts
+from drem_leaderboard.laps import LapAttempts
 
 Policy = Callable[[np.ndarray, dict[str, Any]], dict[str, float]]
 
@@ -66,7 +66,7 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
     params: dict[str, Any] = dict(info.get("params", {})) if isinstance(info, dict) else {}
     step_seconds = float(getattr(env, "step_seconds", 1.0 / 15.0))
     limit = max_steps or int(attempts * SIM_SECONDS_PER_LAP_LIMIT / step_seconds)
-    laps = LapAttempts()  # the whole-lap rule every figure uses (drem_sim.laps)
+    laps = LapAttempts()  # the whole-lap rule every figure uses (drem_leaderboard.laps)
     steering: list[float] = []
     offtrack = 0
     resets_before = _resets(info)

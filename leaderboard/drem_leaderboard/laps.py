@@ -6,7 +6,8 @@ reached, below 100 %). After an off-track the car is put back where it left: the
 attempt at all, because the car never took the bend it left the track on, so it neither counts as a lap nor dilutes
 completion. Every figure of a drive uses this: `drem sim eval` and scrutineering (`drem_sim.learn.evaluate.drive`,
 stepping the simulator) and the booth's run metrics (`chalicelib.domain.booth_runs.compute_metrics`, reading a run's
-recorded rows). Pure Python (no numpy) so the app can use it wherever the simulator is not installed.
+recorded rows). Pure Python (no numpy), with the race rules, so the app has it wherever it runs (the Lambda bundle
+vendors drem_leaderboard, not the simulator).
 """
 from __future__ import annotations
 
