@@ -20,7 +20,7 @@ from chalicelib import services  # noqa: E402  (after functions/ is on sys.path)
 from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView  # noqa: E402
 from chalicelib.live_wake import socket_path as wake_socket_path  # noqa: E402
 from chalicelib.routes.responses import etag_matches  # noqa: E402
-from chalicelib.views import live_regions  # noqa: E402
+from chalicelib.views import live_options, live_regions  # noqa: E402
 from drem_leaderboard.models import Race  # noqa: E402
 
 if TYPE_CHECKING:
@@ -48,8 +48,14 @@ class AppCode:
 
     @staticmethod
     def parse_query(kind: str, params: Mapping[str, str]) -> Any:
-        """The fragment route's query model (pydantic ValidationError on bad input)."""
-        return QUERY_MODELS[kind].model_validate(dict(params))
+        """The fragment route's query model (pydantic ValidationError on bad input), spelled the one way its HTML is
+        keyed by (live_options.canonical): queries that render the same region share one channel."""
+        return live_options.canonical(QUERY_MODELS[kind].model_validate(dict(params)))
+
+    @staticmethod
+    def offered(query: Any, event_tracks: list[str]) -> bool:
+        """Whether the app's own pages and links hand out this option set (live_options.offered)."""
+        return live_options.offered(query, event_tracks)
 
     def region(self, kind: str, event_id: str, query: Any, now_ms: int) -> live_regions.LiveRegion:
         if kind == "leaderboard":
@@ -70,8 +76,10 @@ class AppCode:
         return self.publisher.overlay(event_id, track)
 
     @staticmethod
-    def event_exists(event_id: str) -> bool:
-        return services.event_store().get(event_id) is not None
+    def event_tracks(event_id: str) -> list[str] | None:
+        """The event's track ids, or None when there is no such event."""
+        event = services.event_store().get(event_id)
+        return None if event is None else [track.track_id or "" for track in event.tracks]
 
 
 def read_race(event_id: str, race_id: str) -> Race | None:

@@ -53,9 +53,9 @@ CODE: web.AppKey[AppCode] = web.AppKey("code", AppCode)
 CHANNELS: web.AppKey[Channels] = web.AppKey("channels", Channels)
 STREAMS: web.AppKey[StreamCount] = web.AppKey("streams", StreamCount)
 POLLS: web.AppKey[PollViews] = web.AppKey("polls", PollViews)
-KNOWN_EVENTS: web.AppKey[set[str]] = web.AppKey("known_events", set)
+KNOWN_EVENTS: web.AppKey[dict[str, tuple[list[str], float]]] = web.AppKey("known_events", dict)
 UNKNOWN_EVENTS: web.AppKey[dict[str, float]] = web.AppKey("unknown_events", dict)
-UNKNOWN_EVENT_S = 5.0
+EVENT_READ_S = 5.0
 EXECUTOR: web.AppKey[ThreadPoolExecutor] = web.AppKey("executor", ThreadPoolExecutor)
 
 
@@ -105,23 +105,29 @@ def client_address(request: web.Request) -> str:
         return named
 
 
-async def known_event(request: web.Request, event_id: str) -> bool:
-    """Whether the event exists (one read, remembered; a missing one for UNKNOWN_EVENT_S, so made-up ids cost one read
-    each per window, not one per request): a stream of a made-up event opens no channel."""
+async def event_tracks(request: web.Request, event_id: str) -> list[str] | None:
+    """The event's track ids, or None when it does not exist (one read per EVENT_READ_S per event, remembered; a
+    missing one too, so made-up ids cost one read each per window, not one per request): a stream of a made-up event
+    opens no channel, and the tracks say which option sets the app offers (a track added since is seen within
+    EVENT_READ_S; until then its streams take a slot of their page's own options)."""
     known, unknown = request.app[KNOWN_EVENTS], request.app[UNKNOWN_EVENTS]
-    if event_id in known:
-        return True
-    if time.monotonic() - unknown.get(event_id, -UNKNOWN_EVENT_S) < UNKNOWN_EVENT_S:
-        return False
-    exists = await asyncio.get_running_loop().run_in_executor(request.app[EXECUTOR], request.app[CODE].event_exists,
+    now = time.monotonic()
+    remembered = known.get(event_id)
+    if remembered is not None and now - remembered[1] < EVENT_READ_S:
+        return remembered[0]
+    if now - unknown.get(event_id, -EVENT_READ_S) < EVENT_READ_S:
+        return None
+    tracks = await asyncio.get_running_loop().run_in_executor(request.app[EXECUTOR], request.app[CODE].event_tracks,
                                                               event_id)
-    if exists and len(known) < 10_000:
-        known.add(event_id)
-    elif not exists:
+    if tracks is not None:
+        if len(known) >= 10_000 and event_id not in known:
+            known.clear()
+        known[event_id] = (tracks, now)
+    else:
         if len(unknown) >= 10_000:
             unknown.clear()
-        unknown[event_id] = time.monotonic()
-    return exists
+        unknown[event_id] = now
+    return tracks
 
 
 def stream_handler(kind: str) -> Handler:
@@ -147,7 +153,8 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
     refusal = streams.refusal(client, key, len(app[CHANNELS]))
     if refusal:
         return refuse(503, f"{refusal}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
-    if not await known_event(request, event_id):
+    tracks = await event_tracks(request, event_id)
+    if tracks is None:
         return refuse(404, f"There is no event {event_id}.")
 
     def step(last: Message | None) -> Message | None:  # in a worker thread: read, and render on a new token only
@@ -158,7 +165,8 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
 
     subscriber = Subscriber()
     try:
-        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id), event_id=event_id)
+        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id), event_id=event_id,
+                                     offered=code.offered(query, tracks))
     except ChannelsFull as exc:
         return refuse(503, f"{exc}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
     streams.open(client, key)
@@ -236,7 +244,7 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
                              max_per_page=limits.max_channels_per_page)
     app[STREAMS] = StreamCount(limits)
     app[POLLS] = PollViews(read_view, poll_s, executor)
-    app[KNOWN_EVENTS] = set()
+    app[KNOWN_EVENTS] = {}
     app[UNKNOWN_EVENTS] = {}
     if wake_dir:
         def woken(event_id: str) -> None:
