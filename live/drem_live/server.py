@@ -248,6 +248,7 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
     app[UNKNOWN_EVENTS] = {}
     if wake_dir:
         def woken(event_id: str) -> None:
+            code.changed(event_id)  # first: no channel may be handed what was read before the write
             app[CHANNELS].wake(event_id)
             app[POLLS].expire(event_id)
 
