@@ -220,11 +220,10 @@ def poll_handler(kind: str) -> Handler:
         if not EVENT_ID.fullmatch(event_id) or not TRACK_ID.fullmatch(track):
             return refuse(400, "That is not an event id and track id.")
         view = await request.app[POLLS].get(kind, event_id, track)
-        headers = {**CORS, **NO_SNIFF, "ETag": view.etag, "Cache-Control": "no-cache"}
         if etag_matches(view.etag, request.headers.get("If-None-Match")) or \
                 request.query.get("since") == str(view.version):
-            return web.Response(status=304, headers=headers)
-        return web.Response(body=view.body, headers={**headers, "Content-Type": "application/json"})
+            return web.Response(status=304, headers=view.headers_304)
+        return web.Response(body=view.body, headers=view.headers_200)
     return handle
 
 
