@@ -31,13 +31,20 @@ class ChannelsFull(Exception):
 class Subscriber:
     pending: Message | None = None
     wake: asyncio.Event = field(default_factory=asyncio.Event)
+    heartbeat_due: bool = False
 
     def offer(self, message: Message) -> None:
         self.pending = message
         self.wake.set()
 
+    def beat(self) -> None:
+        """Ask for a heartbeat (Channels' one timer for everybody, instead of a timer per viewer per message)."""
+        self.heartbeat_due = True
+        self.wake.set()
+
     def take(self) -> Message | None:
         self.wake.clear()
+        self.heartbeat_due = False
         message, self.pending = self.pending, None
         return message
 
@@ -173,6 +180,16 @@ class Channels:
             del self._open[channel.key]
             self._pages.pop(channel.key, None)
             channel.stop()
+
+    async def beat_every(self, seconds: float) -> None:
+        """Every `seconds`, a heartbeat to every subscriber not already woken for a message (an idle connection stays
+        open through proxies), with one timer for the whole server."""
+        while True:
+            await asyncio.sleep(seconds)
+            for channel in list(self._open.values()):
+                for subscriber in channel.subscribers:
+                    if not subscriber.wake.is_set():
+                        subscriber.beat()
 
     def wake(self, event_id: str) -> int:
         """Wake every channel of `event_id`; how many there were."""

@@ -19,7 +19,7 @@ import logging
 import os
 import re
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -189,26 +189,34 @@ async def _write_stream(request: web.Request, channel: Any, subscriber: Subscrib
         "X-Accel-Buffering": "no", **({"Content-Encoding": "gzip"} if gzip else {})})
     await response.prepare(request)
     opening = clock_message(request.app[CODE].now_ms(), RETRY_MS).bytes_for(gzip)
-    await _write(response, (GZIP_HEADER if gzip else b"") + opening)
+    await _write(request, response, (GZIP_HEADER if gzip else b"") + opening)
     # What this viewer has: its Last-Event-ID, then whatever it was sent. Only newer tokens go out (a broadcast that
     # reached it while it was joining included, and the channel's current state when it joined an open channel).
     shown: str | None = request.headers.get("Last-Event-ID") or None
     if subscriber.pending is None and channel.latest is not None:
         subscriber.offer(channel.latest)
+    # No timer per viewer per message (profiled: timers were the largest cost of a push to thousands): heartbeats
+    # come from the channels' one timer (Channels.beat_every), and a write is timed only when it may wait.
     while True:
-        try:
-            await asyncio.wait_for(subscriber.wake.wait(), HEARTBEAT_S)
-        except TimeoutError:
-            await _write(response, HEARTBEAT.bytes_for(gzip))
-            continue
+        await subscriber.wake.wait()
+        beat = subscriber.heartbeat_due
         message = subscriber.take()
         if message is not None and token_is_newer(message.token, shown):
-            await _write(response, message.bytes_for(gzip))
+            await _write(request, response, message.bytes_for(gzip))
             shown = message.token
+        elif beat:
+            await _write(request, response, HEARTBEAT.bytes_for(gzip))
 
 
-async def _write(response: web.StreamResponse, data: bytes) -> None:
-    await asyncio.wait_for(response.write(data), WRITE_TIMEOUT_S)
+async def _write(request: web.Request, response: web.StreamResponse, data: bytes) -> None:
+    """Write `data`; a viewer that stops reading is dropped after WRITE_TIMEOUT_S. aiohttp's write waits only while
+    the connection's send buffer is full, so a write onto an empty buffer needs no timer."""
+    transport = request.transport
+    if transport is not None and not transport.is_closing() and transport.get_write_buffer_size() == 0:
+        await response.write(data)
+        return
+    async with asyncio.timeout(WRITE_TIMEOUT_S):
+        await response.write(data)
 
 
 def poll_handler(kind: str) -> Handler:
@@ -259,6 +267,13 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))
         app.router.add_get(f"/live/api/{kind}/{{event_id}}", public(poll_handler(kind)))
     app.router.add_route("OPTIONS", "/live/{tail:.*}", preflight)
+
+    async def beat(_app: web.Application) -> AsyncIterator[None]:
+        task = asyncio.get_running_loop().create_task(app[CHANNELS].beat_every(HEARTBEAT_S))
+        yield
+        task.cancel()
+
+    app.cleanup_ctx.append(beat)
 
     async def close(_app: web.Application) -> None:
         app[CHANNELS].stop_all()

@@ -279,3 +279,22 @@ def test_hand_made_option_sets_of_many_pages_leave_half_the_channels_to_the_page
             channels.stop_all()
 
     asyncio.run(run())
+
+
+def test_one_timer_beats_every_idle_viewer_and_never_replaces_a_pending_board() -> None:
+    async def run() -> None:
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(10, executor, max_channels=8, is_newer=token_is_newer)
+            idle, busy = Subscriber(), Subscriber()
+            channels.join("board", lambda _last: None, idle)
+            channels.join("board", lambda _last: None, busy)
+            board = Message.fragment("1.1-0", "<section>board</section>")
+            busy.offer(board)
+            beating = asyncio.get_running_loop().create_task(channels.beat_every(0.01))
+            await asyncio.wait_for(idle.wake.wait(), 5)
+            beating.cancel()
+            assert idle.heartbeat_due and idle.take() is None  # a heartbeat, nothing else
+            assert not busy.heartbeat_due and busy.take() == board  # its board is still what it gets
+            channels.stop_all()
+
+    asyncio.run(run())
