@@ -34,6 +34,8 @@ def test_what_the_link_builder_and_the_pages_hand_out_is_offered() -> None:
     assert offered(overlay(trackId="2", gapToLeader="false", showLeaderboard="false", lang="ja"), TRACKS)
     assert offered(board(track="1", tracks="1", lang="sv"), TRACKS)
     assert offered(board(track="combined", tracks="1,2"), TRACKS)
+    many = [str(n) for n in range(1, 11)]  # the big screen's combined board shows the first 8 tracks' races
+    assert offered(board(track="combined", tracks=",".join(many[:8])), many)
 
 
 def test_hand_made_options_and_made_up_tracks_are_not_offered() -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from chalicelib.views.live_regions import LeaderboardQuery, OverlayQuery
+from chalicelib.views.live_regions import MAX_FOOTER_TRACKS, LeaderboardQuery, OverlayQuery
 from drem_leaderboard.ranking import COMBINED_TRACK_ID
 from drem_web import i18n
 
@@ -43,7 +43,7 @@ def offered(query: Any, event_tracks: list[str]) -> bool:
     if isinstance(query, LeaderboardQuery):
         track = query.track or COMBINED_TRACK_ID
         footers = [t for t in query.tracks.split(",") if t]
-        page_footers = [track] if track != COMBINED_TRACK_ID else event_tracks
+        page_footers = [track] if track != COMBINED_TRACK_ID else event_tracks[:MAX_FOOTER_TRACKS]
         return ((track in event_tracks or track == COMBINED_TRACK_ID) and footers in (page_footers, [])
                 and _defaults_except(query, _BOARD_DEFAULTS, _BOARD_PAGE_FIELDS))
     if isinstance(query, OverlayQuery):
