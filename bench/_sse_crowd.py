@@ -47,6 +47,9 @@ async def _subscriber(url: str, stop: Any, stats: dict[str, Any], rng: random.Ra
                     continue
                 token = message[4:message.index(b"\n")].decode()
                 stats["messages"] += 1
+                now = time.time()
+                seen = stats["arrivals"].setdefault(token, [now, now])  # first and last viewer to get it
+                seen[1] = now
                 if last is not None and not token_is_newer(token, last):
                     stats["backwards"] += 1
                 last = token
@@ -57,7 +60,7 @@ async def _subscriber(url: str, stop: Any, stats: dict[str, Any], rng: random.Ra
 
 
 async def _crowd(urls: list[str], spectators: int, stop: Any) -> dict[str, Any]:
-    stats: dict[str, Any] = {"connected": 0, "messages": 0, "backwards": 0, "errors": []}
+    stats: dict[str, Any] = {"connected": 0, "messages": 0, "backwards": 0, "errors": [], "arrivals": {}}
     rng = random.Random(11)
     tasks = [asyncio.create_task(_subscriber(urls[i % len(urls)], stop, stats, rng, 2.0)) for i in range(spectators)]
     started = time.monotonic()

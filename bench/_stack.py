@@ -50,6 +50,7 @@ class BenchStack:
     live_port: int = 0
     app_pid: int = 0
     storage_pid: int = 0
+    live_pid: int = 0
 
 
 @contextmanager
@@ -77,7 +78,8 @@ def bench_stack(extra_env: dict[str, str] | None = None, live_workers: int = 1) 
             local_stack.wait_for_ok(config.app_url + local_stack.APP_HEALTH_PATH, app, 60)
             yield BenchStack(url=config.app_url, port=config.app_port, storage_url=config.storage_url, env=env,
                              admin_username="admin", admin_password=password, tmp=tmp, live_url=config.live_url,
-                             live_port=config.live_server_port, app_pid=app.pid, storage_pid=storage.pid)
+                             live_port=config.live_server_port, app_pid=app.pid, storage_pid=storage.pid,
+                             live_pid=live.pid)
         finally:
             if app is not None:
                 app.stop(10)
@@ -216,6 +218,15 @@ def wrk_result(process: subprocess.Popen[str], timeout: float) -> dict[str, Any]
 
 
 # --- figures ----------------------------------------------------------------------------------------------------------
+
+
+def cpu_seconds(pid: int) -> float:
+    """CPU seconds (user + system) process `pid` has used so far; 0.0 once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (fields 14, 15 of stat)
 
 
 def machine_load() -> str:

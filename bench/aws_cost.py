@@ -12,7 +12,8 @@ big screen and stream overlay and everyone's phones (the phones spread evenly ov
 Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the timers' laps, the staff consoles) and
 the same DynamoDB writes and writer reads per lap (the race transaction, the track board, the combined board and the
 overlay, each read consistently before it is rewritten: `lap_writes`). Tasks: spectators / the live pages' scaling
-target per task (drem_infra.live_pages.STREAMS_TARGET_PER_TASK, not yet a measured capacity).
+target per task (drem_infra.live_pages.STREAMS_TARGET_PER_TASK: 80 % of the measured capacity of the task's 0.5 vCPU,
+from `bench/live_latency.py --capacity`).
 
 The message sizes are measured, not guessed: a 50-racer board and a racing overlay are built by the real publisher,
 rendered by the live-region builders (chalicelib.views.live_regions, shared by the app and the live server) and
@@ -56,10 +57,14 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from drem_infra import live_pages
+
 ROOT = Path(__file__).resolve().parent.parent
 REGION = "us-east-1"
 PRICES_READ_ON = "2026-11-24"
 GOALS_DOLLARS = {2_000: 20.0, 20_000: 100.0}
+# How many streams the stack's scaling puts on one live task: derived from the measured per-process capacity.
+STREAMS_TARGET_PER_TASK = live_pages.STREAMS_TARGET_PER_TASK
 GB = 1_000_000_000
 
 
@@ -108,7 +113,7 @@ class Profile:
     # Fargate: the task size and how many streams one task carries (the scaling target, STREAMS_TARGET_PER_TASK).
     task_vcpu: float = 0.5
     task_memory_gb: float = 1.0
-    viewers_per_task: int = 2_000
+    viewers_per_task: int = STREAMS_TARGET_PER_TASK
     alb_public_ips: int = 0  # internal (a CloudFront VPC origin): no public address; was one per subnet/AZ
     infrastructure_hours: float = 24.0
     framing_bytes: int = 40  # per delivered message: HTTP/2 DATA frame + TLS record overhead

@@ -29,6 +29,7 @@ import argparse
 import http.client
 import json
 import multiprocessing
+import os
 import shutil
 import socket
 import sys
@@ -321,10 +322,15 @@ def main(argv: list[str] | None = None) -> int:
             sign_ins.append((status, time.monotonic() - began))
 
         laps: list[float] = []
+        writes: list[float] = []  # POST sent -> answered: the lap is stored and the boards are published
+        pids = {"app": stack.app_pid, "storage": stack.storage_pid, "live": stack.live_pid, "crowd": crowd.pid or 0,
+                "bench": os.getpid()}
+        cpu_before, wall_before = {name: _stack.cpu_seconds(pid) for name, pid in pids.items()}, time.monotonic()
         with ThreadPoolExecutor(32) as phones:
             futures = [phones.submit(phone, i) for i in range(len(order))]
             while time.monotonic() - run_start < args.seconds:
                 _lap_ms, sent_ms, reply = lapper.next_lap()
+                writes.append(time.time() * 1000 - sent_ms)
                 token_wait = time.monotonic() + 5
                 token = None
                 while time.monotonic() < token_wait and token is None:
@@ -336,6 +342,8 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(2.5)
             for future in futures:
                 future.result()
+        cpu = {name: 100 * (_stack.cpu_seconds(pid) - cpu_before[name]) / (time.monotonic() - wall_before)
+               for name, pid in pids.items()}
         stop.set()
         crowd_stop.set()
         crowd_stats = queue.get(timeout=60)
@@ -355,6 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     guess_ok = sum(1 for _t, _a, status in guesses if status == 200)
     laps.sort()
     p95 = laps[int(0.95 * (len(laps) - 1))] if laps else float("inf")
+    write_p50, write_p95 = (_stack.percentile(writes, 50), _stack.percentile(writes, 95)) if writes else (0.0, 0.0)
     growth = peak.growth_mb()
     body_statuses = Counter(status for _p, status, _sent in bodies)
     most_sent = max((sent for _p, _s, sent in bodies), default=0) // MIB
@@ -367,8 +376,15 @@ def main(argv: list[str] | None = None) -> int:
           f"watcher_errors={crowd_stats['errors']} lap_samples={len(laps)} "
           f"guess_attempts={len(guesses)} slow_cut={cut[0]} bodies={dict(body_statuses)} "
           f"most_body_mib_sent={most_sent} ({_stack.machine_load()})")
+    # Where a lap's time goes: the write (the timer's POST until the app answered: race transaction, board publishes
+    # on the storage server) and the rest (the wake-up, the live server's read and render, the push), and who used
+    # the CPU (% of one core over the run; the crowd is the bench's own 500-stream client, bench is this process).
+    print(f"lap write (POST answered) p50 {write_p50:.0f} ms p95 {write_p95:.0f} ms; lap-to-stream p50 "
+          f"{_stack.percentile(laps, 50) if laps else 0:.0f} ms p95 {p95:.0f} ms; CPU % of a core: "
+          + " ".join(f"{name} {value:.0f}" for name, value in cpu.items()))
     print(f"RESULT venue: sign-ins refused {refused}/{len(sign_ins)}, "
           f"uploads refused {upload_refused}/{len(uploads)}, lap-to-stream p95 {p95:.0f} ms, "
+          f"lap write p95 {write_p95:.0f} ms, "
           f"memory growth app {growth['app']:.0f} MB storage {growth['storage']:.0f} MB, "
           f"checked guesses per account-minute max {worst_guesses} (lucky {guess_ok}) | "
           f"goal 0 refused, p95 <= 1000 ms, growth <= 150 MB, <= 10 guesses/min/account | "

@@ -31,7 +31,7 @@ from chalicelib.domain.devices import DeviceService
 from chalicelib.domain.event_logos import EventLogoService
 from chalicelib.domain.events import EventService
 from chalicelib.domain.fleets import FleetService
-from chalicelib.domain.leaderboards import LeaderboardPublisher
+from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicViewCache
 from chalicelib.domain.league import LeagueService
 from chalicelib.domain.league_intake import LeagueIntake
 from chalicelib.domain.model_conversion import ConsoleConverter
@@ -213,11 +213,12 @@ def publisher() -> LeaderboardPublisher:
                                 on_change=live_wake.waker(get_settings().live_wake_dir))
 
 
-def uncached_publisher() -> LeaderboardPublisher:
-    """For the live server (drem_live), which keeps what it read itself and re-reads on its own schedule: the app's
-    250 ms poll cache in front would only delay each change."""
+def live_publisher(cache: PublicViewCache) -> LeaderboardPublisher:
+    """For the live server (drem_live): its own read cache, which it empties for an event when the writer wakes it
+    (PublicViewCache.invalidate_event), so every channel and poll of that event woken together shares one read of
+    each item instead of reading it once per channel."""
     return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms,
-                                cache=None)
+                                cache=cache)
 
 
 def audit_log() -> DynamoAuditLog:

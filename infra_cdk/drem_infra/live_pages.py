@@ -85,9 +85,13 @@ TASK_MEMORY_MIB = 1024
 MIN_TASKS = 1
 MAX_TASKS = 4
 CPU_TARGET_PERCENT = 60
-# Streams per task the connection scaling aims at: below the server's cap per process (drem_live.limits, 5,000) with
-# room for a crowd arriving within the minute scaling takes. Not yet a measured capacity of 0.5 vCPU (issue #34).
-STREAMS_TARGET_PER_TASK = 2000
+# Streams one live process writes a change to within 750 ms on one core (the 1 s lap-to-screen budget less the
+# quiet floor): its CPU per delivered message, 75 us, measured by `bench/live_latency.py --capacity` (2026-11-27, one
+# process pinned to one core, 2,000 streams; CPU time, which the shared machine's load does not inflate).
+MEASURED_STREAMS_PER_CORE = 10_000
+# Streams per task the connection scaling aims at: the measured figure for the task's 0.5 vCPU, with a fifth left
+# for a crowd arriving within the minute scaling takes, below the server's cap per process (drem_live.limits, 5,000).
+STREAMS_TARGET_PER_TASK = int(MEASURED_STREAMS_PER_CORE * TASK_CPU / 1024 * 0.8)
 STREAMS_METRIC_NAMESPACE = "drem/live"
 STREAMS_METRIC_NAME = "Streams"
 SERVER_KEEPALIVE_SECONDS = 130  # longer than ALB_IDLE_TIMEOUT

@@ -82,7 +82,8 @@ def _serve(host: str, port: int, *, reuse_port: bool, hub: socket.socket | None 
     metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None
     if hub is not None:
         os.environ.pop("DREM_LIVE_VIDEO_HUB", None)  # this process is the hub itself
-    app = make_app(AppCode.from_settings(), poll_s=max(10, poll_ms) / 1000, limits=env_limits(), wake_dir=wake_dir,
+    poll_s = max(10, poll_ms) / 1000
+    app = make_app(AppCode.from_settings(poll_s), poll_s=poll_s, limits=env_limits(), wake_dir=wake_dir,
                    metrics=metrics)
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)

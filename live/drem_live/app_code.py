@@ -17,10 +17,10 @@ if importlib.util.find_spec("chalicelib") is None:
     use_app_source()
 
 from chalicelib import services  # noqa: E402  (after functions/ is on sys.path)
-from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView  # noqa: E402
+from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView, PublicViewCache  # noqa: E402
 from chalicelib.live_wake import socket_path as wake_socket_path  # noqa: E402
 from chalicelib.routes.responses import etag_matches  # noqa: E402
-from chalicelib.views import live_regions  # noqa: E402
+from chalicelib.views import live_options, live_regions  # noqa: E402
 from drem_leaderboard.models import Race  # noqa: E402
 
 if TYPE_CHECKING:
@@ -34,13 +34,21 @@ QUERY_MODELS: Mapping[str, type[BaseModel]] = {
 
 @dataclass
 class AppCode:
-    """Reads storage the way the app's public routes do, but without the app's 250 ms poll cache: the live server
-    keeps what it read in memory itself and re-reads every DREM_LIVE_POLL_MS."""
+    """Reads storage the way the app's public routes do, through the live server's own read cache (`reads`): every
+    channel and poll of an event reading at about the same time shares one read of each item (single flight), an
+    item is re-read once it is older than half the poll interval, and `changed(event_id)` (the writer's wake-up)
+    forgets the event's items at once, so the next read after a write always reaches storage."""
     publisher: LeaderboardPublisher
+    reads: PublicViewCache | None = None
 
     @classmethod
-    def from_settings(cls) -> AppCode:
-        return cls(services.uncached_publisher())
+    def from_settings(cls, poll_s: float) -> AppCode:
+        reads = PublicViewCache(fresh_ms=poll_s * 1000 / 2)
+        return cls(services.live_publisher(reads), reads)
+
+    def changed(self, event_id: str) -> None:
+        if self.reads is not None:
+            self.reads.invalidate_event(event_id)
 
     @staticmethod
     def now_ms() -> int:
@@ -48,8 +56,14 @@ class AppCode:
 
     @staticmethod
     def parse_query(kind: str, params: Mapping[str, str]) -> Any:
-        """The fragment route's query model (pydantic ValidationError on bad input)."""
-        return QUERY_MODELS[kind].model_validate(dict(params))
+        """The fragment route's query model (pydantic ValidationError on bad input), spelled the one way its HTML is
+        keyed by (live_options.canonical): queries that render the same region share one channel."""
+        return live_options.canonical(QUERY_MODELS[kind].model_validate(dict(params)))
+
+    @staticmethod
+    def offered(query: Any, event_tracks: list[str]) -> bool:
+        """Whether the app's own pages and links hand out this option set (live_options.offered)."""
+        return live_options.offered(query, event_tracks)
 
     def region(self, kind: str, event_id: str, query: Any, now_ms: int) -> live_regions.LiveRegion:
         if kind == "leaderboard":
@@ -70,8 +84,10 @@ class AppCode:
         return self.publisher.overlay(event_id, track)
 
     @staticmethod
-    def event_exists(event_id: str) -> bool:
-        return services.event_store().get(event_id) is not None
+    def event_tracks(event_id: str) -> list[str] | None:
+        """The event's track ids, or None when there is no such event."""
+        event = services.event_store().get(event_id)
+        return None if event is None else [track.track_id or "" for track in event.tracks]
 
 
 def read_race(event_id: str, race_id: str) -> Race | None:

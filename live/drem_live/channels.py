@@ -31,13 +31,20 @@ class ChannelsFull(Exception):
 class Subscriber:
     pending: Message | None = None
     wake: asyncio.Event = field(default_factory=asyncio.Event)
+    heartbeat_due: bool = False
 
     def offer(self, message: Message) -> None:
         self.pending = message
         self.wake.set()
 
+    def beat(self) -> None:
+        """Ask for a heartbeat (Channels' one timer for everybody, instead of a timer per viewer per message)."""
+        self.heartbeat_due = True
+        self.wake.set()
+
     def take(self) -> Message | None:
         self.wake.clear()
+        self.heartbeat_due = False
         message, self.pending = self.pending, None
         return message
 
@@ -130,27 +137,42 @@ class Channels:
     def __len__(self) -> int:
         return len(self._open)
 
+    def is_open(self, key: Hashable) -> bool:
+        return key in self._open
+
     def join(self, key: Hashable, step: Callable[[Message | None], Message | None],
-             subscriber: Subscriber, *, page: Hashable | None = None, event_id: str = "") -> Channel:
+             subscriber: Subscriber, *, page: Hashable | None = None, event_id: str = "",
+             offered: bool = False) -> Channel:
         """Subscribe to channel `key` (of `page`), opening it if there is room: joining an open one is always free.
 
-        A page (kind and event) may have at most `max_per_page` option sets open, so made-up option sets of one page
-        cannot take every channel of the server (issue 27: 4 addresses x 64 distinct queries took all 256). A channel
-        of `event_id` is woken by `wake(event_id)` when the writer says that event changed."""
+        Option sets the app itself hands out (`offered`: drem's own pages and overlay links, a number bounded by the
+        event's tracks, chalicelib.views.live_options) always get a channel while the server has room. Any other
+        option set of a page (a hand-edited query) takes one of the page's `max_per_page` slots, and such option sets
+        take at most half the server's channels, so made-up queries can neither refuse a page drem offers nor take
+        every channel (issue 27: 4 addresses x 64 distinct queries took all 256). A channel of `event_id` is woken by
+        `wake(event_id)` when the writer says that event changed."""
         channel = self._open.get(key)
         if channel is None:
             if len(self._open) >= self.max_channels:
                 raise ChannelsFull(f"the live server already watches {self.max_channels} different pages")
-            same_page = sum(1 for other in self._pages.values() if other == page) if page is not None else 0
-            if page is not None and same_page >= self.max_per_page:
-                raise ChannelsFull(f"this page is already watched with {self.max_per_page} different options")
+            if not offered:
+                self._check_room_for_other_options(page)
             channel = Channel(key, step, self.poll_s, self.executor, self.sizes, self.is_newer, event_id)
             self._open[key] = channel
-            if page is not None:
+            if page is not None and not offered:
                 self._pages[key] = page
             channel.start()
         channel.subscribers.add(subscriber)
         return channel
+
+    def _check_room_for_other_options(self, page: Hashable | None) -> None:
+        if page is None:
+            return
+        if len(self._pages) >= max(1, self.max_channels // 2):
+            raise ChannelsFull(f"the live server already watches {len(self._pages)} pages with options of their own")
+        same_page = sum(1 for other in self._pages.values() if other == page)
+        if same_page >= self.max_per_page:
+            raise ChannelsFull(f"this page is already watched with {self.max_per_page} options of its own")
 
     def leave(self, channel: Channel, subscriber: Subscriber) -> None:
         channel.subscribers.discard(subscriber)
@@ -158,6 +180,16 @@ class Channels:
             del self._open[channel.key]
             self._pages.pop(channel.key, None)
             channel.stop()
+
+    async def beat_every(self, seconds: float) -> None:
+        """Every `seconds`, a heartbeat to every subscriber not already woken for a message (an idle connection stays
+        open through proxies), with one timer for the whole server."""
+        while True:
+            await asyncio.sleep(seconds)
+            for channel in list(self._open.values()):
+                for subscriber in channel.subscribers:
+                    if not subscriber.wake.is_set():
+                        subscriber.beat()
 
     def wake(self, event_id: str) -> int:
         """Wake every channel of `event_id`; how many there were."""

@@ -12,15 +12,27 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+# Public data, no credentials: the same headers on every poll answer (server.py has the stream's).
+_POLL_HEADERS = {"Access-Control-Allow-Origin": "*", "X-Content-Type-Options": "nosniff", "Cache-Control": "no-cache"}
 
 
 @dataclass(frozen=True)
 class CachedView:
+    """One view as read, with the answers' headers built once for every poll that gets it (the hot path builds
+    nothing per request but the response object)."""
     version: int
     etag: str
     body: bytes
     read_at: float
+    headers_304: dict[str, str] = field(default_factory=dict)
+    headers_200: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, version: int, etag: str, body: bytes, read_at: float) -> CachedView:
+        headers = {**_POLL_HEADERS, "ETag": etag}
+        return cls(version, etag, body, read_at, headers, {**headers, "Content-Type": "application/json"})
 
 
 class PollViews:
@@ -49,15 +61,15 @@ class PollViews:
         """The writer changed `event_id` (drem_live.wake): its views are read again on their next poll."""
         for key, view in list(self._views.items()):
             if key[1] == event_id:
-                self._views[key] = CachedView(view.version, view.etag, view.body, float("-inf"))
+                self._views[key] = CachedView.of(view.version, view.etag, view.body, float("-inf"))
 
     async def _refresh(self, key: tuple[str, str, str], cached: CachedView | None) -> CachedView:
         read_at = time.monotonic()
         version, body = await asyncio.get_running_loop().run_in_executor(self._executor, self._read, *key)
         if cached is not None and version < cached.version:  # an eventually consistent read lagging behind
-            view = CachedView(cached.version, cached.etag, cached.body, read_at)
+            view = CachedView.of(cached.version, cached.etag, cached.body, read_at)
         else:
-            view = CachedView(version, f'"v{version}"', body.encode(), read_at)
+            view = CachedView.of(version, f'"v{version}"', body.encode(), read_at)
         self._views[key] = view
         self._views.move_to_end(key)
         while len(self._views) > self._max_entries:

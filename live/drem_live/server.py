@@ -19,7 +19,7 @@ import logging
 import os
 import re
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -54,9 +54,9 @@ CODE: web.AppKey[AppCode] = web.AppKey("code", AppCode)
 CHANNELS: web.AppKey[Channels] = web.AppKey("channels", Channels)
 STREAMS: web.AppKey[StreamCount] = web.AppKey("streams", StreamCount)
 POLLS: web.AppKey[PollViews] = web.AppKey("polls", PollViews)
-KNOWN_EVENTS: web.AppKey[set[str]] = web.AppKey("known_events", set)
+KNOWN_EVENTS: web.AppKey[dict[str, tuple[list[str], float]]] = web.AppKey("known_events", dict)
 UNKNOWN_EVENTS: web.AppKey[dict[str, float]] = web.AppKey("unknown_events", dict)
-UNKNOWN_EVENT_S = 5.0
+EVENT_READ_S = 5.0
 EXECUTOR: web.AppKey[ThreadPoolExecutor] = web.AppKey("executor", ThreadPoolExecutor)
 
 
@@ -106,23 +106,29 @@ def client_address(request: web.Request) -> str:
         return named
 
 
-async def known_event(request: web.Request, event_id: str) -> bool:
-    """Whether the event exists (one read, remembered; a missing one for UNKNOWN_EVENT_S, so made-up ids cost one read
-    each per window, not one per request): a stream of a made-up event opens no channel."""
+async def event_tracks(request: web.Request, event_id: str) -> list[str] | None:
+    """The event's track ids, or None when it does not exist (one read per EVENT_READ_S per event, remembered; a
+    missing one too, so made-up ids cost one read each per window, not one per request): a stream of a made-up event
+    opens no channel, and the tracks say which option sets the app offers (a track added since is seen within
+    EVENT_READ_S; until then its streams take a slot of their page's own options)."""
     known, unknown = request.app[KNOWN_EVENTS], request.app[UNKNOWN_EVENTS]
-    if event_id in known:
-        return True
-    if time.monotonic() - unknown.get(event_id, -UNKNOWN_EVENT_S) < UNKNOWN_EVENT_S:
-        return False
-    exists = await asyncio.get_running_loop().run_in_executor(request.app[EXECUTOR], request.app[CODE].event_exists,
+    now = time.monotonic()
+    remembered = known.get(event_id)
+    if remembered is not None and now - remembered[1] < EVENT_READ_S:
+        return remembered[0]
+    if now - unknown.get(event_id, -EVENT_READ_S) < EVENT_READ_S:
+        return None
+    tracks = await asyncio.get_running_loop().run_in_executor(request.app[EXECUTOR], request.app[CODE].event_tracks,
                                                               event_id)
-    if exists and len(known) < 10_000:
-        known.add(event_id)
-    elif not exists:
+    if tracks is not None:
+        if len(known) >= 10_000 and event_id not in known:
+            known.clear()
+        known[event_id] = (tracks, now)
+    else:
         if len(unknown) >= 10_000:
             unknown.clear()
-        unknown[event_id] = time.monotonic()
-    return exists
+        unknown[event_id] = now
+    return tracks
 
 
 def stream_handler(kind: str) -> Handler:
@@ -148,7 +154,8 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
     refusal = streams.refusal(client, key, len(app[CHANNELS]))
     if refusal:
         return refuse(503, f"{refusal}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
-    if not await known_event(request, event_id):
+    tracks = await event_tracks(request, event_id)
+    if tracks is None:
         return refuse(404, f"There is no event {event_id}.")
 
     def step(last: Message | None) -> Message | None:  # in a worker thread: read, and render on a new token only
@@ -159,7 +166,8 @@ async def stream(request: web.Request, kind: str) -> web.StreamResponse:
 
     subscriber = Subscriber()
     try:
-        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id), event_id=event_id)
+        channel = app[CHANNELS].join(key, step, subscriber, page=(kind, event_id), event_id=event_id,
+                                     offered=code.offered(query, tracks))
     except ChannelsFull as exc:
         return refuse(503, f"{exc}; try again shortly.", **{"Retry-After": RETRY_AFTER_S})
     streams.open(client, key)
@@ -182,26 +190,34 @@ async def _write_stream(request: web.Request, channel: Any, subscriber: Subscrib
         "X-Accel-Buffering": "no", **({"Content-Encoding": "gzip"} if gzip else {})})
     await response.prepare(request)
     opening = clock_message(request.app[CODE].now_ms(), RETRY_MS).bytes_for(gzip)
-    await _write(response, (GZIP_HEADER if gzip else b"") + opening)
+    await _write(request, response, (GZIP_HEADER if gzip else b"") + opening)
     # What this viewer has: its Last-Event-ID, then whatever it was sent. Only newer tokens go out (a broadcast that
     # reached it while it was joining included, and the channel's current state when it joined an open channel).
     shown: str | None = request.headers.get("Last-Event-ID") or None
     if subscriber.pending is None and channel.latest is not None:
         subscriber.offer(channel.latest)
+    # No timer per viewer per message (profiled: timers were the largest cost of a push to thousands): heartbeats
+    # come from the channels' one timer (Channels.beat_every), and a write is timed only when it may wait.
     while True:
-        try:
-            await asyncio.wait_for(subscriber.wake.wait(), HEARTBEAT_S)
-        except TimeoutError:
-            await _write(response, HEARTBEAT.bytes_for(gzip))
-            continue
+        await subscriber.wake.wait()
+        beat = subscriber.heartbeat_due
         message = subscriber.take()
         if message is not None and token_is_newer(message.token, shown):
-            await _write(response, message.bytes_for(gzip))
+            await _write(request, response, message.bytes_for(gzip))
             shown = message.token
+        elif beat:
+            await _write(request, response, HEARTBEAT.bytes_for(gzip))
 
 
-async def _write(response: web.StreamResponse, data: bytes) -> None:
-    await asyncio.wait_for(response.write(data), WRITE_TIMEOUT_S)
+async def _write(request: web.Request, response: web.StreamResponse, data: bytes) -> None:
+    """Write `data`; a viewer that stops reading is dropped after WRITE_TIMEOUT_S. aiohttp's write waits only while
+    the connection's send buffer is full, so a write onto an empty buffer needs no timer."""
+    transport = request.transport
+    if transport is not None and not transport.is_closing() and transport.get_write_buffer_size() == 0:
+        await response.write(data)
+        return
+    async with asyncio.timeout(WRITE_TIMEOUT_S):
+        await response.write(data)
 
 
 def poll_handler(kind: str) -> Handler:
@@ -213,11 +229,10 @@ def poll_handler(kind: str) -> Handler:
         if not EVENT_ID.fullmatch(event_id) or not TRACK_ID.fullmatch(track):
             return refuse(400, "That is not an event id and track id.")
         view = await request.app[POLLS].get(kind, event_id, track)
-        headers = {**CORS, **NO_SNIFF, "ETag": view.etag, "Cache-Control": "no-cache"}
         if etag_matches(view.etag, request.headers.get("If-None-Match")) or \
                 request.query.get("since") == str(view.version):
-            return web.Response(status=304, headers=headers)
-        return web.Response(body=view.body, headers={**headers, "Content-Type": "application/json"})
+            return web.Response(status=304, headers=view.headers_304)
+        return web.Response(body=view.body, headers=view.headers_200)
     return handle
 
 
@@ -237,10 +252,11 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
                              max_per_page=limits.max_channels_per_page)
     app[STREAMS] = StreamCount(limits)
     app[POLLS] = PollViews(read_view, poll_s, executor)
-    app[KNOWN_EVENTS] = set()
+    app[KNOWN_EVENTS] = {}
     app[UNKNOWN_EVENTS] = {}
     if wake_dir:
         def woken(event_id: str) -> None:
+            code.changed(event_id)  # first: no channel may be handed what was read before the write
             app[CHANNELS].wake(event_id)
             app[POLLS].expire(event_id)
 
@@ -253,6 +269,13 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
         app.router.add_get(f"/live/api/{kind}/{{event_id}}", public(poll_handler(kind)))
     add_video_routes(app)  # the cars' cameras (docs/racing.md "The car's eye")
     app.router.add_route("OPTIONS", "/live/{tail:.*}", preflight)
+
+    async def beat(_app: web.Application) -> AsyncIterator[None]:
+        task = asyncio.get_running_loop().create_task(app[CHANNELS].beat_every(HEARTBEAT_S))
+        yield
+        task.cancel()
+
+    app.cleanup_ctx.append(beat)
 
     async def close(_app: web.Application) -> None:
         app[CHANNELS].stop_all()

@@ -180,3 +180,29 @@ def test_clean_stop_snapshots_and_empties_the_journal(durable_server_factory):
     item = server.clients().dynamodb.get_item(TableName=TABLE, Key={"pk": {"S": "kept"}, "sk": {"S": "v"}})
     assert "Item" in item
     server.stop()
+
+
+
+def test_a_signed_in_racer_keeps_their_session_after_kill_9_with_no_snapshot_since(durable_server_factory):
+    """Sign-ins are journaled, not snapshotted (classify.py): after a crash the replayed sign-in holds the same refresh
+    token, so the racer's browser stays signed in."""
+    server = durable_server_factory.start("sign-in-kill", snapshot_interval=3600)
+    clients = server.clients()
+    pool_id, client_id = _set_up(clients)
+    clients.cognito.admin_create_user(UserPoolId=pool_id, Username="racer", TemporaryPassword="Temp-Passw0rd!",
+                                      MessageAction="SUPPRESS")
+    clients.cognito.admin_set_user_password(UserPoolId=pool_id, Username="racer", Password=PASSWORD, Permanent=True)
+    snapshots_before = server.health()["snapshot_bytes"]
+    signed_in = clients.cognito.initiate_auth(ClientId=client_id, AuthFlow="USER_PASSWORD_AUTH",
+                                              AuthParameters={"USERNAME": "racer", "PASSWORD": PASSWORD})
+    refresh_token = signed_in["AuthenticationResult"]["RefreshToken"]
+    assert server.health()["snapshot_bytes"] == snapshots_before, "the sign-in was snapshotted"
+
+    server.kill9()
+    server.start()
+
+    refreshed = server.clients(retries=3).cognito.initiate_auth(
+        ClientId=client_id, AuthFlow="REFRESH_TOKEN_AUTH", AuthParameters={"REFRESH_TOKEN": refresh_token})
+    sub = _claims(signed_in["AuthenticationResult"]["IdToken"])["sub"]
+    assert _claims(refreshed["AuthenticationResult"]["IdToken"])["sub"] == sub
+    server.stop()

@@ -170,6 +170,41 @@ def test_streams_beyond_the_caps_get_503_with_retry_after(capped_live_server: st
     answer.close()
 
 
+@pytest.fixture(scope="module")
+def two_option_sets_live_server(live_stack: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A second live server on the same storage where a page may open only 2 option sets of its own."""
+    port = local_stack.free_port()
+    env = {**live_stack.env, "DREM_LIVE_MAX_CHANNELS_PER_PAGE": "2"}
+    process = local_stack.spawn("live server, 2 option sets a page", [
+        sys.executable, "-m", "drem_live", "--host", "127.0.0.1", "--port", str(port)],
+        tmp_path_factory.mktemp("option-sets") / "live.log", env=env)
+    try:
+        local_stack.wait_for_ok(f"http://127.0.0.1:{port}/live/healthz", process, 60)
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        process.stop(5)
+
+
+def test_made_up_option_sets_cannot_refuse_an_overlay_the_link_builder_made(two_option_sets_live_server: str,
+                                                                              race: Any) -> None:
+    """Issue 27: one client filled a page's option-set slots with hand-made queries and a real overlay was refused."""
+    base = f"{two_option_sets_live_server}/live/overlay/{race[0]}"
+    attacker = [open_stream(f"{base}?track=1&format=average&lang={lang}") for lang in ("en", "de")]
+    refused = requests.get(f"{base}?track=1&format=average&lang=fr", stream=True, timeout=5, proxies=NO_PROXY)
+    assert refused.status_code == 503 and "options of its own" in refused.json()["message"]
+    # Every overlay the console's link builder offers still streams: another language, no gap column, chroma keyed.
+    for query in ("trackId=1&lang=ja&gapToLeader=false", "trackId=1&showLeaderboard=false&lang=sv",
+                  "trackId=1&chroma=true&chromaColor=%23FF00FF"):
+        offered = open_stream(f"{base}?{query}")
+        assert offered.next_fragment()["data"].startswith("<"), query
+        offered.response.close()
+    # The same hand-made options spelled another way (language case, the chroma key) are the channel already open.
+    again = open_stream(f"{base}?track=1&format=average&lang=DE&chroma=true")
+    assert again.next_fragment()["id"]
+    for stream in [*attacker, again]:
+        stream.response.close()
+
+
 def test_drem_status_names_the_live_server(live_stack: Any) -> None:
     out = subprocess.run([sys.executable, "-m", "drem_local.cli", "status", "--state-dir", str(live_stack.state_dir)],
                          capture_output=True, text=True, timeout=60).stdout

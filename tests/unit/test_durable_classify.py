@@ -33,12 +33,14 @@ def test_dynamodb_writes_are_journaled(operation):
     assert is_state_changing(environ) and service_of(environ) == DYNAMODB
 
 
-def test_logins_are_journaled_and_snapshotted_because_they_mint_refresh_tokens():
+def test_logins_are_journaled_but_not_snapshotted_because_their_refresh_tokens_replay_from_the_journal():
     environ = {"REQUEST_METHOD": "POST", "PATH_INFO": "/",
                "HTTP_X_AMZ_TARGET": "AWSCognitoIdentityProviderService.InitiateAuth"}  # unsigned, as boto3 sends it
 
     assert service_of(environ) == COGNITO and is_state_changing(environ)
-    assert needs_immediate_snapshot(environ, COGNITO)
+    assert not needs_immediate_snapshot(environ, COGNITO)
+    assert needs_immediate_snapshot(_target("AWSCognitoIdentityProviderService.AdminCreateUser", "cognito-idp"),
+                                    COGNITO)
 
 
 def test_admin_get_user_is_a_read():

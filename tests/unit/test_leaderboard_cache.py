@@ -196,3 +196,37 @@ def test_a_lap_through_the_race_api_shows_on_the_next_poll(desk: Desk, scenario:
     assert [e["fastest_lap_ms"] for e in desk.board(eid)["entries"]] == [11_111]
     overlay = desk.ok(desk.anonymous_get(f"/api/overlay/{eid}?track=1"))
     assert overlay["last_lap_ms"] == 11_111
+
+
+def test_the_writers_wake_up_makes_the_next_read_of_that_event_reach_storage_and_spares_other_events() -> None:
+    """The live server's cache: channels woken together share one read; after `invalidate_event` (the writer's
+    wake-up) nobody is handed what was read before the write, a read in flight included."""
+    boards, seconds = MemoryBoards(), Seconds()
+    cache = PublicViewCache(125, monotonic=seconds)
+    publisher = LeaderboardPublisher(boards, lambda: 0, cache=cache)
+    boards.set_behind_the_publishers_back(3)
+    boards.items[("e2", board_key("1"))] = Materialised(version=7, etag='"v7"', body="other event")
+    assert publisher.board("e1", "1").version == 3 and publisher.board("e2", "1").version == 7
+    assert publisher.board("e1", "1").version == 3 and boards.public_reads == 2  # shared: no third read
+
+    boards.set_behind_the_publishers_back(4)  # the app's writer, then its wake-up
+    cache.invalidate_event("e1")
+    assert publisher.board("e1", "1").version == 4
+    assert publisher.board("e2", "1").version == 7 and boards.public_reads == 3
+
+    started, release = threading.Event(), threading.Event()
+
+    def read_before_the_write() -> PublicView:
+        started.set()
+        release.wait(5)
+        return PublicView(version=4, etag='"v4"', body="body 4")
+
+    cache.invalidate_event("e1")
+    reader = threading.Thread(target=lambda: cache.get(("memory", "e1", board_key("1")), read_before_the_write))
+    reader.start()
+    started.wait(5)
+    boards.set_behind_the_publishers_back(5)
+    cache.invalidate_event("e1")  # woken while that read was out: it must not be kept
+    release.set()
+    reader.join(5)
+    assert publisher.board("e1", "1").version == 5

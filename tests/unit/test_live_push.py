@@ -191,11 +191,13 @@ def test_made_up_option_sets_of_one_page_cannot_take_every_channel() -> None:
             page = ("overlay", "e1")
             for n in range(16):
                 channels.join(("overlay", "e1", n), lambda _last: None, Subscriber(), page=page)
-            with pytest.raises(Exception, match="already watched with 16 different options"):
+            with pytest.raises(Exception, match="already watched with 16 options of its own"):
                 channels.join(("overlay", "e1", "made-up"), lambda _last: None, Subscriber(), page=page)
             channels.join(("overlay", "e1", 3), lambda _last: None, Subscriber(), page=page)  # already open: joins
             channels.join(("leaderboard", "e1", "1"), lambda _last: None, Subscriber(), page=("leaderboard", "e1"))
-            assert len(channels) == 17
+            # An overlay the console's link builder made still gets its channel: the 16 slots are for other options.
+            channels.join(("overlay", "e1", "offered"), lambda _last: None, Subscriber(), page=page, offered=True)
+            assert len(channels) == 18
             channels.stop_all()
 
     asyncio.run(run())
@@ -259,3 +261,40 @@ def test_a_wake_makes_the_next_json_poll_read_again() -> None:
             return seen
 
     assert asyncio.run(run()) == [1, 1, 1, 2]
+
+
+def test_hand_made_option_sets_of_many_pages_leave_half_the_channels_to_the_pages_drem_offers() -> None:
+    async def run() -> None:
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(10, executor, max_channels=8, is_newer=token_is_newer, max_per_page=16)
+            for n in range(4):
+                channels.join(("overlay", f"e{n}", "made-up"), lambda _last: None, Subscriber(),
+                              page=("overlay", f"e{n}"))
+            with pytest.raises(Exception, match="4 pages with options of their own"):
+                channels.join(("overlay", "e9", "made-up"), lambda _last: None, Subscriber(), page=("overlay", "e9"))
+            for n in range(4):
+                channels.join(("overlay", "e9", n), lambda _last: None, Subscriber(), page=("overlay", "e9"),
+                              offered=True)
+            assert len(channels) == 8
+            channels.stop_all()
+
+    asyncio.run(run())
+
+
+def test_one_timer_beats_every_idle_viewer_and_never_replaces_a_pending_board() -> None:
+    async def run() -> None:
+        with ThreadPoolExecutor(1) as executor:
+            channels = Channels(10, executor, max_channels=8, is_newer=token_is_newer)
+            idle, busy = Subscriber(), Subscriber()
+            channels.join("board", lambda _last: None, idle)
+            channels.join("board", lambda _last: None, busy)
+            board = Message.fragment("1.1-0", "<section>board</section>")
+            busy.offer(board)
+            beating = asyncio.get_running_loop().create_task(channels.beat_every(0.01))
+            await asyncio.wait_for(idle.wake.wait(), 5)
+            beating.cancel()
+            assert idle.heartbeat_due and idle.take() is None  # a heartbeat, nothing else
+            assert not busy.heartbeat_due and busy.take() == board  # its board is still what it gets
+            channels.stop_all()
+
+    asyncio.run(run())

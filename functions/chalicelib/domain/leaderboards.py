@@ -178,12 +178,25 @@ class PublicViewCache:
             if flight is not None:
                 flight.invalidated = True
 
+    def invalidate_event(self, event_id: str) -> None:
+        """Forget every item of `event_id` (keys are (namespace, event id, sort key)), reads in flight included: the
+        writer says it changed (the live server's wake-up)."""
+        with self._lock:
+            for key in [key for key in self._entries if _event_of(key) == event_id]:
+                del self._entries[key]
+            for key in [key for key in self._flights if _event_of(key) == event_id]:
+                self._flights.pop(key).invalidated = True
+
     def clear(self) -> None:
         with self._lock:
             self._entries.clear()
             for flight in self._flights.values():
                 flight.invalidated = True
             self._flights.clear()
+
+
+def _event_of(key: Hashable) -> object:
+    return key[1] if isinstance(key, tuple) and len(key) == 3 else None
 
 
 PROCESS_CACHE = PublicViewCache()

@@ -17,6 +17,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Literal
 from urllib.parse import quote, urlencode
 
@@ -78,6 +79,7 @@ class OverlayQuery(PageOptions):
 # --- version tokens ---------------------------------------------------------------------------------------------
 
 
+@lru_cache(maxsize=1024)  # the live server compares each broadcast token once per viewer: parse it once
 def token_order(token: str) -> tuple[tuple[int, ...], ...] | None:
     """The comparable form of a token ("12.5-1.7-0" → ((12,), (5, 1), (7, 0))); None if it is not one."""
     try:
