@@ -330,6 +330,7 @@ def measure(racers: int = 50) -> Sizes:
         board_key,
         overlay_key,
     )
+    from chalicelib.domain.big_screen import ScreenView
     from chalicelib.views import live_regions
     from drem_leaderboard.models import Lap, LapSource, RaceConfig, Racer, RaceStatus, new_race
     from drem_leaderboard.ranking import Leaderboard, RacerProfile
@@ -383,9 +384,10 @@ def measure(racers: int = 50) -> Sizes:
                                                  live_regions.OverlayQuery(track="1"), now)
     overlay_token, overlay_html = overlay_region.token, overlay_region.render()
     page_html = render.page("leaderboard", title="re:Invent 2026", track="1", tracks=["1"], lang="en", qr="none",
-                            qr_svg="", page_url="https://drem.example.org/", track_title="", board_footer="",
-                            sponsor=None, links=[], stream_url="/live/leaderboard/reinvent-2026?track=1",
-                            logo_url="/event/reinvent-2026/logo?v=0123456789abcdef",
+                            qr_svg="", page_url="https://drem.example.org/", stream_url=(
+                                "/live/leaderboard/reinvent-2026?track=1"), car_eye_url=None,
+                            view=ScreenView(title="re:Invent 2026", sponsor="", track_title="", footer="", links=(),
+                                            logo_url="/event/reinvent-2026/logo?v=0123456789abcdef"),
                             **board_context()).body
 
     def item_bytes(key: tuple[str, str]) -> int:
