@@ -85,6 +85,7 @@ class DurableState:
         self.last_seq = 0
         self.dirty: set[str] = set()
         self.recovery: RecoveryReport | None = None
+        self.started_at = time.time()  # the app's repair sweep tells a restart of this server by it
 
     def recover(self, replay: Callable[[JournalRecord], int]) -> RecoveryReport:
         """Load the snapshots, then replay each journal record its service's snapshot does not hold yet."""
@@ -182,6 +183,7 @@ class DurableState:
             "recovered_records": self.recovery.replayed if self.recovery else 0,
             "recovery_failed_records": self.recovery.failed if self.recovery else 0,
             "recovery_seconds": round(self.recovery.seconds, 3) if self.recovery else 0.0,
+            "started_at": self.started_at,
         }
 
     def disk_health(self) -> dict[str, Any]:
