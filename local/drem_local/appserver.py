@@ -110,8 +110,9 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
         restarted_at = restarts.restarted_at()
         if restarted_at is not None:
             # Every request that wrote before the crash has had its answer (an error), or is retrying its next
-            # step against the new server: an account from before the restart without a group will not get one
-            # from its own registration, so it is finished now instead of after the in-flight grace.
+            # step against the new server: an account from the journal (created, or replayed, before the restart
+            # was ready) without a group will not get one from its own registration, so it is finished now
+            # instead of after the in-flight grace.
             _finish_interrupted_registrations(max(0.0, time.time() - restarted_at))
         elif time.monotonic() >= next_registration_repair:
             # Also while running: a storage-only crash leaves half-registered racers without any app restart.

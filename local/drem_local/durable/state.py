@@ -85,7 +85,9 @@ class DurableState:
         self.last_seq = 0
         self.dirty: set[str] = set()
         self.recovery: RecoveryReport | None = None
-        self.started_at = time.time()  # the app's repair sweep tells a restart of this server by it
+        # When recovery ended: the app's repair sweep tells a restart of this server by it, and everything the
+        # journal replayed (an account replayed gets the replay's creation time) was created before it.
+        self.started_at = time.time()
 
     def recover(self, replay: Callable[[JournalRecord], int]) -> RecoveryReport:
         """Load the snapshots, then replay each journal record its service's snapshot does not hold yet."""
@@ -115,6 +117,7 @@ class DurableState:
                              *(record.seq for record in existing.records)])
         self.recovery = RecoveryReport(self.manifest.seq, len(existing.records), replayed, skipped, failed,
                                        existing.torn_bytes, time.perf_counter() - started)
+        self.started_at = time.time()
         return self.recovery
 
     def record(self, service: str, environ: dict[str, Any], body: bytes) -> None:
