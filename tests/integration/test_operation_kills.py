@@ -44,6 +44,6 @@ def test_storage_killed_as_the_race_of_a_queue_start_reaches_the_journal_ends_in
     _assert_whole(kills, "queue start")
 
 
-def test_drem_import_killed_midway_is_finished_by_running_it_again(kills):
-    kills.run("import", "worker", at_record=9)  # of its ~18: accounts made, their groups and the event not yet
+def test_drem_import_and_the_stack_killed_midway_are_finished_by_running_the_import_again(kills):
+    kills.run("import", "everything", at_record=9)  # of its ~18: accounts made, their groups and the event not yet
     _assert_whole(kills, "import")
