@@ -19,6 +19,7 @@ twice, boards that differ from their races, and accounts left half-registered.
 """
 from __future__ import annotations
 
+import os
 import random
 import threading
 import time
@@ -30,6 +31,7 @@ from typing import Any
 
 import requests
 
+from drem_local.durable.kill_point import ENV as KILL_POINT_ENV
 from drem_local.stack import RunningStack, StackConfig, free_port, start_stack
 from drem_local.supervise import RestartPolicy, Supervisor
 
@@ -114,7 +116,7 @@ class Api:
             if failures is not None:
                 failures.append(NO_ANSWER if answer is None else _message(answer[1]))
             time.sleep(0.2)
-        raise RuntimeError(f"{method} {path} never answered within {OP_DEADLINE_S:.0f}s")
+        raise RuntimeError(f"{method} {path} never answered within {OP_DEADLINE_S:.0f}s: {answer}")
 
     def login(self, username: str, password: str) -> None:
         self.token = self.until_answered("POST", "/api/auth/token", {"username": username, "password": password},
@@ -150,6 +152,8 @@ class Chaos:
         self.config = StackConfig(state_dir=state_dir, app_port=free_port(), storage_port=free_port(),
                                   live_port=free_port())
         self.stack: RunningStack | None = None
+        # The storage server's kill point (tests/chaos_operations.py arms it; unarmed it does nothing).
+        self.kill_point_file = state_dir.parent / "kill-point.json"
         self.report = ChaosReport()
         self.api = Api(self.config.app_url)
         self.tracks: list[Track] = []
@@ -163,12 +167,14 @@ class Chaos:
 
     # --- lifecycle -------------------------------------------------------------------------------------------------
 
-    def start(self) -> None:
+    def start(self, *, racing: bool = True) -> None:
+        os.environ[KILL_POINT_ENV] = str(self.kill_point_file)  # read by the storage server this starts
         self.stack = start_stack(self.config, "admin", ADMIN_PASSWORD, timeout=60)
         self._supervisor = Supervisor(self.stack, self.say, RestartPolicy(max_crashes=1000, first_delay_s=0.0,
                                                                           max_delay_s=0.0))
         self.api.login("admin", ADMIN_PASSWORD)
-        self._set_up_racing()
+        if racing:  # the timers' event and tracks for the traffic rounds
+            self._set_up_racing()
 
     def close(self) -> None:
         self._stop.set()

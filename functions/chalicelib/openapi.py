@@ -25,6 +25,10 @@ REF_TEMPLATE = "#/components/schemas/{model}"
 ERROR_STATUSES = {"400": "Invalid input (the error names the field)", "401": "No or invalid credentials",
                   "403": "Not allowed for this caller (wrong role or missing CSRF token)",
                   "404": "Not found (or hidden from this caller)", "409": "Conflicts with the current state"}
+# Answered by any operation that writes (every method but GET): the storage server refuses a write it cannot make
+# durable (chalicelib.storage.aws_errors → http_errors), before storing any of it.
+WRITE_ERROR_STATUSES = {"507": "drem's data disk is full (or read-only): the write was refused and nothing of it "
+                               "stored; the message names the disk and what to do (free space, then try again)"}
 _PATH_PARAM = re.compile(r"{([^}]+)}")
 
 ERROR_SCHEMA: dict[str, Any] = {
@@ -110,7 +114,8 @@ def build_document(app: Chalice, *, title: str = "drem API", version: str = "1")
         "paths": paths,
         "components": {
             "schemas": schemas,
-            "responses": {status: _error_response(text) for status, text in ERROR_STATUSES.items()},
+            "responses": {status: _error_response(text)
+                          for status, text in {**ERROR_STATUSES, **WRITE_ERROR_STATUSES}.items()},
             "securitySchemes": SECURITY_SCHEMES,
         },
     }
@@ -144,7 +149,8 @@ def _operation(declared: DeclaredRoute, refs: dict[tuple[type, str], dict[str, A
     responses: dict[str, Any] = {str(docs.status_code): success}
     if docs.conditional:
         responses["304"] = {"description": "Not modified since the version named by If-None-Match (empty body)"}
-    responses.update({status: {"$ref": f"#/components/responses/{status}"} for status in ERROR_STATUSES})
+    errors = [*ERROR_STATUSES, *(WRITE_ERROR_STATUSES if declared.method.upper() not in ("GET", "HEAD") else ())]
+    responses.update({status: {"$ref": f"#/components/responses/{status}"} for status in errors})
     operation["responses"] = responses
     return operation
 

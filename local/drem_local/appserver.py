@@ -21,6 +21,7 @@ presigned uploads and downloads work from the venue network while storage itself
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import signal
@@ -86,14 +87,18 @@ def _with_gateway(app: WSGIApp, gateway: WSGIApp) -> WSGIApp:
     return dispatch
 
 
-def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S) -> None:
-    """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set."""
+def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP_INTERVAL_S,
+                            storage_url: str | None = None) -> None:
+    """Finish publish intents left by a crash: now, then every `interval_s` until `stopping` is set. Also finish
+    registrations a crash interrupted: at once when the storage server restarted (see `StorageRestarts`), and every
+    REGISTRATION_REPAIR_S for any other cause."""
     from chalicelib import logs, services
     from chalicelib.domain.races import STALE_INTENT_MS
 
     _finish_interrupted_registrations(0.0)  # at start nothing is in flight
     next_registration_repair = time.monotonic() + REGISTRATION_REPAIR_S
     older_than_ms = 0  # at start nothing is in flight: every intent left is a crash's
+    restarts = StorageRestarts(storage_url)
     while True:
         try:
             finished = services.race_service().complete_pending_publishes(older_than_ms)
@@ -102,12 +107,44 @@ def sweep_pending_publishes(stopping: threading.Event, interval_s: float = SWEEP
                 logs.log(logging.WARNING, "finished board publishes a crash had left pending", count=finished)
         except Exception as exc:  # storage down or not set up yet: the intents stay, the next sweep tries again
             logs.log(logging.INFO, "publish sweep skipped", reason=str(exc)[:200])
-        if time.monotonic() >= next_registration_repair:
+        restarted_at = restarts.restarted_at()
+        if restarted_at is not None:
+            # Every request that wrote before the crash has had its answer (an error), or is retrying its next
+            # step against the new server: an account from the journal (created, or replayed, before the restart
+            # was ready) without a group will not get one from its own registration, so it is finished now
+            # instead of after the in-flight grace.
+            _finish_interrupted_registrations(max(0.0, time.time() - restarted_at))
+        elif time.monotonic() >= next_registration_repair:
             # Also while running: a storage-only crash leaves half-registered racers without any app restart.
             _finish_interrupted_registrations(REGISTRATION_IN_FLIGHT_S)
             next_registration_repair = time.monotonic() + REGISTRATION_REPAIR_S
         if stopping.wait(interval_s):
             return
+
+
+class StorageRestarts:
+    """Notices that the storage server was restarted (a crash: the journal was replayed), from the start time its
+    unsigned health answer carries (drem_local.durable)."""
+
+    def __init__(self, storage_url: str | None) -> None:
+        self.storage_url = storage_url
+        self.seen: float | None = None
+
+    def restarted_at(self) -> float | None:
+        """The new server's start time the first time a restart is seen, else None."""
+        if not self.storage_url:
+            return None
+        from drem_local.stack import HEALTH_PATH, http_get
+
+        answer = http_get(self.storage_url + HEALTH_PATH, timeout=2.0)
+        if answer is None or answer[0] != 200:
+            return None
+        try:
+            started = float(json.loads(answer[1])["started_at"])
+        except (ValueError, KeyError, TypeError):
+            return None
+        previous, self.seen = self.seen, started
+        return None if previous is None or previous == started else started
 
 
 def _finish_interrupted_registrations(older_than_s: float) -> None:
@@ -224,7 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     if not args.serve_only:
-        threading.Thread(target=sweep_pending_publishes, args=(stopping,), name="publish-sweeper",
+        threading.Thread(target=sweep_pending_publishes, args=(stopping, SWEEP_INTERVAL_S, args.storage_url),
+                         name="publish-sweeper",
                          daemon=True).start()
         threading.Thread(target=_purge_stale_uploads, args=(stopping,), name="upload-purge", daemon=True).start()
     host, port = server.server_address

@@ -276,17 +276,24 @@ STALL_S = 120.0
 
 
 def wait_for_ok(url: str, process: ManagedProcess, timeout: float = STALL_S,
-                say: Callable[[str], None] | None = None) -> float:
+                say: Callable[[str], None] | None = None, needs: ManagedProcess | None = None) -> float:
     """Poll `url` until it answers 200; seconds it took. `timeout` bounds only a stall: the wait goes on as long as
     the process keeps working (drem_local.readiness), and `say` hears every 10 s what it is waiting for. Fails early,
-    with the log tail, if the process dies."""
+    with the log tail, if the process dies, or if `needs` (the storage server an app restart waits on) dies meanwhile:
+    the app would answer 503 for ever, busy enough never to count as stalled."""
     from drem_local.readiness import ChildExited, ReadinessWait, StillWaiting, process_progress
 
     def answered() -> bool:
         answer = http_get(url, timeout=1.0)
         return answer is not None and answer[0] == 200
 
-    wait = ReadinessWait(f"the {process.name} (pid {process.pid}) to answer {url}", answered, process.alive,
+    def alive() -> bool:
+        if needs is not None and not needs.alive():
+            raise StackError(f"the {needs.name} stopped while the {process.name} was starting; it is started again "
+                             "first")
+        return process.alive()
+
+    wait = ReadinessWait(f"the {process.name} (pid {process.pid}) to answer {url}", answered, alive,
                          lambda: process_progress(process.pid, process.log_path), stall_s=timeout, say=say)
     try:
         return wait.run()
@@ -353,14 +360,14 @@ def app_environment(config: StackConfig, outputs: Any) -> dict[str, str]:
 
 
 def start_app(config: StackConfig, env: dict[str, str], timeout: float = STALL_S,
-              say: Callable[[str], None] | None = None) -> ManagedProcess:
+              say: Callable[[str], None] | None = None, storage: ManagedProcess | None = None) -> ManagedProcess:
     _require_free_port(config.app_host, config.app_port, "app server", "--port")
     process = spawn("app server", [
         sys.executable, "-m", "drem_local.appserver", "--host", config.app_host, "--port", str(config.app_port),
         "--storage-url", config.storage_url,
     ], config.log_dir / "app.log", env=env)
     try:
-        wait_for_ok(config.app_local_url + APP_HEALTH_PATH, process, timeout, say)
+        wait_for_ok(config.app_local_url + APP_HEALTH_PATH, process, timeout, say, needs=storage)
     except BaseException:
         process.stop(2)
         raise
@@ -439,7 +446,7 @@ class RunningStack:
         self._record_pids()
 
     def restart_app(self, timeout: float = STALL_S) -> None:
-        self.app = start_app(self.config, self.env, timeout, self.say)
+        self.app = start_app(self.config, self.env, timeout, self.say, storage=self.storage)
         self._record_pids()
 
     def restart_trainer(self, timeout: float = STALL_S) -> None:

@@ -59,6 +59,8 @@ class Supervisor:
     def _revive(self, role: str, current: Callable[[], ManagedProcess], restart: Callable[[], None]) -> None:
         failed_restart: str | None = None  # why the last restart attempt failed (its own log lines included)
         while not current().alive():
+            if role != "storage" and not self.stack.storage.alive():  # died since: everything else waits on it
+                self._revive("storage", lambda: self.stack.storage, self.stack.restart_storage)
             died = current()
             now = self.clock()
             recent = self.crashes.setdefault(role, deque())

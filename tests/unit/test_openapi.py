@@ -91,6 +91,11 @@ def test_the_whole_app_document_is_valid_and_lists_every_api_route_with_who_may_
     assert document["paths"]["/healthz"]["get"]["security"] == []
     assert {"deviceAuth": []} in document["paths"]["/api/devices/self"]["get"]["security"]
     assert document["paths"]["/api/users/{username}/groups"]["get"]["x-drem-allow"] == ["admin"]
+    # A write may meet a full disk: the document says the client can get 507 there, and only there.
+    assert document["paths"]["/api/users"]["post"]["responses"]["507"] == {"$ref": "#/components/responses/507"}
+    assert "full" in document["components"]["responses"]["507"]["description"]
+    assert "507" in document["paths"]["/api/events/{event_id}"]["delete"]["responses"]
+    assert "507" not in document["paths"]["/api/me"]["get"]["responses"]
 
 
 def test_a_route_with_body_shows_its_schema_with_required_fields():
@@ -125,7 +130,7 @@ def test_query_list_responses_conditional_gets_devices_and_undocumented_routes()
     assert board["security"] == [] and board["x-drem-allow"] == "public"
     # declared without any documentation keywords: still there, with the shared error answers
     assert ping["security"] == [{"deviceAuth": []}] and ping["x-drem-allow"] == ["car"]
-    assert set(ping["responses"]) == {"200", "400", "401", "403", "404", "409"}
+    assert set(ping["responses"]) == {"200", "400", "401", "403", "404", "409", "507"}  # a POST writes
     assert "/dashboard" not in document["paths"]
 
 

@@ -108,3 +108,32 @@ def test_a_crashed_booth_trainer_is_restarted_like_the_app(tmp_path):
     finally:
         for child in (stack.storage, stack.app, stack.trainer):
             child.kill_hard()
+
+
+def test_storage_that_dies_while_the_app_is_restarted_is_started_again_first(tmp_path):
+    """A power cut seen in two checks: the app is dead, storage not yet; storage dies while the app restarts (whose
+    wait then fails instead of waiting for ever on answers of 503), and the next attempt starts storage first."""
+    said, order = [], []
+
+    def restart_storage(stack):
+        order.append("storage")
+        stack.storage = _alive(tmp_path / "storage.log")
+
+    stack = FakeStack(_alive(tmp_path / "storage.log"), _crashing("app server", tmp_path / "app.log", "killed"),
+                      restart_storage)
+
+    def restart_app():
+        order.append("app")
+        if order == ["app"]:  # the first attempt: storage goes down meanwhile
+            stack.storage.kill_hard()
+            raise StackError("the storage server stopped while the app server was starting")
+        stack.app = _alive(tmp_path / "app.log")
+
+    stack.restart_app = restart_app
+    try:
+        Supervisor(stack, said.append, RestartPolicy(max_crashes=5), sleep=lambda _s: None).check()
+        assert order == ["app", "storage", "app"]
+        assert stack.storage.alive() and stack.app.alive()
+    finally:
+        for process in (stack.storage, stack.app):
+            process.kill_hard()

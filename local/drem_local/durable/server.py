@@ -19,6 +19,7 @@ from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, 
 from drem_local.durable.disk_guard import disk_refusal
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
+from drem_local.durable.kill_point import KillPoint
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
 from drem_local.durable.state import DurableState, replay_environ
 
@@ -50,6 +51,7 @@ class DurableApp:
         self.upload_guard = upload_guard
         self.lock = threading.Lock()
         self._snapshotting = threading.Lock()
+        self.kill_point = KillPoint.from_environment()  # None unless a chaos harness started this server
 
     def recover(self):
         with self.lock:
@@ -122,6 +124,8 @@ class DurableApp:
                         raise
                     log.warning("refused a write: %s", disk_full.message)
                     return refuse(disk_full, environ, start_response)
+                if self.kill_point is not None:
+                    self.kill_point.after_record(self.state.last_seq)
             app_iter = self.moto_app(environ, capture)
             try:
                 payload = b"".join(app_iter)

@@ -86,6 +86,9 @@ class DurableState:
         self.last_seq = 0
         self.dirty: set[str] = set()
         self.recovery: RecoveryReport | None = None
+        # When recovery ended: the app's repair sweep tells a restart of this server by it, and everything the
+        # journal replayed (an account replayed gets the replay's creation time) was created before it.
+        self.started_at = time.time()
 
     def recover(self, replay: Callable[[JournalRecord], int]) -> RecoveryReport:
         """Load the snapshots, then replay each journal record its service's snapshot does not hold yet."""
@@ -115,6 +118,7 @@ class DurableState:
                              *(record.seq for record in existing.records)])
         self.recovery = RecoveryReport(self.manifest.seq, len(existing.records), replayed, skipped, failed,
                                        existing.torn_bytes, time.perf_counter() - started)
+        self.started_at = time.time()
         return self.recovery
 
     def record(self, service: str, environ: dict[str, Any], body: bytes) -> None:
@@ -213,6 +217,7 @@ class DurableState:
             "recovered_records": self.recovery.replayed if self.recovery else 0,
             "recovery_failed_records": self.recovery.failed if self.recovery else 0,
             "recovery_seconds": round(self.recovery.seconds, 3) if self.recovery else 0.0,
+            "started_at": self.started_at,
         }
 
     def disk_health(self) -> dict[str, Any]:
