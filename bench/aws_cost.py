@@ -322,6 +322,7 @@ def measure(racers: int = 50) -> Sizes:
     sys.path[:0] = [p for p in (str(ROOT / "functions"), str(ROOT)) if p not in sys.path]
     os.environ.setdefault("AWS_DEFAULT_REGION", REGION)
 
+    from chalicelib.domain.big_screen import ScreenView
     from chalicelib.domain.leaderboards import (
         BoardRow,
         LeaderboardPublisher,
@@ -330,7 +331,6 @@ def measure(racers: int = 50) -> Sizes:
         board_key,
         overlay_key,
     )
-    from chalicelib.domain.big_screen import ScreenView
     from chalicelib.views import live_regions
     from drem_leaderboard.models import Lap, LapSource, RaceConfig, Racer, RaceStatus, new_race
     from drem_leaderboard.ranking import Leaderboard, RacerProfile

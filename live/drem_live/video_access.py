@@ -16,9 +16,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from chalicelib import services  # noqa: E402
-from chalicelib.auth.principals import Role  # noqa: E402
 from chalicelib.auth.sessions import resolve_caller  # noqa: E402
-from chalicelib.domain.errors import DremError  # noqa: E402
+from chalicelib.core.errors import DremError  # noqa: E402
+from chalicelib.core.principals import Role  # noqa: E402
 from drem_live import app_code  # noqa: F401  (puts functions/ on sys.path first)
 
 CREDENTIAL_TTL_S = 10.0

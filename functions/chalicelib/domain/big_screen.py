@@ -15,7 +15,7 @@ from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict
 
-from chalicelib.domain.errors import DremError
+from chalicelib.core.errors import DremError
 from chalicelib.domain.events import Event, LandingPageLink
 from chalicelib.domain.leaderboards import PublicView
 

@@ -7,12 +7,12 @@ from typing import Any
 
 from markupsafe import Markup
 
+from chalicelib.core.errors import DremError
 from chalicelib.core.principals import Principal
 from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
 from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
-from chalicelib.domain.errors import DremError
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
 from chalicelib.views.track_map import track_map
