@@ -114,3 +114,44 @@ def test_a_trainer_killed_midway_finishes_the_same_version_and_run_when_it_takes
     assert models[0]["model_id"] == job["model_id"]
     runs = [r for r in alice.call("GET", "/api/runs").json_body["runs"] if r.get("job_id") == job_id]
     assert [(r["run_id"], r["status"]) for r in runs] == [(job["autonomous_run_id"], "FINALISED")]
+
+
+def test_a_claim_stored_before_storage_went_away_is_still_the_workers_job(alice: ModelsApi,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """The claim's write reached storage but its answer was lost; the retry then found the job RUNNING. Skipping it
+    would leave the visitor's job RUNNING with nobody training it."""
+    from chalicelib.domain.booth_runs import RecordChanged
+
+    _, job_id = drive_and_queue(alice, steps=5)
+    training = Trainer(lambda line: None).training
+    real_replace = type(training.store).replace_job
+
+    def stored_then_lost(self, job, *, expected_status):  # type: ignore[no-untyped-def]
+        real_replace(self, job, expected_status=expected_status)
+        raise RecordChanged("the retry of a write that was stored")
+    monkeypatch.setattr(type(training.store), "replace_job", stored_then_lost)
+    claimed = training.claim_next()
+    monkeypatch.undo()
+    assert claimed is not None and claimed.job_id == job_id
+    assert alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]["status"] == "RUNNING"
+
+
+def test_a_job_cut_off_by_storage_going_away_is_taken_again_not_failed(alice: ModelsApi,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    from chalicelib.core.errors import ServiceUnavailable
+
+    _, job_id = drive_and_queue(alice)
+    trainer = Trainer(lambda line: None)
+
+    def storage_gone(self, job, folder):  # type: ignore[no-untyped-def]
+        raise ServiceUnavailable("The booth store cannot be reached.")
+    monkeypatch.setattr(Trainer, "_train_and_submit", storage_gone)
+    with pytest.raises(ServiceUnavailable):  # to the worker's loop, which queues it again once storage answers
+        trainer.work_once()
+    monkeypatch.undo()
+    assert alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]["status"] == "RUNNING"  # not FAILED
+
+    assert [job.job_id for job in trainer.training.requeue_interrupted()] == [job_id]
+    assert trainer.work_once() is True
+    job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
+    assert job["status"] == "DONE" and job["model_name"] == "v0001", job

@@ -5,10 +5,12 @@ takes one job at a time, oldest first: QUEUED (with its place in the queue) → 
 DONE (the model version it made) | FAILED (the reason, in words). The worker submits the archive through the same
 upload validation as any racer's upload (`ModelService.submit_archive`), so a trained model lands in "my models" as
 the next version and is judged exactly like one a racer uploaded. A job left RUNNING by a worker that died is queued
-again when a worker starts (`requeue_interrupted`): an acknowledged job is never lost. Everything the job makes is
-keyed on it: the version's model id and name are recorded on the job before the submit (`plan_version`), and the
-submit with that id is idempotent; the autonomous run's id likewise (`plan_autonomous_run`). So a worker killed after
-any step finishes the same version and run when it takes the job again, never a second copy.
+again when a worker starts, and after the worker lost storage midway (`requeue_interrupted`: one worker per stack,
+so a RUNNING job it is not training is an interrupted one): an acknowledged job is never lost, nor left RUNNING.
+Everything the job makes is keyed on it: the version's model id and name are recorded on the job before the submit
+(`plan_version`), and the submit with that id is idempotent; the autonomous run's id likewise (`plan_autonomous_run`,
+and the run itself carries the job's id). So a worker killed after any step finishes the same version and run when it
+takes the job again, never a second copy.
 """
 from __future__ import annotations
 
@@ -185,6 +187,12 @@ class TrainingService:
             try:
                 self.store.replace_job(running, expected_status=JobStatus.QUEUED.value)
             except RecordChanged:
+                # Our own claim, stored before storage went away, whose retry found it RUNNING: still ours (the
+                # started_at is the one we wrote). Skipping it would leave it RUNNING with nobody training it.
+                stored = self.store.get_job(job.job_id)
+                if stored is not None and stored.status is JobStatus.RUNNING and \
+                        stored.started_at == running.started_at:
+                    return stored
                 continue
             return running
         return None

@@ -137,6 +137,9 @@ class Trainer:
         try:
             model, run_id = self._train_and_submit(job, folder)
         except Exception as error:  # noqa: BLE001 - the racer sees why their job failed, the log has the traceback
+            if storage_away(error):  # not the job's fault: it is queued again once storage answers (main loop)
+                self.say(f"trainer: job {job.job_id} was cut off by storage going away; it is taken again")
+                raise
             self.say(f"trainer: job {job.job_id} failed: {traceback.format_exc()}")
             latest = self.training.store.get_job(job.job_id) or job
             self.training.fail(latest, _reason(error))
@@ -203,6 +206,10 @@ class Trainer:
         except Exception as error:  # noqa: BLE001 - the version stays usable; scrutineering can be asked for again
             self.say(f"trainer: scrutineering {name} failed: {_reason(error)}")
         run = self.runs.store.get_run(job.autonomous_run_id) if job.autonomous_run_id else None
+        if run is None:  # made, but cut off before the job recorded it: the run carries the job's id
+            run = next((r for r in self.runs.store.all_runs() if r.job_id == job.job_id), None)
+            if run is not None:
+                job = self.training.plan_autonomous_run(job, run.run_id)
         if run is None:
             run = self.runs.create(racer, NewRun(track_id=job.track_id, mode=RunMode.AUTONOMOUS,
                                                  model_id=model.model_id), job_id=job.job_id)
@@ -230,6 +237,8 @@ class Trainer:
             finished = self._drive(running, folder)
             self._record_evaluation(finished)
         except Exception as error:  # noqa: BLE001 - the racer sees why; the log has the traceback
+            if run.job_id and storage_away(error):  # its job is taken again, which drives it again from the start
+                raise
             self.say(f"trainer: autonomous run {run.run_id} failed: {traceback.format_exc()}")
             latest = self.runs.store.get_run(run.run_id) or running
             if latest.status is RunStatus.RUNNING:
@@ -278,6 +287,14 @@ class Trainer:
             lap_times_s=metrics.lap_times_s, steering_jitter_deg=metrics.stability_deg, source="booth"))
 
 
+def storage_away(error: BaseException) -> bool:
+    """Storage stopped answering (restarting after a crash): the work is taken again when it is back. A full disk is
+    not that: it is said to the racer as the job's reason."""
+    from chalicelib.core.errors import ServiceUnavailable, StorageDiskFull
+
+    return isinstance(error, ServiceUnavailable) and not isinstance(error, StorageDiskFull)
+
+
 def _reason(error: Exception) -> str:
     message = getattr(error, "message", None) or str(error) or type(error).__name__
     return f"{type(error).__name__}: {message}"[:400]
@@ -306,7 +323,9 @@ def main(argv: list[str] | None = None) -> int:
         import drem_sim.learn.pipeline  # noqa: F401
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
-    requeued = False  # jobs a dead trainer left RUNNING go back to the queue once storage answers
+    # Jobs a dead trainer left RUNNING (or this one, when storage went away under it) go back to the queue once
+    # storage answers. drem up runs one trainer per stack, so a RUNNING job this idle one holds is nobody's.
+    requeued = False
     while not stopping:
         try:
             if not requeued:
@@ -317,6 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         except Exception:  # noqa: BLE001 - storage briefly away (a restart): say so and look again
             say(f"trainer: could not reach the queue: {traceback.format_exc(limit=2)}")
             busy = False
+            requeued = False  # the job it had (if any) is RUNNING with nobody training it: queued again
         if args.once and not busy:
             return 0
         if not busy:
