@@ -4,10 +4,11 @@
    racers, an operator creates events and a racer uploads models, all retrying as real clients do
    (tests/chaos_harness.py).
 2. Operations: `--rounds` rounds more, each one operation (racer registration, queue start, `drem import`, model
-   upload + check + conversion) killed -9 right after its Nth journal record, N drawn over the records an uncut run
-   of it writes; the processes killed take turns: storage, app, the worker (the scrutineering worker; for an import,
-   the `drem import` process itself) and everything (tests/chaos_operations.py). Booth training is not among them
-   yet (a run trains for a minute; its crash handling is tested in tests/unit/test_booth_worker.py).
+   upload + check + conversion, booth training) killed -9 right after its Nth journal record, N drawn over the
+   records an uncut run of it writes; the processes killed take turns: storage, app, the worker (the scrutineering
+   worker; for an import, the `drem import` process itself; for booth training, the trainer worker) and everything
+   (tests/chaos_operations.py). A booth round is a new visitor's 300-frame drive of drem_oval and Train with the
+   form's Epochs at 1 (tests/chaos_booth.py): a few seconds of training, the same kind of model as 8 epochs.
 3. Disk full: a stack on a 96 MiB tmpfs filled to the last byte, writes until they are refused, a power cut, space
    freed, a restart (tests/chaos_disk.py; needs root to mount the tmpfs, otherwise the round says it was skipped).
 
@@ -17,8 +18,8 @@ stop) to the first authenticated 200, crash next to clean restart.
     .venv/bin/python bench/chaos.py [--rounds 30] [--seed 19] [--no-disk-round]
 
 Goal: 0 lost, 0 duplicated, 0 stale boards, 0 half-created, 0 model checks left "Checking…" (the scrutineering worker
-resumes a cut-off check; here it looks every 2 s and takes over a check 5 s old), and a restart after a crash within
-1.5x a clean one.
+resumes a cut-off check; here it looks every 2 s and takes over a check 5 s old), every training job DONE with exactly
+one version (its archive stored) and one finished autonomous run, and a restart after a crash within 1.5x a clean one.
 A crash restarts only the child that died (timed from the kill, so noticing it and the journal replay count); a clean
 restart starts both (timed from the start, after the clean stop).
 """
@@ -44,7 +45,8 @@ CLEAN_RESTARTS = 2
 VISIBILITY_SAMPLES = 3
 VICTIMS_OF = {"registration": ("storage", "app", "everything"), "queue start": ("storage", "app", "everything"),
               "import": ("storage", "app", "worker", "everything"),
-              "model upload": ("storage", "app", "worker", "everything")}
+              "model upload": ("storage", "app", "worker", "everything"),
+              "booth training": ("storage", "app", "worker", "everything")}
 RESTART_RATIO_GOAL = 1.5
 
 

@@ -3,8 +3,9 @@
 
 Each round takes one operation, the way its user runs it (the desk's registration, the timekeeper's Start on the racer
 queue, `drem import` as a subprocess, a racer's model upload whose check and conversion the app and the scrutineering
-worker finish), arms the storage server's kill point (drem_local.durable.kill_point) to kill -9 the chosen processes
-right after the operation's Nth journal record, N drawn over the records the operation writes (counted once on an
+worker finish, a booth visitor's Train whose job the trainer worker finishes: tests/chaos_booth.py), arms the storage
+server's kill point (drem_local.durable.kill_point) to kill -9 the chosen processes right after the operation's Nth
+journal record, N drawn over the records the operation writes (counted once on an
 uncut run of it, as an independent campaign would), and runs it. The dead processes are started again by `drem up`'s
 own Supervisor, the user repeats what got no answer (Start again, the same registration, the same import command), and
 then the outcome is checked: nothing acknowledged lost, nothing made twice, nothing left half made or stuck.
@@ -28,10 +29,11 @@ import requests
 
 from drem_local.durable.kill_point import arm, disarm
 from drem_local.stack import HEALTH_PATH, http_get
+from tests.chaos_booth import BoothTraining
 from tests.chaos_harness import OP_DEADLINE_S, RETRYABLE, Chaos
 
 VICTIMS = ("storage", "app", "worker", "everything")
-OPERATIONS = ("registration", "queue start", "import", "model upload")
+OPERATIONS = ("registration", "queue start", "import", "model upload", "booth training")
 RACER_PASSWORD = "Chaos-Racer-Pass-1!"
 DREM = str(Path(sys.executable).with_name("drem"))
 
@@ -74,6 +76,7 @@ class OperationKills:
         self._export_dir: Path | None = None
         self._export_racers: list[str] = []
         self._count = 0
+        self.booth = BoothTraining(self)
         # One supervising thread for the campaign's whole life: a child is started with PR_SET_PDEATHSIG, so it gets
         # SIGTERM when the thread that started it ends (a thread per round would stop every server it restarted).
         self._checking = threading.Lock()
@@ -129,9 +132,9 @@ class OperationKills:
             return [stack.app.pid]
         if victim == "worker":
             return [worker] if worker else []
-        if victim == "everything":
-            return [p.pid for p in (stack.app, stack.live, stack.scrutineer) if p is not None] + (
-                [client_pid] if client_pid else [])
+        if victim == "everything":  # a power cut: every process of the stack (the trainer too, once it runs)
+            pids = [p.pid for p in (stack.app, stack.live, stack.scrutineer, stack.trainer) if p is not None]
+            return pids + ([client_pid] if client_pid and client_pid not in pids else [])
         return []
 
     def _keep_up(self) -> None:
@@ -171,7 +174,8 @@ class OperationKills:
                 "registration": (self._registration_run, self._registration_check),
                 "queue start": (self._queue_run, self._queue_check),
                 "import": (self._import_run, self._import_check),
-                "model upload": (self._model_run, self._model_check)}
+                "model upload": (self._model_run, self._model_check),
+                "booth training": (self.booth.run, self.booth.check)}
         return table[name]
 
     def _name(self, what: str) -> str:
