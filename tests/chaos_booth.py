@@ -159,7 +159,8 @@ class BoothTraining:
                                       f"{[(m['name'], m['status'], m.get('reason')) for m in models]}")
         self._check_archives(username, models)
         self._check_autonomous_run(visitor, username, job)
-        self._check_train_again(visitor, username)
+        if job["status"] == "DONE":  # (after a failure, Train again rightly queues a new job)
+            self._check_train_again(visitor, username)
 
     def _check_archives(self, username: str, models: list[dict[str, Any]]) -> None:
         """No model record without its archive, no archive (or upload) without its record."""
