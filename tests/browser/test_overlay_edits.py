@@ -16,6 +16,8 @@ from tests.browser.test_live_push import wait_until
 
 pytestmark = pytest.mark.browser
 
+SCREENSHOTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "overlay"
+
 
 def test_a_renamed_event_and_a_new_logo_reach_an_open_overlay(chromium: Any, live_stack: Any, app_url: str,
                                                               browser_errors: Any, tmp_path: Path) -> None:
@@ -61,5 +63,7 @@ def test_a_renamed_event_and_a_new_logo_reach_an_open_overlay(chromium: Any, liv
         assert overlay.locator("#overlay-live").count() == 1  # the race region stays, with the racer
         assert "overlay-racer" in overlay.locator("#overlay-live").inner_text()
     assert polls == [], polls  # the streamed overlay's edits came by push
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    streamed.screenshot(path=str(SCREENSHOTS / "edited-live-1920x1080.png"))
     for page in (streamed, polled, staff):
         page.context.close()
