@@ -73,4 +73,6 @@ def league_page(principal: Principal, track: str, query: BoardQuery) -> Response
 @route(bp, "/league/{track}/racers/{racer}", allow=PUBLIC)
 def league_racer_fragment(principal: Principal, track: str, racer: str) -> Response:
     """The hyperparameters and trials behind a board row (htmx fragment)"""
-    return render.fragment("league_submission", view=submission_view(services.league_service().latest(track, racer)))
+    submission = services.league_service().latest(track, racer)
+    shown = services.profile_service().shown_names([submission.racer])[submission.racer]
+    return render.fragment("league_submission", view=submission_view(submission, shown))

@@ -1,7 +1,12 @@
 """What the operator console's cars page shows: every device with its status, fleet and assigned models, and the
-models an operator can give a car. Built from the same services the JSON API uses."""
+models an operator can give a car. Built from the same services the JSON API uses.
+
+Racers are named by their display names, told apart as everywhere else (drem_leaderboard.names) among every racer the
+page names: the owners of the assigned models and of the models on offer, so a chip and the choices name one racer
+alike, and the page's 2-second poll (which rebuilds the chips) names them as the page did."""
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 
 from pydantic import BaseModel
@@ -10,12 +15,24 @@ from chalicelib.core.principals import User
 from chalicelib.domain.assignments import AssignmentService, CarModelStatus
 from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.fleets import FleetService
+from chalicelib.domain.profiles import PublicProfile
 from chalicelib.domain.racer_models import ListQuery, ModelService, ModelStatus
+from drem_leaderboard.names import told_apart
+
+# {sub: public profile} of many racers at once (ProfileService.public_by_subs): one batch read per page or poll.
+ProfilesBySub = Callable[[list[str]], Mapping[str, PublicProfile]]
 
 
 class AssignedLine(BaseModel):
     model_id: str
-    text: str
+    owner_sub: str
+    owner_username: str
+    model: str  # the model's name and how far it got: "fast-one (loaded)"
+    racer: str = ""  # how the page names its owner (set by `cars_overview`)
+
+    @property
+    def text(self) -> str:
+        return f"{self.racer or self.owner_username} · {self.model}"
 
 
 class CarLine(BaseModel):
@@ -37,7 +54,14 @@ class CarLine(BaseModel):
 
 class ModelChoice(BaseModel):
     model_id: str
-    label: str
+    owner_sub: str
+    owner_username: str
+    name: str
+    racer: str = ""  # how the page names its owner (set by `cars_overview`)
+
+    @property
+    def label(self) -> str:
+        return f"{self.racer or self.owner_username} · {self.name}"
 
 
 class CarsOverview(BaseModel):
@@ -93,8 +117,8 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
                 state = "loaded"
             elif running is not None and state == "loaded":
                 state = "on the car"
-            assigned.append(AssignedLine(model_id=model.model_id,
-                                         text=f"{model.owner_username} · {model.name} ({state}{said})"))
+            assigned.append(AssignedLine(model_id=model.model_id, owner_sub=model.owner_sub,
+                                         owner_username=model.owner_username, model=f"{model.name} ({state}{said})"))
     commands = devices.device_commands(view.device_id)
     last, state = command_text(max(commands, key=lambda c: c.command_id) if commands else None, now_ms)
     return CarLine(
@@ -108,19 +132,27 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
         last_command_state=state)
 
 
-def car_lines(devices: DeviceService, fleets: FleetService, assignments: AssignmentService,
-              now_ms: int) -> list[CarLine]:
-    fleet_names = {f.fleet_id: f.name for f in fleets.list_fleets()}
-    return [car_line(view, fleet_names, assignments, devices, now_ms) for view in devices.list_devices()]
-
-
 def cars_overview(principal: User, devices: DeviceService, fleets: FleetService, assignments: AssignmentService,
-                  models: ModelService, now_ms: int) -> CarsOverview:
+                  models: ModelService, profiles: ProfilesBySub, now_ms: int) -> CarsOverview:
     fleet_names = {f.fleet_id: f.name for f in fleets.list_fleets()}
     lines = [car_line(view, fleet_names, assignments, devices, now_ms) for view in devices.list_devices()]
     page = models.list_models(principal, ListQuery(limit=100))
-    choices = [ModelChoice(model_id=m.model_id, label=f"{m.owner_username} · {m.name}")
+    choices = [ModelChoice(model_id=m.model_id, owner_sub=m.owner_sub, owner_username=m.owner_username, name=m.name)
                for m in page.models if m.status is ModelStatus.AVAILABLE]
+    racer = _racer_names([(a.owner_sub, a.owner_username) for line in lines for a in line.assigned]
+                         + [(c.owner_sub, c.owner_username) for c in choices], profiles)
+    lines = [line.model_copy(update={"assigned": [a.model_copy(update={"racer": racer[a.owner_sub]})
+                                                  for a in line.assigned]}) for line in lines]
+    choices = [c.model_copy(update={"racer": racer[c.owner_sub]}) for c in choices]
     return CarsOverview(cars=lines, fleets=sorted(fleet_names.items(), key=lambda item: item[1].lower()),
                         models=choices, tail_lights=[(name, name) for name in TAIL_LIGHT_PALETTE] + [("#FFFFFF",
                                                                                                       "white")])
+
+
+def _racer_names(owners: list[tuple[str, str]], profiles: ProfilesBySub) -> dict[str, str]:
+    """{sub: the name the page shows}: the display name, with the sign-in name after it when another racer on the page
+    goes by the same one; a racer without a profile is named by the sign-in name their model carries."""
+    signed_in = dict(owners)
+    public = profiles(list(signed_in))
+    return told_apart({sub: (p.display_name or p.username, p.username) if (p := public.get(sub)) else (name, name)
+                       for sub, name in signed_in.items()})
