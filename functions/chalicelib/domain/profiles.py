@@ -136,13 +136,17 @@ class ProfileService:
     def shown_names(self, usernames: list[str]) -> dict[str, str]:
         """{sign-in name: what boards show} for racers shown together and named by their sign-in name (the league's
         rows): the display name, with the sign-in name after it when another of them goes by the same display name
-        (drem_leaderboard.names). A name without a profile is shown as it is."""
+        (drem_leaderboard.names). A name without a profile is shown as it is. Two batch reads (names to subs, then
+        profiles) where the store offers them, however many racers."""
+        unique = list(dict.fromkeys(usernames))
+        get_subs = getattr(self._store, "subs_for_usernames", None)
+        subs = get_subs(unique) if get_subs else {name.casefold(): sub for name in unique
+                                                  if (sub := self._store.sub_for_username(name))}
+        public = self.public_by_subs(list(dict.fromkeys(subs.values())))
         names = {}
-        for username in dict.fromkeys(usernames):
-            sub = self._store.sub_for_username(username)
-            profile = self._store.get(sub) if sub else None
-            public = public_view(profile) if profile is not None else None
-            names[username] = (public.display_name, public.username) if public else (username, username)
+        for username in unique:
+            shown = public.get(subs.get(username.casefold(), ""))
+            names[username] = (shown.display_name, shown.username) if shown else (username, username)
         return told_apart(names)
 
     def account_name(self, username: str) -> str | None:

@@ -30,7 +30,8 @@ class TrainForm(BaseModel):
 def booth(principal: User, query: ListRunsQuery) -> Response:
     """The booth: tracks to drive, your runs, training jobs and model versions"""
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), services.device_service(), everyone=query.everyone)
+                                  services.track_service(), services.device_service(),
+                                  services.profile_service().public_by_subs, everyone=query.everyone)
     return render.page("booth", view=view)
 
 
@@ -71,5 +72,6 @@ def booth_make_active(principal: User, model_id: str) -> Response:
     """Mark one of your versions active (htmx; answers the booth page)"""
     services.training_service().set_active(principal, model_id)
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), services.device_service(), everyone=False)
+                                  services.track_service(), services.device_service(),
+                                  services.profile_service().public_by_subs, everyone=False)
     return render.page("booth", view=view)

@@ -12,7 +12,7 @@ from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.core.principals import User
 from chalicelib.domain.model_registry import Evaluation, EvaluationInput
-from chalicelib.views.registry_views import loss_plot, registry_plots
+from chalicelib.views.registry_views import loss_plot, registry_plots, registry_racer_names
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -22,7 +22,8 @@ bp = Blueprint(__name__)
 def staff_registry(principal: User) -> Response:
     """Every racer's model versions"""
     view = services.registry_service().registry(principal, everyone=True)
-    return render.page("registry", view=view, plots=registry_plots(view))
+    return render.page("registry", view=view, plots=registry_plots(view),
+                       racer_names=registry_racer_names(view, services.profile_service().public_by_subs))
 
 
 @route(bp, "/models/registry", allow=SIGNED_IN)

@@ -15,6 +15,7 @@ from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingServ
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
+from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
@@ -33,10 +34,11 @@ class BoothView:
     why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
+    racer_names: dict[str, str]  # staff: {sub: display name, told apart among the racers the page lists}
 
 
 def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService,
-               devices: DeviceService, *, everyone: bool) -> BoothView:
+               devices: DeviceService, profiles: ProfilesBySub, *, everyone: bool) -> BoothView:
     everyone = everyone and bool(principal.roles & MODEL_STAFF)
     query = ListRunsQuery(everyone=everyone)
     mine = runs.list_runs(principal, query)
@@ -51,7 +53,9 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
                      trainable=trainable, why_not_train=training.why_not_train(principal),
                      active_versions=_active_versions(training, mine) if everyone else [],
-                     cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [])
+                     cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [],
+                     racer_names=shown_racer_names({(r.owner_sub, r.owner_username) for r in mine}, profiles)
+                     if everyone else {})
 
 
 def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:

@@ -6,7 +6,6 @@ page names: the owners of the assigned models and of the models on offer, so a c
 alike, and the page's 2-second poll (which rebuilds the chips) names them as the page did."""
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 
 from pydantic import BaseModel
@@ -15,12 +14,8 @@ from chalicelib.core.principals import User
 from chalicelib.domain.assignments import AssignmentService, CarModelStatus
 from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.fleets import FleetService
-from chalicelib.domain.profiles import PublicProfile
 from chalicelib.domain.racer_models import ListQuery, ModelService, ModelStatus
-from drem_leaderboard.names import told_apart
-
-# {sub: public profile} of many racers at once (ProfileService.public_by_subs): one batch read per page or poll.
-ProfilesBySub = Callable[[list[str]], Mapping[str, PublicProfile]]
+from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 
 
 class AssignedLine(BaseModel):
@@ -139,7 +134,7 @@ def cars_overview(principal: User, devices: DeviceService, fleets: FleetService,
     page = models.list_models(principal, ListQuery(limit=100))
     choices = [ModelChoice(model_id=m.model_id, owner_sub=m.owner_sub, owner_username=m.owner_username, name=m.name)
                for m in page.models if m.status is ModelStatus.AVAILABLE]
-    racer = _racer_names([(a.owner_sub, a.owner_username) for line in lines for a in line.assigned]
+    racer = shown_racer_names([(a.owner_sub, a.owner_username) for line in lines for a in line.assigned]
                          + [(c.owner_sub, c.owner_username) for c in choices], profiles)
     lines = [line.model_copy(update={"assigned": [a.model_copy(update={"racer": racer[a.owner_sub]})
                                                   for a in line.assigned]}) for line in lines]
@@ -148,11 +143,3 @@ def cars_overview(principal: User, devices: DeviceService, fleets: FleetService,
                         models=choices, tail_lights=[(name, name) for name in TAIL_LIGHT_PALETTE] + [("#FFFFFF",
                                                                                                       "white")])
 
-
-def _racer_names(owners: list[tuple[str, str]], profiles: ProfilesBySub) -> dict[str, str]:
-    """{sub: the name the page shows}: the display name, with the sign-in name after it when another racer on the page
-    goes by the same one; a racer without a profile is named by the sign-in name their model carries."""
-    signed_in = dict(owners)
-    public = profiles(list(signed_in))
-    return told_apart({sub: (p.display_name or p.username, p.username) if (p := public.get(sub)) else (name, name)
-                       for sub, name in signed_in.items()})
