@@ -228,3 +228,27 @@ def test_the_models_page_names_racers_by_display_name_and_tells_two_bjorns_apart
     # Only one Björn on this car: plain "Björn", as the table lists them together.
     status = text(operator.get(f"/console/models/car-status?device_id={car.device_id}"))
     assert "bjorn_a-fast Björn assigned" in status and "yamada-fast 山田太郎 assigned" in status, status
+
+
+def test_the_scrutineering_warning_names_racers_by_display_name(app: Any, users: Any) -> None:
+    """Issue 31: the Models page's "Not every model passed scrutineering" warning said "bjorn_a – bjorn_a-fast" (the
+    sign-in name). Now the display name, told apart as the page does when two racers in the warning are both Björn."""
+    operator = signed_in(app, users, "olga", "operator")
+    uploaded = {username: _named(app, users, username, name).upload_and_complete(f"{username}-fast.tar.gz",
+                                                                                  onnx_archive(bias))
+                for bias, (username, name) in enumerate((("bjorn_a", "Björn"), ("bjorn_b", "björn"),
+                                                         ("yamada", "山田太郎")))}
+    car = activate_device("car-7", make_fleet("fleet-1"))
+
+    def warning(*usernames: str) -> str:
+        asked = post(operator, "/console/models/assign",
+                     {"device_id": car.device_id, "model_ids": [uploaded[u]["model_id"] for u in usernames]},
+                     htmx=True)
+        assert asked.status_code == 200 and 'data-testid="send-anyway"' in body(asked)
+        return text(asked)
+
+    both = warning("bjorn_a", "bjorn_b")
+    assert "Björn (bjorn_a) – bjorn_a-fast: not scrutineered yet" in both
+    assert "björn (bjorn_b) – bjorn_b-fast: not scrutineered yet" in both
+    alone = warning("bjorn_a", "yamada")
+    assert "Björn – bjorn_a-fast: not scrutineered yet" in alone and "山田太郎 – yamada-fast" in alone

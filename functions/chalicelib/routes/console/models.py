@@ -80,7 +80,8 @@ def assign_models(principal: User) -> Response:
     request = bp.current_request
     values = submitted(request, "device_id", "confirmed")
     device_id, model_ids = values.get("device_id", ""), submitted_list(request, "model_ids")
-    doubts = services.scrutineer_service().doubts(model_ids) if values.get("confirmed") != "yes" else []
+    asked = values.get("confirmed") != "yes"
+    doubts = services.scrutineer_service().doubts(model_ids, _racer_names_of) if asked else []
     if device_id and doubts:  # asked, not refused: staff may still send a model that did not pass
         return render.fragment("console/car_status", assignment=None, device_id=device_id, errors={},
                                notice="", doubts=doubts, model_ids=model_ids)
@@ -122,6 +123,11 @@ def _racer_names(models: Sequence[ModelRecord | AssignedModel]) -> dict[str, str
     """{owner sub: display name}, told apart among the racers the table lists (one batch profile read)."""
     return shown_racer_names([(m.owner_sub, m.owner_username) for m in models],
                              services.profile_service().public_by_subs)
+
+
+def _racer_names_of(owners: list[tuple[str, str]]) -> dict[str, str]:
+    """The scrutineering warning names racers as the Models page does (one batch profile read)."""
+    return shown_racer_names(owners, services.profile_service().public_by_subs)
 
 
 def _filtered(listed: list[ModelRecord], racer_names: dict[str, str]
