@@ -38,8 +38,10 @@ def booth(principal: User, query: ListRunsQuery) -> Response:
 @route(bp, "/booth/jobs", allow=SIGNED_IN, query=ListRunsQuery)
 def booth_jobs(principal: User, query: ListRunsQuery) -> Response:
     """Your training jobs (htmx fragment, polled while one is queued or running)"""
+    everyone = query.everyone and bool(principal.roles & MODEL_STAFF)
     jobs = booth_views.jobs_view(principal, services.training_service(), everyone=query.everyone)
-    return render.fragment("booth_jobs", jobs=jobs, everyone=query.everyone and bool(principal.roles & MODEL_STAFF))
+    names = booth_views.job_racer_names(jobs, services.profile_service().public_by_subs) if everyone else {}
+    return render.fragment("booth_jobs", jobs=jobs, everyone=everyone, job_names=names)
 
 
 @route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)
@@ -63,7 +65,8 @@ def booth_run(principal: User, run_id: str) -> Response:
     runs = services.run_service()
     run, rows = runs.get(principal, run_id), runs.controls(principal, run_id)
     inspection = booth_views.run_inspection(run, rows)
-    return render.page("booth_run", run=run, inspection=inspection,
+    racer = booth_views.racer_name(run.owner_sub, run.owner_username, services.profile_service().public_by_subs)
+    return render.page("booth_run", run=run, inspection=inspection, racer=racer,
                        track_map=booth_views.run_map(services.track_service(), run, rows))
 
 
