@@ -65,10 +65,12 @@ PARAMETER_ACTIONS: tuple[str, ...] = ("ssm:GetParameter",)
 LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
 
 # The live-page server's task role (drem_infra.live_pages): it renders the live regions from the materialised boards
-# and overlays (leaderboards), the event (events) and the race behind an overlay (races), and only reads. Per table
+# and overlays (leaderboards), the event (events) and the race behind an overlay (races), checks a car's credential
+# when it sends its camera (fleet), and only reads. Per table
 # logical name; tests/infra/test_iam_policy.py derives the same set from the live routes' reads and fails on any drift.
 LIVE_TABLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "events": ("dynamodb:GetItem",),
+    "fleet": ("dynamodb:GetItem", "dynamodb:Query"),  # a car sending its camera: its credential and device record
     "leaderboards": ("dynamodb:BatchGetItem", "dynamodb:GetItem"),  # the adapter reads a big board's state parts
     "races": ("dynamodb:GetItem", "dynamodb:Query"),
 }

@@ -31,6 +31,10 @@ def chromium() -> Iterator[Any]:
 # (404) or a server failure (5xx) still fails the test.
 _REFUSAL_SHOWN_ON_PAGE = re.compile(r"^Failed to load resource: the server responded with a status of "
                                     r"(400|401|403|409|422|429) ")
+# htmx logs a request it cancelled itself (the page navigated on, or a newer poll replaced it under hx-sync) as
+# "htmx:afterRequest" + "htmx:sendAbort": nothing a person sees. A request that failed still fails the test, because
+# htmx logs its own event beside afterRequest ("htmx:sendError", "htmx:timeout", "htmx:responseError").
+_CANCELLED_BY_HTMX = re.compile(r"^htmx:(afterRequest|sendAbort)\b")
 
 
 class BrowserErrors:
@@ -52,7 +56,7 @@ class BrowserErrors:
         return context
 
     def _console(self, message: Any) -> None:
-        if _REFUSAL_SHOWN_ON_PAGE.search(message.text):
+        if _REFUSAL_SHOWN_ON_PAGE.search(message.text) or _CANCELLED_BY_HTMX.match(message.text.strip()):
             return
         if message.type == "error" or "Content Security Policy" in message.text:
             where = (message.location or {}).get("url", "")

@@ -20,9 +20,9 @@ SCREENSHOTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "big-scre
 
 def test_staff_edits_of_sponsor_footer_and_logo_reach_open_big_screens(chromium: Any, live_stack: Any, app_url: str,
                                                                        browser_errors: Any, tmp_path: Path) -> None:
-    create_user(live_stack, "screen-op", "operator")
+    create_user(live_stack, "screen-editor", "operator")
     create_user(live_stack, "screen-racer", "racer")
-    token = access_token(live_stack, "screen-op")
+    token = access_token(live_stack, "screen-editor")
     event_id = call(app_url, "POST", "/api/events", token=token, expect=201, body={
         "name": "Screen Cup", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-02", "country_code": "SE",
         "tracks": [{"track_id": "1", "leaderboard_title": "Main stage"}]})["event_id"]
@@ -42,7 +42,7 @@ def test_staff_edits_of_sponsor_footer_and_logo_reach_open_big_screens(chromium:
     assert "Follow the race #AWSDeepRacer" in phone.get_by_test_id("board-footer").inner_text()
 
     staff = chromium.new_context(viewport=BIG_SCREEN).new_page()
-    sign_in(staff, app_url, "screen-op")
+    sign_in(staff, app_url, "screen-editor")
     staff.goto(f"{app_url}/console/events/{event_id}/edit")
     staff.fill("#name", "Screen Cup Finals")
     staff.fill("#sponsor", "Acme Robotics")

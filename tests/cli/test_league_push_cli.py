@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import tarfile
 from pathlib import Path
 
@@ -60,3 +61,25 @@ def test_console_logs_and_model_download_pushed_together(live_stack, tmp_path: P
     assert "pushed console-logs" in pushed and "1/2 laps, best 14.321 s" in pushed
     board = requests.get(live_stack.url + "/api/league/reinvent_base", timeout=10).json()
     assert any(ranked["entry"]["best_lap_s"] == 14.321 for ranked in board["entries"]), board
+
+
+def test_league_pull_names_racers_by_display_name_and_tells_two_bjorns_apart(live_stack, tmp_path: Path) -> None:
+    """Issue 31: `drem league pull` printed sign-in names. Now the table's racer column shows display names, two
+    racers both called Björn as "Björn (cli_bjorn_a)" and "björn (cli_bjorn_b)" (the board page's rule)."""
+    url = live_stack.url
+    env = {"DREM_API": url, "DREM_USERNAME": live_stack.admin_username, "DREM_PASSWORD": live_stack.admin_password}
+    bearer = {"Authorization": "Bearer " + requests.post(url + "/api/auth/token", timeout=10, json={
+        "username": live_stack.admin_username, "password": live_stack.admin_password}).json()["access_token"]}
+    racers = {"cli_bjorn_a": "Björn", "cli_bjorn_b": "björn", "cli_yamada": "山田太郎"}
+    for index, (username, name) in enumerate(racers.items()):
+        made = requests.post(url + "/api/users", headers=bearer, timeout=15, json={
+            "username": username, "email": f"{username}@example.test", "country_code": "SE", "display_name": name})
+        assert made.status_code in (200, 201), made.text
+        logs = droa_export(tmp_path / username, world="AWS_track", eval_world="AWS_track",
+                           laps=[(40000 + 1000 * index, 100)])
+        ok(drem("league", "push", str(logs), "--track", "AWS_track", "--racer", username, "--self-reported",
+                cwd=tmp_path, env=env))
+
+    table = ok(drem("league", "pull", "--track", "AWS_track", cwd=tmp_path, env=env)).splitlines()
+    shown = [re.split(r"\s{2,}", line.strip())[1] for line in table[2:] if line.strip()]
+    assert shown == ["Björn (cli_bjorn_a)", "björn (cli_bjorn_b)", "山田太郎"], table

@@ -236,7 +236,7 @@ def test_the_images_packages_import_and_render_the_live_routes(staged_image_cont
              "from chalicelib.routes import public_pages\n"
              "from drem_web import render\n"
              "html = render.fragment('leaderboard_live', rows=[], footers=[], summaries=[], poll_url='/x', token='1',"
-             " scroll=True, t=lambda s: s, clock_at=0, page_ms=8000).body\n"
+             " scroll=True, t=lambda s: s, clock_at=0, page_ms=8000, pushed_screen=None).body\n"
              "assert html.lstrip().startswith('<section'), html\n"
              "print(public_pages.__file__)\n")
     run = subprocess.run([str(python), "-c", probe], cwd=tmp_path, capture_output=True, text=True,

@@ -1,7 +1,9 @@
 """Manual drive server: a real HTTP server on a free port, the simulator stepping in real time in its thread."""
 from __future__ import annotations
 
+import io
 import json
+import tarfile
 import time
 import urllib.error
 import urllib.request
@@ -150,7 +152,10 @@ def test_a_stopped_recording_is_uploaded_to_the_runs_bucket(tmp_path: Path) -> N
         uri = state["last_run"]["uploaded"]
         assert uri.startswith("s3://drem-test-runs/runs/drem_oval/")
         keys = {item["Key"] for item in s3.list_objects_v2(Bucket="drem-test-runs")["Contents"]}
-        assert len([key for key in keys if "/frames/" in key]) == 5
+        bundle = next(key for key in keys if key.endswith("/frames.tar"))  # all frames travel as one object
+        body = s3.get_object(Bucket="drem-test-runs", Key=bundle)["Body"].read()
+        with tarfile.open(fileobj=io.BytesIO(body)) as frames:
+            assert len([name for name in frames.getnames() if name.startswith("frames/")]) == 5
         assert any(key.endswith("/metadata.json") for key in keys)
 
 

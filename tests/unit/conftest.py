@@ -200,7 +200,7 @@ class Browser:
     client: Client
     cookies: dict[str, str] = field(default_factory=dict)
 
-    def request(self, method: str, path: str, *, form: Mapping[str, str] | None = None,
+    def request(self, method: str, path: str, *, form: Mapping[str, str | list[str]] | None = None,
                 headers: Mapping[str, str] | None = None) -> Any:
         all_headers = {"Accept": "text/html", **(headers or {})}
         if self.cookies:
@@ -209,7 +209,7 @@ class Browser:
         if form is not None:
             from urllib.parse import urlencode
 
-            body = urlencode(form).encode()
+            body = urlencode(form, doseq=True).encode()  # a list is a repeated field, as checkboxes send it
             all_headers["Content-Type"] = "application/x-www-form-urlencoded"
         response = getattr(self.client.http, method.lower())(path, headers=all_headers, body=body)
         for header in set_cookie_headers(response.headers):
@@ -224,7 +224,7 @@ class Browser:
     def get(self, path: str, **kwargs: Any) -> Any:
         return self.request("GET", path, **kwargs)
 
-    def post(self, path: str, form: Mapping[str, str] | None = None, **kwargs: Any) -> Any:
+    def post(self, path: str, form: Mapping[str, str | list[str]] | None = None, **kwargs: Any) -> Any:
         return self.request("POST", path, form=form, **kwargs)
 
     @property

@@ -123,3 +123,34 @@ def test_a_model_the_car_lost_and_loads_again_says_why_on_the_cars_page(console)
     console.sign_in("op-web", "operator")
     page = text_of(console.web.get("/console/cars").body.decode())
     assert f"rita · fast (verified: {why})" in page, page
+
+
+def test_two_racers_called_bjorn_are_told_apart_on_the_cars_page(console):
+    """Issue 31: the cars page named racers by sign-in name. Now by display name, and bjorn_a's model on the car is
+    "Björn (bjorn_a)" because another Björn's model is on offer on the same page (in the page and its poll alike)."""
+    from tests.unit.models_helpers import ModelsApi, bearer, onnx_archive
+
+    fleet = console.desk.fleet()
+    console.desk.device(fleet, "deepracer-08", kind="car")
+    models = {}
+    for bias, (username, name) in enumerate((("bjorn_a", "Björn"), ("bjorn_b", "björn"), ("yamada", "山田"))):
+        token = console.desk.token(username, "racer")
+        named = console.desk.client.http.put("/api/me/profile", body=json.dumps({"display_name": name}),
+                                             headers={**bearer(token), "Content-Type": "application/json"})
+        assert named.status_code == 200, named.body
+        models[username] = ModelsApi(console.desk.client, bearer(token)).upload_and_complete(
+            f"fast-{bias}.tar.gz", onnx_archive(0.1 * bias))["model_id"]
+    device_id = next(d["device_id"] for d in json.loads(console.desk.call("GET", "/api/devices").body)["devices"]
+                     if d["hostname"] == "deepracer-08")
+    assigned = console.desk.call("PUT", f"/api/cars/{device_id}/models",
+                                 {"model_ids": [models["bjorn_a"], models["yamada"]]})
+    assert assigned.status_code == 200, assigned.body
+
+    console.sign_in("op-web", "operator")
+    html = console.web.get("/console/cars").body.decode()
+    live = console.web.get("/console/cars/live").body.decode()
+    for shown in (html, live):
+        chips = [text_of(chip) for chip in re.findall(r'<span class="pill model-chip">(.*?)</span>', shown)]
+        assert chips == ["Björn (bjorn_a) · fast-0 (assigned)", "山田 · fast-2 (assigned)"], chips
+    options = sorted(text_of(o) for o in re.findall(r'<option value="[^"]*">([^<]*· fast-[^<]*)</option>', html))
+    assert options == ["Björn (bjorn_a) · fast-0", "björn (bjorn_b) · fast-1", "山田 · fast-2"], options

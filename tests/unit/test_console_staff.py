@@ -2,7 +2,9 @@
 models to cars. Each test checks what the page shows, what changed behind it, and who is refused."""
 from __future__ import annotations
 
+import json
 from typing import Any
+from urllib.parse import quote
 
 import pytest
 from markupsafe import escape
@@ -187,3 +189,66 @@ def test_staff_see_a_check_a_crash_cut_short_and_start_it_again_now(app: Any, us
     checked = post(operator, f"/console/models/{uploaded['model_id']}/check", htmx=True)
     assert checked.status_code == 200 and "ada-cut Ready to race" in text(checked).replace("ada ", ""), text(checked)
     assert store.get_by_id(uploaded["model_id"]).status is ModelStatus.AVAILABLE
+
+
+def _named(app: Any, users: Any, username: str, display_name: str) -> ModelsApi:
+    token = users.access_token(username, ("racer",))
+    named = app.http.put("/api/me/profile", body=json.dumps({"display_name": display_name}),
+                         headers={**bearer(token), "Content-Type": "application/json"})
+    assert named.status_code == 200, named.body
+    return ModelsApi(app, bearer(token))
+
+
+def test_the_models_page_names_racers_by_display_name_and_tells_two_bjorns_apart(app: Any, users: Any) -> None:
+    """Issue 31: the Models page named racers by sign-in name (its rows, the assign checkboxes and a car's table).
+    Now by display name, "Björn (bjorn_a)" where two listed racers are both Björn, and the racer box finds them by
+    either name."""
+    operator = signed_in(app, users, "olga", "operator")
+    uploaded = {username: _named(app, users, username, name).upload_and_complete(f"{username}-fast.tar.gz",
+                                                                                  onnx_archive(bias))
+                for bias, (username, name) in enumerate((("bjorn_a", "Björn"), ("bjorn_b", "björn"),
+                                                         ("yamada", "山田太郎")))}
+    car = activate_device("car-7", make_fleet("fleet-1"))
+
+    def racers(reply: Any) -> list[str]:
+        return sorted(cell.split("</td>")[0].strip() for cell in body(reply).split('data-testid="model-racer">')[1:])
+
+    page = operator.get("/console/models")
+    assert racers(page) == ["Björn (bjorn_a)", "björn (bjorn_b)", "山田太郎"], racers(page)
+    assert "Björn (bjorn_a) – bjorn_a-fast" in text(page) and "山田太郎 – yamada-fast" in text(page)
+    assert racers(operator.get(f"/console/models/rows?racer={quote('山田')}")) == ["山田太郎"]
+    assert racers(operator.get(f"/console/models/rows?racer={quote('BJÖ')}")) == ["Björn (bjorn_a)", "björn (bjorn_b)"]
+    assert racers(operator.get("/console/models/rows?racer=bjorn_b")) == ["björn (bjorn_b)"]
+
+    staff = bearer(users.access_token("olga-api", ("operator",)))
+    sent = app.http.put(f"/api/cars/{car.device_id}/models", headers={**staff, "Content-Type": "application/json"},
+                        body=json.dumps({"model_ids": [uploaded["bjorn_a"]["model_id"],
+                                                       uploaded["yamada"]["model_id"]]}))
+    assert sent.status_code == 200, sent.body
+    # Only one Björn on this car: plain "Björn", as the table lists them together.
+    status = text(operator.get(f"/console/models/car-status?device_id={car.device_id}"))
+    assert "bjorn_a-fast Björn assigned" in status and "yamada-fast 山田太郎 assigned" in status, status
+
+
+def test_the_scrutineering_warning_names_racers_by_display_name(app: Any, users: Any) -> None:
+    """Issue 31: the Models page's "Not every model passed scrutineering" warning said "bjorn_a – bjorn_a-fast" (the
+    sign-in name). Now the display name, told apart as the page does when two racers in the warning are both Björn."""
+    operator = signed_in(app, users, "olga", "operator")
+    uploaded = {username: _named(app, users, username, name).upload_and_complete(f"{username}-fast.tar.gz",
+                                                                                  onnx_archive(bias))
+                for bias, (username, name) in enumerate((("bjorn_a", "Björn"), ("bjorn_b", "björn"),
+                                                         ("yamada", "山田太郎")))}
+    car = activate_device("car-7", make_fleet("fleet-1"))
+
+    def warning(*usernames: str) -> str:
+        asked = post(operator, "/console/models/assign",
+                     {"device_id": car.device_id, "model_ids": [uploaded[u]["model_id"] for u in usernames]},
+                     htmx=True)
+        assert asked.status_code == 200 and 'data-testid="send-anyway"' in body(asked)
+        return text(asked)
+
+    both = warning("bjorn_a", "bjorn_b")
+    assert "Björn (bjorn_a) – bjorn_a-fast: not scrutineered yet" in both
+    assert "björn (bjorn_b) – bjorn_b-fast: not scrutineered yet" in both
+    alone = warning("bjorn_a", "yamada")
+    assert "Björn – bjorn_a-fast: not scrutineered yet" in alone and "山田太郎 – yamada-fast" in alone

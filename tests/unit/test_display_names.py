@@ -5,6 +5,7 @@ and boards, PDFs and statistics showing ASCII spellings."""
 from __future__ import annotations
 
 import json
+import re
 import unicodedata
 from pathlib import Path
 
@@ -183,3 +184,23 @@ def test_two_racers_called_bjorn_are_told_apart_on_boards_overlay_results_and_cs
                              headers={"Accept": "application/pdf"})
     (tmp_path / "certificates").mkdir()
     assert "Björn (bjorn_b)" in pdf_text(certificates.body, tmp_path / "certificates")
+
+
+def test_two_racers_called_bjorn_are_told_apart_on_the_statistics_page(client, desk: Desk,
+                                                                        scenario: Scenario) -> None:
+    staff = desk.token("desk", "registration")
+    for username, name in (("bjorn_a", "Björn"), ("yamada", "山田"), ("bjorn_b", "björn")):
+        status, body = call(client, "POST", "/api/users", {"username": username, "email": f"{username}@example.test",
+                                                           "country_code": "SE", "display_name": name}, token=staff)
+        assert status == 201, body
+    scenario.add_event()
+    for username, lap in (("bjorn_a", 9_000), ("yamada", 9_500), ("bjorn_b", 9_700)):
+        scenario.submitted_race(username, [lap])
+
+    page = desk.anonymous_get("/stats").body.decode()
+    tables = re.findall(r'data-testid="(stats-fastest[^"]*)">(.*?)</table>', page, re.S)
+    assert len(tables) >= 2  # the fastest laps overall and per track type
+    for testid, table in tables:
+        names = [re.findall(r"<td[^>]*>([^<]*)</td>", row)[1] for row in re.findall(r"<tr>(.*?)</tr>", table, re.S)
+                 if "<td" in row]
+        assert names == ["Björn (bjorn_a)", "山田", "björn (bjorn_b)"], (testid, names)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -160,3 +161,19 @@ def test_the_league_page_names_racers_by_their_display_name(pushed: dict[str, st
     html = client.http.get(f"/league/{REINVENT}").body.decode()
     assert '<td data-label="Racer">Zoë.Müller</td>' in html
     assert 'hx-get="/league/reinvent_base/racers/alice"' in html  # the row still opens alice's submission
+
+
+def test_two_racers_called_bjorn_are_told_apart_on_the_league_board(pushed: dict[str, str], client: Any) -> None:
+    """Issue 31: alice and bob both go by Björn; the board shows each with their sign-in name, 山田 as she writes it."""
+    for racer, name in (("alice", "Björn"), ("bob", "björn"), ("carol", "山田")):
+        reply = client.http.put("/api/me/profile", body=json.dumps({"display_name": name}),
+                                headers={**bearer(pushed[racer]), "Content-Type": "application/json"})
+        assert reply.status_code == 200, reply.body
+    html = client.http.get(f"/league/{REINVENT}?sort=avg").body.decode()
+    shown = re.findall(r'<td data-label="Racer">([^<]*)</td>', html)
+    assert shown == ["björn (bob)", "Björn (alice)", "山田"], shown
+    # On the oval alice races without bob: her name alone.
+    oval = client.http.get(f"/league/{OVAL}").body.decode()
+    assert sorted(re.findall(r'<td data-label="Racer">([^<]*)</td>', oval)) == ["Björn", "山田"]
+    detail = client.http.get(f"/league/{REINVENT}/racers/carol", headers={"HX-Request": "true"}).body.decode()
+    assert "<h3>山田 · " in detail

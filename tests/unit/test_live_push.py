@@ -15,6 +15,7 @@ from chalicelib.views.live_regions import token_is_newer
 from drem_live.channels import Channels, Subscriber
 from drem_live.limits import Limits, StreamCount
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, event_bytes
+from tests import coroutines
 
 
 @pytest.mark.parametrize(("candidate", "shown", "newer"), [
@@ -62,7 +63,7 @@ def _broadcasts(tokens: list[str]) -> list[str]:
             assert len(channels) == 0  # the last subscriber left: the channel (and its watcher) stopped
         return received
 
-    return asyncio.run(run())
+    return coroutines.run(run())
 
 
 def test_a_channel_never_broadcasts_an_older_state_than_it_sent() -> None:
@@ -81,7 +82,7 @@ def test_a_channel_cap_refuses_one_more_option_set() -> None:
                 channels.join("b", lambda _last: None, Subscriber())
             channels.stop_all()
 
-    asyncio.run(run())
+    coroutines.run(run())
 
 
 def test_each_message_is_compressed_once_and_decodes_after_any_subscribers_header() -> None:
@@ -200,7 +201,7 @@ def test_made_up_option_sets_of_one_page_cannot_take_every_channel() -> None:
             assert len(channels) == 18
             channels.stop_all()
 
-    asyncio.run(run())
+    coroutines.run(run())
 
 
 def test_a_wake_reads_the_events_channels_at_once_and_no_others() -> None:
@@ -230,7 +231,7 @@ def test_a_wake_reads_the_events_channels_at_once_and_no_others() -> None:
             channels.stop_all()
             return reads["e1"], reads["e2"], len(channels)
 
-    assert asyncio.run(run()) == (2, 1, 0)
+    assert coroutines.run(run()) == (2, 1, 0)
 
 
 def test_the_streams_metric_is_one_embedded_metric_format_record() -> None:
@@ -260,7 +261,7 @@ def test_a_wake_makes_the_next_json_poll_read_again() -> None:
             seen.append((await polls.get("leaderboard", "e1", "1")).version)
             return seen
 
-    assert asyncio.run(run()) == [1, 1, 1, 2]
+    assert coroutines.run(run()) == [1, 1, 1, 2]
 
 
 def test_hand_made_option_sets_of_many_pages_leave_half_the_channels_to_the_pages_drem_offers() -> None:
@@ -278,7 +279,7 @@ def test_hand_made_option_sets_of_many_pages_leave_half_the_channels_to_the_page
             assert len(channels) == 8
             channels.stop_all()
 
-    asyncio.run(run())
+    coroutines.run(run())
 
 
 def test_one_timer_beats_every_idle_viewer_and_never_replaces_a_pending_board() -> None:
@@ -297,4 +298,4 @@ def test_one_timer_beats_every_idle_viewer_and_never_replaces_a_pending_board() 
             assert not busy.heartbeat_due and busy.take() == board  # its board is still what it gets
             channels.stop_all()
 
-    asyncio.run(run())
+    coroutines.run(run())

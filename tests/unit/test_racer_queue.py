@@ -27,6 +27,7 @@ class Track:
     car_apis: dict[str, ModelsApi] = field(default_factory=dict)  # hostname → the car's own API client
     models: dict[str, dict[str, Any]] = field(default_factory=dict)  # racer → their model
     archives: dict[str, bytes] = field(default_factory=dict)  # racer → their model's archive
+    racer_apis: dict[str, ModelsApi] = field(default_factory=dict)  # racer → their own API client
 
     @property
     def base(self) -> str:
@@ -73,6 +74,7 @@ def _track(console: Console, *hostnames: str, racers: tuple[str, ...] = ("alice"
         api = ModelsApi(console.desk.client, bearer(console.users.access_token(racer, ("racer",))))
         track.models[racer] = api.upload_and_complete(f"{racer}-model.tar.gz", archive)
         track.archives[racer] = archive
+        track.racer_apis[racer] = api
     console.sign_in("timekeeper", "operator")
     return track
 
@@ -315,3 +317,24 @@ def test_a_start_cut_off_after_the_race_was_created_ends_as_one_race_and_a_short
     assert len(_races_of(console, track.event_id, "alice")) == 1  # never a second race for her
     race = text_of(console.web.get(f"{track.base}/state").body.decode())
     assert "alice" in race and "Ready to start" in race
+
+
+def test_the_queue_names_racers_by_display_name_and_tells_two_bjorns_apart(console):
+    """Issue 31: the timekeeper's queue named racers by sign-in name. Now by display name; two racers in line both
+    called Björn are "Björn (bjorn_a)" and "björn (bjorn_b)", and plain "Björn" once the other has left the line."""
+    names = {"bjorn_a": "Björn", "bjorn_b": "björn", "yamada": "山田太郎", "zoe": "Zoë Müller"}
+    track = _track(console, racers=tuple(names))
+    for username, name in names.items():
+        named = console.desk.client.http.put("/api/me/profile", body=json.dumps({"display_name": name}),
+                                             headers={**track.racer_apis[username].headers,
+                                                      "Content-Type": "application/json"})
+        assert named.status_code == 200, named.body
+        assert track.add(username).status_code == 200
+
+    page = console.web.get(track.base).body.decode()
+    assert track.on_deck(page) == ["Björn (bjorn_a)", "björn (bjorn_b)", "山田太郎"]
+    assert "Zoë Müller" in text_of(page.split('data-testid="queue-later"', 1)[1])
+    assert "Ready race for Björn (bjorn_a)" in text_of(page)
+
+    track.press("remove", "björn (bjorn_b)")
+    assert track.on_deck() == ["Björn", "山田太郎", "Zoë Müller"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 
 from drem_live.video_feeds import Feeds, Sink, looks_like_jpeg
+from tests import coroutines
 
 JPEG = b"\xff\xd8\xff\xe0" + b"x" * 10 + b"\xff\xd9"
 
@@ -19,7 +20,7 @@ def test_a_viewer_that_fell_behind_gets_only_the_newest_frame() -> None:
         nothing = await feed.next_after(first.seq, 0.05)  # nothing newer: it waits, then gives up
         return [first.seq, 0 if nothing is None else nothing.seq]
 
-    assert asyncio.run(run()) == [3, 0]
+    assert coroutines.run(run()) == [3, 0]
 
 
 def test_every_viewer_gets_the_same_bytes_of_a_frame() -> None:
@@ -31,7 +32,7 @@ def test_every_viewer_gets_the_same_bytes_of_a_frame() -> None:
         frames = await asyncio.gather(*waiting)
         return all(f is frames[0] for f in frames) and frames[0] is not None and JPEG in frames[0].part
 
-    assert asyncio.run(run())
+    assert coroutines.run(run())
 
 
 def test_a_car_is_wanted_while_watched_by_its_hostname_or_id() -> None:
@@ -46,7 +47,7 @@ def test_a_car_is_wanted_while_watched_by_its_hostname_or_id() -> None:
         seen.append(feeds.wanted("car-1"))
         return seen
 
-    assert asyncio.run(run()) == [False, True, True, False]
+    assert coroutines.run(run()) == [False, True, True, False]
 
 
 def test_only_a_whole_jpeg_counts_as_a_frame() -> None:
@@ -86,7 +87,7 @@ def test_a_frame_is_written_once_per_viewer_as_one_http_chunk_and_a_stuck_viewer
         feed.publish(JPEG, 2.0)
         return quick, stuck, stuck_sink
 
-    quick, stuck, stuck_sink = asyncio.run(run())
+    quick, stuck, stuck_sink = coroutines.run(run())
     assert len(quick.written) == 2
     size, rest = quick.written[0].split(b"\r\n", 1)
     assert int(size, 16) == len(rest) - 2 and rest.startswith(b"--drem-frame\r\n") and JPEG in rest

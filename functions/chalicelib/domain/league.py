@@ -222,19 +222,22 @@ class Board(BaseModel):
     track: str
     sort: SortKey
     entries: list[RankedEntry]
+    racer_names: dict[str, str] = Field(
+        default_factory=dict, description="{sign-in name: the racer's display name, told apart where two collide}")
 
     def rows(self) -> list[dict[str, Any]]:
-        """Flat rows (CSV, terminal table): the same columns everywhere."""
-        return [board_row(ranked) for ranked in self.entries]
+        """Flat rows (CSV, terminal table): the same columns everywhere; "racer" is the display name."""
+        return [board_row(ranked, self.racer_names.get(ranked.entry.racer, "")) for ranked in self.entries]
 
 
 BOARD_COLUMNS = ("rank", "racer", "model", "algorithm", "sensor", "best_lap_s", "average_lap_s", "laps_completed",
                  "trials", "completion_pct", "off_track", "resets", "source", "submitted_at")
 
 
-def board_row(ranked: RankedEntry) -> dict[str, Any]:
+def board_row(ranked: RankedEntry, racer_name: str = "") -> dict[str, Any]:
     entry = ranked.entry
-    return {"rank": ranked.rank, "racer": entry.racer, "model": entry.model_name, "algorithm": entry.algorithm,
+    return {"rank": ranked.rank, "racer": racer_name or entry.racer, "sign_in_name": entry.racer,
+            "model": entry.model_name, "algorithm": entry.algorithm,
             "sensor": "+".join(entry.sensor), "best_lap_s": entry.best_lap_s, "average_lap_s": entry.average_lap_s,
             "laps_completed": entry.laps_completed, "trials": entry.trials,
             "completion_pct": entry.average_completion_pct, "off_track": entry.off_track_total,

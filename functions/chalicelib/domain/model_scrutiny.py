@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from datetime import date, timedelta
 from pathlib import Path
 from typing import Any, Protocol
@@ -60,6 +60,9 @@ class TrackTypes(Protocol):
 
 # drive(model folder holding model_metadata.json + model.onnx, track type, laps) -> a drem_sim ScrutineerReport
 Drive = Callable[[Path, str, int], Any]
+# {sub: the name a page shows} for (sub, sign-in name) pairs, read in one batch: passed in by the route that words the
+# warning (chalicelib.views.racer_names), so the domain names racers as the page does without importing views.
+RacerNames = Callable[[list[tuple[str, str]]], Mapping[str, str]]
 
 
 NO_REPORT = ("drem's simulator finished without a report, so your model was not checked. Try “Drive again”; if it "
@@ -121,16 +124,18 @@ class ScrutineerService:
         with download.body:
             return download.body.read()
 
-    def doubts(self, model_ids: list[str]) -> list[str]:
+    def doubts(self, model_ids: list[str], racer_names: RacerNames | None = None) -> list[str]:
         """Why each of these models may not drive on a car (failed, not yet or never scrutineered), to ask staff
-        before sending them: a warning, never a refusal. Ids that are no AVAILABLE model are the sender's to refuse."""
+        before sending them: a warning, never a refusal. Ids that are no AVAILABLE model are the sender's to refuse.
+        racer_names names each model's racer as the page does ({sub: name} for (sub, sign-in name) pairs)."""
         found = []
         for model_id in model_ids:
             try:
                 found.append(self.models.available_model(model_id))
             except (NotFound, Conflict):
                 continue
-        return [doubt for doubt in map(scrutiny_doubt, found) if doubt]
+        names = racer_names([(m.owner_sub, m.owner_username) for m in found]) if racer_names and found else {}
+        return [doubt for m in found if (doubt := scrutiny_doubt(m, names.get(m.owner_sub)))]
 
     def model_files(self, record: ModelRecord, folder: Path) -> None:
         """model_metadata.json from the archive; model.onnx from the archive or, for console models, the conversion."""
@@ -173,9 +178,10 @@ class ScrutineerService:
         raise Conflict(f"Model '{record.name}' changed while it was scrutineered.")
 
 
-def scrutiny_doubt(model: ModelRecord) -> str | None:
-    """One line on a model that did not pass scrutineering (None when it passed)."""
-    status, who = model.scrutineer_status, f"{model.owner_username} – {model.name}"
+def scrutiny_doubt(model: ModelRecord, racer: str | None = None) -> str | None:
+    """One line on a model that did not pass scrutineering (None when it passed), naming its racer as `racer`
+    (the page's name for them; the sign-in name when not given)."""
+    status, who = model.scrutineer_status, f"{racer or model.owner_username} – {model.name}"
     result = model.scrutineer_result
     if status == "passed":
         return None

@@ -16,6 +16,7 @@ from chalicelib.domain.countries import normalise_country_code
 from chalicelib.domain.names import check_display_name
 from chalicelib.domain.ownership import require_owner_or_role
 from chalicelib.formats.avatars import avatar_seed, identicon_svg
+from drem_leaderboard.names import told_apart
 from drem_leaderboard.ranking import RacerProfile
 
 # DREM's tail-light palette (website/src/constants/tailLightColours.ts). White is the car's "stop" colour.
@@ -133,15 +134,20 @@ class ProfileService:
         return profile
 
     def shown_names(self, usernames: list[str]) -> dict[str, str]:
-        """{sign-in name: what boards show} for racers named by their sign-in name (the league's rows); a name
-        without a profile is left out (the caller shows it as it is)."""
-        shown = {}
-        for username in dict.fromkeys(usernames):
-            sub = self._store.sub_for_username(username)
-            profile = self._store.get(sub) if sub else None
-            if profile is not None:
-                shown[username] = public_view(profile).display_name
-        return shown
+        """{sign-in name: what boards show} for racers shown together and named by their sign-in name (the league's
+        rows): the display name, with the sign-in name after it when another of them goes by the same display name
+        (drem_leaderboard.names). A name without a profile is shown as it is. Two batch reads (names to subs, then
+        profiles) where the store offers them, however many racers."""
+        unique = list(dict.fromkeys(usernames))
+        get_subs = getattr(self._store, "subs_for_usernames", None)
+        subs = get_subs(unique) if get_subs else {name.casefold(): sub for name in unique
+                                                  if (sub := self._store.sub_for_username(name))}
+        public = self.public_by_subs(list(dict.fromkeys(subs.values())))
+        names = {}
+        for username in unique:
+            shown = public.get(subs.get(username.casefold(), ""))
+            names[username] = (shown.display_name, shown.username) if shown else (username, username)
+        return told_apart(names)
 
     def account_name(self, username: str) -> str | None:
         """The sign-in name as the account spells it, for a name typed in any case; None when there is none."""

@@ -26,6 +26,7 @@ from chalicelib.domain.events import Event, EventType, TrackDirection
 from chalicelib.domain.races import RaceRecord
 from chalicelib.formats.figures import lap_time
 from drem_leaderboard.models import Race, RaceStatus
+from drem_leaderboard.names import told_apart
 
 MIN_LAP_MS = 5_000
 TOP_LAPS = 10
@@ -42,9 +43,11 @@ class StatsFilter(BaseModel):
 
 
 class ShownRacer(NamedTuple):
-    """How a lap's racer is shown: their display name (a deleted racer's tombstone name) and their own country."""
+    """How a lap's racer is shown: their display name (a deleted racer's tombstone name), their own country, and the
+    name that tells them apart from another racer of the same display name ("" : the race's sign-in name)."""
     name: str
     country_code: str | None = None
+    sign_in_name: str = ""
 
 
 class FastLap(BaseModel):
@@ -167,6 +170,9 @@ def _event_matches(event: Event, wanted: StatsFilter) -> bool:
     return not wanted.direction or any(t.direction == wanted.direction for t in event.tracks)
 
 
+Candidate = tuple[int, str, str, Event, str, str]  # (ms, sub, username, event, track type, direction)
+
+
 def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], wanted: StatsFilter,
             display_name: Callable[[str, str], ShownRacer]) -> Stats:
     """`events_and_races` holds the visible events only, each with its submitted races' digests;
@@ -178,7 +184,7 @@ def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], want
     racers_by_country: dict[str, set[str]] = {}
     racers: set[str] = set()
     laps = valid = race_count = 0
-    candidates: list[tuple[int, str, str, Event, str, str]] = []  # (ms, sub, username, event, track type, direction)
+    candidates: list[Candidate] = []
     by_type: dict[str, int] = Counter()
     for event, races in chosen:
         directions = {t.track_id: t.direction for t in event.tracks}
@@ -199,22 +205,25 @@ def compute(events_and_races: Sequence[tuple[Event, Sequence[RaceDigest]]], want
             if race.best_valid_ms is not None:  # a racer's best lap is the best of their races' bests
                 candidates.append((race.best_valid_ms, race.sub, race.username, event, race.track_type, direction))
     candidates.sort(key=lambda c: (c[0], c[2]))
+    tops = {track_type: _top(c for c in candidates if c[4] == track_type) for track_type in by_type}
+    overall = _top(candidates)
+    # One page, one view: a racer is told apart from a namesake in any of its tables, the same way in every one.
+    named = _named({c[1]: c[2] for top in (overall, *tops.values()) for c in top}, display_name)
     per_type = [TrackTypeStats(track_type=track_type, races=count,
                                best=lap_time(next((c[0] for c in candidates if c[4] == track_type), None), "—"),
-                               fastest=_top(c for c in candidates if c[4] == track_type)(display_name))
+                               fastest=_fast_laps(tops[track_type], named))
                 for track_type, count in sorted(by_type.items())]
     return Stats(
         totals=Totals(events=len(chosen), racers=len(racers), races=race_count, laps=laps, valid_laps=valid,
                       countries=len(event_countries)),
         by_month=tuple((m, v[0], v[1]) for m, v in sorted(months.items())),
         events_by_country=dict(event_countries), racers_by_country={c: len(s) for c, s in racers_by_country.items()},
-        track_types=tuple(per_type), fastest=_top(candidates)(display_name), countries=countries)
+        track_types=tuple(per_type), fastest=_fast_laps(overall, named), countries=countries)
 
 
-def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callable[
-        [Callable[[str, str], ShownRacer]], tuple[FastLap, ...]]:
-    """The TOP_LAPS fastest laps, one per racer (their best), named only once chosen (a profile read each)."""
-    best: list[tuple[int, str, str, Event, str, str]] = []
+def _top(candidates: Iterable[Candidate]) -> list[Candidate]:
+    """The TOP_LAPS fastest laps, one per racer (their best)."""
+    best: list[Candidate] = []
     seen: set[str] = set()
     for candidate in candidates:
         if candidate[1] in seen:
@@ -223,15 +232,23 @@ def _top(candidates: Iterable[tuple[int, str, str, Event, str, str]]) -> Callabl
         best.append(candidate)
         if len(best) == TOP_LAPS:
             break
+    return best
 
-    def named(display_name: Callable[[str, str], ShownRacer]) -> tuple[FastLap, ...]:
-        laps = []
-        for i, (ms, sub, username, event, _type, direction) in enumerate(best, start=1):
-            racer = display_name(sub, username)
-            code = racer.country_code or ""
-            laps.append(FastLap(position=i, username=racer.name, time=lap_time(ms), time_ms=ms, event_name=event.name,
-                                event_date=event.date, country_code=code, country=country_name(code),
-                                direction=DIRECTION_LABELS[direction]))
-        return tuple(laps)
 
-    return named
+def _named(usernames: dict[str, str], display_name: Callable[[str, str], ShownRacer]) -> dict[str, ShownRacer]:
+    """{sub: how the page shows them} for the racers its tables name (a profile read each, once): a display name
+    another of them also goes by gets the sign-in name after it (drem_leaderboard.names)."""
+    racers = {sub: display_name(sub, username) for sub, username in usernames.items()}
+    shown = told_apart({sub: (r.name, r.sign_in_name or usernames[sub]) for sub, r in racers.items()})
+    return {sub: r._replace(name=shown[sub]) for sub, r in racers.items()}
+
+
+def _fast_laps(top: list[Candidate], named: dict[str, ShownRacer]) -> tuple[FastLap, ...]:
+    laps = []
+    for i, (ms, sub, _username, event, _type, direction) in enumerate(top, start=1):
+        racer = named[sub]
+        code = racer.country_code or ""
+        laps.append(FastLap(position=i, username=racer.name, time=lap_time(ms), time_ms=ms, event_name=event.name,
+                            event_date=event.date, country_code=code, country=country_name(code),
+                            direction=DIRECTION_LABELS[direction]))
+    return tuple(laps)

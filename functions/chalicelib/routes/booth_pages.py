@@ -30,15 +30,18 @@ class TrainForm(BaseModel):
 def booth(principal: User, query: ListRunsQuery) -> Response:
     """The booth: tracks to drive, your runs, training jobs and model versions"""
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), services.device_service(), everyone=query.everyone)
+                                  services.track_service(), services.device_service(),
+                                  services.profile_service().public_by_subs, everyone=query.everyone)
     return render.page("booth", view=view)
 
 
 @route(bp, "/booth/jobs", allow=SIGNED_IN, query=ListRunsQuery)
 def booth_jobs(principal: User, query: ListRunsQuery) -> Response:
     """Your training jobs (htmx fragment, polled while one is queued or running)"""
+    everyone = query.everyone and bool(principal.roles & MODEL_STAFF)
     jobs = booth_views.jobs_view(principal, services.training_service(), everyone=query.everyone)
-    return render.fragment("booth_jobs", jobs=jobs, everyone=query.everyone and bool(principal.roles & MODEL_STAFF))
+    names = booth_views.job_racer_names(jobs, services.profile_service().public_by_subs) if everyone else {}
+    return render.fragment("booth_jobs", jobs=jobs, everyone=everyone, job_names=names)
 
 
 @route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)
@@ -62,7 +65,8 @@ def booth_run(principal: User, run_id: str) -> Response:
     runs = services.run_service()
     run, rows = runs.get(principal, run_id), runs.controls(principal, run_id)
     inspection = booth_views.run_inspection(run, rows)
-    return render.page("booth_run", run=run, inspection=inspection,
+    racer = booth_views.racer_name(run.owner_sub, run.owner_username, services.profile_service().public_by_subs)
+    return render.page("booth_run", run=run, inspection=inspection, racer=racer,
                        track_map=booth_views.run_map(services.track_service(), run, rows))
 
 
@@ -71,5 +75,6 @@ def booth_make_active(principal: User, model_id: str) -> Response:
     """Mark one of your versions active (htmx; answers the booth page)"""
     services.training_service().set_active(principal, model_id)
     view = booth_views.booth_view(principal, services.run_service(), services.training_service(),
-                                  services.track_service(), services.device_service(), everyone=False)
+                                  services.track_service(), services.device_service(),
+                                  services.profile_service().public_by_subs, everyone=False)
     return render.page("booth", view=view)

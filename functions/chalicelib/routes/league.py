@@ -32,8 +32,10 @@ def push_submission(principal: User, track: str, query: PushOptions) -> Response
 
 @route(bp, "/api/league/{track}", allow=PUBLIC, query=BoardQuery, response=Board, tags=("league",))
 def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
-    """A track's board: each racer's latest submission, ranked"""
-    return services.league_service().board(track, query).model_dump(mode="json")
+    """A track's board: each racer's latest submission, ranked, with each racer's display name"""
+    board = services.league_service().board(track, query)
+    names = services.profile_service().shown_names([ranked.entry.racer for ranked in board.entries])
+    return board.model_copy(update={"racer_names": names}).model_dump(mode="json")
 
 
 @route(bp, "/api/league/{track}/racers/{racer}", allow=PUBLIC, response=Submission, tags=("league",))
@@ -73,4 +75,6 @@ def league_page(principal: Principal, track: str, query: BoardQuery) -> Response
 @route(bp, "/league/{track}/racers/{racer}", allow=PUBLIC)
 def league_racer_fragment(principal: Principal, track: str, racer: str) -> Response:
     """The hyperparameters and trials behind a board row (htmx fragment)"""
-    return render.fragment("league_submission", view=submission_view(services.league_service().latest(track, racer)))
+    submission = services.league_service().latest(track, racer)
+    shown = services.profile_service().shown_names([submission.racer])[submission.racer]
+    return render.fragment("league_submission", view=submission_view(submission, shown))

@@ -30,7 +30,6 @@ from chalicelib.auth.access import PUBLIC, route
 from chalicelib.core.errors import NotFound
 from chalicelib.core.principals import Principal
 from chalicelib.domain.events import Event
-from chalicelib.routes.event_logos import logo_path
 from chalicelib.routes.responses import etag_matches
 from chalicelib.settings import get_settings
 from chalicelib.views import car_video
@@ -158,10 +157,13 @@ def overlay_page(principal: Principal, event_id: str, query: OverlayQuery) -> Re
     """The OBS browser-source overlay (1920×1080, transparent or chroma-key background)"""
     event = event_or_404(event_id)
     event.track(query.overlay_track)  # NotFound for a track the event does not have
-    live = regions.overlay_region(services.publisher(), read_race, event_id, query, services.now_ms()).context()
+    region = regions.overlay_region(services.publisher(), read_race, event_id, query, services.now_ms())
+    # The name and logo as the event says now; the live region carries later edits (domain/big_screen.py).
+    settings = services.screen_publisher().caught_up(event)
+    live = {**region.context(), "pushed_screen": None}
     chroma = views.safe_colour(query.chroma_color, views.DEFAULT_CHROMA) if query.chroma else ""
     return render.page("overlay", title=event.name, chroma=chroma, lang=i18n.resolve_language(query.lang),
-                       stream_url=stream_url(live["poll_url"]), logo_url=logo_path(event_id),
+                       stream_url=stream_url(live["poll_url"]), screen=settings.view(event_id, query.overlay_track),
                        car_eye_url=car_video.shown_when_asked(event_id, query.overlay_track,
                                                               bp.current_request.query_params), **live)
 

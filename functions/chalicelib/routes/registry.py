@@ -12,7 +12,8 @@ from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.core.principals import User
 from chalicelib.domain.model_registry import Evaluation, EvaluationInput
-from chalicelib.views.registry_views import loss_plot, registry_plots
+from chalicelib.views.booth_views import racer_name
+from chalicelib.views.registry_views import loss_plot, registry_plots, registry_racer_names
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -22,7 +23,8 @@ bp = Blueprint(__name__)
 def staff_registry(principal: User) -> Response:
     """Every racer's model versions"""
     view = services.registry_service().registry(principal, everyone=True)
-    return render.page("registry", view=view, plots=registry_plots(view))
+    return render.page("registry", view=view, plots=registry_plots(view),
+                       racer_names=registry_racer_names(view, services.profile_service().public_by_subs))
 
 
 @route(bp, "/models/registry", allow=SIGNED_IN)
@@ -36,7 +38,8 @@ def my_registry(principal: User) -> Response:
 def model_detail(principal: User, model_id: str) -> Response:
     """One model: lineage, loss curve, evaluations (htmx fragment; owner or model staff)"""
     detail = services.registry_service().detail(principal, model_id)
-    return render.fragment("registry_model", detail=detail, loss_plot=loss_plot(detail))
+    racer = racer_name(detail.model.owner_sub, detail.model.owner_username, services.profile_service().public_by_subs)
+    return render.fragment("registry_model", detail=detail, loss_plot=loss_plot(detail), racer=racer)
 
 
 @route(bp, "/api/models/{model_id}/evaluations", methods=["POST"], allow=SIGNED_IN, body=EvaluationInput,

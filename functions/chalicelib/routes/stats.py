@@ -28,6 +28,6 @@ def stats(principal: Principal, query: StatsFilter) -> Response:
         public = profiles.public_by_sub(sub)
         if public is None:
             return ShownRacer(username)
-        return ShownRacer(public.display_name or public.username, public.country_code)
+        return ShownRacer(public.display_name or public.username, public.country_code, public.username)
 
     return render.page("stats", view=stats_page(compute(data, query, display_name), query, staff=staff))

@@ -58,6 +58,13 @@ class DynamoProfileStore:
         item = self._get(_alias_key(username))
         return item["sub"]["S"] if item else None
 
+    def subs_for_usernames(self, usernames: Iterable[str]) -> dict[str, str]:
+        """{case-folded sign-in name: sub} of many names in BatchGetItem calls of 100 keys (a board's racers at once);
+        names without an alias are left out."""
+        keys = [_alias_key(name) for name in dict.fromkeys(name.casefold() for name in usernames)]
+        return {item["pk"]["S"].removeprefix("USERNAME#"): item["sub"]["S"]
+                for item in batch_items(self._client, self._table, keys, _SERVICE, ConsistentRead=True)}
+
     def link_username(self, username: str, sub: str) -> None:
         self._call("put_item", TableName=self._table, Item={**_alias_key(username), "sub": {"S": sub}})
 

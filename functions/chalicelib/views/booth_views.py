@@ -15,6 +15,7 @@ from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingServ
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
+from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
@@ -33,10 +34,12 @@ class BoothView:
     why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
+    racer_names: dict[str, str]  # staff: {sub: display name, told apart among the racers the page lists}
+    job_names: dict[str, str]  # staff: the same for the racers of the jobs list (which its poll renders alone)
 
 
 def booth_view(principal: Principal, runs: RunService, training: TrainingService, tracks: TrackService,
-               devices: DeviceService, *, everyone: bool) -> BoothView:
+               devices: DeviceService, profiles: ProfilesBySub, *, everyone: bool) -> BoothView:
     everyone = everyone and bool(principal.roles & MODEL_STAFF)
     query = ListRunsQuery(everyone=everyone)
     mine = runs.list_runs(principal, query)
@@ -46,12 +49,15 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
                       key=lambda m: m.name, reverse=True)
     trainable = sum(1 for r in mine if r.owner_sub == owner and r.mode is RunMode.MANUAL
                     and r.status is RunStatus.FINALISED)
-    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine,
-                     jobs=jobs_view(principal, training, everyone=everyone), versions=versions,
+    jobs = jobs_view(principal, training, everyone=everyone)
+    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs, versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
                      trainable=trainable, why_not_train=training.why_not_train(principal),
                      active_versions=_active_versions(training, mine) if everyone else [],
-                     cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [])
+                     cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [],
+                     racer_names=shown_racer_names({(r.owner_sub, r.owner_username) for r in mine}, profiles)
+                     if everyone else {},
+                     job_names=job_racer_names(jobs, profiles) if everyone else {})
 
 
 def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
@@ -66,6 +72,17 @@ def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[t
 
 def jobs_view(principal: Principal, training: TrainingService, *, everyone: bool = False) -> list[JobView]:
     return training.list_jobs(principal, everyone=everyone)[:20]
+
+
+def job_racer_names(jobs: list[JobView], profiles: ProfilesBySub) -> dict[str, str]:
+    """Staff's jobs list names each job's racer by display name, told apart among the jobs listed: the same on the
+    booth page and in the fragment it polls every second, as both list the same jobs."""
+    return shown_racer_names({(v.job.owner_sub, v.job.owner_username) for v in jobs}, profiles)
+
+
+def racer_name(owner_sub: str, owner_username: str, profiles: ProfilesBySub) -> str:
+    """How a page about one racer's run or model names that racer: the display name (no one to tell apart from)."""
+    return shown_racer_names([(owner_sub, owner_username)], profiles)[owner_sub]
 
 
 @dataclass(frozen=True)

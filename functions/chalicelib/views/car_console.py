@@ -1,5 +1,9 @@
 """What the operator console's cars page shows: every device with its status, fleet and assigned models, and the
-models an operator can give a car. Built from the same services the JSON API uses."""
+models an operator can give a car. Built from the same services the JSON API uses.
+
+Racers are named by their display names, told apart as everywhere else (drem_leaderboard.names) among every racer the
+page names: the owners of the assigned models and of the models on offer, so a chip and the choices name one racer
+alike, and the page's 2-second poll (which rebuilds the chips) names them as the page did."""
 from __future__ import annotations
 
 from datetime import UTC, datetime
@@ -11,11 +15,19 @@ from chalicelib.domain.assignments import AssignmentService, CarModelStatus
 from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.racer_models import ListQuery, ModelService, ModelStatus
+from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 
 
 class AssignedLine(BaseModel):
     model_id: str
-    text: str
+    owner_sub: str
+    owner_username: str
+    model: str  # the model's name and how far it got: "fast-one (loaded)"
+    racer: str = ""  # how the page names its owner (set by `cars_overview`)
+
+    @property
+    def text(self) -> str:
+        return f"{self.racer or self.owner_username} · {self.model}"
 
 
 class CarLine(BaseModel):
@@ -37,7 +49,14 @@ class CarLine(BaseModel):
 
 class ModelChoice(BaseModel):
     model_id: str
-    label: str
+    owner_sub: str
+    owner_username: str
+    name: str
+    racer: str = ""  # how the page names its owner (set by `cars_overview`)
+
+    @property
+    def label(self) -> str:
+        return f"{self.racer or self.owner_username} · {self.name}"
 
 
 class CarsOverview(BaseModel):
@@ -93,8 +112,8 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
                 state = "loaded"
             elif running is not None and state == "loaded":
                 state = "on the car"
-            assigned.append(AssignedLine(model_id=model.model_id,
-                                         text=f"{model.owner_username} · {model.name} ({state}{said})"))
+            assigned.append(AssignedLine(model_id=model.model_id, owner_sub=model.owner_sub,
+                                         owner_username=model.owner_username, model=f"{model.name} ({state}{said})"))
     commands = devices.device_commands(view.device_id)
     last, state = command_text(max(commands, key=lambda c: c.command_id) if commands else None, now_ms)
     return CarLine(
@@ -108,19 +127,19 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
         last_command_state=state)
 
 
-def car_lines(devices: DeviceService, fleets: FleetService, assignments: AssignmentService,
-              now_ms: int) -> list[CarLine]:
-    fleet_names = {f.fleet_id: f.name for f in fleets.list_fleets()}
-    return [car_line(view, fleet_names, assignments, devices, now_ms) for view in devices.list_devices()]
-
-
 def cars_overview(principal: User, devices: DeviceService, fleets: FleetService, assignments: AssignmentService,
-                  models: ModelService, now_ms: int) -> CarsOverview:
+                  models: ModelService, profiles: ProfilesBySub, now_ms: int) -> CarsOverview:
     fleet_names = {f.fleet_id: f.name for f in fleets.list_fleets()}
     lines = [car_line(view, fleet_names, assignments, devices, now_ms) for view in devices.list_devices()]
     page = models.list_models(principal, ListQuery(limit=100))
-    choices = [ModelChoice(model_id=m.model_id, label=f"{m.owner_username} · {m.name}")
+    choices = [ModelChoice(model_id=m.model_id, owner_sub=m.owner_sub, owner_username=m.owner_username, name=m.name)
                for m in page.models if m.status is ModelStatus.AVAILABLE]
+    racer = shown_racer_names([(a.owner_sub, a.owner_username) for line in lines for a in line.assigned]
+                         + [(c.owner_sub, c.owner_username) for c in choices], profiles)
+    lines = [line.model_copy(update={"assigned": [a.model_copy(update={"racer": racer[a.owner_sub]})
+                                                  for a in line.assigned]}) for line in lines]
+    choices = [c.model_copy(update={"racer": racer[c.owner_sub]}) for c in choices]
     return CarsOverview(cars=lines, fleets=sorted(fleet_names.items(), key=lambda item: item[1].lower()),
                         models=choices, tail_lights=[(name, name) for name in TAIL_LIGHT_PALETTE] + [("#FFFFFF",
                                                                                                       "white")])
+

@@ -14,7 +14,7 @@ def _live(path: str) -> str:
     if base is None:
         return ""
     if render.base_path():
-        return render.url(path)  # under a prefix the proxy routes /live/ to the live server (docs/operations.md)
+        return path  # the template's url() adds the prefix; the proxy routes it to the live server (docs/operations.md)
     return f"{base}{path}"
 
 

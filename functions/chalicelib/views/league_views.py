@@ -79,13 +79,14 @@ class SubmissionView:
     verification: str
 
 
-def submission_view(submission: Submission) -> SubmissionView:
+def submission_view(submission: Submission, shown_name: str = "") -> SubmissionView:
+    """`shown_name`: the racer's display name (only one racer here, so never told apart); "": the sign-in name."""
     best = submission.training_best_completion_pct
     training = f"{submission.training_episodes} episodes" + (f", best completion {best:.0f} %" if best is not None
                                                               else "") + (f" on {submission.training_track}"
                                                                           if submission.training_track else "")
     return SubmissionView(
-        racer=submission.racer, model_name=submission.model_name, track=submission.track,
+        racer=shown_name or submission.racer, model_name=submission.model_name, track=submission.track,
         submitted=submission.submitted_at[:19].replace("T", " "), layout=submission.layout,
         algorithm=submission.algorithm, sensor=" + ".join(submission.sensor), action_space=submission.action_space,
         training=training,

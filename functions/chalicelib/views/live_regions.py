@@ -206,11 +206,14 @@ def leaderboard_options(event_id: str, query: LeaderboardQuery) -> tuple[Any, ..
 
 def overlay_region(publisher: LeaderboardPublisher, read_race: Callable[[str, str], Race | None], event_id: str,
                    query: OverlayQuery, now_ms: int) -> LiveRegion:
-    """The overlay's live region; its token carries the phase (racing, just finished, standings)."""
+    """The overlay's live region; its token carries the phase (racing, just finished, standings) and the version of
+    the event's name and logo it shows."""
     track = query.overlay_track
-    items = read_live(publisher, event_id, track, [track])
+    items = read_live(publisher, event_id, track, [track], screen=True)
     phase = views.overlay_phase(items.overlay, now_ms)
-    token = views.version_token(items.board.version, f"{items.overlay.version}-{PHASE_ORDER[phase]}")
+    # The event's name and logo (the big screen's settings) come last: an edit of either changes the token.
+    token = views.version_token(items.board.version, f"{items.overlay.version}-{PHASE_ORDER[phase]}",
+                                items.screen_version)
 
     def context() -> dict[str, Any]:
         t = i18n.translator(query.lang)
@@ -221,7 +224,9 @@ def overlay_region(publisher: LeaderboardPublisher, read_race: Callable[[str, st
             "track": track, "format": query.format, "flag": query.flag, "lang": query.lang,
             "gapToLeader": query.gap_to_leader, "showLeaderboard": query.show_leaderboard, "v": token})
         return {"view": view, "poll_url": poll, "token": token, "gap_to_leader": query.gap_to_leader, "t": t,
-                "clock_at": now_ms}
+                "clock_at": now_ms,
+                # Swapped in out of band beside the region (partials/overlay_brand.html); None: the page's stay.
+                "pushed_screen": items.screen.view(event_id, track) if items.screen else None}
 
     return LiveRegion(token, context, "overlay_live")
 

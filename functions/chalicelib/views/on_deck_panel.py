@@ -1,6 +1,6 @@
 """What the timekeeper's queue panel shows: the racers in line (the first three "on deck"), each with their model and,
 for the racer whose model went to a car, how far that car got: assigned, loading, loaded (the car's heartbeat names
-the model it has loaded) or failed."""
+the model it has loaded) or failed. Racers are named by display name, told apart among the racers in line."""
 from __future__ import annotations
 
 from pydantic import BaseModel
@@ -9,6 +9,7 @@ from chalicelib.domain.assignments import Assignment, CarModelStatus
 from chalicelib.domain.devices import DeviceView
 from chalicelib.domain.on_deck import OnDeck
 from chalicelib.domain.racer_queue import QueueEntry
+from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 
 ON_DECK = 3
 
@@ -41,23 +42,24 @@ class QueuePanel(BaseModel):
         return [row for row in self.rows if not row.on_deck]
 
 
-def queue_panel(on_deck: OnDeck, event_id: str, track_id: str) -> QueuePanel:
+def queue_panel(on_deck: OnDeck, profiles: ProfilesBySub, event_id: str, track_id: str) -> QueuePanel:
     queue = on_deck.queue(event_id, track_id)
+    racers = shown_racer_names([(e.racer_sub, e.racer_username) for e in queue.entries], profiles)
     cars = {car.device_id: car for car in on_deck.fleet_cars(event_id, track_id)} if queue.entries else {}
     with_car = [cars[e.car] for e in queue.entries[:1] if e.car in cars]
     held = on_deck.assignments_of(with_car)
     racing = on_deck.racing_car(event_id, track_id)
-    rows = [_row(index, entry, cars.get(entry.car or ""), held.get(entry.car or ""), racing)
+    rows = [_row(index, entry, racers[entry.racer_sub], cars.get(entry.car or ""), held.get(entry.car or ""), racing)
             for index, entry in enumerate(queue.entries)]
     return QueuePanel(event_id=event_id, track_id=track_id, race_live=on_deck.race_live(event_id, track_id),
                       racing_car=racing, rows=rows)
 
 
-def _row(index: int, entry: QueueEntry, car: DeviceView | None, assignment: Assignment | None,
+def _row(index: int, entry: QueueEntry, racer: str, car: DeviceView | None, assignment: Assignment | None,
          racing: str | None) -> QueueRow:
     # Only the head's model is kept on a car; a racer moved down keeps their old car on record until they are next.
     preload, text = preload_state(entry, car, assignment, racing) if index == 0 else ("", "")
-    return QueueRow(entry_id=entry.entry_id, position=index + 1, racer=entry.racer_username,
+    return QueueRow(entry_id=entry.entry_id, position=index + 1, racer=racer,
                     model_name=entry.model_name, on_deck=index < ON_DECK, is_head=index == 0,
                     car_label=car.hostname if car else None, preload=preload, preload_text=text)
 

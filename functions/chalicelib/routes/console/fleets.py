@@ -24,7 +24,7 @@ from chalicelib.routes.console.forms import (
 )
 from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
-from chalicelib.views.car_console import COMMAND_LABELS, car_lines, cars_overview
+from chalicelib.views.car_console import COMMAND_LABELS, CarsOverview, cars_overview
 from chalicelib.views.car_video import preview_video_url
 from drem_web import render
 
@@ -58,9 +58,7 @@ def cars_page(principal: User) -> Response:
 def cars_live(principal: User) -> Response:
     """Every car's status cell (status, battery, faults, loaded model, last command) as out-of-band swaps: the page
     polls this, so the operator sees an emergency stop confirmed without reloading"""
-    lines = car_lines(services.device_service(), services.fleet_service(), services.assignment_service(),
-                      services.now_ms())
-    return render.fragment("console/cars_live", cars=lines, headers={"Cache-Control": "no-store"})
+    return render.fragment("console/cars_live", cars=_overview(principal).cars, headers={"Cache-Control": "no-store"})
 
 
 @route(bp, "/console/cars/activate", allow=DEVICE_STAFF)
@@ -145,10 +143,14 @@ def _sent_notice(query: dict[str, str]) -> str:
 
 
 def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notice: str = "") -> Response:
-    overview = cars_overview(principal, services.device_service(), services.fleet_service(),
-                             services.assignment_service(), services.model_service(), services.now_ms())
-    return render.page("console/cars", status=status, overview=overview, errors=errors,
+    return render.page("console/cars", status=status, overview=_overview(principal), errors=errors,
                        is_admin=ADMIN in principal.roles, notice=notice, camera_url=preview_video_url)
+
+
+def _overview(principal: User) -> CarsOverview:
+    """The page and its poll name racers alike (views/car_console.py)."""
+    return cars_overview(principal, services.device_service(), services.fleet_service(), services.assignment_service(),
+                         services.model_service(), services.profile_service().public_by_subs, services.now_ms())
 
 
 def _activation_page(errors: dict[str, str], values: dict[str, str], issued: object, status: int = 200) -> Response:

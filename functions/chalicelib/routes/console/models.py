@@ -3,6 +3,8 @@ each car download, verify and load them (a polling fragment). Same services as /
 /api/cars/{device_id}/models; only AVAILABLE models can be given to a car (the assignment service says so)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from chalice import Blueprint, Response
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -10,12 +12,14 @@ from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, SIGNED_IN, route
 from chalicelib.core.errors import InvalidInput
 from chalicelib.core.principals import User
-from chalicelib.domain.assignments import Assignment
+from chalicelib.domain.assignments import AssignedModel, Assignment
 from chalicelib.domain.devices import DeviceKind
 from chalicelib.domain.model_scrutiny import TRACK_TYPES, ScrutineerRequest
 from chalicelib.domain.racer_models import MODEL_STAFF as MODEL_STAFF_ROLES
 from chalicelib.domain.racer_models import ListQuery, ModelRecord, ModelStatus
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted, submitted_list
+from chalicelib.views.racer_names import shown_racer_names
+from drem_leaderboard.names import name_key
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -30,26 +34,30 @@ class ModelFilter(BaseModel):
     racer: str = Field(default="", max_length=128)
     status: ModelStatus | None = None
 
-    def keeps(self, model: ModelRecord) -> bool:
-        racer = self.racer.strip().casefold()
-        return ((not racer or model.owner_username.casefold().startswith(racer))
+    def keeps(self, model: ModelRecord, shown_name: str) -> bool:
+        """The racer box matches the start of the name the page shows ("Björn", "山田") or of the sign-in name."""
+        racer = name_key(self.racer.strip())
+        return ((not racer or any(name_key(name).startswith(racer) for name in (shown_name, model.owner_username)))
                 and (self.status is None or model.status is self.status))
 
 
 @route(bp, "/console/models", allow=MODEL_STAFF)
 def models_page(principal: User) -> Response:
     listed = _listed(principal)
-    query, errors, models = _filtered(listed)
+    racer_names = _racer_names(listed)
+    query, errors, models = _filtered(listed, racer_names)
     return render.page("console/models", status=400 if errors else 200, query=query, errors=errors, models=models,
                        statuses=STATUSES, cars=_cars(), track_types=TRACK_TYPES, show_scrutiny_detail=True,
-                       assignable=[m for m in listed if m.status is ModelStatus.AVAILABLE])
+                       assignable=[m for m in listed if m.status is ModelStatus.AVAILABLE], racer_names=racer_names)
 
 
 @route(bp, "/console/models/rows", allow=MODEL_STAFF)
 def model_rows(principal: User) -> Response:
-    query, errors, models = _filtered(_listed(principal))
+    listed = _listed(principal)
+    racer_names = _racer_names(listed)
+    query, errors, models = _filtered(listed, racer_names)
     return render.fragment("console/model_rows", status=400 if errors else 200, errors=errors, models=models,
-                           track_types=TRACK_TYPES, show_scrutiny_detail=True)
+                           track_types=TRACK_TYPES, show_scrutiny_detail=True, racer_names=racer_names)
 
 
 @route(bp, "/console/models/{model_id}/check", methods=["POST"], allow=MODEL_STAFF)
@@ -60,9 +68,11 @@ def check_model_again(principal: User, model_id: str) -> Response:
         services.model_service().complete(principal, model_id)
     except SHOWN_ON_FORM as exc:
         errors = field_errors(exc, "model_id")
-    query, filter_errors, models = _filtered(_listed(principal))
+    listed = _listed(principal)
+    racer_names = _racer_names(listed)
+    query, filter_errors, models = _filtered(listed, racer_names)
     return render.fragment("console/model_rows", status=200, errors=errors or filter_errors, models=models,
-                           track_types=TRACK_TYPES)
+                           track_types=TRACK_TYPES, racer_names=racer_names)
 
 
 @route(bp, "/console/models/assign", methods=["POST"], allow=MODEL_STAFF)
@@ -70,7 +80,8 @@ def assign_models(principal: User) -> Response:
     request = bp.current_request
     values = submitted(request, "device_id", "confirmed")
     device_id, model_ids = values.get("device_id", ""), submitted_list(request, "model_ids")
-    doubts = services.scrutineer_service().doubts(model_ids) if values.get("confirmed") != "yes" else []
+    asked = values.get("confirmed") != "yes"
+    doubts = services.scrutineer_service().doubts(model_ids, _racer_names_of) if asked else []
     if device_id and doubts:  # asked, not refused: staff may still send a model that did not pass
         return render.fragment("console/car_status", assignment=None, device_id=device_id, errors={},
                                notice="", doubts=doubts, model_ids=model_ids)
@@ -93,8 +104,9 @@ def car_status(principal: User) -> Response:
 
 def _car_status(assignment: Assignment | None, device_id: str, errors: dict[str, str], status: int,
                 notice: str = "") -> Response:
+    racer_names = _racer_names(assignment.models) if assignment else {}
     return render.fragment("console/car_status", status=status, assignment=assignment, device_id=device_id,
-                           errors=errors, notice=notice)
+                           errors=errors, notice=notice, racer_names=racer_names)
 
 
 def _chosen_car(device_id: str) -> str:
@@ -107,14 +119,26 @@ def _listed(principal: User) -> list[ModelRecord]:
     return services.model_service().list_models(principal, ListQuery(limit=_LISTED)).models
 
 
-def _filtered(listed: list[ModelRecord]) -> tuple[dict[str, str], dict[str, str], list[ModelRecord]]:
+def _racer_names(models: Sequence[ModelRecord | AssignedModel]) -> dict[str, str]:
+    """{owner sub: display name}, told apart among the racers the table lists (one batch profile read)."""
+    return shown_racer_names([(m.owner_sub, m.owner_username) for m in models],
+                             services.profile_service().public_by_subs)
+
+
+def _racer_names_of(owners: list[tuple[str, str]]) -> dict[str, str]:
+    """The scrutineering warning names racers as the Models page does (one batch profile read)."""
+    return shown_racer_names(owners, services.profile_service().public_by_subs)
+
+
+def _filtered(listed: list[ModelRecord], racer_names: dict[str, str]
+              ) -> tuple[dict[str, str], dict[str, str], list[ModelRecord]]:
     raw = {k: v for k, v in (bp.current_request.query_params or {}).items() if k in ("racer", "status") and v}
     query = {"racer": raw.get("racer", ""), "status": raw.get("status", "")}
     try:
         wanted = ModelFilter.model_validate(raw)
     except SHOWN_ON_FORM as exc:
         return query, field_errors(exc, "status"), []
-    return query, {}, [m for m in listed if wanted.keeps(m)]
+    return query, {}, [m for m in listed if wanted.keeps(m, racer_names.get(m.owner_sub, m.owner_username))]
 
 
 def _cars() -> list:

@@ -14,7 +14,7 @@ from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.core.principals import User
 from chalicelib.domain.racer_queue import AddToQueue, MoveInQueue, QueueEntryRef
 from chalicelib.routes.console.forms import SHOWN_ON_FORM, error_status, field_errors, submitted
-from chalicelib.views.on_deck_panel import queue_panel
+from chalicelib.views.on_deck_panel import QueuePanel, queue_panel
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -93,10 +93,14 @@ def _form_name(name: str) -> str:
 def _list(event_id: str, track_id: str, errors: dict[str, str] | None = None, status: int = 200,
           headers: dict[str, str] | None = None) -> Response:
     return render.fragment("console/tk_queue_list", status=status, headers=headers,
-                           queue=queue_panel(services.on_deck(), event_id, track_id), queue_errors=errors or {})
+                           queue=_queue(event_id, track_id), queue_errors=errors or {})
 
 
 def _panel(event_id: str, track_id: str, errors: dict[str, str] | None = None, values: dict[str, str] | None = None,
            status: int = 200) -> Response:
-    return render.fragment("console/tk_queue", status=status, queue=queue_panel(services.on_deck(), event_id, track_id),
+    return render.fragment("console/tk_queue", status=status, queue=_queue(event_id, track_id),
                            queue_errors=errors or {}, queue_values=values or {})
+
+
+def _queue(event_id: str, track_id: str) -> QueuePanel:
+    return queue_panel(services.on_deck(), services.profile_service().public_by_subs, event_id, track_id)

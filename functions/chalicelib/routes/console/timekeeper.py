@@ -73,7 +73,8 @@ def racer_options(principal: User, query: RacerSearch) -> Response:
 @route(bp, "/console/timekeeper/{event_id}/{track_id}", allow=TIMEKEEPERS)
 def timekeeper_page(principal: User, event_id: str, track_id: str) -> Response:
     return render.page("console/timekeeper", screen=desk().screen(event_id, track_id), errors={}, setup={},
-                       queue=queue_panel(services.on_deck(), event_id, track_id), queue_errors={}, queue_values={})
+                       queue=queue_panel(services.on_deck(), services.profile_service().public_by_subs, event_id,
+                                         track_id), queue_errors={}, queue_values={})
 
 
 @route(bp, "/console/timekeeper/{event_id}/{track_id}/state", allow=TIMEKEEPERS)
