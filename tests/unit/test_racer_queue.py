@@ -319,6 +319,34 @@ def test_a_start_cut_off_after_the_race_was_created_ends_as_one_race_and_a_short
     assert "alice" in race and "Ready to start" in race
 
 
+def test_a_start_whose_answer_was_lost_after_it_finished_answers_with_its_race_when_pressed_again(console,
+                                                                                                 monkeypatch):
+    """Found by the chaos bench (kill -9 of everything after the queue change): the race was made and the racer left
+    the line, the answer never came, and Start pressed again said "Who is next changed meanwhile" (409)."""
+    from chalicelib.domain.on_deck import OnDeck
+
+    track = _track(console, "car-1", "car-2")
+    track.add("alice")
+    track.add("bob")
+    alice = track.entry_of("alice")
+    real_start = OnDeck.start_head
+
+    def answer_lost(service, *args, **kwargs):
+        real_start(service, *args, **kwargs)  # everything done ...
+        raise _PowerCut()  # ... and the timekeeper never hears of it
+
+    monkeypatch.setattr(OnDeck, "start_head", answer_lost)
+    assert console.post(f"{track.base}/queue/start", {"entry_id": alice}, htmx=True).status_code == 500
+    monkeypatch.setattr(OnDeck, "start_head", real_start)
+
+    again = console.post(f"{track.base}/queue/start", {"entry_id": alice}, htmx=True)
+    assert again.status_code == 200, again.body
+    assert track.on_deck() == ["bob"]
+    assert len(_races_of(console, track.event_id, "alice")) == 1  # one race, and it is the answer
+    race = text_of(console.web.get(f"{track.base}/state").body.decode())
+    assert "alice" in race and "Ready to start" in race
+
+
 def test_the_queue_names_racers_by_display_name_and_tells_two_bjorns_apart(console):
     """Issue 31: the timekeeper's queue named racers by sign-in name. Now by display name; two racers in line both
     called Björn are "Björn (bjorn_a)" and "björn (bjorn_b)", and plain "Björn" once the other has left the line."""

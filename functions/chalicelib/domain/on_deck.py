@@ -103,12 +103,18 @@ class OnDeck:
         the next racer's model to a free car. The race and the queue change are one outcome: the race's id is
         recorded on the entry first, so a Start repeated after a crash (between the race and the queue change)
         finds that race and only finishes the queue change. If the race is refused, the queue keeps the racer."""
-        head = _require_head(self._queue.queue(event_id, track_id), entry_id)
+        queue = self._queue.queue(event_id, track_id)
+        race_id = race_id_for_entry(event_id, track_id, entry_id)
+        if all(e.entry_id != entry_id for e in queue.entries) and self._races.existing_race(event_id, race_id):
+            # Start repeated after everything was done but its answer was lost (a crash or a dropped connection):
+            # the race that Start made is the answer, not "who is next changed".
+            return self._races.get_race(principal, event_id, race_id)
+        head = _require_head(queue, entry_id)
         if head.starting_race_id and (started := self._races.existing_race(event_id, head.starting_race_id)):
             return self._finish_start(principal, event_id, track_id, entry_id, started.race.race_id)
         # The car the model went to may have been racing then (one car), or given other models since: check again.
         head = _require_head(self.preload_head(principal, event_id, track_id), entry_id)
-        head = self._queue.mark_starting(event_id, track_id, entry_id, uuid.uuid4().hex)
+        head = self._queue.mark_starting(event_id, track_id, entry_id, race_id)
         assert head.starting_race_id is not None
         race = self._races.create_race(principal, event_id, CreateRaceInput(
             track_id=track_id, racer_username=head.racer_username, car=head.car, raced_by_proxy=raced_by_proxy,
@@ -158,6 +164,15 @@ class OnDeck:
                 raise
             # One of the car's other models was withdrawn since it was given: the racer's model alone, then.
             self._assignments.assign(principal, current.device_id, [entry.model_id])
+
+
+_QUEUE_RACES = uuid.UUID("5c0e0d0a-7d1e-4b8e-9a55-0f1c2e3d4b5a")  # names the races Start makes from queue entries
+
+
+def race_id_for_entry(event_id: str, track_id: str, entry_id: str) -> str:
+    """The id of the race Start makes for a queue entry: always the same for that entry, so a repeated Start can find
+    the race an earlier one made even after the entry left the queue. A new place in line is a new entry (a new id)."""
+    return uuid.uuid5(_QUEUE_RACES, f"{event_id}/{track_id}/{entry_id}").hex
 
 
 def _require_head(queue: RacerQueue, entry_id: str) -> QueueEntry:
