@@ -25,6 +25,7 @@ from drem_local.api_client import ApiClient, ApiError
 from drem_local.commands.status import describe, gather
 from drem_local.stack import HEALTH_PATH, StackConfig, free_port, http_get, start_stack
 from drem_local.storage_keys import load, local_client
+from tests.chaos_disk import fill, mount_small_disk, unmount
 from tests.stack_fixtures import read_until
 
 pytestmark = [pytest.mark.integration, pytest.mark.durability]
@@ -38,28 +39,12 @@ def small_disk(tmp_path):
     if os.geteuid() != 0:
         pytest.skip("mounting a small tmpfs needs root; run this test as root (CI does)")
     mount = tmp_path / "disk"
-    mount.mkdir()
-    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48m,mode=0700", "tmpfs", str(mount)], check=True)
+    problem = mount_small_disk(mount, "48m")
+    assert problem is None, problem
     try:
         yield mount
     finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
-
-
-def _fill(disk: Path) -> Path:
-    """Write a file until the disk refuses another byte."""
-    filler = disk / "filler"
-    fd = os.open(filler, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    try:
-        for chunk in (1 << 20, 1 << 12, 1):
-            try:
-                while os.write(fd, b"\xff" * chunk):
-                    pass
-            except OSError:
-                pass
-    finally:
-        os.close(fd)
-    return filler
+        unmount(mount)
 
 
 def _register(admin: ApiClient, username: str) -> str:
@@ -90,7 +75,7 @@ def test_a_full_disk_is_said_in_words_and_nothing_acknowledged_changes_after_a_c
         s3 = local_client("s3", config.storage_url, load(state_dir))
         s3.create_bucket(Bucket="disk-test")
 
-        filler = _fill(small_disk)
+        filler = fill(small_disk)
         during_sub = _register(admin, "full-disk-racer")  # its account's immediate snapshot fails: no room for it
 
         disk = _health(config.storage_url)["disk"]
@@ -154,7 +139,7 @@ def test_drem_up_on_a_full_or_read_only_disk_says_so_instead_of_a_traceback(smal
     config = StackConfig(state_dir=state_dir, app_port=free_port(), storage_port=free_port(), live_port=free_port())
     start_stack(config, "admin", PASSWORD, timeout=120).stop()
 
-    filler = _fill(small_disk)
+    filler = fill(small_disk)
     full = _drem_up(state_dir, tmp_path)
     assert full.returncode == 1, full.stdout + full.stderr
     assert f"drem's data disk is full at {state_dir.resolve()}: free space on that disk" in full.stderr, full.stderr
