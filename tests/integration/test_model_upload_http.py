@@ -41,7 +41,9 @@ def test_presigned_post_then_complete_makes_the_model_available(admin_api: ApiCl
     listed = admin_api.get("/api/models")["models"]
     assert model["model_id"] in [m["model_id"] for m in listed]
     again = admin_api.post(f"/api/models/{model['model_id']}/complete")["model"]
-    assert again == model
+    # Completing twice changes nothing of the upload; the background test drive moves on by itself meanwhile.
+    driving = {"scrutineer_status", "scrutineer_state", "updated_at"}
+    assert {k: v for k, v in again.items() if k not in driving} == {k: v for k, v in model.items() if k not in driving}
 
 
 def test_an_invalid_archive_is_not_valid_with_a_reason(admin_api: ApiClient) -> None:

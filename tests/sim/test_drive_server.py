@@ -151,7 +151,8 @@ def test_a_stopped_recording_is_uploaded_to_the_runs_bucket(tmp_path: Path) -> N
 
         uri = state["last_run"]["uploaded"]
         assert uri.startswith("s3://drem-test-runs/runs/drem_oval/")
-        keys = {item["Key"] for item in s3.list_objects_v2(Bucket="drem-test-runs")["Contents"]}
+        stored = s3.list_objects_v2(Bucket="drem-test-runs", Prefix=uri.removeprefix("s3://drem-test-runs/"))
+        keys = {item["Key"] for item in stored["Contents"]}
         bundle = next(key for key in keys if key.endswith("/frames.tar"))  # all frames travel as one object
         body = s3.get_object(Bucket="drem-test-runs", Key=bundle)["Body"].read()
         with tarfile.open(fileobj=io.BytesIO(body)) as frames:

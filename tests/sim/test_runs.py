@@ -58,7 +58,7 @@ def test_s3_round_trip(run_dir, tmp_path) -> None:
         s3.create_bucket(Bucket="drem-test-runs")
         uri = upload_run(s3, "drem-test-runs", run_dir)
         assert uri == f"s3://drem-test-runs/runs/drem_oval/{run_dir.parts[-2]}/run-a/"
-        stored = s3.list_objects_v2(Bucket="drem-test-runs")["Contents"]
+        stored = s3.list_objects_v2(Bucket="drem-test-runs", Prefix=uri.removeprefix("s3://drem-test-runs/"))["Contents"]
         assert len(stored) == 4  # controls, metadata, the frames in one bundle, the first frame (the run page's)
         back = download_run(uri, tmp_path, s3_client=s3)
         for name in ("controls.jsonl", "metadata.json", "frames/000007.png"):
