@@ -66,13 +66,15 @@ LOG_ACTIONS: tuple[str, ...] = ("logs:CreateLogStream", "logs:PutLogEvents")
 
 # The live-page server's task role (drem_infra.live_pages): it renders the live regions from the materialised boards
 # and overlays (leaderboards), the event (events) and the race behind an overlay (races), checks a car's credential
-# when it sends its camera (fleet), and only reads. Per table
+# when it sends its camera (fleet), checks that a staff session previewing a car's camera was not signed out or
+# demoted since its token was issued (sessions: the user's revocation mark, one GetItem), and only reads. Per table
 # logical name; tests/infra/test_iam_policy.py derives the same set from the live routes' reads and fails on any drift.
 LIVE_TABLE_ACTIONS: dict[str, tuple[str, ...]] = {
     "events": ("dynamodb:GetItem",),
     "fleet": ("dynamodb:GetItem", "dynamodb:Query"),  # a car sending its camera: its credential and device record
     "leaderboards": ("dynamodb:BatchGetItem", "dynamodb:GetItem"),  # the adapter reads a big board's state parts
     "races": ("dynamodb:GetItem", "dynamodb:Query"),
+    "sessions": ("dynamodb:GetItem",),  # a staff preview: the revocation mark of the session's user
 }
 # The read calls the live server may make at all (its contract: GetItem/Query/BatchGetItem through the adapters).
 LIVE_READ_ACTIONS: frozenset[str] = frozenset({"dynamodb:GetItem", "dynamodb:Query", "dynamodb:BatchGetItem"})

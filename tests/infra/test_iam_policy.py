@@ -188,6 +188,18 @@ def _services_tables() -> dict[str, set[tuple[str, str]]]:
     return {name: resolve(name) for name in direct}
 
 
+SESSIONS_MODULE = "chalicelib.auth.sessions"
+
+
+def _session_backends_used() -> set[str]:
+    """The session backends chalicelib.auth.sessions calls (`_installed().session_store()`, ...): the composition root
+    installs services functions of the same names, so a reader resolving a session reads what they read."""
+    tree = ast.parse((FUNCTIONS_DIR / "chalicelib" / "auth" / "sessions.py").read_text())
+    return {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Call) and isinstance(node.value.func, ast.Name)
+            and node.value.func.id == "_installed"}
+
+
 def live_reads() -> dict[str, set[str]]:
     """{table logical name: {dynamodb:Action}}: the read operations of the storage adapters the live readers use
     (behind each `services.x()` they call, or built by themselves), limited to the reads the live server may make."""
@@ -199,6 +211,8 @@ def live_reads() -> dict[str, set[str]]:
         tree = ast.parse(path.read_text())
         used = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)
                 and isinstance(node.value, ast.Name) and node.value.id == "services"}
+        if any(isinstance(node, ast.ImportFrom) and node.module == SESSIONS_MODULE for node in ast.walk(tree)):
+            used |= _session_backends_used()  # e.g. the staff preview resolving a session cookie
         adapters = {pair for name in used for pair in services_tables.get(name, ())}
         adapters |= _adapters_built(tree, _storage_classes(tree))
         for module, table in adapters:
@@ -227,6 +241,9 @@ def test_the_live_derivation_finds_the_boards_events_and_races():
     # Spot checks that the derivation works (finding nothing would make the next test vacuous).
     assert "dynamodb:GetItem" in reads["leaderboards"] and "dynamodb:GetItem" in reads["events"]
     assert reads["races"] >= {"dynamodb:GetItem"}
+    # The staff preview of a car's camera resolves the session cookie: the user's revocation mark, and nothing else
+    # of the sessions table (no write, no scan).
+    assert reads["sessions"] == {"dynamodb:GetItem"}
 
 
 def test_the_live_task_role_reads_exactly_the_tables_the_live_pages_read(task_role_statements, app_template):
