@@ -44,6 +44,7 @@ from aws_cdk import aws_elasticloadbalancingv2 as elbv2
 from aws_cdk import aws_iam as iam
 from aws_cdk import aws_logs as logs
 from aws_cdk import aws_secretsmanager as secretsmanager
+from aws_cdk import aws_servicediscovery as servicediscovery
 from constructs import Construct
 
 from drem_infra import permissions
@@ -69,6 +70,9 @@ LIVE_IMAGE_FILES: tuple[str, ...] = (
 
 VIEWER_ADDRESS_HEADER = "CloudFront-Viewer-Address"  # "address:port" of the viewer, added by CloudFront
 PATH_PATTERN = "/live/*"
+PREVIEW_PATH_PATTERN = "/live/video/cars/*"  # staff previews: the one live route that reads the session cookies
+CAR_UPLOAD_PATH_PATTERN = "/live/video/car/*"  # a car's frames (POST) and its demand poll, with its device credential
+SESSION_COOKIES = ("drem_session", "drem_refresh")  # chalicelib.auth.cookies SESSION_COOKIE, REFRESH_COOKIE
 HEALTH_PATH = "/live/healthz"
 CONTAINER_PORT = 8080
 # The live server's SSE heartbeat (a comment line every 15 s); the timeouts below are set against it.
@@ -99,6 +103,16 @@ ORIGIN_SECRET_HEADER = "X-Drem-Origin-Secret"
 LIVE_RULE_PRIORITY = 50  # after the booth's rules (drem_infra.booth_service)
 LOG_RETENTION = logs.RetentionDays.ONE_MONTH
 ORIGIN_SUBNETS = "origin"  # the isolated subnets the internal load balancer lives in
+# The cars' cameras across tasks (drem_live.video_peers): every task has an A record under one private DNS name, and
+# takes the frames and viewer reports of the others on its own port, which only the service's own tasks reach.
+PEER_PORT = 8081
+PEER_NAMESPACE = "drem-live.internal"  # private to this stage's own VPC
+PEER_SERVICE_NAME = "tasks"
+PEER_DNS_TTL = cdk.Duration.seconds(10)  # a new task is found within this plus the server's re-resolve (5 s)
+# drem_live.video_peers reads these (tests/infra/test_live_pages.py checks the names match).
+PEERS_ENV = "DREM_LIVE_VIDEO_PEERS"
+PEER_LISTEN_ENV = "DREM_LIVE_VIDEO_PEER_LISTEN"
+PEER_SECRET_ENV = "DREM_LIVE_VIDEO_PEER_SECRET"
 
 
 class LivePages(Construct):
@@ -123,6 +137,9 @@ class LivePages(Construct):
             self, "Task", cpu=TASK_CPU, memory_limit_mib=TASK_MEMORY_MIB, task_role=self.task_role,
             runtime_platform=ecs.RuntimePlatform(cpu_architecture=ecs.CpuArchitecture.X86_64,
                                                  operating_system_family=ecs.OperatingSystemFamily.LINUX))
+        self.peer_secret = secretsmanager.Secret(
+            self, "PeerSecret", description=f"drem {stage}: live tasks' shared secret for the cars' frames",
+            generate_secret_string=secretsmanager.SecretStringGenerator(exclude_punctuation=True, password_length=40))
         task.add_container(
             "Server",
             image=ecs.ContainerImage.from_asset(
@@ -133,19 +150,29 @@ class LivePages(Construct):
             environment={**environment, "AWS_DEFAULT_REGION": stack.region,
                          "DREM_LIVE_CLIENT_ADDRESS_HEADER": VIEWER_ADDRESS_HEADER,
                          "DREM_LIVE_KEEPALIVE_S": str(SERVER_KEEPALIVE_SECONDS),
-                         "DREM_LIVE_METRICS_NAMESPACE": STREAMS_METRIC_NAMESPACE, "DREM_LIVE_METRICS_STAGE": stage},
-            port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT)],
+                         "DREM_LIVE_METRICS_NAMESPACE": STREAMS_METRIC_NAMESPACE, "DREM_LIVE_METRICS_STAGE": stage,
+                         PEERS_ENV: f"{PEER_SERVICE_NAME}.{PEER_NAMESPACE}:{PEER_PORT}",
+                         PEER_LISTEN_ENV: f"0.0.0.0:{PEER_PORT}"},
+            secrets={PEER_SECRET_ENV: ecs.Secret.from_secrets_manager(self.peer_secret)},
+            port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT), ecs.PortMapping(container_port=PEER_PORT)],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
         )
         # The cluster, the public subnets and the load balancer's listener are shared with the learning booth's task
         # (drem_infra.booth_service), when the stage has one.
         self.cluster = ecs.Cluster(self, "Cluster", vpc=self.vpc)
+        self.peer_namespace = servicediscovery.PrivateDnsNamespace(
+            self, "PeerNamespace", name=PEER_NAMESPACE, vpc=self.vpc,
+            description=f"drem {stage}: the live tasks find each other to share the cars' cameras")
         self.public_subnets = ec2.SubnetSelection(subnet_type=ec2.SubnetType.PUBLIC)
         self.service = ecs.FargateService(
             self, "Service", cluster=self.cluster, task_definition=task, desired_count=MIN_TASKS,
             assign_public_ip=True, vpc_subnets=self.public_subnets,
             min_healthy_percent=100, max_healthy_percent=200, circuit_breaker=ecs.DeploymentCircuitBreaker(
-                rollback=True))
+                rollback=True),
+            cloud_map_options=ecs.CloudMapOptions(
+                cloud_map_namespace=self.peer_namespace, name=PEER_SERVICE_NAME,
+                dns_record_type=servicediscovery.DnsRecordType.A, dns_ttl=PEER_DNS_TTL))
+        self.service.connections.allow_internally(ec2.Port.tcp(PEER_PORT), "live tasks share the cars' cameras")
         max_tasks = int(self.node.try_get_context("live_max_tasks") or MAX_TASKS)
         scaling = self.service.auto_scale_task_count(min_capacity=MIN_TASKS, max_capacity=max(MIN_TASKS, max_tasks))
         scaling.scale_on_cpu_utilization("Cpu", target_utilization_percent=CPU_TARGET_PERCENT)
@@ -240,6 +267,23 @@ class LivePages(Construct):
             header_behavior=cloudfront.OriginRequestHeaderBehavior.all(VIEWER_ADDRESS_HEADER),
             query_string_behavior=cloudfront.OriginRequestQueryStringBehavior.all(),
             cookie_behavior=cloudfront.OriginRequestCookieBehavior.none())
+        # More specific paths first (CloudFront takes the first behaviour that matches): a staff preview of a car's
+        # camera carries the session cookies (and only those) for the server's staff check; a car's frames are POSTs.
+        preview_policy = cloudfront.OriginRequestPolicy(
+            self, "PreviewRequestPolicy", comment="drem live: a staff preview of a car's camera, with the session",
+            header_behavior=cloudfront.OriginRequestHeaderBehavior.all(VIEWER_ADDRESS_HEADER),
+            query_string_behavior=cloudfront.OriginRequestQueryStringBehavior.all(),
+            cookie_behavior=cloudfront.OriginRequestCookieBehavior.allow_list(*SESSION_COOKIES))
+        distribution.add_behavior(
+            PREVIEW_PATH_PATTERN, self.origin,
+            viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            allowed_methods=cloudfront.AllowedMethods.ALLOW_GET_HEAD,
+            cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=preview_policy, compress=False)
+        distribution.add_behavior(
+            CAR_UPLOAD_PATH_PATTERN, self.origin,
+            viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            allowed_methods=cloudfront.AllowedMethods.ALLOW_ALL,
+            cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=policy, compress=False)
         distribution.add_behavior(
             PATH_PATTERN, self.origin, viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
             allowed_methods=cloudfront.AllowedMethods.ALLOW_GET_HEAD,

@@ -6,13 +6,16 @@ the viewers once, as one part of a `multipart/x-mixed-replace` (MJPEG) stream, a
 
 Demand: a car uploads only while someone may watch it. Viewers register interest under the name the race knows the car
 by (its device id or hostname); a car asks whether it is wanted, by its device id, and the feed answers from the
-interest held under either name. Everything here runs on the server's one event loop (no locks).
+interest held under either name. With several live tasks (drem_live.video_peers) the viewers of the other tasks count
+too: each task tells its peers which cars its viewers watch, and a car is wanted while any task wants it.
+Everything here runs on the server's one event loop (no locks).
 """
 from __future__ import annotations
 
 import asyncio
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 BOUNDARY = "drem-frame"
@@ -120,6 +123,8 @@ class Feeds:
         self._names: dict[str, str] = {}  # hostname or device id → device id
         self._interest: Counter[str] = Counter()  # car name → viewers watching it
         self._demand_changed: dict[str, asyncio.Event] = {}
+        self._remote: dict[str, tuple[float, frozenset[str]]] = {}  # peer id → (expires, the car names it watches)
+        self.on_interest_change: Callable[[], None] | None = None  # the peers are told (drem_live.video_peers)
         self.viewers = 0
         self.frames_in = 0
 
@@ -140,13 +145,29 @@ class Feeds:
     def wanted(self, device_id: str) -> bool:
         feed = self._feeds.get(device_id)
         names = {device_id, *((feed.hostname,) if feed and feed.hostname else ())}
-        return any(self._interest[name] > 0 for name in names)
+        if any(self._interest[name] > 0 for name in names):
+            return True
+        now = time.monotonic()
+        return any(expires > now and not names.isdisjoint(watched) for expires, watched in self._remote.values())
+
+    def watched_here(self) -> list[str]:
+        """The car names this server's own viewers watch (what its peers are told)."""
+        return sorted(name for name, count in self._interest.items() if count > 0)
+
+    def watched_by_peer(self, peer_id: str, names: frozenset[str], ttl_s: float) -> None:
+        """A peer's viewers watch these cars (its whole list, replacing the last one), for the next `ttl_s`: a peer
+        that stops telling (stopped, cut off) stops counting by itself."""
+        _expires, before = self._remote.get(peer_id, (0.0, frozenset()))
+        self._remote[peer_id] = (time.monotonic() + ttl_s, names)
+        for name in before ^ names:
+            self._wake(name)
 
     def watch(self, car_name: str) -> None:
         self.viewers += 1
         self._interest[car_name] += 1
         if self._interest[car_name] == 1:
             self._wake(car_name)
+            self._tell_peers()
 
     def unwatch(self, car_name: str) -> None:
         self.viewers -= 1
@@ -154,6 +175,11 @@ class Feeds:
         if self._interest[car_name] <= 0:
             del self._interest[car_name]
             self._wake(car_name)
+            self._tell_peers()
+
+    def _tell_peers(self) -> None:
+        if self.on_interest_change is not None:
+            self.on_interest_change()
 
     def full(self) -> bool:
         return self.viewers >= self.max_viewers

@@ -22,10 +22,12 @@ from typing import Any
 from aiohttp import web
 
 from drem_live.video_feeds import MAX_FRAME_BYTES, MJPEG_CONTENT_TYPE, Feeds, Sink, looks_like_jpeg
+from drem_live.video_peers import Peers, PeerSettings, Upload, serve_peers
 
 FEEDS: web.AppKey[Feeds] = web.AppKey("video_feeds", Feeds)
 ACCESS: web.AppKey[Any] = web.AppKey("video_access", object)
 VIDEO_EXECUTOR: web.AppKey[ThreadPoolExecutor] = web.AppKey("video_executor", ThreadPoolExecutor)
+PEERS: web.AppKey[Peers | None] = web.AppKey("video_peers", object)  # type: ignore[arg-type]
 EVENT_ID = re.compile(r"[A-Za-z0-9_.-]{1,128}")
 TRACK_ID = re.compile(r"[A-Za-z0-9_-]{1,32}")
 DEVICE_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
@@ -65,6 +67,9 @@ async def car_frame(request: web.Request) -> web.Response:
     feeds = request.app[FEEDS]
     feeds.feed(car.device_id, car.hostname).publish(jpeg, taken_ms)
     feeds.frames_in += 1
+    peers = request.app[PEERS]
+    if peers is not None:  # the viewers of the other live tasks see it too (drem_live.video_peers)
+        peers.forward(Upload(car.device_id, car.hostname, jpeg, taken_ms))
     return web.json_response({"wanted": feeds.wanted(car.device_id)})
 
 
@@ -200,9 +205,10 @@ HUB_URL: web.AppKey[str] = web.AppKey("video_hub_url", str)
 
 
 def add_video_routes(app: web.Application, access: Any | None = None, *, threads: int = 4,
-                     hub_url: str | None = None) -> None:
+                     hub_url: str | None = None, peers: PeerSettings | None = None) -> None:
     """Mount the camera routes; `access` defaults to the app's (drem_live.video_access.VideoAccess). With `hub_url`
-    (default $DREM_LIVE_VIDEO_HUB, which the first of several workers gives the others) they pass to that hub."""
+    (default $DREM_LIVE_VIDEO_HUB, which the first of several workers gives the others) they pass to that hub. With
+    `peers` (default from $DREM_LIVE_VIDEO_PEERS…, drem_live.video_peers) the feeds are shared with other servers."""
     import os
 
     hub_url = hub_url if hub_url is not None else os.environ.get(HUB_ENV, "")
@@ -213,8 +219,13 @@ def add_video_routes(app: web.Application, access: Any | None = None, *, threads
         from drem_live.video_access import VideoAccess
 
         access = VideoAccess()
-    app[FEEDS] = Feeds()
+    feeds = app[FEEDS] = Feeds()
     app[ACCESS] = access
+    peers = peers if peers is not None else PeerSettings.from_env()
+    app[PEERS] = None
+    if peers is not None:
+        app[PEERS] = shared = Peers(feeds, peers)
+        serve_peers(app, shared)
     executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="drem-video")
     app[VIDEO_EXECUTOR] = executor
     app.router.add_post("/live/video/car/frame", car_frame)

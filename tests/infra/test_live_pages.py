@@ -151,8 +151,10 @@ def test_only_cloudfront_reaches_the_load_balancer_and_only_the_load_balancer_th
     [task_group] = [g["Fn::GetAtt"][0] for g in
                     service["Properties"]["NetworkConfiguration"]["AwsvpcConfiguration"]["SecurityGroups"]]
     to_task = [r for g, r in ingress if g == task_group]
-    assert [(r["SourceSecurityGroupId"]["Fn::GetAtt"][0], r["FromPort"]) for r in to_task] == \
-        [(alb_group, live_pages.CONTAINER_PORT)]
+    # The load balancer on the server's port; the service's own tasks, and nothing else, on the peer port.
+    assert sorted((r["SourceSecurityGroupId"]["Fn::GetAtt"][0], r["FromPort"], r["ToPort"]) for r in to_task) == \
+        sorted([(alb_group, live_pages.CONTAINER_PORT, live_pages.CONTAINER_PORT),
+                (task_group, live_pages.PEER_PORT, live_pages.PEER_PORT)])
 
 
 def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_its_own_origin(app_template):
@@ -168,7 +170,8 @@ def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_it
         assert env[name] == lambda_env[0][name], name
     assert "AWS_DEFAULT_REGION" in env
     assert env["DREM_LIVE_CLIENT_ADDRESS_HEADER"] == "CloudFront-Viewer-Address", "caps count viewers, not CloudFront"
-    assert container["PortMappings"] == [{"ContainerPort": live_pages.CONTAINER_PORT, "Protocol": "tcp"}]
+    assert container["PortMappings"] == [{"ContainerPort": live_pages.CONTAINER_PORT, "Protocol": "tcp"},
+                                         {"ContainerPort": live_pages.PEER_PORT, "Protocol": "tcp"}]
 
 
 def test_the_live_server_logs_expire_and_failures_raise_alarms(app_template):
@@ -244,3 +247,79 @@ def test_the_images_packages_import_and_render_the_live_routes(staged_image_cont
                                            "AWS_DEFAULT_REGION": "us-east-1"})
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip().startswith(str(root / "app" / "functions" / "chalicelib"))
+
+
+def _behaviours(app_template) -> list[dict]:
+    config = _one(app_template, "AWS::CloudFront::Distribution")[1]["Properties"]["DistributionConfig"]
+    return config["CacheBehaviors"]
+
+
+def _request_policy(app_template, behaviour: dict) -> dict:
+    policies = app_template.find_resources("AWS::CloudFront::OriginRequestPolicy")
+    return policies[behaviour["OriginRequestPolicyId"]["Ref"]]["Properties"]["OriginRequestPolicyConfig"]
+
+
+def test_a_staff_preview_carries_the_session_cookies_and_a_car_may_post_its_frames(app_template):
+    from chalicelib.auth.cookies import REFRESH_COOKIE, SESSION_COOKIE
+
+    behaviours = _behaviours(app_template)
+    order = [b["PathPattern"] for b in behaviours]
+    by_path = {b["PathPattern"]: b for b in behaviours}
+    live_origin = by_path[live_pages.PATH_PATTERN]["TargetOriginId"]
+    preview, upload = by_path["/live/video/cars/*"], by_path["/live/video/car/*"]
+    # CloudFront takes the first behaviour that matches: both come before the public /live/* one.
+    assert order.index("/live/video/cars/*") < order.index("/live/*") > order.index("/live/video/car/*")
+    for behaviour in (preview, upload):
+        assert behaviour["TargetOriginId"] == live_origin
+        assert behaviour["CachePolicyId"] == CACHING_DISABLED
+        assert behaviour["ViewerProtocolPolicy"] == "redirect-to-https"
+    # Only the two session cookies, only on the preview route: the public streams still get no cookie at all.
+    cookies = _request_policy(app_template, preview)["CookiesConfig"]
+    assert cookies["CookieBehavior"] == "whitelist" and sorted(cookies["Cookies"]) == [REFRESH_COOKIE, SESSION_COOKIE]
+    assert sorted(preview["AllowedMethods"]) == ["GET", "HEAD"]
+    assert _request_policy(app_template, upload)["CookiesConfig"] == {"CookieBehavior": "none"}
+    assert "POST" in upload["AllowedMethods"]
+    headers = _request_policy(app_template, upload)["HeadersConfig"]["HeaderBehavior"]
+    assert headers.startswith("allViewer"), "the car's Authorization and X-Frame-Time reach the server"
+
+
+def test_the_staff_preview_check_has_its_settings_and_its_one_read_on_aws(app_template):
+    """The preview resolves the session as the app does (drem_live.video_access): the user pool to verify the token
+    against, and the user's revocation mark in the sessions table the task is told of, which its role may read."""
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    [container] = task["Properties"]["ContainerDefinitions"]
+    env = {e["Name"]: e["Value"] for e in container["Environment"]}
+    assert {"DREM_USER_POOL_ID", "DREM_USER_POOL_CLIENT_ID", "AWS_DEFAULT_REGION"} <= set(env)
+    sessions_table = env["DREM_TABLE_SESSIONS"]["Ref"]
+    role_id = task["Properties"]["TaskRoleArn"]["Fn::GetAtt"][0]
+    role = app_template.find_resources("AWS::IAM::Role")[role_id]["Properties"]
+    statements = [s for p in role["Policies"] for s in p["PolicyDocument"]["Statement"]]
+    on_sessions = [s for s in statements if s["Resource"] == {"Fn::GetAtt": [sessions_table, "Arn"]}]
+    assert [s["Action"] for s in on_sessions] == ["dynamodb:GetItem"]
+
+
+def test_every_live_task_finds_the_others_by_one_name_and_only_they_reach_its_peer_port(app_template):
+    from drem_live import video_peers
+
+    [(namespace_id, namespace)] = app_template.find_resources("AWS::ServiceDiscovery::PrivateDnsNamespace").items()
+    [vpc_id] = app_template.find_resources("AWS::EC2::VPC")
+    assert namespace["Properties"]["Vpc"] == {"Ref": vpc_id}, "private to the stage's own VPC"
+    _, service = _one(app_template, "AWS::ECS::Service")
+    [registry] = service["Properties"]["ServiceRegistries"]
+    discovery = app_template.find_resources("AWS::ServiceDiscovery::Service")[
+        registry["RegistryArn"]["Fn::GetAtt"][0]]["Properties"]
+    assert discovery["Name"] == live_pages.PEER_SERVICE_NAME
+    assert discovery["DnsConfig"]["NamespaceId"] == {"Fn::GetAtt": [namespace_id, "Id"]}
+    assert [r["Type"] for r in discovery["DnsConfig"]["DnsRecords"]] == ["A"], "one address per task"
+    assert discovery["DnsConfig"]["RoutingPolicy"] == "MULTIVALUE", "the name answers with every task"
+
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    [container] = task["Properties"]["ContainerDefinitions"]
+    env = {e["Name"]: e["Value"] for e in container["Environment"]}
+    assert env[video_peers.PEERS_ENV] == \
+        f"{live_pages.PEER_SERVICE_NAME}.{namespace['Properties']['Name']}:{live_pages.PEER_PORT}"
+    assert env[video_peers.PEER_LISTEN_ENV] == f"0.0.0.0:{live_pages.PEER_PORT}"
+    # The shared secret comes from Secrets Manager at start, never as plain text in the template.
+    [secret] = container["Secrets"]
+    assert secret["Name"] == video_peers.PEER_SECRET_ENV and "Ref" in secret["ValueFrom"]
+    assert video_peers.PEER_SECRET_ENV not in env

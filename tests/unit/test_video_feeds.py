@@ -92,3 +92,32 @@ def test_a_frame_is_written_once_per_viewer_as_one_http_chunk_and_a_stuck_viewer
     size, rest = quick.written[0].split(b"\r\n", 1)
     assert int(size, 16) == len(rest) - 2 and rest.startswith(b"--drem-frame\r\n") and JPEG in rest
     assert stuck.written == [] and stuck.closed and stuck_sink.closed.is_set()
+
+
+def test_a_car_is_wanted_while_another_live_servers_viewers_watch_it_and_not_after_they_stop_saying_so() -> None:
+    async def run() -> list[bool]:
+        feeds = Feeds()
+        feeds.feed("car-1", "eye-car")
+        seen = [feeds.wanted("car-1")]
+        feeds.watched_by_peer("0123456789abcdef", frozenset({"eye-car"}), ttl_s=60)
+        seen.append(feeds.wanted("car-1"))
+        feeds.watched_by_peer("0123456789abcdef", frozenset(), ttl_s=60)  # its viewers left
+        seen.append(feeds.wanted("car-1"))
+        feeds.watched_by_peer("fedcba9876543210", frozenset({"car-1"}), ttl_s=0)  # a peer that went quiet
+        seen.append(feeds.wanted("car-1"))
+        return seen
+
+    assert coroutines.run(run()) == [False, True, False, False]
+
+
+def test_a_peers_report_wakes_the_car_waiting_to_hear_it_is_wanted() -> None:
+    async def run() -> bool:
+        feeds = Feeds()
+        feeds.feed("car-1", "eye-car")
+        asking = asyncio.create_task(feeds.demand_change("car-1", reported=False, timeout_s=30))
+        await asyncio.sleep(0)
+        feeds.watched_by_peer("0123456789abcdef", frozenset({"eye-car"}), ttl_s=60)
+        async with asyncio.timeout(10):
+            return await asking
+
+    assert coroutines.run(run())
