@@ -7,14 +7,16 @@ short timeout: a slow network costs frames, never memory or the control loop's t
 frame says whether the car is still wanted.
 
 Staff choose the rate, size and view when they start the car (`drem car run --video-fps/--video-size/--video-view`):
-`camera` (colour, 480×360 by default) or `model`, the model's own input (160×120 grey).
+`camera` (colour, 480×360 by default) or `model`, the model's own input (160×120 grey); and later on the Cars page,
+whose choice the live server hands on with its answers: the relay sends at it from then on (a new size reopens the
+source).
 """
 from __future__ import annotations
 
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import requests
@@ -121,11 +123,17 @@ class VideoRelay:
             self._stop.wait(self.retry_s)
 
     def _stream(self) -> None:
-        self.source.open(*self.settings.size)
-        period, last = 1.0 / max(0.5, self.settings.fps), 0
+        opened = self.settings.size
+        self.source.open(*opened)
+        last = 0
         try:
             while self.wanted and not self._stop.is_set():
                 started = time.monotonic()
+                if self.settings.size != opened:  # staff chose another size: the source delivers that from now on
+                    self.source.close()
+                    opened = self.settings.size
+                    self.source.open(*opened)
+                period = 1.0 / max(0.5, self.settings.fps)
                 frame = self.source.latest()
                 if frame is not None and frame.number != last:
                     self.skipped += max(0, frame.number - last - 1) if last else 0
@@ -149,4 +157,22 @@ class VideoRelay:
             log.warning("video: %s", self.last_error)
             return False
         body: Any = reply.json()
+        if isinstance(body, dict) and isinstance(body.get("video"), dict):
+            self._apply(body["video"])
         return bool(isinstance(body, dict) and body.get("wanted"))
+
+    def _apply(self, chosen: dict[str, Any]) -> None:
+        """The settings staff chose on the Cars page, as the live server hands them on; anything malformed is ignored
+        (the car keeps what it sends at)."""
+        try:
+            settings = replace(self.settings, fps=float(chosen["fps"]), width=int(chosen["width"]),
+                               height=int(chosen["height"]), view=chosen["view"])
+        except (KeyError, TypeError, ValueError):
+            return
+        if (settings.view not in ("camera", "model") or not 1 <= settings.fps <= 30
+                or not (16 <= settings.width <= 1920 and 16 <= settings.height <= 1080)):
+            return
+        if settings != self.settings:
+            log.info("video: staff chose %g fps, %dx%d, %s view", settings.fps, settings.width, settings.height,
+                     settings.view)
+            self.settings = settings

@@ -67,8 +67,8 @@ class ConsoleCamera:
         return self._latest
 
     def open(self, width: int, height: int) -> None:
-        if self._thread is not None and self._thread.is_alive():
-            return
+        if self._thread is not None and self._thread.is_alive() and not self._stop.is_set():
+            return  # already reading (a closed reader still finishing its last read is replaced)
         self._size, self._stop = (width, height), threading.Event()
         self._thread = threading.Thread(target=self._read, args=(self._stop,), name="drem-console-camera",
                                         daemon=True)

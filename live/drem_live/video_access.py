@@ -5,6 +5,7 @@
   (a revoked credential stops working here within that time).
 - The public sees the car now racing on an event's track: the track's live race (the same pointer the overlay
   follows) names its car. Read at most once a second per track, shared by all viewers.
+  The car's record also carries the camera settings staff chose (Cars page): every answer to the car hands them on.
 - Staff (admin, operator) preview any car: their drem session cookie, resolved as the app does. Cookies ignore
   ports, so the session of the pages reaches the live server on its own port too.
 All calls block (storage reads): the routes run them in the server's worker threads.
@@ -32,6 +33,7 @@ _CACHE_CAP = 10_000
 class Car:
     device_id: str
     hostname: str
+    video: dict | None = None  # the camera settings staff chose on the Cars page (None: the car's own)
 
 
 class VideoAccess:
@@ -53,7 +55,8 @@ class VideoAccess:
             record = services.device_store().get_device(device.device_id)
         except DremError:
             device, record = None, None
-        car = Car(record.device_id, record.hostname) if device and record and device.device_kind == "car" else None
+        car = (Car(record.device_id, record.hostname, record.video.model_dump(mode="json") if record.video else None)
+               if device and record and device.device_kind == "car" else None)
         self._remember(self._cars, credential, car, CREDENTIAL_TTL_S)
         return car
 

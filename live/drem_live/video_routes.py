@@ -1,7 +1,8 @@
 """The live server's camera routes (feeds in video_feeds.py, who may call what in video_access.py).
 
     POST /live/video/car/frame              car (its device credential): one JPEG frame, `X-Frame-Time` = epoch ms
-                                            it was taken; answers {"wanted": bool} (stop sending when false)
+                                            it was taken; answers {"wanted": bool} (stop sending when false), and
+                                            "video": {fps, width, height, view} once staff chose them
     GET  /live/video/car/demand?wanted=&wait_s=   car: long poll, answers {"wanted": bool} when it differs from
                                             `wanted` (or after wait_s ≤ 25)
     GET  /live/video/{event_id}?track=      public: MJPEG of the car of the track's live race; 204 when no race is
@@ -70,7 +71,7 @@ async def car_frame(request: web.Request) -> web.Response:
     peers = request.app[PEERS]
     if peers is not None:  # the viewers of the other live tasks see it too (drem_live.video_peers)
         peers.forward(Upload(car.device_id, car.hostname, jpeg, taken_ms))
-    return web.json_response({"wanted": feeds.wanted(car.device_id)})
+    return web.json_response(_answer(car, feeds.wanted(car.device_id)))
 
 
 async def car_demand(request: web.Request) -> web.Response:
@@ -84,7 +85,14 @@ async def car_demand(request: web.Request) -> web.Response:
     except ValueError:
         return refuse(400, "wait_s must be a number of seconds.")
     reported = request.query.get("wanted") == "1"
-    return web.json_response({"wanted": await feeds.demand_change(car.device_id, reported, wait_s)})
+    return web.json_response(_answer(car, await feeds.demand_change(car.device_id, reported, wait_s)))
+
+
+def _answer(car: Any, wanted: bool) -> dict[str, Any]:
+    """What a car hears back: whether to send, and at which settings when staff chose them (the car's relay applies
+    them from this answer on)."""
+    video = getattr(car, "video", None)
+    return {"wanted": wanted, **({"video": video} if video else {})}
 
 
 async def racing_video(request: web.Request) -> web.StreamResponse:

@@ -133,3 +133,25 @@ def test_the_camera_falls_back_to_nothing_when_the_race_ends(chromium: Any, raci
     page.wait_for_function("() => document.querySelector('[data-car-eye]').hidden", timeout=30_000)
     assert not page.locator("[data-car-eye]").is_visible()
     page.context.close()
+
+
+def test_staff_set_a_cars_camera_on_the_cars_page_and_the_car_sends_at_it(chromium: Any, racing_car: dict[str, Any],
+                                                                          app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    sign_in(page, app_url, racing_car["operator"])
+    page.goto(f"{app_url}/console/cars")
+    form = page.locator("[data-testid=video-eye-car]")
+    form.locator("select[name=fps]").select_option("10")
+    form.locator("select[name=size]").select_option("320x240")
+    form.locator("select[name=view]").select_option("model")
+    form.locator("button[type=submit]").click()
+    page.get_by_text("Camera settings saved").wait_for()
+    form = page.locator("[data-testid=video-eye-car]")  # the page after the redirect shows what was chosen
+    assert form.locator("select[name=view]").input_value() == "model"
+    assert form.locator("select[name=fps]").input_value() == "10"
+    # The preview thumbnail turns into the model's own view: 160×120 (the relay took the setting up by itself).
+    page.wait_for_function(
+        "() => { const i = document.querySelector('[data-testid=camera-eye-car] img');"
+        " return i && i.naturalWidth === 160 && i.naturalHeight === 120; }", timeout=60_000)
+    shoot(page, "car-eye-cars-page-settings")
+    page.context.close()

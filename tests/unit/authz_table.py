@@ -112,6 +112,11 @@ def car_x_device(world: World, caller: str) -> Call:
     return Call({"device_id": world.device_ids["car_x"]})
 
 
+def car_x_video(world: World, caller: str) -> Call:
+    return Call({"device_id": world.device_ids["car_x"]},
+                body={"fps": 15, "width": 480, "height": 360, "view": "camera"})
+
+
 def disposable_car(world: World, caller: str) -> Call:
     return Call({"device_id": world.device_ids[world.mint("car_x")]})
 
@@ -236,6 +241,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/api/devices/{device_id}"): Case(allow("admin", "operator"), car_x_device),
     ("PUT", "/api/devices/{device_id}/fleet"): ADMIN_OPERATOR,
     ("DELETE", "/api/devices/{device_id}"): Case(allow("admin"), disposable_car),
+    ("PUT", "/api/devices/{device_id}/video"): Case(allow("admin", "operator"), car_x_video),
     ("POST", "/api/devices/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
     ("GET", "/api/devices/{device_id}/commands"): Case(allow("admin", "operator"), car_x_device),
     # devices: the device itself (acts on its own id only)
@@ -338,6 +344,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/cars/{device_id}/fleet"): Case(allow("admin", "operator"), car_x_device),
     ("POST", "/console/cars/{device_id}/models"): Case(allow("admin", "operator"), car_x_device),
     ("POST", "/console/cars/{device_id}/deregister"): Case(allow("admin"), disposable_car),
+    ("POST", "/console/cars/{device_id}/video"): Case(allow("admin", "operator"), car_x_video),
     ("GET", "/console/timekeeper"): ADMIN_OPERATOR,
     ("GET", "/console/timekeeper/racers"): ADMIN_OPERATOR,
     ("GET", "/console/timekeeper/{event_id}/{track_id}"): Case(allow("admin", "operator"), event_only),

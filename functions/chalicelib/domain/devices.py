@@ -12,7 +12,7 @@ import re
 import secrets
 from collections.abc import Callable
 from enum import StrEnum
-from typing import Protocol
+from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
@@ -35,6 +35,30 @@ class DeviceKind(StrEnum):
     TIMER = "timer"
 
 
+class CarVideoSettings(BaseModel):
+    """How a car's camera goes to the stream (issue #35): staff choose it on the Cars page, the live server hands it to
+    the car with every answer to its relay (drem_cars.video_relay), and the car sends at it from then on. `model`: what
+    the model sees, 160×120 grey, whatever the size. A car without settings sends at its own (`drem car run` flags)."""
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    fps: int = Field(default=15, ge=1, le=30, description="frames a second, 1 to 30")
+    width: int = Field(default=480, ge=160, le=1280)
+    height: int = Field(default=360, ge=120, le=720)
+    view: Literal["camera", "model"] = "camera"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _size_as_text(cls, data: Any) -> Any:
+        """A form sends the size as one field, `480x360`."""
+        if isinstance(data, dict) and "size" in data:
+            data = dict(data)
+            width, _, height = str(data.pop("size")).lower().partition("x")
+            if not (width.isdigit() and height.isdigit()):
+                raise ValueError("Give the size as WIDTHxHEIGHT, e.g. 480x360.")
+            data.update(width=int(width), height=int(height))
+        return data
+
+
 class DeviceRecord(BaseModel):
     """The registry item of one device, including the SHA-256 of its current secret (never the secret)."""
     model_config = ConfigDict(frozen=True)
@@ -46,6 +70,7 @@ class DeviceRecord(BaseModel):
     secret_hash: str
     registered_at_ms: int
     activated_by: str = ""
+    video: CarVideoSettings | None = None  # a car's camera settings, once staff chose them
 
 
 class LoadedModel(BaseModel):
@@ -88,11 +113,12 @@ class StatusEntry(BaseModel):
     registered_at_ms: int
     last_seen_ms: int | None = None
     telemetry: Telemetry | None = None
+    video: CarVideoSettings | None = None
 
     @classmethod
     def for_device(cls, device: DeviceRecord) -> StatusEntry:
         return cls(device_id=device.device_id, kind=device.kind, hostname=device.hostname, fleet_id=device.fleet_id,
-                   registered_at_ms=device.registered_at_ms)
+                   registered_at_ms=device.registered_at_ms, video=device.video)
 
 
 class DeviceView(StatusEntry):
@@ -203,6 +229,7 @@ class DeviceRepository(Protocol):
     def get_device(self, device_id: str) -> DeviceRecord | None: ...
     def delete_device(self, device_id: str) -> None: ...
     def set_fleet(self, device_id: str, fleet_id: str | None) -> None: ...
+    def set_video(self, device_id: str, video: CarVideoSettings) -> None: ...
     def status_board(self) -> dict[str, StatusEntry]: ...
     def put_status_entry(self, entry: StatusEntry) -> None: ...
     def record_heartbeat(self, device_id: str, now_ms: int, telemetry: Telemetry) -> bool: ...
@@ -244,6 +271,17 @@ class DeviceService:
             raise NotFound(f"There is no device {device_id}.")
         self._devices.set_fleet(device_id, fleet_id)
         return self.get_device(device_id)
+
+    def set_video(self, device_id: str, video: CarVideoSettings) -> CarVideoSettings:
+        """The car's camera relay sends at these settings from its next answer from the live server on (at most the
+        live server's credential cache, 10 s, later)."""
+        device = self._devices.get_device(device_id)
+        if device is None:
+            raise NotFound(f"There is no device {device_id}.")
+        if device.kind != DeviceKind.CAR:
+            raise InvalidInput(f"{device.hostname} is a timer: only cars have a camera.", field="view")
+        self._devices.set_video(device_id, video)
+        return video
 
     def deregister(self, device_id: str) -> None:
         """The device's credential stops working with the next request: the verifier reads the registry each time."""

@@ -24,7 +24,15 @@ from chalicelib.domain.activation import (
     IssuedActivationCode,
     IssuedCredential,
 )
-from chalicelib.domain.devices import Command, CommandAck, CommandRequest, DeviceView, MoveToFleet, Telemetry
+from chalicelib.domain.devices import (
+    CarVideoSettings,
+    Command,
+    CommandAck,
+    CommandRequest,
+    DeviceView,
+    MoveToFleet,
+    Telemetry,
+)
 
 bp = Blueprint(__name__)
 
@@ -60,6 +68,13 @@ def get_device(principal: User, device_id: str) -> dict:
        response=DeviceView)
 def move_device(principal: User, device_id: str, body: MoveToFleet) -> dict:
     return services.device_service().move_to_fleet(device_id, body.fleet_id).model_dump(mode="json")
+
+
+@route(bp, "/api/devices/{device_id}/video", methods=["PUT"], allow=DEVICE_STAFF, body=CarVideoSettings,
+       response=CarVideoSettings)
+def set_car_video(principal: User, device_id: str, body: CarVideoSettings) -> dict:
+    """The car's camera on the stream: frame rate, size, camera or model view (the car picks it up by itself)."""
+    return services.device_service().set_video(device_id, body).model_dump(mode="json")
 
 
 @route(bp, "/api/devices/{device_id}", methods=["DELETE"], allow={ADMIN})

@@ -16,7 +16,15 @@ from boto3.dynamodb.types import TypeDeserializer, TypeSerializer
 
 from chalicelib.core.errors import Conflict
 from chalicelib.domain.activation import ActivationExchange, ActivationRecord
-from chalicelib.domain.devices import Command, CommandAck, CommandStatus, DeviceRecord, StatusEntry, Telemetry
+from chalicelib.domain.devices import (
+    CarVideoSettings,
+    Command,
+    CommandAck,
+    CommandStatus,
+    DeviceRecord,
+    StatusEntry,
+    Telemetry,
+)
 from chalicelib.storage.aws_errors import all_items, call, write_if
 
 _SERVICE = "The fleet table"
@@ -58,6 +66,16 @@ class DynamoDeviceStore:
                               ConditionExpression="attribute_exists(pk)", ExpressionAttributeValues={":f": value}):
             return  # deregistered meanwhile: nothing to move
         if not self._update_status_entry(device_id, "SET devices.#d.fleet_id = :f", {":f": value}):
+            record = self.get_device(device_id)
+            if record:
+                self.put_status_entry(StatusEntry.for_device(record))
+
+    def set_video(self, device_id: str, video: CarVideoSettings) -> None:
+        value = _attr(video.model_dump(mode="json"))
+        if not self._write_if("update_item", Key=device_key(device_id), UpdateExpression="SET video = :v",
+                              ConditionExpression="attribute_exists(pk)", ExpressionAttributeValues={":v": value}):
+            return  # deregistered meanwhile
+        if not self._update_status_entry(device_id, "SET devices.#d.video = :v", {":v": value}):
             record = self.get_device(device_id)
             if record:
                 self.put_status_entry(StatusEntry.for_device(record))
@@ -197,7 +215,8 @@ def _device(item: dict[str, Any]) -> DeviceRecord:
     fleet = item.get("fleetId", {})
     return DeviceRecord(device_id=item["deviceId"]["S"], kind=item["kind"]["S"], hostname=item["hostname"]["S"],
                         fleet_id=fleet.get("S"), secret_hash=item["secretHash"]["S"],
-                        registered_at_ms=int(item["registeredAtMs"]["N"]), activated_by=item["activatedBy"]["S"])
+                        registered_at_ms=int(item["registeredAtMs"]["N"]), activated_by=item["activatedBy"]["S"],
+                        video=_plain(_deserializer.deserialize(item["video"])) if "video" in item else None)
 
 
 def _attr(value: Any) -> dict[str, Any]:

@@ -12,7 +12,15 @@ from pydantic import BaseModel
 
 from chalicelib.core.principals import User
 from chalicelib.domain.assignments import AssignmentService, CarModelStatus
-from chalicelib.domain.devices import TAIL_LIGHT_PALETTE, Command, CommandStatus, DeviceKind, DeviceService, DeviceView
+from chalicelib.domain.devices import (
+    TAIL_LIGHT_PALETTE,
+    CarVideoSettings,
+    Command,
+    CommandStatus,
+    DeviceKind,
+    DeviceService,
+    DeviceView,
+)
 from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.racer_models import ListQuery, ModelService, ModelStatus
 from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
@@ -45,6 +53,12 @@ class CarLine(BaseModel):
     faults: list[str] = []
     last_command: str = ""
     last_command_state: str = ""  # pending | ok | failed: the page colours it
+    video: CarVideoSettings = CarVideoSettings()  # the camera on the stream (the defaults until staff choose)
+
+
+# The Cars page offers these sizes (the API takes any in CarVideoSettings' bounds).
+VIDEO_SIZES = ((320, 240), (480, 360), (640, 480))
+VIDEO_RATES = (5, 10, 15, 20, 30)
 
 
 class ModelChoice(BaseModel):
@@ -124,7 +138,7 @@ def car_line(view: DeviceView, fleet_names: dict[str, str], assignments: Assignm
         loaded_model=(telemetry.model.name if telemetry and telemetry.model else loaded_by_progress) or "—",
         battery=f"{telemetry.battery_pct:.0f} %" if telemetry and telemetry.battery_pct is not None else "—",
         assigned=assigned, faults=list(telemetry.faults) if telemetry else [], last_command=last,
-        last_command_state=state)
+        last_command_state=state, video=view.video or CarVideoSettings())
 
 
 def cars_overview(principal: User, devices: DeviceService, fleets: FleetService, assignments: AssignmentService,

@@ -11,7 +11,7 @@ from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.core.errors import NotFound
 from chalicelib.core.principals import User
 from chalicelib.domain.activation import ActivationCodeRequest
-from chalicelib.domain.devices import CommandRequest
+from chalicelib.domain.devices import CarVideoSettings, CommandRequest
 from chalicelib.domain.fleets import FleetInput
 from chalicelib.routes.console.forms import (
     SHOWN_ON_FORM,
@@ -24,7 +24,7 @@ from chalicelib.routes.console.forms import (
 )
 from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
-from chalicelib.views.car_console import COMMAND_LABELS, CarsOverview, cars_overview
+from chalicelib.views.car_console import COMMAND_LABELS, VIDEO_RATES, VIDEO_SIZES, CarsOverview, cars_overview
 from chalicelib.views.car_video import preview_video_url
 from drem_web import render
 
@@ -106,6 +106,13 @@ def assign_model(principal: User, device_id: str) -> Response:
     return _car_action(principal, device_id, assign, done="car-models")
 
 
+@route(bp, "/console/cars/{device_id}/video", methods=["POST"], allow=DEVICE_STAFF)
+def car_video(principal: User, device_id: str) -> Response:
+    values = submitted(bp.current_request, "fps", "size", "view")
+    return _car_action(principal, device_id, lambda: services.device_service().set_video(
+        device_id, CarVideoSettings.model_validate(values)), done="car-video")
+
+
 @route(bp, "/console/cars/{device_id}/deregister", methods=["POST"], allow={ADMIN})
 def deregister_car(principal: User, device_id: str) -> Response:
     return _car_action(principal, device_id, lambda: services.device_service().deregister(device_id),
@@ -144,7 +151,8 @@ def _sent_notice(query: dict[str, str]) -> str:
 
 def _cars_page(principal: User, errors: dict[str, str], status: int = 200, notice: str = "") -> Response:
     return render.page("console/cars", status=status, overview=_overview(principal), errors=errors,
-                       is_admin=ADMIN in principal.roles, notice=notice, camera_url=preview_video_url)
+                       is_admin=ADMIN in principal.roles, notice=notice, camera_url=preview_video_url,
+                       video_sizes=VIDEO_SIZES, video_rates=VIDEO_RATES)
 
 
 def _overview(principal: User) -> CarsOverview:

@@ -17,6 +17,7 @@ DONE: dict[str, str] = {
     "logo-removed": "Logo removed; the boards show the event's name alone.",
     "fleet-created": "Fleet created.",
     "car-moved": "Car moved; its row below shows the fleet.",
+    "car-video": "Camera settings saved; the car sends at them within about 10 seconds.",
     "car-models": "Models on the car changed; its row below shows them.",
     "car-deregistered": "Car deregistered; its credential no longer works.",
     "lap-saved": "Lap saved; the leaderboard shows the change.",
