@@ -43,7 +43,7 @@ def car_racing(live_stack: Any) -> Iterator[dict[str, Any]]:
         relay.start()
         try:
             yield {"event_id": eid, "admin": admin, "racer": access_token(live_stack, racer), "relay": relay,
-                   "device_id": credential.split(".")[0]}
+                   "device_id": credential.split(".")[0], "fleet_id": fleet["fleet_id"]}
         finally:
             relay.stop()
 
@@ -64,8 +64,19 @@ def test_staff_choose_the_models_view_and_the_racing_car_sends_it(live_stack: An
         wait_until(model_view_shown, 30, "the viewer sees the model's own 160×120 grey view")
 
 
+def test_staff_choose_for_a_whole_fleet_and_its_racing_car_sends_at_it(live_stack: Any, car_racing: Any) -> None:
+    relay = car_racing["relay"]
+    answer = call(live_stack.url, "PUT", f"/api/fleets/{car_racing['fleet_id']}/video", token=car_racing["admin"],
+                  body={"fps": 20, "width": 640, "height": 480, "view": "camera"})
+    assert answer["cars"] == [car_racing["device_id"]]
+    wait_until(lambda: (relay.settings.fps, relay.settings.size, relay.settings.view) == (20, (640, 480), "camera"),
+               60, "the fleet's car takes up the fleet's settings")
+
+
 def test_racers_may_not_choose_a_cars_camera_settings(live_stack: Any, car_racing: Any) -> None:
     call(live_stack.url, "PUT", f"/api/devices/{car_racing['device_id']}/video", token=car_racing["racer"],
+         body={"fps": 30, "width": 640, "height": 480, "view": "camera"}, expect=403)
+    call(live_stack.url, "PUT", f"/api/fleets/{car_racing['fleet_id']}/video", token=car_racing["racer"],
          body={"fps": 30, "width": 640, "height": 480, "view": "camera"}, expect=403)
 
 

@@ -133,6 +133,10 @@ def matrix_fleet(world: World, caller: str) -> Call:
     return Call({"fleet_id": world.fleet_id})
 
 
+def fleet_video(world: World, caller: str) -> Call:
+    return Call({"fleet_id": world.fleet_id}, body={"fps": 15, "width": 480, "height": 360, "view": "camera"})
+
+
 def matrix_event(world: World, caller: str) -> dict:
     """An event whose one track races with the matrix fleet (car X and car Y are in it)."""
     body = {"name": "Matrix event", "event_type": "TEST_EVENT", "date": "2026-05-14", "country_code": "SE",
@@ -235,6 +239,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/api/fleets/{fleet_id}"): Case(allow("admin", "operator"), matrix_fleet),
     ("PUT", "/api/fleets/{fleet_id}"): ADMIN_OPERATOR,
     ("DELETE", "/api/fleets/{fleet_id}"): ADMIN_OPERATOR,
+    ("PUT", "/api/fleets/{fleet_id}/video"): Case(allow("admin", "operator"), fleet_video),
     # devices: staff side
     ("POST", "/api/devices/activation-codes"): ADMIN_OPERATOR,
     ("GET", "/api/devices"): ADMIN_OPERATOR,

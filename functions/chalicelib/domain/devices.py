@@ -283,6 +283,15 @@ class DeviceService:
         self._devices.set_video(device_id, video)
         return video
 
+    def set_fleet_video(self, fleet_id: str, video: CarVideoSettings) -> list[str]:
+        """The same camera settings for every car of a fleet (the ids of those cars; a fleet of timers has none)."""
+        if not self._fleets.fleet_exists(fleet_id):
+            raise NotFound(f"There is no fleet {fleet_id}.")
+        cars = [v.device_id for v in self.list_devices(fleet_id=fleet_id) if v.kind is DeviceKind.CAR]
+        for device_id in cars:
+            self._devices.set_video(device_id, video)
+        return cars
+
     def deregister(self, device_id: str) -> None:
         """The device's credential stops working with the next request: the verifier reads the registry each time."""
         if self._devices.get_device(device_id) is None:

@@ -6,6 +6,7 @@ from chalice import Blueprint, Response
 from chalicelib import services
 from chalicelib.auth.access import ADMIN, OPERATOR, route
 from chalicelib.core.principals import User
+from chalicelib.domain.devices import CarVideoSettings
 from chalicelib.domain.fleets import Fleet, FleetInput
 
 bp = Blueprint(__name__)
@@ -31,6 +32,12 @@ def get_fleet(principal: User, fleet_id: str) -> dict:
 @route(bp, "/api/fleets/{fleet_id}", methods=["PUT"], allow=FLEET_STAFF, body=FleetInput, response=Fleet)
 def update_fleet(principal: User, fleet_id: str, body: FleetInput) -> dict:
     return services.fleet_service().update_fleet(principal, fleet_id, body).model_dump(mode="json")
+
+
+@route(bp, "/api/fleets/{fleet_id}/video", methods=["PUT"], allow=FLEET_STAFF, body=CarVideoSettings)
+def set_fleet_video(principal: User, fleet_id: str, body: CarVideoSettings) -> dict:
+    """Every car of the fleet sends its camera at these settings (docs/cars.md); the cars it set, by device id."""
+    return {"video": body.model_dump(mode="json"), "cars": services.device_service().set_fleet_video(fleet_id, body)}
 
 
 @route(bp, "/api/fleets/{fleet_id}", methods=["DELETE"], allow=FLEET_STAFF)
