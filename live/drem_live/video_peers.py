@@ -213,7 +213,7 @@ class Peers:
         if sender == self.id:
             return web.Response(status=204, headers=answer)
         try:
-            names = json.loads(await request.content.read(64 * MAX_NAMES))["names"]
+            names = json.loads(await request.read())["names"]  # bounded by the peer app's client_max_size
             valid = (PEER_ID.fullmatch(sender) and isinstance(names, list) and len(names) <= MAX_NAMES
                      and all(isinstance(n, str) and CAR_NAME.fullmatch(n) for n in names))
         except (ValueError, KeyError, TypeError):

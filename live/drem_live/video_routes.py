@@ -189,7 +189,9 @@ async def via_hub(request: web.Request) -> web.StreamResponse:
     if request.method == "POST":
         if (request.content_length or 0) > MAX_FRAME_BYTES:
             return refuse(413, f"A frame is one JPEG of at most {MAX_FRAME_BYTES} bytes, with its Content-Length.")
-        body = await request.content.read(MAX_FRAME_BYTES)
+        # The whole frame (content.read(n) may stop at what has arrived so far); without a length the hub refuses it.
+        size = request.content_length
+        body = await request.content.readexactly(size) if size else await request.content.read(MAX_FRAME_BYTES)
     headers = {name: request.headers[name] for name in _FORWARDED if name in request.headers}
     try:
         upstream = await request.app[HUB_SESSION].request(
