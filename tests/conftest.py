@@ -34,8 +34,9 @@ SLOWEST_TIERS_FIRST = ("browser", "integration", "infra", "install", "cli", "car
 
 
 def _tier_rank(item: pytest.Item) -> int:
-    parts = Path(str(item.path)).relative_to(REPO_ROOT / "tests").parts
-    return SLOWEST_TIERS_FIRST.index(parts[0]) if parts[0] in SLOWEST_TIERS_FIRST else len(SLOWEST_TIERS_FIRST)
+    path, tests = Path(str(item.path)), REPO_ROOT / "tests"
+    tier = path.relative_to(tests).parts[0] if path.is_relative_to(tests) else ""
+    return SLOWEST_TIERS_FIRST.index(tier) if tier in SLOWEST_TIERS_FIRST else len(SLOWEST_TIERS_FIRST)
 
 
 @pytest.hookimpl(trylast=True)
