@@ -46,13 +46,18 @@ demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
 # pytest-xdist workers for `make test`: one per core (CI has two). Each test file runs whole in one worker
-# (--dist loadfile); the infra tests take turns on functions/ (tests/infra/conftest.py). TEST_WORKERS=0: one process.
+# (--dist loadfile), handed out in collection order (--no-loadscope-reorder), which tests/conftest.py makes slowest
+# tiers first; the infra tests take turns on functions/ (tests/infra/conftest.py). TEST_WORKERS=0: one process.
 TEST_WORKERS ?= auto
+# Python compiles each module once, into .pycache/, and every later process reuses it: the workers and the many drem
+# subprocesses the tests start. A shell's PYTHONDONTWRITEBYTECODE would otherwise make each of them compile everything
+# it imports again (the app, moto and botocore: 3-5 s per process on a busy 2-core machine).
+TEST_ENV := env -u PYTHONDONTWRITEBYTECODE PYTHONPYCACHEPREFIX=$(CURDIR)/.pycache
 
 ## make test: install the test dependencies (Python, npm htmx, Debian chromium), lint, then run every test
 test: install-test
 	$(MAKE) --no-print-directory lint
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
+	$(TEST_ENV) $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 ## make lint: ruff (style and likely bugs), mypy (types; strict for leaderboard/ and chalicelib/domain/) and
 ## lint-imports (the layering of docs/architecture.md), as configured in pyproject.toml. mypy keeps its cache in

@@ -11,7 +11,6 @@ import os
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import boto3
 from botocore.config import Config
 from botocore.exceptions import ClientError
 
@@ -70,6 +69,15 @@ class AdminCredentials:
     created: bool
 
 
+def _boto_session(region: str, **credentials: str) -> Any:
+    from drem_local.app_source import use_app_source
+
+    use_app_source()
+    from chalicelib.storage.clients import boto_session  # one reader of botocore's JSON for every client made
+
+    return boto_session(region, **credentials)
+
+
 def clients_for(endpoint_url: str | None, region: str, keys: StorageKeys | None = None) -> AwsClients:
     """boto3 clients for the local storage server (signed with the installation's `keys`, which it requires) or,
     with no endpoint, the default chain / mock_aws."""
@@ -79,7 +87,7 @@ def clients_for(endpoint_url: str | None, region: str, keys: StorageKeys | None 
             raise ValueError("the local storage server accepts only the installation's keys: pass them "
                              "(drem_local.storage_keys.load_or_create(state_dir))")
         credentials = keys.boto_kwargs()
-    session = boto3.session.Session(region_name=region, **credentials)
+    session = _boto_session(region, **credentials)
     # botocore 1.44 otherwise routes some DynamoDB calls to account-specific hosts moto does not serve.
     base = Config(account_id_endpoint_mode="disabled", retries={"max_attempts": 3, "mode": "standard"})
     # s3v4: moto checks SigV2 presigned PUTs on the browser's CORS preflight and rejects them.

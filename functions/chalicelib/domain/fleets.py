@@ -84,10 +84,10 @@ class FleetService:
 
     def update_fleet(self, principal: User, fleet_id: str, data: FleetInput) -> Fleet:
         record = self._record(fleet_id)
+        board = self._devices.status_board()
+        self._check_devices(data.device_ids or [], board)  # before any write: a refused edit changes nothing
         self._fleets.put_fleet(record.model_copy(update={"name": data.name}))
         if data.device_ids is not None:
-            board = self._devices.status_board()
-            self._check_devices(data.device_ids, board)
             wanted = set(data.device_ids)
             for device_id, entry in board.items():
                 if entry.fleet_id == fleet_id and device_id not in wanted:

@@ -6,8 +6,10 @@ from functools import lru_cache
 from typing import Any
 
 import boto3
+import botocore.session
 from botocore import UNSIGNED
 from botocore.config import Config
+from botocore.loaders import Loader, create_loader
 
 from chalicelib.settings import get_settings
 from chalicelib.storage.aws_errors import note_write_sent
@@ -17,13 +19,28 @@ _BASE_CONFIG = Config(account_id_endpoint_mode="disabled", retries={"max_attempt
                       connect_timeout=3, read_timeout=10)
 
 
+@lru_cache(maxsize=1)
+def _service_models() -> Loader:
+    # botocore's reader of its bundled JSON (service models, endpoint rules), which caches what it has read. A fresh
+    # boto3 Session brings a fresh one and re-reads ~1 MB of JSON for every client it makes (0.1-0.2 s each); shared,
+    # a client costs ~10 ms. Only the read-only data is shared: each session still resolves its own credentials.
+    return create_loader()
+
+
+def boto_session(region: str, **credentials: str) -> boto3.session.Session:
+    """A boto3 Session (credentials from `credentials`, else the usual chain) whose clients are cheap to make."""
+    core = botocore.session.get_session()
+    core.register_component("data_loader", _service_models())
+    return boto3.session.Session(region_name=region, botocore_session=core, **credentials)
+
+
 @lru_cache(maxsize=None)
 def _client(service: str, region: str, endpoint_url: str | None) -> Any:
     config = _BASE_CONFIG
     if service == "s3":
         # s3v4 + path style: presigned URLs that moto (127.0.0.1) and browsers both accept.
         config = config.merge(Config(signature_version="s3v4", s3={"addressing_style": "path"} if endpoint_url else {}))
-    made = boto3.session.Session(region_name=region).client(service, endpoint_url=endpoint_url, config=config)
+    made = boto_session(region).client(service, endpoint_url=endpoint_url, config=config)
     made.meta.events.register("before-call", note_write_sent)  # honest errors after a write (see aws_errors)
     # The local storage server accepts only requests signed with the installation's keys (from the environment).
     return sign_every_call(made) if endpoint_url else made

@@ -47,11 +47,25 @@ def install(private_jwk: dict[str, Any]) -> None:
         def encode(header: dict[str, Any], claims: dict[str, Any], _key: Any = None, *args: Any, **kw: Any) -> str:
             return joserfc_jwt.encode({**header, "kid": kid, "alg": "RS256"}, claims, key, *args, **kw)
 
+    class InstallationKeyLoader:
+        """Stands in for joserfc's `jwk` module inside moto.cognitoidp.models, whose one use is a new pool importing
+        moto's shipped key into `json_web_key` (0.1-0.3 s of RSA arithmetic per pool), which the property below
+        discards anyway: the import answers with the installation key at once."""
+
+        class RSAKey:
+            @staticmethod
+            def import_key(*_args: Any, **_kwargs: Any) -> Any:
+                return key
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(joserfc_jwk, name)
+
     pool_class, backend_class = models.CognitoIdpUserPool, models.CognitoIdpBackend
-    _ORIGINALS.update(jwt=models.jwt, pool_key=pool_class.__dict__.get("json_web_key"),
+    _ORIGINALS.update(jwk=models.jwk, jwt=models.jwt, pool_key=pool_class.__dict__.get("json_web_key"),
                       jwks=responses.CognitoIdpJsonWebKeyResponse.json_web_key,
                       respond=backend_class.respond_to_auth_challenge, confirm=backend_class.confirm_sign_up)
     models.jwt = InstallationSigner()
+    models.jwk = InstallationKeyLoader()
     pool_class.json_web_key = property(lambda self: key, lambda self, value: None)
     responses.CognitoIdpJsonWebKeyResponse.json_web_key = jwks_body
     original_respond = backend_class.respond_to_auth_challenge
@@ -77,6 +91,7 @@ def uninstall() -> None:
     from moto.cognitoidp import models, responses
 
     models.jwt = _ORIGINALS["jwt"]
+    models.jwk = _ORIGINALS["jwk"]
     if _ORIGINALS["pool_key"] is None:
         del models.CognitoIdpUserPool.json_web_key
     else:
