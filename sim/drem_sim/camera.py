@@ -111,9 +111,9 @@ class Camera:
         # First row safely below the horizon; everything above is sky.
         self._row0 = min(self._h, max(0, int(math.floor(horizon)) + 2))
         # The warp reads the texture cropped to what is drawn: the grass margin round the mat is what the warp's
-        # constant border gives anyway, and a smaller texture keeps more of it in the core's cache between frames
-        # (onnxruntime evicts it every decision). Frames are the same to within float rounding (one grey level
-        # on a few pixels in ten thousand; tests/sim/test_camera.py compares them with saved ones).
+        # constant border gives anyway, and the smaller texture costs 13-18 % less per frame (docs/sim.md, issue
+        # 33). Frames are the same to within float rounding (one grey level on a few pixels in ten thousand;
+        # tests/sim/test_camera.py compares them with frames saved before).
         self._image, column0, row0 = _drawn_part(self.texture.image)
         t = self.texture
         self._tex_scale = 1 / t.px_per_m
