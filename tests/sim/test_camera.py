@@ -6,6 +6,7 @@ import pytest
 
 from drem_sim.camera import BORDER, Camera, CameraConfig
 from drem_sim.tracks import load_track
+from tests.sim.camera_reference import REFERENCE_FILE, TRACKS, reference_poses
 
 pytestmark = pytest.mark.sim
 
@@ -44,3 +45,17 @@ def test_seeded_noise_is_reproducible() -> None:
 
 def test_borders_are_drawn_white_on_the_texture(camera: Camera) -> None:
     assert (camera.texture.image >= BORDER - 5).sum() > 1000
+
+
+@pytest.mark.parametrize("track_name", TRACKS)
+def test_frames_are_the_ones_the_sample_models_were_trained_on(track_name: str) -> None:
+    """The renderer draws what it drew before issue 33's speed work (saved frames): at most one grey level apart,
+    on almost no pixels (float rounding of the warp's coordinates), at poses on the road, near the borders and
+    looking out over the grass where the texture ends."""
+    saved = np.load(REFERENCE_FILE)[track_name]
+    camera = Camera(load_track(track_name))
+    for pose, before in zip(reference_poses(track_name), saved, strict=True):
+        now = camera.render(*pose)
+        difference = np.abs(now.astype(int) - before.astype(int))
+        assert difference.max() <= 1, pose
+        assert (difference > 0).mean() < 0.002, pose
