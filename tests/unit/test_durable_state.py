@@ -279,3 +279,49 @@ def _refuse_snapshot(*_args, **_kwargs):
     import errno
 
     raise OSError(errno.ENOSPC, "No space left on device")
+
+
+_S3_AUTH = ("AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/s3/aws4_request, SignedHeaders=host, "
+            "Signature=0")
+
+
+def test_the_board_reads_and_writes_dynamodb_while_a_big_s3_object_is_still_being_stored_and_both_survive(
+        tmp_path, fresh_moto):
+    """A model archive being stored in S3 (moto takes a good part of a second for tens of MB) does not hold up the
+    DynamoDB requests the public board and the races make; after a restart both writes are there, each once."""
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    s3 = {"Authorization": _S3_AUTH, "Host": "localhost"}
+    assert client.put("/models", headers=s3).status_code == 200
+    storing, go_on = threading.Event(), threading.Event()
+    real_moto = app.moto_app
+
+    def slow_s3_put(environ, start_response):
+        if environ["REQUEST_METHOD"] == "PUT" and environ["PATH_INFO"] == "/models/uploads/big.tar.gz":
+            storing.set()
+            assert go_on.wait(60), "the test never let the S3 write finish"
+        return real_moto(environ, start_response)
+
+    app.moto_app = slow_s3_put
+    archive = b"\x1f\x8b" + bytes(range(256)) * 4096  # 1 MiB
+    answers: list[int] = []
+    upload = threading.Thread(target=lambda: answers.append(
+        client.put("/models/uploads/big.tar.gz", data=archive, headers=s3).status_code))
+    upload.start()
+    try:
+        assert storing.wait(60), "the S3 write never reached moto"
+        assert _hits(client) == 1  # a board read, answered while the archive is in moto
+        assert _add_hit(client) == 2  # and a race's write
+    finally:
+        go_on.set()
+        upload.join(60)
+    assert answers == [200]
+    app.state.close()
+    BackendDict.reset()
+
+    _app, client = _server(tmp_path)
+
+    assert _hits(client) == 2
+    stored = client.get("/models/uploads/big.tar.gz", headers=s3)
+    assert stored.status_code == 200 and stored.get_data() == archive

@@ -20,6 +20,7 @@ from drem_local.durable.disk_guard import disk_refusal
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.kill_point import KillPoint
+from drem_local.durable.lanes import Lanes
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
 from drem_local.durable.state import DurableState, replay_environ
 
@@ -41,7 +42,8 @@ def read_body(environ: dict[str, Any]) -> bytes:
 
 
 class DurableApp:
-    """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
+    """WSGI middleware: journal (fsynced) before moto runs a state-changing request; answer after. Each request holds
+    its lane (durable.lanes: S3's own, or the one for everything else) from its journal record to moto's answer."""
 
     def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState,
                  guard: StorageGuard | None = None, upload_guard: PostPolicyGuard | None = None) -> None:
@@ -49,12 +51,12 @@ class DurableApp:
         self.state = state
         self.guard = guard  # None only in tests that drive the middleware in-process
         self.upload_guard = upload_guard
-        self.lock = threading.Lock()
+        self.lanes = Lanes()
         self._snapshotting = threading.Lock()
         self.kill_point = KillPoint.from_environment()  # None unless a chaos harness started this server
 
     def recover(self):
-        with self.lock:
+        with self.lanes.everything():
             return self.state.recover(self._replay)
 
     def _replay(self, record: JournalRecord) -> int:
@@ -66,13 +68,13 @@ class DurableApp:
         return int(status.split(" ", 1)[0])
 
     def snapshot_if_dirty(self, *, force: bool = False) -> bool:
-        """Snapshot what changed and empty the journal. The files are written without the request lock (pickled under
-        it), so requests keep being answered meanwhile; what they change is caught by the next round, up to
-        `SNAPSHOT_ROUNDS`; past that the last round holds the lock throughout, so the journal is always emptied."""
+        """Snapshot what changed and empty the journal. The files are written without the request lanes (pickled under
+        them), so requests keep being answered meanwhile; what they change is caught by the next round, up to
+        `SNAPSHOT_ROUNDS`; past that the last round holds the lanes throughout, so the journal is always emptied."""
         with self._snapshotting:  # one snapshot at a time (the periodic one and the final one at stop)
             did = False
             for _ in range(SNAPSHOT_ROUNDS):
-                with self.lock:
+                with self.lanes.everything():
                     capture = self.state.begin_snapshot(force=force and not did)
                 if capture is None:
                     return did
@@ -80,13 +82,13 @@ class DurableApp:
                 try:
                     written = self.state.write_snapshot(capture)
                 except OSError:
-                    with self.lock:
+                    with self.lanes.everything():
                         self.state.abandon_snapshot(capture)
                     raise
-                with self.lock:
+                with self.lanes.everything():
                     if self.state.finish_snapshot(written):
                         return True
-            with self.lock:
+            with self.lanes.everything():
                 return self.state.snapshot_all() or did
 
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
@@ -114,10 +116,13 @@ class DurableApp:
             captured["status"], captured["headers"] = status, headers
             return lambda data: None
 
-        with self.lock:
+        locks = self.lanes.locks_for(service, environ)
+        with self.lanes.holding(locks):
             if changing and service in PERSISTED:
                 try:
-                    self.state.record(service, environ, body)
+                    with self.lanes.state:
+                        # Alone in the S3 lane, moto's seeded randomness belongs to a request in the main lane.
+                        seq = self.state.record(service, environ, body, seed=self.lanes.main in locks)
                 except OSError as exc:
                     disk_full = disk_refusal(exc, self.state.state_dir)
                     if disk_full is None:
@@ -125,16 +130,18 @@ class DurableApp:
                     log.warning("refused a write: %s", disk_full.message)
                     return refuse(disk_full, environ, start_response)
                 if self.kill_point is not None:
-                    self.kill_point.after_record(self.state.last_seq)
+                    self.kill_point.after_record(seq)
             app_iter = self.moto_app(environ, capture)
             try:
                 payload = b"".join(app_iter)
             finally:
                 getattr(app_iter, "close", lambda: None)()
             if changing and service in PERSISTED and needs_immediate_snapshot(environ, service):
-                self._snapshot_service(service)
+                with self.lanes.state:
+                    self._snapshot_service(service)
             elif changing and service == MOTO_API:
-                self.state.after_moto_api_call()
+                with self.lanes.state:
+                    self.state.after_moto_api_call()
         start_response(captured["status"], without_cors(captured["headers"]))
         return [payload]
 

@@ -67,8 +67,8 @@ class RecoveryReport:
 
 
 class DurableState:
-    """Everything the middleware does to the disk. Every method runs under the server's one request lock, except
-    `write_snapshot` (see DurableApp.snapshot_if_dirty)."""
+    """Everything the middleware does to the disk. Every method runs under the server's `state` lock (durable.lanes),
+    except `write_snapshot` (see DurableApp.snapshot_if_dirty)."""
 
     def __init__(self, state_dir: Path, *, fsync: bool = True, seed_secret: bytes | None = None) -> None:
         """`seed_secret` keys the randomness moto draws for each journaled request (see `seed_randomness`); the
@@ -121,14 +121,16 @@ class DurableState:
         self.started_at = time.time()
         return self.recovery
 
-    def record(self, service: str, environ: dict[str, Any], body: bytes) -> None:
-        """Make a state-changing request durable before it runs, and seed moto's randomness for it. Raises OSError
-        (nothing recorded) when the disk refuses the write."""
+    def record(self, service: str, environ: dict[str, Any], body: bytes, *, seed: bool = True) -> int:
+        """Make a state-changing request durable before it runs, and (with `seed`) seed moto's randomness for it;
+        returns its sequence number. Raises OSError (nothing recorded) when the disk refuses the write."""
         seq = self.last_seq + 1
         self.journal.append(JournalRecord(seq, service, journal_environ(environ), body))
         self.last_seq = seq
         self.dirty.add(service)
-        self.seed_randomness(seq)
+        if seed:
+            self.seed_randomness(seq)
+        return seq
 
     def seed_randomness(self, seq: int) -> None:
         """Seed moto's one source of randomness (`mock_random`: user subs, refresh tokens, sessions, S3 version ids)
