@@ -152,6 +152,13 @@ def public_profiles() -> ProfileService:
     return ProfileService(profile_store())
 
 
+def league_shown_names(usernames: list[str]) -> dict[str, str]:
+    """What the public league board shows for its racers, read at most a few seconds ago (domain.shown_names_cache)."""
+    from chalicelib.domain.shown_names_cache import PROCESS_SHOWN_NAMES
+
+    return PROCESS_SHOWN_NAMES.get(usernames, public_profiles().shown_names)
+
+
 # --- events, fleets and devices -------------------------------------------------------------------------------------
 
 def event_store() -> DynamoEventStore:

@@ -50,11 +50,13 @@ def _reset_app_caches() -> None:
     from chalicelib.auth import rate_limits
     from chalicelib.auth.revocation import REVOKED
     from chalicelib.auth.tokens import JWKS, PINNED
+    from chalicelib.domain.shown_names_cache import PROCESS_SHOWN_NAMES
     from chalicelib.settings import get_settings
     from chalicelib.storage.clients import reset_clients
 
     get_settings.cache_clear()
     reset_clients()
+    PROCESS_SHOWN_NAMES.clear()
     JWKS.clear()
     PINNED.clear()
     REVOKED.clear()

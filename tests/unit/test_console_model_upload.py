@@ -53,6 +53,28 @@ def test_a_console_model_is_available_converted_and_its_archive_untouched(stack:
     assert service.get(ALICE, model.model_id).scrutiny == "ready"  # stored, not just returned
 
 
+def test_checking_a_console_upload_reads_its_archive_from_storage_once(stack: Any, aws_clients: Any) -> None:
+    """The inspection and the conversion share one copy: the app (which also answers the public board) does not
+    fetch tens of MB twice while the upload is checked."""
+    service = services.model_service()
+    ticket = service.request_upload(ALICE, UploadRequest(filename="console-once.tar.gz"))
+    aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key,
+                              Body=console_fixture.require_fixture().read_bytes())
+    reads: list[str] = []
+    real_download = service.files.download_bounded
+
+    def counted(key: str, *, limit: int) -> Any:
+        reads.append(key)
+        return real_download(key, limit=limit)
+
+    service.files.download_bounded = counted  # type: ignore[method-assign]
+
+    model = service.complete(ALICE, ticket.model.model_id)
+
+    assert model.status is ModelStatus.AVAILABLE and model.scrutiny == "ready", model.scrutiny_reason
+    assert reads == [ticket.model.upload_key]
+
+
 def test_a_stereo_model_races_on_a_stock_car_but_cannot_be_scrutineered(stack: Any, aws_clients: Any) -> None:
     data = console_fixture.console_archive(metadata={"sensor": ["STEREO_CAMERAS"]}, flat=True)  # DROA flat layout
 

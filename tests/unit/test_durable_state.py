@@ -279,3 +279,118 @@ def _refuse_snapshot(*_args, **_kwargs):
     import errno
 
     raise OSError(errno.ENOSPC, "No space left on device")
+
+
+_S3_AUTH = ("AWS4-HMAC-SHA256 Credential=testing/20260101/us-east-1/s3/aws4_request, SignedHeaders=host, "
+            "Signature=0")
+
+
+def test_the_board_reads_and_writes_dynamodb_while_a_big_s3_object_is_still_being_stored_and_both_survive(
+        tmp_path, fresh_moto):
+    """A model archive being stored in S3 (moto takes a good part of a second for tens of MB) does not hold up the
+    DynamoDB requests the public board and the races make; after a restart both writes are there, each once."""
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    s3 = {"Authorization": _S3_AUTH, "Host": "localhost"}
+    assert client.put("/models", headers=s3).status_code == 200
+    storing, go_on = threading.Event(), threading.Event()
+    real_moto = app.moto_app
+
+    def slow_s3_put(environ, start_response):
+        if environ["REQUEST_METHOD"] == "PUT" and environ["PATH_INFO"] == "/models/uploads/big.tar.gz":
+            storing.set()
+            assert go_on.wait(60), "the test never let the S3 write finish"
+        return real_moto(environ, start_response)
+
+    app.moto_app = slow_s3_put
+    archive = b"\x1f\x8b" + bytes(range(256)) * 4096  # 1 MiB
+    answers: list[int] = []
+    upload = threading.Thread(target=lambda: answers.append(
+        client.put("/models/uploads/big.tar.gz", data=archive, headers=s3).status_code))
+    upload.start()
+    try:
+        assert storing.wait(60), "the S3 write never reached moto"
+        assert _hits(client) == 1  # a board read, answered while the archive is in moto
+        assert _add_hit(client) == 2  # and a race's write
+    finally:
+        go_on.set()
+        upload.join(60)
+    assert answers == [200]
+    app.state.close()
+    BackendDict.reset()
+
+    _app, client = _server(tmp_path)
+
+    assert _hits(client) == 2
+    stored = client.get("/models/uploads/big.tar.gz", headers=s3)
+    assert stored.status_code == 200 and stored.get_data() == archive
+
+
+def test_the_board_is_answered_while_s3_is_pickled_for_a_snapshot_and_the_journal_still_empties(tmp_path, fresh_moto):
+    """Pickling S3 (tens of ms per model archive it holds) holds S3's lane only: DynamoDB reads and writes are answered
+    meanwhile, the snapshot round still ends with an empty journal, and after a restart everything is there once."""
+    app, client = _server(tmp_path)
+    _create_table(client)
+    _add_hit(client)
+    s3 = {"Authorization": _S3_AUTH, "Host": "localhost"}
+    assert client.put("/models", headers=s3).status_code == 200
+    assert client.put("/models/models/a.tar.gz", data=b"archive", headers=s3).status_code == 200
+    pickling, go_on = threading.Event(), threading.Event()
+    real_capture = app.state.snapshots.capture
+
+    def slow_s3_capture(services, seq):
+        if "s3" in services and not pickling.is_set():
+            pickling.set()
+            assert go_on.wait(60), "the test never let the snapshot go on"
+        return real_capture(services, seq)
+
+    app.state.snapshots.capture = slow_s3_capture
+    snapshot = threading.Thread(target=app.snapshot_if_dirty)
+    snapshot.start()
+    try:
+        assert pickling.wait(60), "the snapshot never pickled S3"
+        assert _hits(client) == 1  # the board's read, answered while S3 is being pickled
+        assert _add_hit(client) == 2
+    finally:
+        go_on.set()
+        snapshot.join(60)
+    assert not snapshot.is_alive()
+    assert app.state.journal.records == 0
+    app.state.close()
+    BackendDict.reset()
+
+    again, client = _server(tmp_path)
+
+    assert _hits(client) == 2
+    assert client.get("/models/models/a.tar.gz", headers=s3).get_data() == b"archive"
+    assert again.state.recovery.journal_records == 0
+
+
+def test_writes_arriving_during_every_snapshot_round_are_kept_by_the_journal_without_stopping_requests(
+        tmp_path, fresh_moto):
+    """Busy storage (a write lands while each round's files are written) does not make a snapshot hold every request
+    while it writes: the journal keeps the newer writes until a later snapshot, a restart replays them, and a forced
+    snapshot (the one at a clean stop) empties it."""
+    app, client = _server(tmp_path)
+    _create_table(client)
+    real_write_files = app.state.snapshots.write_files
+    answered_while_writing: list[int] = []
+
+    def busy_write(capture):
+        answered_while_writing.append(_add_hit(client))  # would wait forever if the round held the lanes
+        return real_write_files(capture)
+
+    app.state.snapshots.write_files = busy_write
+    app.snapshot_if_dirty()
+
+    assert answered_while_writing == [1, 2, 3]
+    assert app.state.journal.records > 0
+    app.state.snapshots.write_files = real_write_files
+    app.state.close()
+    BackendDict.reset()
+
+    again, client = _server(tmp_path)
+    assert _hits(client) == 3
+    again.snapshot_if_dirty(force=True)
+    assert again.state.journal.records == 0

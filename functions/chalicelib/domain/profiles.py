@@ -15,6 +15,7 @@ from chalicelib.core.principals import Role, User
 from chalicelib.domain.countries import normalise_country_code
 from chalicelib.domain.names import check_display_name
 from chalicelib.domain.ownership import require_owner_or_role
+from chalicelib.domain.shown_names_cache import PROCESS_SHOWN_NAMES
 from chalicelib.formats.avatars import avatar_seed, identicon_svg
 from drem_leaderboard.names import told_apart
 from drem_leaderboard.ranking import RacerProfile
@@ -204,6 +205,7 @@ class ProfileService:
     def tombstone(self, sub: str, username: str) -> None:
         self._store.put(Profile(sub=sub, deleted=True, avatar="none", updated_at=_now()))
         self._store.unlink_username(username)
+        PROCESS_SHOWN_NAMES.clear()  # the league board no longer shows the deleted racer's name
 
     def _by_username(self, username: str) -> Profile:
         sub = self._store.sub_for_username(username)
@@ -219,6 +221,7 @@ class ProfileService:
         changes = {k: v for k, v in update.model_dump(exclude_unset=True).items() if v is not None}
         saved = profile.model_copy(update={**changes, "updated_at": _now()})
         self._store.put(saved)
+        PROCESS_SHOWN_NAMES.clear()  # the league board shows the change at once (other processes within seconds)
         if self._boards is not None:
             self._boards.refresh_racer_everywhere(saved.sub)
         return saved

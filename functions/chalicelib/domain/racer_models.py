@@ -461,51 +461,49 @@ class ModelService:
         if download is None:
             self._raise_not_arrived(record)
         assert download is not None
-        with download.body:
+        with download.body:  # read once: the inspection and a console model's conversion share this copy
             if download.too_large:  # the object grew after the size check: trust only what we read
                 return self._verdict(record, ModelStatus.NOT_VALID, size_bytes=download.size,
                                      reason=f"the archive is larger than the {_size(limit)} upload limit")
             report = inspect_archive(download.body, limits=self.limits)
-        facts: dict[str, Any] = dict(size_bytes=download.size, archive_md5=download.md5, reason=report.reason)
-        if report.status is ArchiveStatus.QUARANTINED:
-            destination = quarantine_key(record.owner_sub, record.model_id)
-            self.files.copy(record.upload_key, destination)
-            return self._verdict(record, ModelStatus.QUARANTINED, s3_key=destination, **facts)
-        if report.status is ArchiveStatus.NOT_VALID:
-            return self._verdict(record, ModelStatus.NOT_VALID, **facts)
-        facts.update(model_kind=report.model_kind, model_md5=report.model_md5, metadata_md5=report.metadata_md5,
-                     sensor=list(report.sensor), action_space_type=report.action_space_type,
-                     training_algorithm=report.training_algorithm)
-        earlier = [m for m in self.store.find_available_by_md5(record.owner_sub, report.model_md5 or "")
-                   if m.model_id != record.model_id]
-        if earlier:
-            first = earlier[0]
-            return self._verdict(record, ModelStatus.NOT_VALID, **{
-                **facts, "duplicate_of": ModelRef(model_id=first.model_id, name=first.name),
-                "reason": f"this is the same model as your model '{first.name}' (identical model file); "
-                          "that one is kept, so this copy was not added"})
-        if report.model_kind == "tensorflow":
-            facts.update(self._convert(record))
-            if facts.get("scrutiny") == "not_raceable":  # a stock car cannot load it, or would drive it wrongly
-                return self._verdict(record, ModelStatus.NOT_VALID, **{**facts, "reason": facts["scrutiny_reason"]})
-        else:
-            facts.update(scrutiny="ready")
+            facts: dict[str, Any] = dict(size_bytes=download.size, archive_md5=download.md5, reason=report.reason)
+            if report.status is ArchiveStatus.QUARANTINED:
+                destination = quarantine_key(record.owner_sub, record.model_id)
+                self.files.copy(record.upload_key, destination)
+                return self._verdict(record, ModelStatus.QUARANTINED, s3_key=destination, **facts)
+            if report.status is ArchiveStatus.NOT_VALID:
+                return self._verdict(record, ModelStatus.NOT_VALID, **facts)
+            facts.update(model_kind=report.model_kind, model_md5=report.model_md5, metadata_md5=report.metadata_md5,
+                         sensor=list(report.sensor), action_space_type=report.action_space_type,
+                         training_algorithm=report.training_algorithm)
+            earlier = [m for m in self.store.find_available_by_md5(record.owner_sub, report.model_md5 or "")
+                       if m.model_id != record.model_id]
+            if earlier:
+                first = earlier[0]
+                return self._verdict(record, ModelStatus.NOT_VALID, **{
+                    **facts, "duplicate_of": ModelRef(model_id=first.model_id, name=first.name),
+                    "reason": f"this is the same model as your model '{first.name}' (identical model file); "
+                              "that one is kept, so this copy was not added"})
+            if report.model_kind == "tensorflow":
+                download.body.seek(0)
+                facts.update(self._convert(record, download.body))
+                if facts.get("scrutiny") == "not_raceable":  # a stock car cannot load it, or would drive it wrongly
+                    return self._verdict(record, ModelStatus.NOT_VALID, **{**facts, "reason": facts["scrutiny_reason"]})
+            else:
+                facts.update(scrutiny="ready")
         destination = model_key(record.owner_sub, record.model_id)
         self.files.copy(record.upload_key, destination)  # byte for byte: what a stock car receives
         return self._verdict(record, ModelStatus.AVAILABLE, s3_key=destination, **facts)
 
-    def _convert(self, record: ModelRecord) -> dict[str, Any]:
-        """Console model: convert agent/model.pb to ONNX (contained worker) and store it beside the archive.
+    def _convert(self, record: ModelRecord, archive: IO[bytes]) -> dict[str, Any]:
+        """Console model: convert agent/model.pb to ONNX (contained worker) and store it beside the archive. `archive`
+        is the copy `_judge` read (the upload is not downloaded a second time).
 
         Whatever happens, the model stays AVAILABLE for stock cars; only its scrutiny changes."""
         if self.converter is None:
             return {"scrutiny": "cannot_scrutineer",
                     "scrutiny_reason": "the model converter (OpenVINO) is not installed on this server"}
-        download = self.files.download_bounded(record.upload_key, limit=self.max_upload_bytes)
-        if download is None or download.too_large:
-            return {"scrutiny": "cannot_scrutineer", "scrutiny_reason": "the archive could not be read again"}
-        with download.body:
-            outcome = self.converter.convert(download.body)
+        outcome = self.converter.convert(archive)
         facts: dict[str, Any] = {"scrutiny": outcome.scrutiny, "scrutiny_reason": outcome.reason,
                                  "scrutiny_detail": outcome.detail, "conversion_max_diff": outcome.max_abs_diff}
         if outcome.scrutiny == "ready" and outcome.onnx:

@@ -34,7 +34,7 @@ def push_submission(principal: User, track: str, query: PushOptions) -> Response
 def league_board(principal: Principal, track: str, query: BoardQuery) -> dict:
     """A track's board: each racer's latest submission, ranked, with each racer's display name"""
     board = services.league_service().board(track, query)
-    names = services.profile_service().shown_names([ranked.entry.racer for ranked in board.entries])
+    names = services.league_shown_names([ranked.entry.racer for ranked in board.entries])
     return board.model_copy(update={"racer_names": names}).model_dump(mode="json")
 
 
@@ -68,7 +68,7 @@ def delete_racer(principal: User, track: str, racer: str) -> dict:
 def league_page(principal: Principal, track: str, query: BoardQuery) -> Response:
     """The public board page"""
     board = services.league_service().board(track, query)
-    names = services.profile_service().shown_names([ranked.entry.racer for ranked in board.entries])
+    names = services.league_shown_names([ranked.entry.racer for ranked in board.entries])
     return render.page("league", view=board_view(board, query, names))
 
 

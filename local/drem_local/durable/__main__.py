@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         stopping.set()
         try:
-            app.snapshot_if_dirty()
+            app.snapshot_if_dirty(force=True)  # no request comes any more: the journal is emptied
             log.info("stopped; state snapshotted to %s", args.state_dir)
         except OSError as exc:
             log.warning("stopped without a final snapshot (%s); the journal holds every change and is replayed on the "

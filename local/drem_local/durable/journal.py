@@ -96,7 +96,7 @@ def _torn_length(data: bytes, offset: int) -> int:
 
 
 class Journal:
-    """The open journal file. Not thread-safe: the server calls it under its one request lock."""
+    """The open journal file. Not thread-safe: the server calls it under its `state` lock (durable.lanes)."""
 
     def __init__(self, path: Path, *, fsync: bool = True) -> None:
         self.path = path

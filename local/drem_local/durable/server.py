@@ -15,19 +15,24 @@ from typing import Any
 
 from werkzeug.test import run_wsgi_app
 
-from drem_local.durable.classify import MOTO_API, PERSISTED, is_state_changing, needs_immediate_snapshot, service_of
+from drem_local.durable.classify import MOTO_API, PERSISTED, S3, is_state_changing, needs_immediate_snapshot, service_of
 from drem_local.durable.disk_guard import disk_refusal
 from drem_local.durable.guard import StorageGuard, refuse, without_cors
 from drem_local.durable.journal import JournalRecord
 from drem_local.durable.kill_point import KillPoint
+from drem_local.durable.lanes import Lanes
 from drem_local.durable.post_policy import PostPolicyGuard, is_form_upload, refusal_response
 from drem_local.durable.state import DurableState, replay_environ
 
 log = logging.getLogger("drem.durable")
 
 HEALTH_PATH = "/_drem/health"
-# Snapshot rounds written without the request lock before one holds it (writes kept coming during each round).
+# Snapshot rounds written without the request lanes before giving up until the next tick (writes kept coming during
+# each round); the journal then keeps its newer records, which recovery replays on top of the snapshots.
 SNAPSHOT_ROUNDS = 3
+# Past this the last round holds every lane while it writes (up to a second or more once S3 holds model archives, and
+# the public board waits meanwhile), so a journal that writes never let empty stays bounded.
+FORCE_EMPTY_JOURNAL_ABOVE_BYTES = 256 * 1024 * 1024
 
 
 def read_body(environ: dict[str, Any]) -> bytes:
@@ -41,7 +46,8 @@ def read_body(environ: dict[str, Any]) -> bytes:
 
 
 class DurableApp:
-    """WSGI middleware: one lock; journal (fsynced) before moto runs a state-changing request; answer after."""
+    """WSGI middleware: journal (fsynced) before moto runs a state-changing request; answer after. Each request holds
+    its lane (durable.lanes: S3's own, or the one for everything else) from its journal record to moto's answer."""
 
     def __init__(self, moto_app: Callable[..., Iterable[bytes]], state: DurableState,
                  guard: StorageGuard | None = None, upload_guard: PostPolicyGuard | None = None) -> None:
@@ -49,12 +55,12 @@ class DurableApp:
         self.state = state
         self.guard = guard  # None only in tests that drive the middleware in-process
         self.upload_guard = upload_guard
-        self.lock = threading.Lock()
+        self.lanes = Lanes()
         self._snapshotting = threading.Lock()
         self.kill_point = KillPoint.from_environment()  # None unless a chaos harness started this server
 
     def recover(self):
-        with self.lock:
+        with self.lanes.everything():
             return self.state.recover(self._replay)
 
     def _replay(self, record: JournalRecord) -> int:
@@ -66,28 +72,51 @@ class DurableApp:
         return int(status.split(" ", 1)[0])
 
     def snapshot_if_dirty(self, *, force: bool = False) -> bool:
-        """Snapshot what changed and empty the journal. The files are written without the request lock (pickled under
-        it), so requests keep being answered meanwhile; what they change is caught by the next round, up to
-        `SNAPSHOT_ROUNDS`; past that the last round holds the lock throughout, so the journal is always emptied."""
+        """Snapshot what changed and empty the journal. S3 is pickled holding only its own lane, then the other
+        services holding only theirs (model archives take tens of ms each to pickle, and the public board's reads
+        must not wait for them); the files are written without any lane, so requests keep being answered meanwhile.
+        What they change is caught by the next round, up to `SNAPSHOT_ROUNDS`; past that the journal keeps its newer
+        records until the next tick, unless it has grown past FORCE_EMPTY_JOURNAL_ABOVE_BYTES (or `force`): then a last
+        round holds every lane throughout, so the journal is emptied."""
         with self._snapshotting:  # one snapshot at a time (the periodic one and the final one at stop)
             did = False
             for _ in range(SNAPSHOT_ROUNDS):
-                with self.lock:
-                    capture = self.state.begin_snapshot(force=force and not did)
-                if capture is None:
+                did = self._snapshot_part(self.lanes.s3, (S3,), empties_journal=False) is not None or did
+                emptied = self._snapshot_part(self.lanes.main, tuple(s for s in PERSISTED if s != S3),
+                                              force=force and not did)
+                if emptied is None:
                     return did
                 did = True
-                try:
-                    written = self.state.write_snapshot(capture)
-                except OSError:
-                    with self.lock:
-                        self.state.abandon_snapshot(capture)
-                    raise
-                with self.lock:
-                    if self.state.finish_snapshot(written):
-                        return True
-            with self.lock:
+                if emptied:
+                    return True
+            if not force and self.state.journal.bytes <= FORCE_EMPTY_JOURNAL_ABOVE_BYTES:
+                return did
+            with self.lanes.everything():
                 return self.state.snapshot_all() or did
+
+    def _snapshot_part(self, lane: threading.Lock, services: tuple[str, ...], *, force: bool = False,
+                       empties_journal: bool = True) -> bool | None:
+        """One capture, write and commit of `services`, pickled holding `lane` only (requests of the other lane are
+        journaled and answered meanwhile): None if there was nothing to do, else whether the journal was emptied."""
+        with lane:
+            with self.lanes.state:
+                plan = self.state.plan_snapshot(services, force=force, empties_journal=empties_journal)
+            if plan is None:
+                return None
+            try:
+                capture = self.state.snapshots.capture(*plan)
+            except BaseException:
+                with self.lanes.state:
+                    self.state.abandon_snapshot(plan[0])
+                raise
+        try:
+            written = self.state.write_snapshot(capture)
+        except OSError:
+            with self.lanes.state:
+                self.state.abandon_snapshot(plan[0])
+            raise
+        with self.lanes.state:
+            return self.state.finish_snapshot(written, empties_journal=empties_journal)
 
     def __call__(self, environ: dict[str, Any], start_response: Callable[..., Any]) -> Iterable[bytes]:
         if environ.get("PATH_INFO") == HEALTH_PATH:
@@ -114,10 +143,13 @@ class DurableApp:
             captured["status"], captured["headers"] = status, headers
             return lambda data: None
 
-        with self.lock:
+        locks = self.lanes.locks_for(service, environ)
+        with self.lanes.holding(locks):
             if changing and service in PERSISTED:
                 try:
-                    self.state.record(service, environ, body)
+                    with self.lanes.state:
+                        # Alone in the S3 lane, moto's seeded randomness belongs to a request in the main lane.
+                        seq = self.state.record(service, environ, body, seed=self.lanes.main in locks)
                 except OSError as exc:
                     disk_full = disk_refusal(exc, self.state.state_dir)
                     if disk_full is None:
@@ -125,16 +157,18 @@ class DurableApp:
                     log.warning("refused a write: %s", disk_full.message)
                     return refuse(disk_full, environ, start_response)
                 if self.kill_point is not None:
-                    self.kill_point.after_record(self.state.last_seq)
+                    self.kill_point.after_record(seq)
             app_iter = self.moto_app(environ, capture)
             try:
                 payload = b"".join(app_iter)
             finally:
                 getattr(app_iter, "close", lambda: None)()
             if changing and service in PERSISTED and needs_immediate_snapshot(environ, service):
-                self._snapshot_service(service)
+                with self.lanes.state:
+                    self._snapshot_service(service)
             elif changing and service == MOTO_API:
-                self.state.after_moto_api_call()
+                with self.lanes.state:
+                    self.state.after_moto_api_call()
         start_response(captured["status"], without_cors(captured["headers"]))
         return [payload]
 

@@ -8,7 +8,7 @@ import logging
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,8 +67,8 @@ class RecoveryReport:
 
 
 class DurableState:
-    """Everything the middleware does to the disk. Every method runs under the server's one request lock, except
-    `write_snapshot` (see DurableApp.snapshot_if_dirty)."""
+    """Everything the middleware does to the disk. Every method runs under the server's `state` lock (durable.lanes),
+    except `write_snapshot` (see DurableApp.snapshot_if_dirty)."""
 
     def __init__(self, state_dir: Path, *, fsync: bool = True, seed_secret: bytes | None = None) -> None:
         """`seed_secret` keys the randomness moto draws for each journaled request (see `seed_randomness`); the
@@ -121,14 +121,16 @@ class DurableState:
         self.started_at = time.time()
         return self.recovery
 
-    def record(self, service: str, environ: dict[str, Any], body: bytes) -> None:
-        """Make a state-changing request durable before it runs, and seed moto's randomness for it. Raises OSError
-        (nothing recorded) when the disk refuses the write."""
+    def record(self, service: str, environ: dict[str, Any], body: bytes, *, seed: bool = True) -> int:
+        """Make a state-changing request durable before it runs, and (with `seed`) seed moto's randomness for it;
+        returns its sequence number. Raises OSError (nothing recorded) when the disk refuses the write."""
         seq = self.last_seq + 1
         self.journal.append(JournalRecord(seq, service, journal_environ(environ), body))
         self.last_seq = seq
         self.dirty.add(service)
-        self.seed_randomness(seq)
+        if seed:
+            self.seed_randomness(seq)
+        return seq
 
     def seed_randomness(self, seq: int) -> None:
         """Seed moto's one source of randomness (`mock_random`: user subs, refresh tokens, sessions, S3 version ids)
@@ -156,35 +158,41 @@ class DurableState:
         self.dirty.clear()
         return True
 
-    def begin_snapshot(self, *, force: bool = False) -> Capture | None:
-        """Under the request lock: pickle every dirty service as of now (None when there is nothing to do). The
-        services count as clean from here; `abandon_snapshot` marks them dirty again if writing fails."""
-        if not self.dirty and not force and self.journal.records == 0:
+    def plan_snapshot(self, services: tuple[str, ...] = PERSISTED, *, force: bool = False,
+                      empties_journal: bool = True) -> tuple[list[str], int] | None:
+        """Under the state lock (and the lanes of `services`, held until they are pickled): which of `services` to
+        pickle, and the journal sequence number the pickles will hold. None when there is nothing to do: none of them
+        is dirty and (for the capture that may empty the journal) the journal is empty and no `force`. The planned
+        services count as clean from here; `abandon_snapshot` marks them dirty again if the snapshot fails."""
+        wanted = sorted(self.dirty & set(services))
+        if not wanted and not (empties_journal and (force or self.journal.records)):
             return None
-        capture = self.snapshots.capture(sorted(self.dirty & set(PERSISTED)), self.last_seq)
-        self.dirty.clear()
-        return capture
+        self.dirty.difference_update(wanted)
+        return wanted, self.last_seq
 
     def write_snapshot(self, capture: Capture) -> Written:
-        """Without the request lock: the slow part (files written and fsynced)."""
+        """Without the request lanes: the slow part (files written and fsynced)."""
         try:
             return self.snapshots.write_files(capture)
         except OSError as exc:
             self.last_snapshot_error = f"{exc.strerror or exc} ({time.strftime('%H:%M:%S')})"
             raise
 
-    def finish_snapshot(self, written: Written) -> bool:
-        """Under the request lock: commit the manifest; empty the journal if nothing was recorded since the capture
-        (else its newer records stay: recovery skips those a service's snapshot already holds). True if emptied."""
-        self.manifest = self._noting_disk_errors(lambda: self.snapshots.commit(self.manifest, written, full=True))
-        if self.last_seq != written.seq:
+    def finish_snapshot(self, written: Written, *, empties_journal: bool = True) -> bool:
+        """Under the state lock: commit the manifest; with `empties_journal`, empty the journal if every service is
+        clean and nothing was recorded since the capture (else its newer records stay: recovery skips those a
+        service's snapshot already holds). True if emptied."""
+        complete = empties_journal and not self.dirty
+        self.manifest = self._noting_disk_errors(
+            lambda: self.snapshots.commit(self.manifest, written, full=complete))
+        if not complete or self.last_seq != written.seq:
             return False
         self.journal.truncate()
         return True
 
-    def abandon_snapshot(self, capture: Capture) -> None:
-        """Under the request lock, after a failed write: the captured services are dirty again."""
-        self.dirty.update(capture.pickles)
+    def abandon_snapshot(self, services: Iterable[str]) -> None:
+        """Under the state lock, after a failed snapshot: the planned services are dirty again."""
+        self.dirty.update(services)
 
     def _noting_disk_errors(self, write: Callable[[], Manifest]) -> Manifest:
         try:

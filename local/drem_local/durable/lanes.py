@@ -1,0 +1,53 @@
+"""Which lock a storage request holds while it is journaled and run by moto: S3's own, or the one for everything else.
+
+S3 requests move model archives of tens of megabytes; moto needs a good part of a second to store, copy or hand out
+one (measured: a 21.7 MB PutObject held the single lock ~180 ms, a CopyObject ~100 ms). Under one lock, every
+DynamoDB read waited behind them, so the public league board slowed while uploads were checked and re-driven
+(bench/league.py, issue 32). S3 and the other services live in separate moto backends, which moto's own threaded
+server runs concurrently; here each lane keeps its own requests in journal order (a request holds its lane from its
+journal record until moto has answered it), so replaying the journal, in sequence order, rebuilds every backend as the
+clients saw it.
+
+The randomness of a journaled request is seeded from its record (DurableState.seed_randomness) and drawn while moto
+runs it; an S3 request running at the same time must neither re-seed nor draw from that source. drem's buckets are
+neither versioned nor logged nor notified, so the S3 requests it makes draw nothing; the S3 requests that do draw
+(multipart uploads) and moto's own API take every lane, as before.
+
+Lock order, always: the main lane, then the S3 lane, then `state` (the journal, the dirty set and the manifest, held
+only for a moment). Snapshots and recovery take all three.
+"""
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from typing import Any
+
+from drem_local.durable.classify import MOTO_API, S3, needs_immediate_snapshot
+
+
+class Lanes:
+    def __init__(self) -> None:
+        self.main = threading.Lock()
+        self.s3 = threading.Lock()
+        self.state = threading.Lock()
+
+    def locks_for(self, service: str, environ: dict[str, Any]) -> tuple[threading.Lock, ...]:
+        """The lanes a request holds: S3's alone for plain S3 requests; both for those that draw randomness or
+        snapshot at once; the main lane for everything else."""
+        if service == S3 and not needs_immediate_snapshot(environ, service):
+            return (self.s3,)
+        if service in (S3, MOTO_API):
+            return (self.main, self.s3)
+        return (self.main,)
+
+    @contextmanager
+    def holding(self, locks: tuple[threading.Lock, ...]) -> Iterator[None]:
+        with ExitStack() as stack:
+            for lock in locks:
+                stack.enter_context(lock)
+            yield
+
+    def everything(self) -> Any:
+        """Every lane and the state: nothing runs in moto meanwhile (snapshots, recovery)."""
+        return self.holding((self.main, self.s3, self.state))
