@@ -394,3 +394,21 @@ def test_writes_arriving_during_every_snapshot_round_are_kept_by_the_journal_wit
     assert _hits(client) == 3
     again.snapshot_if_dirty(force=True)
     assert again.state.journal.records == 0
+
+
+def test_an_s3_answer_in_its_own_lane_leaves_a_sign_up_s_seeded_ids_alone(tmp_path, fresh_moto):
+    """A Cognito sign-up draws its racer's `sub` from moto's source, seeded from its journal record so a replay after
+    a crash draws the same one. S3 requests run in their own lane, at the same time: every moto answer draws a request
+    id, and one drawn from that source between the seed and the `sub` would give the racer another `sub` on replay."""
+    from moto.moto_api._internal import mock_random
+
+    app, client = _server(tmp_path)
+    s3 = {"Authorization": _S3_AUTH, "Host": "localhost"}
+    assert client.put("/models", headers=s3).status_code == 200
+    app.state.seed_randomness(7)
+    sub_as_told = mock_random.uuid4()
+
+    app.state.seed_randomness(7)
+    answer = client.get("/models/models/missing.tar.gz", headers=s3)  # an S3 answer between the seed and the draw
+    assert answer.status_code == 404 and answer.headers.get("x-amzn-requestid")
+    assert mock_random.uuid4() == sub_as_told

@@ -10,8 +10,13 @@ clients saw it.
 
 The randomness of a journaled request is seeded from its record (DurableState.seed_randomness) and drawn while moto
 runs it; an S3 request running at the same time must neither re-seed nor draw from that source. drem's buckets are
-neither versioned nor logged nor notified, so the S3 requests it makes draw nothing; the S3 requests that do draw
-(multipart uploads) and moto's own API take every lane, as before.
+neither versioned nor logged nor notified, so the S3 operations it makes draw nothing; the S3 requests that do draw
+(multipart uploads) and moto's own API take every lane, as before. One draw every answer makes, whatever its service,
+is its request id (moto.core.responses.BaseResponse._enrich_response calls
+moto.utilities.aws_headers.gen_amzn_requestid_long, which draws 52 characters from mock_random): an S3 answer in its
+own lane would so shift the seeded sequence of a Cognito sign-up running at the same time, and a replay would hand
+that racer another `sub`. Request ids are never state, so `Lanes()` makes them come from the operating system's
+randomness instead (`request_ids_outside_the_seeded_source`).
 
 Lock order, always: the main lane, then the S3 lane, then `state` (the journal, the dirty set and the manifest, held
 only for a moment). Snapshots and recovery take all three.
@@ -26,8 +31,27 @@ from typing import Any
 from drem_local.durable.classify import MOTO_API, S3, needs_immediate_snapshot
 
 
+def request_ids_outside_the_seeded_source() -> None:
+    """Answer every request with a request id that does not draw from moto's seeded `mock_random` (idempotent)."""
+    import secrets
+    import string
+
+    from moto.core import responses
+
+    alphabet = string.ascii_letters + string.digits  # what moto draws from
+
+    def request_id(headerdict: dict[str, Any] | None = None) -> str:
+        req_id = "".join(secrets.choice(alphabet) for _ in range(52))
+        if isinstance(headerdict, dict):
+            headerdict["x-amzn-requestid"] = req_id
+        return req_id
+
+    responses.gen_amzn_requestid_long = request_id  # type: ignore[assignment]
+
+
 class Lanes:
     def __init__(self) -> None:
+        request_ids_outside_the_seeded_source()
         self.main = threading.Lock()
         self.s3 = threading.Lock()
         self.state = threading.Lock()
