@@ -46,7 +46,7 @@ def request_ids_outside_the_seeded_source() -> None:
             headerdict["x-amzn-requestid"] = req_id
         return req_id
 
-    responses.gen_amzn_requestid_long = request_id  # type: ignore[assignment]
+    responses.gen_amzn_requestid_long = request_id
 
 
 class Lanes:
