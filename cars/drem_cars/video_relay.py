@@ -14,6 +14,7 @@ source).
 from __future__ import annotations
 
 import logging
+import sys
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -26,6 +27,7 @@ from drem_cars.video_sources import FrameSource, SourceFrame
 log = logging.getLogger("drem_cars.video")
 
 MODEL_VIEW_SIZE = (160, 120)
+SWITCH_INTERVAL_S = 0.0005  # how long the control loop may wait for the GIL while the relay runs Python
 View = Literal["camera", "model"]
 
 
@@ -93,6 +95,10 @@ class VideoRelay:
         self.last_error: str | None = None
 
     def start(self) -> None:
+        # The relay shares its process with the car's control loop. Its HTTP client is pure Python and holds the GIL
+        # for a millisecond or more per frame; at CPython's default switch interval (5 ms) the loop's tick could wait
+        # that long for it. The loop takes the GIL back within SWITCH_INTERVAL_S instead.
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         self._thread = threading.Thread(target=self._run, name="drem-video-relay", daemon=True)
         self._thread.start()
 
