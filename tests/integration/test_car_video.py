@@ -7,6 +7,7 @@ nobody may watch; a car that is not racing is never shown publicly, and a previe
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -32,6 +33,27 @@ def activate_car(url: str, token: str, fleet_id: str, hostname: str, kind: str =
                     body={"code": code, "hostname": hostname, "device_kind": kind})["credential"])
 
 
+@dataclass(frozen=True)
+class CarRacing:
+    event_id: str
+    fleet_id: str
+    credential: str  # the racing car's device credential
+
+
+def car_racing_on_track_1(url: str, admin: str, racer: str, car: str, event_name: str) -> CarRacing:
+    """An event whose track 1 has a started race of `racer` on `car`, a car activated in the event's fleet."""
+    fleet = call(url, "POST", "/api/fleets", token=admin, body={"name": f"{event_name} cars"}, expect=201)
+    event = call(url, "POST", "/api/events", token=admin, expect=201, body={
+        "name": event_name, "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
+        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
+    credential = activate_car(url, admin, fleet["fleet_id"], car)
+    eid = event["event_id"]
+    race = call(url, "POST", f"/api/events/{eid}/races", token=admin, expect=201,
+                body={"track_id": "1", "racer_username": racer, "car": car})
+    call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=admin, body={"kind": "start"})
+    return CarRacing(eid, fleet["fleet_id"], credential)
+
+
 @pytest.fixture(scope="module")
 def racing(live_stack: Any) -> Iterator[dict[str, Any]]:
     """An event whose track 1 races `video-car-1` (a stock car behind a fake console, its relay running), and a second
@@ -40,16 +62,9 @@ def racing(live_stack: Any) -> Iterator[dict[str, Any]]:
     admin = call(url, "POST", "/api/auth/token", body={"username": live_stack.admin_username,
                                                        "password": live_stack.admin_password})["access_token"]
     racer = create_user(live_stack, "vera-video", "racer")
-    fleet = call(url, "POST", "/api/fleets", token=admin, body={"name": "Video cars"}, expect=201)
-    event = call(url, "POST", "/api/events", token=admin, expect=201, body={
-        "name": "Car's eye", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
-        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
-    car = activate_car(url, admin, fleet["fleet_id"], "video-car-1")
-    idle_car = activate_car(url, admin, fleet["fleet_id"], "video-car-2")
-    eid = event["event_id"]
-    race = call(url, "POST", f"/api/events/{eid}/races", token=admin, expect=201,
-                body={"track_id": "1", "racer_username": racer, "car": "video-car-1"})
-    call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=admin, body={"kind": "start"})
+    racing = car_racing_on_track_1(url, admin, racer, "video-car-1", "Car's eye")
+    car, eid = racing.credential, racing.event_id
+    idle_car = activate_car(url, admin, racing.fleet_id, "video-car-2")
     with FakeConsole() as console:
         camera = ConsoleCamera(DeepRacerConsole(console.url, "car-password"))
         relay = VideoRelay(live_stack.live_url, car, camera, VideoSettings(fps=15), demand_wait_s=5)

@@ -23,7 +23,7 @@ from drem_live.video_peers import PEER_LISTEN_ENV, PEER_SECRET_ENV, PEERS_ENV
 from drem_local import stack as local_stack
 from tests.browser.console_api import call
 from tests.cars.fake_deepracer_console import FakeConsole
-from tests.integration.test_car_video import NO_PROXY, activate_car, frames, watch
+from tests.integration.test_car_video import NO_PROXY, car_racing_on_track_1, frames, watch
 
 pytestmark = pytest.mark.integration
 SECRET = "peer-secret-for-the-tests-only"
@@ -69,15 +69,8 @@ def test_a_viewer_on_another_server_gets_the_car_it_alone_wants(two_servers: Any
     admin = call(url, "POST", "/api/auth/token", body={"username": "admin", "password": password})["access_token"]
     call(url, "POST", "/api/users", token=admin, expect=201,
          body={"username": "petra", "email": "petra@example.test", "country_code": "SE"})
-    fleet = call(url, "POST", "/api/fleets", token=admin, body={"name": "Cars"}, expect=201)
-    event = call(url, "POST", "/api/events", token=admin, expect=201, body={
-        "name": "Two tasks", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
-        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
-    credential = activate_car(url, admin, fleet["fleet_id"], "peer-car")
-    eid = event["event_id"]
-    race = call(url, "POST", f"/api/events/{eid}/races", token=admin, expect=201,
-                body={"track_id": "1", "racer_username": "petra", "car": "peer-car"})
-    call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=admin, body={"kind": "start"})
+    racing = car_racing_on_track_1(url, admin, "petra", "peer-car", "Two tasks")
+    credential, eid = racing.credential, racing.event_id
     with FakeConsole() as console:
         # The car reaches the stack's live server only; the viewers reach only the second one.
         relay = VideoRelay(config.live_url, credential, ConsoleCamera(DeepRacerConsole(console.url, "car-password")),

@@ -16,7 +16,7 @@ from drem_cars.video_relay import VideoRelay, VideoSettings
 from drem_cars.video_sources import ConsoleCamera
 from tests.browser.console_api import access_token, call, create_user
 from tests.cars.fake_deepracer_console import FakeConsole
-from tests.integration.test_car_video import activate_car, frames, watch
+from tests.integration.test_car_video import car_racing_on_track_1, frames, watch
 from tests.waiting import wait_until
 
 pytestmark = pytest.mark.integration
@@ -28,22 +28,15 @@ def car_racing(live_stack: Any) -> Iterator[dict[str, Any]]:
     admin = call(url, "POST", "/api/auth/token", body={"username": live_stack.admin_username,
                                                        "password": live_stack.admin_password})["access_token"]
     racer = create_user(live_stack, "sven-settings", "racer")
-    fleet = call(url, "POST", "/api/fleets", token=admin, body={"name": "Settings cars"}, expect=201)
-    event = call(url, "POST", "/api/events", token=admin, expect=201, body={
-        "name": "Camera settings", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
-        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
-    credential = activate_car(url, admin, fleet["fleet_id"], "settings-car")
-    eid = event["event_id"]
-    race = call(url, "POST", f"/api/events/{eid}/races", token=admin, expect=201,
-                body={"track_id": "1", "racer_username": racer, "car": "settings-car"})
-    call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=admin, body={"kind": "start"})
+    racing = car_racing_on_track_1(url, admin, racer, "settings-car", "Camera settings")
+    credential, eid = racing.credential, racing.event_id
     with FakeConsole() as console:
         camera = ConsoleCamera(DeepRacerConsole(console.url, "car-password"))
         relay = VideoRelay(live_stack.live_url, credential, camera, VideoSettings(fps=15), demand_wait_s=5)
         relay.start()
         try:
             yield {"event_id": eid, "admin": admin, "racer": access_token(live_stack, racer), "relay": relay,
-                   "device_id": credential.split(".")[0], "fleet_id": fleet["fleet_id"]}
+                   "device_id": credential.split(".")[0], "fleet_id": racing.fleet_id}
         finally:
             relay.stop()
 

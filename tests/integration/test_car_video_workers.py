@@ -15,7 +15,7 @@ from drem_cars.video_sources import ConsoleCamera
 from drem_local import stack as local_stack
 from tests.browser.console_api import call
 from tests.cars.fake_deepracer_console import FakeConsole
-from tests.integration.test_car_video import activate_car, frames, watch
+from tests.integration.test_car_video import car_racing_on_track_1, frames, watch
 
 pytestmark = pytest.mark.integration
 
@@ -41,15 +41,8 @@ def test_every_viewer_sees_the_one_upload_whichever_worker_it_reached(two_worker
     admin = call(url, "POST", "/api/auth/token", body={"username": "admin", "password": password})["access_token"]
     call(url, "POST", "/api/users", token=admin, expect=201,
          body={"username": "wanda", "email": "wanda@example.test", "country_code": "SE"})
-    fleet = call(url, "POST", "/api/fleets", token=admin, body={"name": "Cars"}, expect=201)
-    event = call(url, "POST", "/api/events", token=admin, expect=201, body={
-        "name": "Two workers", "event_type": "AWS_SUMMIT", "date": "2026-05-14", "country_code": "SE",
-        "race_config": {"race_time_min": 3}, "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"]}]})
-    credential = activate_car(url, admin, fleet["fleet_id"], "worker-car")
-    eid = event["event_id"]
-    race = call(url, "POST", f"/api/events/{eid}/races", token=admin, expect=201,
-                body={"track_id": "1", "racer_username": "wanda", "car": "worker-car"})
-    call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=admin, body={"kind": "start"})
+    racing = car_racing_on_track_1(url, admin, "wanda", "worker-car", "Two workers")
+    credential, eid = racing.credential, racing.event_id
     with FakeConsole() as console:
         relay = VideoRelay(config.live_url, credential, ConsoleCamera(DeepRacerConsole(console.url, "car-password")),
                            VideoSettings(fps=15), demand_wait_s=5)
