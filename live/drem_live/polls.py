@@ -12,7 +12,9 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Executor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+
+from drem_live.prepared import WireAnswer
 
 # Public data, no credentials: the same headers on every poll answer (server.py has the stream's).
 _POLL_HEADERS = {"Access-Control-Allow-Origin": "*", "X-Content-Type-Options": "nosniff", "Cache-Control": "no-cache"}
@@ -20,19 +22,23 @@ _POLL_HEADERS = {"Access-Control-Allow-Origin": "*", "X-Content-Type-Options": "
 
 @dataclass(frozen=True)
 class CachedView:
-    """One view as read, with the answers' headers built once for every poll that gets it (the hot path builds
-    nothing per request but the response object)."""
+    """One view as read, with its answers built once for every poll that gets it: the headers (for aiohttp's own
+    response) and the whole answer as bytes (drem_live.prepared), so the hot path builds nothing per request."""
     version: int
     etag: str
     body: bytes
     read_at: float
     headers_304: dict[str, str] = field(default_factory=dict)
     headers_200: dict[str, str] = field(default_factory=dict)
+    wire_304: WireAnswer = field(default_factory=lambda: WireAnswer(304, {}))
+    wire_200: WireAnswer = field(default_factory=lambda: WireAnswer(200, {}))
 
     @classmethod
     def of(cls, version: int, etag: str, body: bytes, read_at: float) -> CachedView:
-        headers = {**_POLL_HEADERS, "ETag": etag}
-        return cls(version, etag, body, read_at, headers, {**headers, "Content-Type": "application/json"})
+        headers_304 = {**_POLL_HEADERS, "ETag": etag}
+        headers_200 = {**headers_304, "Content-Type": "application/json"}
+        return cls(version, etag, body, read_at, headers_304, headers_200, WireAnswer(304, headers_304),
+                   WireAnswer(200, headers_200, body))
 
 
 class PollViews:
@@ -44,6 +50,14 @@ class PollViews:
         self._max_entries = max_entries
         self._views: OrderedDict[tuple[str, str, str], CachedView] = OrderedDict()
         self._reading: dict[tuple[str, str, str], asyncio.Future[CachedView]] = {}
+
+    def fresh(self, kind: str, event_id: str, track: str) -> CachedView | None:
+        """The view from memory while it is fresh, else None (then `get`): no coroutine for a poll answered from
+        memory."""
+        cached = self._views.get((kind, event_id, track))
+        if cached is not None and time.monotonic() - cached.read_at < self._fresh_s:
+            return cached
+        return None
 
     async def get(self, kind: str, event_id: str, track: str) -> CachedView:
         key = (kind, event_id, track)
@@ -61,13 +75,13 @@ class PollViews:
         """The writer changed `event_id` (drem_live.wake): its views are read again on their next poll."""
         for key, view in list(self._views.items()):
             if key[1] == event_id:
-                self._views[key] = CachedView.of(view.version, view.etag, view.body, float("-inf"))
+                self._views[key] = replace(view, read_at=float("-inf"))
 
     async def _refresh(self, key: tuple[str, str, str], cached: CachedView | None) -> CachedView:
         read_at = time.monotonic()
         version, body = await asyncio.get_running_loop().run_in_executor(self._executor, self._read, *key)
         if cached is not None and version < cached.version:  # an eventually consistent read lagging behind
-            view = CachedView.of(cached.version, cached.etag, cached.body, read_at)
+            view = replace(cached, read_at=read_at)
         else:
             view = CachedView.of(version, f'"v{version}"', body.encode(), read_at)
         self._views[key] = view

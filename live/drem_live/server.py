@@ -31,6 +31,7 @@ from drem_live.channels import Channels, ChannelsFull, Subscriber
 from drem_live.limits import Limits, StreamCount
 from drem_live.metrics import publish_streams
 from drem_live.polls import PollViews
+from drem_live.prepared import PreparedResponse, takes_prepared
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, clock_message
 from drem_live.video_routes import add_video_routes
 from drem_live.wake import WAKE, listen_for_wakes
@@ -224,13 +225,18 @@ def poll_handler(kind: str) -> Handler:
     default_track = COMBINED_TRACK if kind == "leaderboard" else "1"
 
     async def handle(request: web.Request) -> web.StreamResponse:
-        event_id = request.match_info["event_id"]
-        track = request.query.get("track") or default_track
+        event_id, query = request.match_info["event_id"], request.query
+        track = query.get("track") or default_track
         if not EVENT_ID.fullmatch(event_id) or not TRACK_ID.fullmatch(track):
             return refuse(400, "That is not an event id and track id.")
-        view = await request.app[POLLS].get(kind, event_id, track)
-        if etag_matches(view.etag, request.headers.get("If-None-Match")) or \
-                request.query.get("since") == str(view.version):
+        polls = request.app[POLLS]
+        view = polls.fresh(kind, event_id, track) or await polls.get(kind, event_id, track)
+        if_none_match, since = request.headers.get("If-None-Match"), query.get("since")
+        unchanged = (if_none_match is not None and etag_matches(view.etag, if_none_match)) or \
+            (since is not None and since == str(view.version))
+        if takes_prepared(request):  # the answer's bytes as built with the view (drem_live.prepared)
+            return PreparedResponse(view.wire_304 if unchanged else view.wire_200)
+        if unchanged:
             return web.Response(status=304, headers=view.headers_304)
         return web.Response(body=view.body, headers=view.headers_200)
     return handle
