@@ -1,9 +1,12 @@
 """The board/overlay JSON polls (`/live/api/leaderboard|overlay/{event}?track=`) served from memory.
 
-Each (kind, event, track) is read from storage at most once per `fresh_s` (one read in flight at a time; everyone
-else waits for it), whatever the poll rate, and again on the first poll after the writer woke the server for its
-event. A re-read never replaces a view with an older version (monotonic). The table is bounded (least recently used
-out first), so made-up event ids cannot grow it.
+Each (kind, event, track) is read from storage at most once per `fresh_s` (one read in flight at a time), whatever
+the poll rate, and again on the first poll after the writer woke the server for its event. The poll that finds the
+view past `fresh_s` starts the re-read and waits for it; polls arriving while that read is in flight get the view
+they would have got a moment before, at once, instead of each parking a coroutine on the read (under a crowd that
+wait was a few per cent of a worker's CPU). After a wake-up every poll waits for the new read: the change is news.
+A re-read never replaces a view with an older version (monotonic). The table is bounded (least recently used out
+first), so made-up event ids cannot grow it.
 """
 from __future__ import annotations
 
@@ -18,6 +21,11 @@ from drem_live.prepared import WireAnswer
 
 # Public data, no credentials: the same headers on every poll answer (server.py has the stream's).
 _POLL_HEADERS = {"Access-Control-Allow-Origin": "*", "X-Content-Type-Options": "nosniff", "Cache-Control": "no-cache"}
+
+
+# A view past its freshness is still shown while its timed re-read is in flight, up to this many `fresh_s` old (a
+# storage read that hangs longer makes every poll wait for it again). A wake-up makes a view infinitely old.
+MAX_AGE_WHILE_READING = 2.0
 
 
 @dataclass(frozen=True)
@@ -54,8 +62,12 @@ class PollViews:
     def fresh(self, kind: str, event_id: str, track: str) -> CachedView | None:
         """The view from memory while it is fresh, else None (then `get`): no coroutine for a poll answered from
         memory."""
-        cached = self._views.get((kind, event_id, track))
-        if cached is not None and time.monotonic() - cached.read_at < self._fresh_s:
+        key = (kind, event_id, track)
+        cached = self._views.get(key)
+        if cached is None:
+            return None
+        age = time.monotonic() - cached.read_at
+        if age < self._fresh_s or (key in self._reading and age < MAX_AGE_WHILE_READING * self._fresh_s):
             return cached
         return None
 

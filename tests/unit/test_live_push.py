@@ -299,3 +299,45 @@ def test_one_timer_beats_every_idle_viewer_and_never_replaces_a_pending_board() 
             channels.stop_all()
 
     coroutines.run(run())
+
+
+def test_while_a_timed_re_read_is_in_flight_other_polls_get_the_last_view_at_once_but_after_a_wake_they_wait(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import threading
+    import types
+
+    from drem_live import polls as polls_module
+    from drem_live.polls import PollViews
+
+    clock = [1000.0]
+    monkeypatch.setattr(polls_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+
+    async def run() -> tuple[int | None, int, int | None]:
+        release = threading.Event()
+        versions = iter([1, 2, 3])
+
+        def read(_k: str, _e: str, _t: str) -> tuple[int, str]:
+            version = next(versions)
+            if version > 1:
+                assert release.wait(10), "the test never let the read finish"
+            return version, "{}"
+
+        with ThreadPoolExecutor(1) as executor:
+            polls = PollViews(read, 0.25, executor)
+            await polls.get("leaderboard", "e1", "1")
+            clock[0] += 0.3  # the view is now past its freshness
+            first = asyncio.ensure_future(polls.get("leaderboard", "e1", "1"))  # starts the re-read, waits for it
+            await asyncio.sleep(0)
+            during = polls.fresh("leaderboard", "e1", "1")  # another poll meanwhile: answered from memory
+            release.set()
+            after_read = (await first).version
+            release.clear()
+            polls.expire("e1")
+            woken = asyncio.ensure_future(polls.get("leaderboard", "e1", "1"))
+            await asyncio.sleep(0)
+            during_wake = polls.fresh("leaderboard", "e1", "1")  # news: nobody gets the old view
+            release.set()
+            await woken
+            return (during.version if during else None), after_read, (during_wake.version if during_wake else None)
+
+    assert coroutines.run(run()) == (1, 2, None)
