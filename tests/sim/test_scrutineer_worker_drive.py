@@ -44,7 +44,8 @@ def test_a_model_that_laps_gets_its_figures_and_a_bounded_animated_clip(tmp_path
 
 
 def test_a_drive_over_its_wall_clock_bound_is_stopped_with_the_reason(tmp_path: Path) -> None:
-    outcome = BoundedClipDrive(ScrutineerLimits(wall_seconds=1.0))(_model_folder(tmp_path), ["REINVENT_2018"], 3)
+    outcome = BoundedClipDrive(ScrutineerLimits(wall_seconds=1.0))(  # 100 laps: far more than 1 s at any sim speed
+        _model_folder(tmp_path), ["REINVENT_2018"], 100)
 
     assert outcome.reports == [] and outcome.clip is None
     assert outcome.failure is not None and outcome.failure.startswith("The test drive took longer than 1 s")
