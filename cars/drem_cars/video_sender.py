@@ -24,6 +24,7 @@ from drem_cars.video_settings import VideoSettings, encode
 from drem_cars.video_sources import SourceFrame
 
 log = logging.getLogger("drem_cars.video")
+VIDEO_NICENESS = 10  # the sender's CPU priority below the car's process (0 normal, 19 lowest)
 
 
 @dataclass(frozen=True)
@@ -155,6 +156,7 @@ class VideoSender:
 
 def run_sender(config: SenderConfig, pipe: connection.Connection) -> None:
     """The child process's whole life: send until the car's process stops it or goes away (even by kill -9)."""
+    os.nice(VIDEO_NICENESS)  # on a busy car the control loop, lap timing and uploads of laps come first; video waits
     parent = parent_process()
     if parent is not None:
         threading.Thread(target=_exit_with, args=(parent.sentinel,), name="drem-video-orphan-watch",
