@@ -82,6 +82,7 @@
     var lastPaint = 0;
     var decoding = false;
     var waiting = null;  // the newest frame that arrived while another decoded
+    var stream = 0;      // which connection is current: a frame still decoding when its stream ended shows nothing
     figure.dataset.frames = "0";
 
     setInterval(function () {
@@ -99,7 +100,7 @@
           lastPaint = performance.now();
           figure.dataset.frames = String(frames);
           if (frame.takenMs > 0) { figure.dataset.delayMs = String(Math.round(Date.now() - frame.takenMs)); }
-          figure.hidden = false;
+          if (frame.stream === stream) { figure.hidden = false; }
         });
       }).catch(function () { /* a frame that does not decode is skipped */ }).then(function () {
         if (previous && previous.indexOf("blob:") === 0) { URL.revokeObjectURL(previous); }
@@ -108,6 +109,7 @@
       });
     }
 
+    function ended() { stream += 1; figure.hidden = true; again(); }
     function again() { setTimeout(connect, RETRY_MS); }
 
     function connect() {
@@ -115,17 +117,21 @@
         var type = response.headers.get("Content-Type") || "";
         var boundary = (type.split("boundary=")[1] || "").replace(/"/g, "").trim();
         if (response.status !== 200 || !response.body || !boundary) { again(); return; }
-        var parts = partReader(ascii("--" + boundary.replace(/^--/, "")), paint);
+        var current = stream;
+        var parts = partReader(ascii("--" + boundary.replace(/^--/, "")), function (frame) {
+          frame.stream = current;
+          paint(frame);
+        });
         var reader = response.body.getReader();
         function pump() {
           return reader.read().then(function (step) {
-            if (step.done) { figure.hidden = true; again(); return; }
-            if (!parts(step.value)) { reader.cancel(); figure.hidden = true; again(); return; }
+            if (step.done) { ended(); return; }
+            if (!parts(step.value)) { reader.cancel(); ended(); return; }
             return pump();
           });
         }
         return pump();
-      }).catch(function () { figure.hidden = true; again(); });
+      }).catch(ended);
     }
     connect();
   }
