@@ -25,6 +25,7 @@ MAX_FRAME_BYTES = 512 * 1024
 
 MAX_BEHIND_BYTES = 256 * 1024  # a viewer with more than this still unsent skips frames until it has caught up
 DROP_BEHIND_S = 5.0  # a viewer behind for this long is dropped
+FAN_OUT_SLICE = 25  # viewers written in one turn of the event loop (about 0.6 ms at 30 KB a frame)
 
 
 @dataclass(frozen=True)
@@ -38,8 +39,9 @@ class Frame:
 
 @dataclass(eq=False)
 class Sink:
-    """One viewer's connection, written straight from `CarFeed.publish`: one loop over the viewers per frame, no
-    coroutine woken per viewer (500 viewers at 15 fps would be 7,500 task switches a second)."""
+    """One viewer's connection, written straight from `CarFeed.publish`: a loop over the viewers per frame (in slices
+    the event loop's other work runs between), no coroutine woken per viewer (500 viewers at 15 fps would be 7,500 task
+    switches a second)."""
     transport: asyncio.BaseTransport
     chunked: bool = True
     shown: int = 0
@@ -90,12 +92,22 @@ class CarFeed:
         seq = (self.latest.seq + 1) if self.latest else 1
         part = mjpeg_part(jpeg, taken_ms, seq)
         frame = self.latest = Frame(seq, taken_ms, time.time() * 1000, part, b"%x\r\n%b\r\n" % (len(part), part))
-        now = time.monotonic()
-        for sink in list(self.sinks):
-            sink.offer(frame, now)
+        self._fan_out(frame, list(self.sinks), 0)
         woken, self._next = self._next, asyncio.Event()
         woken.set()
         return frame
+
+    def _fan_out(self, frame: Frame, sinks: list[Sink], start: int) -> None:
+        """Writes the frame to FAN_OUT_SLICE viewers, then lets the event loop run what is due (a board push, a lap)
+        before the next slice: 500 viewers at once held the loop 13 ms (25 ms p95) a frame."""
+        if frame is not self.latest:
+            return  # a newer frame is on its way to every viewer: latest-frame-wins
+        now = time.monotonic()
+        for sink in sinks[start:start + FAN_OUT_SLICE]:
+            sink.offer(frame, now)
+        rest = start + FAN_OUT_SLICE
+        if rest < len(sinks):
+            asyncio.get_running_loop().call_soon(self._fan_out, frame, sinks, rest)
 
     def attach(self, sink: Sink) -> None:
         """The viewer gets every frame from now on, starting with the newest one there is."""

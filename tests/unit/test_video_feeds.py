@@ -3,6 +3,7 @@ a car is wanted exactly while someone watches it, under its device id or the hos
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 
 from drem_live.video_feeds import Feeds, Sink, looks_like_jpeg
 from tests import coroutines
@@ -121,3 +122,47 @@ def test_a_peers_report_wakes_the_car_waiting_to_hear_it_is_wanted() -> None:
             return await asking
 
     assert coroutines.run(run())
+
+
+def test_a_board_push_due_during_a_frames_fan_out_goes_out_before_the_last_viewers_get_the_frame() -> None:
+    async def run() -> tuple[list[str], list[Connection]]:
+        feed = Feeds().feed("car-1")
+        order: list[str] = []
+        viewers = [Connection() for _ in range(200)]
+        for number, viewer in enumerate(viewers):
+            viewer.write = lambda data, number=number: order.append(f"viewer {number}")  # type: ignore[method-assign]
+            feed.attach(Sink(viewer))  # type: ignore[arg-type]
+        feed.publish(JPEG, 1.0)
+        asyncio.get_running_loop().call_soon(order.append, "board push")  # due while the frame is going out
+        await until(lambda: len(order) == 201, 5.0)
+        return order, viewers
+
+    order, _ = coroutines.run(run())
+    assert sorted(line for line in order if line != "board push") == sorted(f"viewer {n}" for n in range(200))
+    assert order.index("board push") < 200  # the push went out before the last of the 200 viewers got the frame
+
+
+def test_a_newer_frame_overtakes_an_older_ones_fan_out_and_every_viewer_ends_with_the_newest() -> None:
+    async def run() -> list[Connection]:
+        feed = Feeds().feed("car-1")
+        viewers = [Connection() for _ in range(200)]
+        for viewer in viewers:
+            feed.attach(Sink(viewer))  # type: ignore[arg-type]
+        feed.publish(JPEG, 1.0)
+        feed.publish(JPEG, 2.0)  # before the first frame reached everyone
+        await until(lambda: all(v.written for v in viewers), 5.0)
+        for _ in range(20):  # the event loop's next turns: any leftover slice of the first frame runs (writes nothing)
+            await asyncio.sleep(0)
+        return viewers
+
+    viewers = coroutines.run(run())
+    assert all(b"X-Frame: 2" in v.written[-1] for v in viewers)
+    assert all(len(v.written) <= 2 for v in viewers)
+    assert any(len(v.written) == 1 for v in viewers)  # the last viewers never got the older frame
+
+
+async def until(condition: Callable[[], bool], timeout_s: float) -> None:
+    """Turns of the event loop until `condition` holds; fails after `timeout_s` (a generous bound, not a wait)."""
+    async with asyncio.timeout(timeout_s):
+        while not condition():
+            await asyncio.sleep(0.001)

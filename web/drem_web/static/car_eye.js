@@ -9,6 +9,8 @@
   var STALL_MS = 2000;
   var RETRY_MS = 3000;
   var CRLF2 = [13, 10, 13, 10];
+  var MAX_HEAD = 4096;          // a part header is a few lines; more without one is not MJPEG
+  var MAX_PART = 4 << 20;       // the largest JPEG part taken
 
   function indexOf(bytes, pattern, from) {
     outer: for (var i = from; i <= bytes.length - pattern.length; i++) {
@@ -33,6 +35,46 @@
     return fields;
   }
 
+  // The stream's parts, chunk by chunk, without rescanning or re-copying what came before: only a part's few header
+  // bytes are searched (bytes that are not a part header are dropped a few KB at a time until one comes); its JPEG is
+  // copied once into a buffer of its Content-Length. Returns false for a part without a usable length.
+  function partReader(marker, onFrame) {
+    var head = new Uint8Array(0);  // the bytes since the last JPEG, until a whole part header has arrived
+    var body = null;               // the JPEG being filled, with its timestamp
+    var filled = 0;
+    return function (chunk) {
+      var at = 0;
+      while (at < chunk.length) {
+        if (body) {
+          var take = Math.min(body.jpeg.length - filled, chunk.length - at);
+          body.jpeg.set(chunk.subarray(at, at + take), filled);
+          filled += take; at += take;
+          if (filled === body.jpeg.length) { onFrame(body); body = null; }
+          continue;
+        }
+        var piece = chunk.subarray(at, Math.min(chunk.length, at + MAX_HEAD));
+        var joined = new Uint8Array(head.length + piece.length);
+        joined.set(head); joined.set(piece, head.length);
+        var start = indexOf(joined, marker, 0);
+        var headEnd = start < 0 ? -1 : indexOf(joined, CRLF2, start);
+        if (headEnd < 0) {
+          head = joined.length > MAX_HEAD ? joined.slice(joined.length - MAX_HEAD) : joined;
+          at += piece.length;
+          continue;
+        }
+        var fields = headers(joined.subarray(start + marker.length, headEnd));
+        var length = Number(fields["content-length"]);
+        if (!(length > 0 && length <= MAX_PART)) { return false; }
+        var stamp = Number(fields["x-timestamp"]);
+        body = { jpeg: new Uint8Array(length), takenMs: stamp > 0 ? stamp * 1000 : 0 };
+        filled = 0;
+        at += headEnd + 4 - head.length;  // where the JPEG starts in this chunk
+        head = new Uint8Array(0);
+      }
+      return true;
+    };
+  }
+
   function play(figure) {
     var img = figure.querySelector("img");
     var url = figure.dataset.carEye;
@@ -40,6 +82,7 @@
     var lastPaint = 0;
     var decoding = false;
     var waiting = null;  // the newest frame that arrived while another decoded
+    var stream = 0;      // which connection is current: a frame still decoding when its stream ended shows nothing
     figure.dataset.frames = "0";
 
     setInterval(function () {
@@ -57,7 +100,7 @@
           lastPaint = performance.now();
           figure.dataset.frames = String(frames);
           if (frame.takenMs > 0) { figure.dataset.delayMs = String(Math.round(Date.now() - frame.takenMs)); }
-          figure.hidden = false;
+          if (frame.stream === stream) { figure.hidden = false; }
         });
       }).catch(function () { /* a frame that does not decode is skipped */ }).then(function () {
         if (previous && previous.indexOf("blob:") === 0) { URL.revokeObjectURL(previous); }
@@ -66,6 +109,7 @@
       });
     }
 
+    function ended() { stream += 1; figure.hidden = true; again(); }
     function again() { setTimeout(connect, RETRY_MS); }
 
     function connect() {
@@ -73,32 +117,21 @@
         var type = response.headers.get("Content-Type") || "";
         var boundary = (type.split("boundary=")[1] || "").replace(/"/g, "").trim();
         if (response.status !== 200 || !response.body || !boundary) { again(); return; }
-        var marker = ascii("--" + boundary.replace(/^--/, ""));
+        var current = stream;
+        var parts = partReader(ascii("--" + boundary.replace(/^--/, "")), function (frame) {
+          frame.stream = current;
+          paint(frame);
+        });
         var reader = response.body.getReader();
-        var buffer = new Uint8Array(0);
         function pump() {
           return reader.read().then(function (step) {
-            if (step.done) { figure.hidden = true; again(); return; }
-            var joined = new Uint8Array(buffer.length + step.value.length);
-            joined.set(buffer); joined.set(step.value, buffer.length);
-            buffer = joined;
-            for (;;) {
-              var start = indexOf(buffer, marker, 0);
-              var headEnd = start < 0 ? -1 : indexOf(buffer, CRLF2, start);
-              if (headEnd < 0) { break; }
-              var fields = headers(buffer.subarray(start + marker.length, headEnd));
-              var length = Number(fields["content-length"]);
-              var bodyStart = headEnd + 4;
-              if (!(length > 0) || buffer.length < bodyStart + length) { break; }
-              var stamp = Number(fields["x-timestamp"]);
-              paint({ jpeg: buffer.slice(bodyStart, bodyStart + length), takenMs: stamp > 0 ? stamp * 1000 : 0 });
-              buffer = buffer.slice(bodyStart + length);
-            }
+            if (step.done) { ended(); return; }
+            if (!parts(step.value)) { reader.cancel(); ended(); return; }
             return pump();
           });
         }
         return pump();
-      }).catch(function () { figure.hidden = true; again(); });
+      }).catch(ended);
     }
     connect();
   }
