@@ -27,7 +27,8 @@ def gallery_event(live_stack: Any) -> dict[str, str]:
     url = live_stack.url
     create_user(live_stack, "gallery-op", "operator")
     token = access_token(live_stack, "gallery-op")
-    fleet = call(url, "POST", "/api/fleets", token=token, body={"name": "Gallery fleet of the main hall (Björn, Zoë and 山田 race here)"}, expect=201)
+    fleet = call(url, "POST", "/api/fleets", token=token, expect=201,  # a long name must wrap on a phone
+                 body={"name": "Gallery fleet of the main hall (Björn, Zoë and 山田 race here)"})
     event = call(url, "POST", "/api/events", token=token, expect=201, body={
         "name": "Gallery Grand Prix", "event_type": "OFFICIAL_TRACK_RACE", "date": "2026-06-01", "country_code": "FR",
         "sponsor": "Acme Robotics", "tracks": [{"track_id": "1", "fleet_id": fleet["fleet_id"],
