@@ -14,6 +14,7 @@ source).
 from __future__ import annotations
 
 import multiprocessing
+import sys
 import threading
 from multiprocessing import connection
 from multiprocessing.process import BaseProcess
@@ -25,6 +26,7 @@ from drem_cars.video_sources import FrameSource
 __all__ = ["MODEL_VIEW_SIZE", "VideoRelay", "VideoSettings", "View", "encode", "parse_size"]
 
 DEFAULT_SETTINGS = VideoSettings()  # 15 fps, 480×360, the camera's view
+SWITCH_INTERVAL_S = 0.0005  # how long the control loop may wait for the GIL while the frame thread runs Python
 
 
 class VideoRelay:
@@ -44,6 +46,9 @@ class VideoRelay:
         self.last_error: str | None = None
 
     def start(self) -> None:
+        # The thread that hands frames to the child runs Python in the car's process (pickling a frame, the pipe);
+        # at CPython's default switch interval (5 ms) the loop's tick could wait that long for the GIL after it.
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         spawn = multiprocessing.get_context("spawn")  # not fork: the car's threads and sockets stay in the car
         self._pipe, child_end = spawn.Pipe()
         self._process = spawn.Process(target=run_sender, args=(self._config, child_end), name="drem-video-relay",
