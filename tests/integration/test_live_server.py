@@ -43,11 +43,14 @@ class EventStream:
             message[field] = message[field] + "\n" + value if field == "data" and field in message else value
         return message
 
-    def next_fragment(self) -> dict[str, str]:
+    def next_fragment(self, within_s: float = 60.0) -> dict[str, str]:
+        """The next fragment pushed; fails after `within_s` (heartbeats keep the read itself from ever timing out)."""
+        deadline = time.monotonic() + within_s
         while True:
             message = self.next()
             if message.get("event") == "fragment":
                 return message
+            assert time.monotonic() < deadline, f"no fragment pushed within {within_s:.0f} s, only heartbeats"
 
 
 def open_stream(url: str, **headers: str) -> EventStream:
@@ -270,8 +273,10 @@ def test_a_lap_wakes_every_live_worker_without_waiting_for_a_poll(live_stack: An
         seed = int(time.time() * 1000)
         strip(live_stack.url, timer, eid, seed, "wake-1")
         strip(live_stack.url, timer, eid, seed + 7_654, "wake-2")
+        pushed_by = time.monotonic() + 60
         for stream, first in zip(streams, shown, strict=True):
-            while True:  # a read timeout (20 s) fails the test: without a wake-up nothing comes before the poll
+            while True:  # a deadline fails the test: without a wake-up nothing comes before the 10-minute poll
+                assert time.monotonic() < pushed_by, "the lap was not pushed to every viewer within 60 s"
                 pushed = stream.next_fragment()
                 assert pushed["id"] != first
                 if "0:07.654" in pushed["data"]:
