@@ -54,9 +54,9 @@ def model_stopped(track: str, error: BaseException) -> PlainFailure:
 
 def drive_timed_out(seconds: float) -> PlainFailure:
     return PlainFailure(
-        f"The test drive took longer than {seconds:.0f} s and was stopped, so your model was not checked. The laptop "
+        f"The test drive took longer than {seconds:g} s and was stopped, so your model was not checked. The laptop "
         "may be busy: try “Drive again” in a few minutes.",
-        f"wall-clock limit of {seconds:.0f} s reached")
+        f"wall-clock limit of {seconds:g} s reached")
 
 
 def drive_out_of_cpu(seconds: int) -> PlainFailure:
