@@ -89,23 +89,34 @@
       if (!figure.hidden && performance.now() - lastPaint > STALL_MS) { figure.hidden = true; }
     }, 500);
 
+    // Each frame decodes in an image of its own, off screen, and replaces the shown one whole only once decoded: the
+    // figure never shows a half-loaded or empty picture between two frames.
     function paint(frame) {
       if (decoding) { waiting = frame; return; }
       decoding = true;
-      var previous = img.src;
-      img.src = URL.createObjectURL(new Blob([frame.jpeg], { type: "image/jpeg" }));
-      img.decode().then(function () {
+      var next = new Image(Number(img.getAttribute("width")) || undefined, Number(img.getAttribute("height")) || undefined);
+      next.alt = img.alt;
+      next.src = URL.createObjectURL(new Blob([frame.jpeg], { type: "image/jpeg" }));
+      function finished() {
+        decoding = false;
+        if (waiting) { var newest = waiting; waiting = null; paint(newest); }
+      }
+      next.decode().then(function () {
         requestAnimationFrame(function () {
+          var shown = img;
+          shown.replaceWith(next);
+          img = next;
+          if (shown.src.indexOf("blob:") === 0) { URL.revokeObjectURL(shown.src); }
           frames += 1;
           lastPaint = performance.now();
           figure.dataset.frames = String(frames);
           if (frame.takenMs > 0) { figure.dataset.delayMs = String(Math.round(Date.now() - frame.takenMs)); }
           if (frame.stream === stream) { figure.hidden = false; }
+          finished();
         });
-      }).catch(function () { /* a frame that does not decode is skipped */ }).then(function () {
-        if (previous && previous.indexOf("blob:") === 0) { URL.revokeObjectURL(previous); }
-        decoding = false;
-        if (waiting) { var next = waiting; waiting = null; paint(next); }
+      }, function () {  // a frame that does not decode is skipped
+        URL.revokeObjectURL(next.src);
+        finished();
       });
     }
 
