@@ -27,6 +27,18 @@ log = logging.getLogger("drem_cars.video")
 VIDEO_NICENESS = 10  # the sender's CPU priority below the car's process (0 normal, 19 lowest)
 
 
+def give_way_to_the_car() -> None:
+    """The sender takes only CPU time the car's own work does not want: `nice`, then SCHED_IDLE where Linux offers it.
+    With `nice` alone the sender still kept a share of the core and the drive loop, waking for its next tick, could
+    wait for the scheduler's wake-up granularity behind a JPEG encode; a SCHED_IDLE task gives the CPU up at once to
+    any task that wakes. A starved sender only sends fewer frames (latest-frame-wins), it never queues any."""
+    os.nice(VIDEO_NICENESS)
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass  # not Linux: the nice value stands
+
+
 @dataclass(frozen=True)
 class SenderConfig:
     live_url: str
@@ -156,7 +168,7 @@ class VideoSender:
 
 def run_sender(config: SenderConfig, pipe: connection.Connection) -> None:
     """The child process's whole life: send until the car's process stops it or goes away (even by kill -9)."""
-    os.nice(VIDEO_NICENESS)  # on a busy car the control loop, lap timing and uploads of laps come first; video waits
+    give_way_to_the_car()  # on a busy car the control loop, lap timing and uploads of laps come first; video waits
     parent = parent_process()
     if parent is not None:
         threading.Thread(target=_exit_with, args=(parent.sentinel,), name="drem-video-orphan-watch",

@@ -79,6 +79,7 @@ def test_a_stalled_upload_never_holds_the_loop_and_the_newest_frame_goes_next(li
         wait_until(lambda: live_server.frames, 60, "the first frame to reach the live server")
         assert relay.process_id not in (None, os.getpid())  # the upload is another process's work, and it gives way
         assert os.getpriority(os.PRIO_PROCESS, relay.process_id) > os.getpriority(os.PRIO_PROCESS, 0)  # to the loop
+        assert os.sched_getscheduler(relay.process_id) == os.SCHED_IDLE  # only on CPU time the car does not want
 
         def drive_loop() -> None:  # the loop's ticks while the upload stalls: each hands its frame to the tap
             for value in range(1, 201):
