@@ -23,7 +23,6 @@ MJPEG_CONTENT_TYPE = f"multipart/x-mixed-replace;boundary={BOUNDARY}"
 MAX_FRAME_BYTES = 512 * 1024
 
 
-MAX_BEHIND_BYTES = 256 * 1024  # a viewer with more than this still unsent skips frames until it has caught up
 DROP_BEHIND_S = 5.0  # a viewer behind for this long is dropped
 FAN_OUT_SLICE = 25  # viewers written in one turn of the event loop (about 0.6 ms at 30 KB a frame)
 
@@ -55,8 +54,11 @@ class Sink:
         if transport.is_closing():
             self.closed.set()
             return
-        if transport.get_write_buffer_size() > MAX_BEHIND_BYTES:  # type: ignore[attr-defined]
-            # Latest frame wins: this one is skipped; the viewer gets the newest once it has caught up.
+        if transport.get_write_buffer_size() > 0:  # type: ignore[attr-defined]
+            # Latest frame wins: while any of its last frame is still unsent this one is skipped, and the viewer gets
+            # the newest once that is out. So at most one frame (the rest of it the socket did not take at once) waits
+            # in the server per viewer, and none is copied behind another: a backlog of frames would cost memory, a
+            # copy into the transport's buffer per viewer, and the viewer a picture ever further behind the car.
             if self.behind_since is None:
                 self.behind_since = now
             elif now - self.behind_since > DROP_BEHIND_S:

@@ -95,6 +95,21 @@ def test_a_frame_is_written_once_per_viewer_as_one_http_chunk_and_a_stuck_viewer
     assert stuck.written == [] and stuck.closed and stuck_sink.closed.is_set()
 
 
+def test_a_viewer_still_taking_its_last_frame_skips_the_next_and_then_gets_the_newest_not_a_backlog() -> None:
+    async def run() -> list[bytes]:
+        feed = Feeds().feed("car-1")
+        slow = Connection(unsent=100)  # the socket has not taken the last 100 bytes of the frame before
+        feed.attach(Sink(slow))  # type: ignore[arg-type]
+        feed.publish(JPEG, 1.0)
+        feed.publish(JPEG, 2.0)
+        slow.unsent = 0  # the network took it all
+        feed.publish(JPEG, 3.0)
+        return slow.written
+
+    written = coroutines.run(run())
+    assert len(written) == 1 and b"X-Frame: 3\r\n" in written[0]
+
+
 def test_a_car_is_wanted_while_another_live_servers_viewers_watch_it_and_not_after_they_stop_saying_so() -> None:
     async def run() -> list[bool]:
         feeds = Feeds()
