@@ -2,14 +2,20 @@
 
 Starts a durable moto server, the live server (drem_live) and the app (bench/_stack.py), an event with a live race
 whose car is a sim car activated as a real device, and runs that sim car's drive loop (the camera, pilot, safety and
-actuator parts, and the camera tap the relay reads) at 15 Hz in this process for the whole run. Two phases, side by
-side in one run:
+actuator parts, and the camera tap the relay reads) at 15 Hz for the whole run, in a process of its own
+(bench/_car_stand_in.py). Two phases, side by side in one run:
 
 - without video: no relay, the stream overlay (no car's eye) open in headless Chromium;
-- with video: the car's video relay (drem_cars.video_relay: 480×360 JPEG at 15 fps, the sim's rendered frames) sends
-  to the live server, 500 MJPEG viewers watch the racing car (bench/_mjpeg_crowd.py, one asyncio child process, the
-  URL the overlay's car's eye reads; at nice 10, as they stand in for other machines), and the overlay with the
+- with video: the car's video relay (drem_cars.video_relay: 480×360 JPEG at 15 fps, the sim's rendered frames, its
+  own child process of the car's) sends to the live server, 500 MJPEG viewers watch the racing car
+  (bench/_mjpeg_crowd.py, one asyncio child process, the URL the overlay's car's eye reads), and the overlay with the
   car's eye is open in Chromium.
+
+Where things run (bench/_placement.py), the same in both phases: at a venue the car and the 500 phones are other
+machines than the event laptop, so on this 2-core machine the laptop's processes (storage, live server, app) are
+pinned to core 1, the car's (its drive loop and, in the video phase, its relay) to core 0, and the viewers' stand-in
+runs SCHED_IDLE (only on CPU time neither wants). Chromium (the OBS PC) and this process (the timer, the browser
+driver) are not placed. Other engineers' work on the shared machine is not placed either: say the load.
 
 In each phase: lap-to-screen (a timer's strip crossing → the lap painted in the overlay; bench/live_latency.py's
 observer and clock calibration) and the car loop's jitter (how late each 15 Hz tick started). With video also:
@@ -23,17 +29,17 @@ the run without video.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import multiprocessing
 import random
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench import _mjpeg_crowd, _stack  # noqa: E402
+from bench import _car_stand_in, _mjpeg_crowd, _placement, _stack  # noqa: E402
 from bench.live_latency import CHROMIUM, CHROMIUM_ARGS, OBSERVER_JS, Lapper, clock_offset_ms, sample_round  # noqa: E402
 
 CAR = "bench-car"
@@ -74,12 +80,31 @@ def overlay(browser: Any, stack: _stack.BenchStack, event_id: str, car_eye: bool
     return page, clock_offset_ms(page)[0]
 
 
-def phase(name: str, page: Any, offset: float, lapper: Lapper, samples: int, loop: Any) -> dict[str, Any]:
-    first_tick = len(loop.stats.jitter_ms)
+def phase(name: str, page: Any, offset: float, lapper: Lapper, samples: int, car: Any) -> dict[str, Any]:
+    car.send(("mark",))
+    first_tick = car.recv()
     laps = sample_round({"overlay": page}, {"overlay": offset}, lapper, samples, random.Random(35))["overlay"]
-    jitter = loop.stats.jitter_ms[first_tick:]
+    car.send(("jitter", first_tick))
+    jitter = car.recv()
     return {"name": name, "lap_p95": _stack.percentile(laps, 95), "lap_p50": _stack.percentile(laps, 50),
             "jitter_p99": _stack.percentile(jitter, 99), "ticks": len(jitter)}
+
+
+def place(stack: _stack.BenchStack, car_pid: int) -> str:
+    """The laptop's processes on one core, the car's on the other (bench/_placement.py); the same for both halves."""
+    if not _placement.two_cores():
+        return "no placement (fewer than 2 cores): everything competes"
+    for pid in (stack.storage_pid, stack.live_pid, stack.app_pid):
+        _placement.pin(pid, _placement.LAPTOP_CORES)
+    _placement.pin(car_pid, _placement.CAR_CORES)
+    return _placement.describe()
+
+
+def _stop_car(process: Any) -> None:
+    """Whatever happened, the car's stand-in and its relay end with the bench (its relay ends with it by itself)."""
+    if process.is_alive():
+        process.terminate()
+    process.join(10)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,48 +114,51 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from playwright.sync_api import sync_playwright
 
-    from drem_cars.parts.safety import Safety
-    from drem_cars.sim_car import build_sim_car
-    from drem_cars.video_relay import VideoRelay, VideoSettings
-    from drem_sim.tracks import default_track_name
-
-    with _stack.bench_stack() as stack, sync_playwright() as playwright:
+    spawn = multiprocessing.get_context("spawn")
+    with _stack.bench_stack() as stack, sync_playwright() as playwright, contextlib.ExitStack() as stack_stops:
         race, credential = racing_car(stack)
-        car = build_sim_car(default_track_name(), device_id=CAR,  # no agent here: the bench runs the drive loop alone
-                            safety=Safety(heartbeat_limit_s=1e9))
-        loop_thread = threading.Thread(target=car.vehicle.start, kwargs={"rate_hz": 15.0}, daemon=True)
-        loop_thread.start()
+        car, car_end = spawn.Pipe()
+        # Not a daemon: the car starts its relay as a child of its own, as `drem car run` does (stopped below).
+        car_process = spawn.Process(target=_car_stand_in.run_car, args=(car_end, CAR))
+        car_process.start()
+        stack_stops.callback(_stop_car, car_process)
+        if not car.poll(120) or car.recv() != "driving":
+            raise SystemExit("the car's stand-in did not start driving")
+        placement = place(stack, car_process.pid)
         browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         lapper = Lapper(stack.url, race)
-        print(f"machine load before: {_stack.machine_load()}", flush=True)
+        print(f"machine load before: {_stack.machine_load()}; placement: {placement}", flush=True)
         page, offset = overlay(browser, stack, race.event_id, car_eye=False)
-        without = phase("without video", page, offset, lapper, args.samples, car.vehicle)
+        without = phase("without video", page, offset, lapper, args.samples, car)
         page.context.close()
 
-        relay = VideoRelay(stack.live_url, credential, car.camera_tap, VideoSettings(fps=15), demand_wait_s=5)
-        relay.start()
-        stop, queue = multiprocessing.Event(), multiprocessing.Queue()
-        crowd = multiprocessing.Process(target=_mjpeg_crowd.run_crowd, daemon=True,
-                                        args=(f"{stack.live_url}/live/video/{race.event_id}?track=1", args.viewers,
-                                              stop, queue))
+        car.send(("relay", stack.live_url, credential))
+        car.recv()  # the relay's process, a child of the car's: it inherits the car's core
+        stop, queue = spawn.Event(), spawn.Queue()
+        crowd = spawn.Process(target=_mjpeg_crowd.run_crowd, daemon=True,
+                              args=(f"{stack.live_url}/live/video/{race.event_id}?track=1", args.viewers, stop,
+                                    queue))
         crowd.start()
         page, offset = overlay(browser, stack, race.event_id, car_eye=True)
         page.wait_for_function("() => Number(document.querySelector('[data-car-eye]').dataset.frames) >= 15",
                                timeout=60_000)
         time.sleep(3.0)  # the crowd's spread-out arrival (bench/_mjpeg_crowd.py) is over
         page.evaluate(DELAYS_JS)
-        frames_before = relay.sent
+        car.send(("sent",))
+        frames_before = car.recv()[0]
         started = time.monotonic()
-        with_video = phase("with video", page, offset, lapper, args.samples, car.vehicle)
-        sent_fps = (relay.sent - frames_before) / (time.monotonic() - started)
+        with_video = phase("with video", page, offset, lapper, args.samples, car)
+        car.send(("sent",))
+        sent, skipped = car.recv()
+        sent_fps = (sent - frames_before) / (time.monotonic() - started)
         painted = [d for d in page.evaluate("() => window.__delays") if d == d]
         load = _stack.machine_load()
         stop.set()
         stats = queue.get(timeout=60)
         crowd.join(10)
-        relay.stop()
-        car.vehicle.stop()
-        loop_thread.join(5)
+        car.send(("stop",))
+        car.recv()
+        car_process.join(10)
         browser.close()
 
     glass_p95 = _stack.percentile(painted, 95) if painted else float("inf")
@@ -138,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in (without, with_video):
         print(f"{row['name']:>14}: lap-to-screen p50 {row['lap_p50']:.0f} ms p95 {row['lap_p95']:.0f} ms; "
               f"car loop jitter p99 {row['jitter_p99']:.1f} ms over {row['ticks']} ticks")
-    print(f"video: relay sent {sent_fps:.1f} fps ({relay.skipped} frames skipped, latest-frame-wins); "
+    print(f"video: relay sent {sent_fps:.1f} fps ({skipped} frames skipped, latest-frame-wins); "
           f"{stats['connected']}/{args.viewers} viewers, {stats['frames']} frames received, arrival p95 "
           f"{arrive_p95:.0f} ms, longest gap {stats['max_gap_s']:.2f} s, {stats['stalls']} stalls > 1 s, "
           f"{len(stats['errors'])} errors {stats['errors'][:3]}; glass-to-glass painted in the overlay: "
@@ -151,8 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"RESULT car_video: glass-to-glass p95 {glass_p95:.0f} ms, {stats['stalls']} stalls > 1 s, "
           f"lap-to-screen p95 {with_video['lap_p95']:.0f} vs {without['lap_p95']:.0f} ms ({lap_ratio:.2f}x), "
           f"loop jitter p99 {with_video['jitter_p99']:.1f} vs {without['jitter_p99']:.1f} ms ({jitter_ratio:.2f}x), "
-          f"{args.viewers} viewers, load {load} | goal glass-to-glass p95 <= 300 ms, 0 stalls, lap-to-screen p95 and "
-          f"jitter p99 <= 1.1x without video | {'met' if met else 'not met'}")
+          f"{args.viewers} viewers, load {load}, {placement} | goal glass-to-glass p95 <= 300 ms, 0 stalls, "
+          f"lap-to-screen p95 and jitter p99 <= 1.1x without video | {'met' if met else 'not met'}")
     return 0
 
 
