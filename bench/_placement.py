@@ -4,9 +4,7 @@ At a venue the event laptop runs the live server, the app and storage; the car i
 viewers are phones and OBS PCs. A bench that runs all of them on this machine's 2 shared cores measures contention
 that does not exist at a venue (the viewers' stand-in reading 500 streams competing with the live server writing
 them). So the laptop's processes get one core, the car's the other, and the stand-ins for the crowd of other machines
-run SCHED_IDLE (only on CPU time neither wants). Other people's work on this shared machine is on no venue machine
-either: the car's and the laptop's processes come before it (nice -10), and so does the browser standing in for the
-OBS PC (nice -5, after them). The same placement holds for both halves of a side-by-side run.
+run SCHED_IDLE (only on CPU time neither wants). The same placement holds for both halves of a side-by-side run.
 """
 from __future__ import annotations
 
@@ -15,10 +13,6 @@ from pathlib import Path
 
 CAR_CORES = {0}
 LAPTOP_CORES = {1}
-# This machine is shared with other people's work, which no venue machine runs: the venue's stand-ins come before it,
-# the measured ones (the car, the laptop's servers) first, the OBS PC's browser next; the viewers' stand-in last.
-MEASURED_NICENESS = -10
-BROWSER_NICENESS = -5
 
 
 def two_cores() -> bool:
@@ -63,32 +57,6 @@ def idle(pid: int) -> None:
                 pass
 
 
-def prioritise(pid: int, niceness: int) -> None:
-    """The process, its threads and its children at `niceness` (Linux keeps it per thread; new ones inherit it). A
-    child that lowers its own priority (the car's video relay: nice +10 and SCHED_IDLE) still does so from there."""
-    for process in process_tree(pid):
-        for thread in threads(process):
-            try:
-                if os.sched_getscheduler(thread) != os.SCHED_IDLE:
-                    os.setpriority(os.PRIO_PROCESS, thread, niceness)
-            except OSError:
-                pass
-
-
-def browsers(pid: int) -> list[int]:
-    """The Chromium processes among `pid`'s descendants (those Playwright started)."""
-    found = []
-    for process in process_tree(pid):
-        try:
-            name = Path(f"/proc/{process}/comm").read_text().strip().lower()
-        except OSError:
-            continue
-        if "chrom" in name or "headless" in name:
-            found.append(process)
-    return found
-
-
 def describe() -> str:
-    return (f"laptop (storage, live server, app) on core {sorted(LAPTOP_CORES)} and car (drive loop, video relay) on "
-            f"core {sorted(CAR_CORES)} at nice {MEASURED_NICENESS}, Chromium unpinned at nice {BROWSER_NICENESS}, "
-            f"viewers' stand-in SCHED_IDLE")
+    return (f"laptop (storage, live server, app) on core {sorted(LAPTOP_CORES)}, car (drive loop, video relay) on "
+            f"core {sorted(CAR_CORES)}, viewers' stand-in SCHED_IDLE")

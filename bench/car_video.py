@@ -17,9 +17,8 @@ both halves), so a change in the shared machine's load falls on both alike:
 Where things run (bench/_placement.py), the same in both halves: at a venue the car and the 500 phones are other
 machines than the event laptop, so on this 2-core machine the laptop's processes (storage, live server, app) are
 pinned to core 1, the car's (its drive loop and its relay) to core 0, and the viewers' stand-in
-runs SCHED_IDLE (only on CPU time neither wants). Other people's work on this shared machine runs on no venue machine:
-the car's and the laptop's processes come before it (nice -10), and so does Chromium (the OBS PC; nice -5, after them;
-not pinned). This process (the timer, the browser driver) is not placed. The machine's load is printed all the same.
+runs SCHED_IDLE (only on CPU time neither wants). Chromium (the OBS PC) and this process (the timer, the browser
+driver) are not placed. Other engineers' work on the shared machine is not placed either: say the load.
 
 In each half: lap-to-screen (a timer's strip crossing → the lap painted in the overlay; bench/live_latency.py's
 observer and clock calibration) and the car loop's jitter (how late each 15 Hz tick started). With video also:
@@ -36,7 +35,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import multiprocessing
-import os
 import random
 import sys
 import time
@@ -81,9 +79,6 @@ def racing_car(stack: _stack.BenchStack) -> tuple[_stack.LiveRace, str]:
 def overlay(browser: Any, stack: _stack.BenchStack, event_id: str, car_eye: bool) -> tuple[Any, float]:
     page = browser.new_context(viewport={"width": 1920, "height": 1080}).new_page()
     page.goto(f"{stack.url}/overlay/{event_id}?trackId=1{'&carEye=true' if car_eye else ''}")
-    if _placement.two_cores():  # the page's renderer is a new process: it takes the OBS PC stand-in's priority too
-        for pid in _placement.browsers(os.getpid()):
-            _placement.prioritise(pid, _placement.BROWSER_NICENESS)
     page.locator("[data-testid=lower-third]").wait_for()
     page.evaluate(OBSERVER_JS)
     return page, clock_offset_ms(page)[0]
@@ -95,9 +90,7 @@ def place(stack: _stack.BenchStack, car_pid: int) -> str:
         return "no placement (fewer than 2 cores): everything competes"
     for pid in (stack.storage_pid, stack.live_pid, stack.app_pid):
         _placement.pin(pid, _placement.LAPTOP_CORES)
-        _placement.prioritise(pid, _placement.MEASURED_NICENESS)
     _placement.pin(car_pid, _placement.CAR_CORES)
-    _placement.prioritise(car_pid, _placement.MEASURED_NICENESS)
     return _placement.describe()
 
 
