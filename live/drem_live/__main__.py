@@ -72,23 +72,27 @@ def _start_worker(args: argparse.Namespace) -> subprocess.Popen[bytes]:
 def _serve(host: str, port: int, *, reuse_port: bool, hub: socket.socket | None = None) -> None:
     from aiohttp import web
 
-    from drem_live.app_code import AppCode
+    from drem_live.app_code import MIN_WAKE_SECRET_CHARS, WAKE_SECRET_ENV, AppCode
     from drem_live.limits import env_limits
     from drem_live.server import make_app
 
     wake_dir = os.environ.get("DREM_LIVE_WAKE_DIR") or ""
+    wake_secret = os.environ.get(WAKE_SECRET_ENV) or ""
+    if wake_secret and len(wake_secret) < MIN_WAKE_SECRET_CHARS:
+        raise SystemExit(f"{WAKE_SECRET_ENV} must be a secret of at least {MIN_WAKE_SECRET_CHARS} characters.")
     # An idle poller's connection is not kept long locally; behind a load balancer the server must keep it longer
     # than the balancer does (DREM_LIVE_KEEPALIVE_S), or the balancer may send a request onto a closing one (a 502).
     keepalive_s = float(os.environ.get("DREM_LIVE_KEEPALIVE_S") or DEFAULT_KEEPALIVE_S)
     # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
-    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
+    woken = bool(wake_dir or wake_secret)
+    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if woken else DEFAULT_POLL_MS))
     namespace = os.environ.get("DREM_LIVE_METRICS_NAMESPACE") or ""
     metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None
     if hub is not None:
         os.environ.pop("DREM_LIVE_VIDEO_HUB", None)  # this process is the hub itself
     poll_s = max(10, poll_ms) / 1000
     app = make_app(AppCode.from_settings(poll_s), poll_s=poll_s, limits=env_limits(), wake_dir=wake_dir,
-                   metrics=metrics)
+                   wake_secret=wake_secret, metrics=metrics)
     _quiet_collector()
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
