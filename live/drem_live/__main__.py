@@ -7,14 +7,17 @@ the polls; the first process starts the others and stops them when it stops (the
 from __future__ import annotations
 
 import argparse
+import atexit
 import ctypes
 import gc
 import logging
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 
 DEFAULT_POLL_MS = 100
 WOKEN_POLL_MS = 250
@@ -35,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s drem_live %(message)s")
     hub = _video_hub_socket() if args.workers > 1 and not args.reuse_port else None
+    if args.workers > 1 and not args.reuse_port:
+        _share_wake_ups()
     others = [_start_worker(args) for _ in range(max(0, args.workers - 1))]
     try:
         _serve(args.host, args.port, reuse_port=args.workers > 1 or args.reuse_port, hub=hub)
@@ -47,6 +52,15 @@ def main(argv: list[str] | None = None) -> int:
             except subprocess.TimeoutExpired:
                 worker.kill()
     return 0
+
+
+def _share_wake_ups() -> None:
+    """Several workers woken over HTTP (DREM_LIVE_WAKE_SECRET, on AWS) without a wake directory: give them a private
+    one, so the worker a wake-up reaches wakes the others through their wake sockets (drem_live.wake_route)."""
+    if os.environ.get("DREM_LIVE_WAKE_SECRET") and not os.environ.get("DREM_LIVE_WAKE_DIR"):
+        directory = tempfile.mkdtemp(prefix="drem-live-wake-")  # owner-only
+        os.environ["DREM_LIVE_WAKE_DIR"] = directory  # for this process and the workers it starts
+        atexit.register(shutil.rmtree, directory, ignore_errors=True)
 
 
 def _video_hub_socket() -> socket.socket:
