@@ -157,8 +157,8 @@ def test_the_writers_http_waker_wakes_every_task_through_one_of_them() -> None:
 
 
 def test_a_live_server_that_does_not_answer_costs_the_writer_one_short_wait_then_none() -> None:
-    """The writer returns while its wake-up is still unanswered; while it is in flight, and for a while after it
-    failed, further wake-ups are not even tried (the live server's poll shows those laps)."""
+    """The writer returns while its wake-up is still unanswered; one that comes meanwhile waits behind it, and when it
+    fails, that one and, for a while, further wake-ups are not even tried (the live server's poll shows those laps)."""
     import socket
 
     listener = socket.socket()
@@ -174,16 +174,61 @@ def test_a_live_server_that_does_not_answer_costs_the_writer_one_short_wait_then
         wait_until(lambda: arrived, 30, "the wake-up reached the stalled server")
         assert waker.sent == 0 and waker.failed == 0, "the writer did not wait for the answer"
         waker("e2")
-        assert waker.skipped == 1, "one wake-up in flight at a time"
+        assert waker.remembered == 1 and waker.skipped == 0, "one wake-up in flight at a time, the next waits"
         listener.close()
         arrived[0].close()  # the server goes away without answering
         wait_until(lambda: waker.failed == 1, 30, "the unanswered wake-up failed")
+        assert waker.skipped == 1 and waker.remembered == 0, "the waiting one is dropped with it"
         waker("e3")
         assert waker.skipped == 2, "after a failure the writer stops trying for a while"
     finally:
         listener.close()
         for conn in arrived:
             conn.close()
+
+
+def test_a_wake_up_that_comes_while_one_is_in_flight_is_sent_right_after_it() -> None:
+    """A lap writes the board and then the overlay: the overlay's wake-up must not be lost behind the board's, or the
+    overlay would wait for the live server's poll. Two writes of one event meanwhile are one wake-up."""
+    import socket
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen()
+    port = listener.getsockname()[1]
+    bodies: list[bytes] = []
+    answer_first = threading.Event()
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        with conn, conn.makefile("rb") as requests_in:
+            while True:
+                length = 0
+                while (line := requests_in.readline()) not in (b"\r\n", b""):
+                    if line.lower().startswith(b"content-length:"):
+                        length = int(line.split(b":")[1])
+                if not line:
+                    return
+                bodies.append(requests_in.read(length))
+                if len(bodies) == 1:
+                    answer_first.wait(30)
+                conn.sendall(b"HTTP/1.1 204 No Content\r\n\r\n")
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    waker = HttpWaker(f"http://127.0.0.1:{port}{WAKE_PATH}", SECRET, socket_timeout_s=30)
+    try:
+        waker("e-board")  # its answer is held back: the writer returns after its bound
+        wait_until(lambda: bodies, 30, "the first wake-up reached the live server")
+        waker("e-overlay")
+        waker("e-overlay")
+        assert bodies == [b"e-board"] and waker.remembered == 1
+        answer_first.set()
+        wait_until(lambda: waker.sent == 2, 30, "the remembered wake-up sent once the first was answered")
+        assert bodies == [b"e-board", b"e-overlay"] and waker.skipped == 0 and waker.remembered == 0
+    finally:
+        answer_first.set()
+        listener.close()
 
 
 def test_the_settings_choose_the_wake_path_and_refuse_a_short_secret(tmp_path) -> None:
