@@ -7,8 +7,9 @@ big screen and stream overlay and everyone's phones (the phones spread evenly ov
     fragment when it did), each Lambda read going to DynamoDB unless the instance's 250 ms cache has it.
 (b) push: CloudFront carries page loads and one Server-Sent-Events request per (re)connection to the live server on
     Fargate behind an ALB; each update is gzipped once and delivered to every viewer of its channel (data transfer
-    out), the server reads DynamoDB on a fixed poll per channel whatever the number of viewers: on AWS every
-    drem_live DEFAULT_POLL_MS (100 ms; the functions cannot wake the tasks, so there is no wake-up there), per task.
+    out), the server reads DynamoDB on a fixed poll per channel whatever the number of viewers, per task: the writer
+    wakes the tasks (each board or overlay write POSTs the event id through CloudFront to one task, which relays it to
+    the others: drem_live.wake_route), so the poll is only the fallback, every drem_live WOKEN_POLL_MS (250 ms).
 Both pay the same non-live traffic (page HTML through API Gateway + Lambda, the timers' laps, the staff consoles) and
 the same DynamoDB writes and writer reads per lap (the race transaction, the track board, the combined board and the
 overlay, each read consistently before it is rewritten: `lap_writes`). Tasks: spectators / the live pages' scaling
@@ -100,8 +101,13 @@ class Profile:
     static_files_per_page: int = 7  # CSS, JS, favicon, fonts, the event's logo: CloudFront cache hits (requests only)
     heartbeat_every_s: float = 15.0
     # The live server re-reads each channel's items on this fixed poll (per task, whatever the viewers): its real
-    # default on AWS (drem_live.__main__.DEFAULT_POLL_MS).
-    server_poll_every_s: float = 0.1
+    # interval on AWS, where the writer wakes it (drem_live.__main__.WOKEN_POLL_MS).
+    server_poll_every_s: float = 0.25
+    # The writer's wake-ups: one POST through CloudFront per write that changes a live page (the track board, the
+    # combined board, the overlay: LeaderboardPublisher's on_change), and the Lambda's time waiting for its answer.
+    # That time is an estimate, not measured (no AWS here); chalicelib.live_wake_http bounds it at 250 ms.
+    wakes_per_lap: int = 3
+    wake_post_ms: float = 20.0
     # Lambda: 512 MB (functions/.chalice/config.json); a poll answered 204 or from the render cache takes ~10 ms.
     lambda_memory_gb: float = 0.5
     lambda_poll_ms: float = 10.0
@@ -273,8 +279,10 @@ def push(p: Profile, s: Sizes) -> Usage:
     # ALB: each hour billed at its highest LCU dimension (streams are spread evenly over the day here).
     per_hour = 3600 / p.seconds
     lcu = max(streams * per_hour / 3600 / 25, p.spectators / 3000, bytes_out * per_hour / GB)
+    wakes = p.laps * p.wakes_per_lap  # task to task relays stay inside the VPC: not billed per request
     return _plus(non_live(p, s), Usage(
-        cloudfront_requests=streams, cloudfront_bytes_out=bytes_out, dynamodb_rru=rru,
+        cloudfront_requests=streams + wakes, cloudfront_bytes_out=bytes_out, dynamodb_rru=rru,
+        lambda_gb_seconds=wakes * p.wake_post_ms / 1000 * p.lambda_memory_gb,
         alb_hours=p.infrastructure_hours, alb_lcu_hours=lcu * p.hours,
         fargate_vcpu_hours=n_tasks * p.task_vcpu * p.infrastructure_hours,
         fargate_gb_hours=n_tasks * p.task_memory_gb * p.infrastructure_hours,
@@ -418,9 +426,9 @@ def report(p: Profile, s: Sizes) -> tuple[float, float]:
           f"overlay {s.overlay_html:,} B / {s.overlay_gzip:,} B; heartbeat {s.heartbeat_gzip} B; "
           f"DynamoDB items: board {s.board_item:,} B, overlay {s.overlay_item:,} B; page {s.page_html:,} B")
     wru, rru = lap_writes(p, s)
-    print(f"per lap: {wru:g} write units, {rru:g} read units (writer); live server poll every "
-          f"{p.server_poll_every_s * 1000:g} ms per channel per task; {tasks(p)} task(s) of {p.viewers_per_task:,} "
-          f"viewers")
+    print(f"per lap: {wru:g} write units, {rru:g} read units (writer), {p.wakes_per_lap} wake-up POSTs (push); live "
+          f"server fallback poll every {p.server_poll_every_s * 1000:g} ms per channel per task; {tasks(p)} task(s) "
+          f"of {p.viewers_per_task:,} viewers")
     counts = [("CloudFront requests", "cloudfront_requests", 1), ("CloudFront GB out", "cloudfront_bytes_out", GB),
               ("API Gateway requests", "api_requests", 1), ("Lambda requests", "lambda_requests", 1),
               ("Lambda GB-s", "lambda_gb_seconds", 1), ("DynamoDB read units", "dynamodb_rru", 1),

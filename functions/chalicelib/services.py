@@ -217,7 +217,7 @@ def race_store() -> DynamoRaceStore:
 
 def publisher() -> LeaderboardPublisher:
     return LeaderboardPublisher(DynamoBoardStore(clients.dynamodb(), get_settings().table("leaderboards")), now_ms,
-                                on_change=live_wake.waker(get_settings().live_wake_dir))
+                                on_change=live_wake.waker(get_settings()))
 
 
 def live_publisher(cache: PublicViewCache) -> LeaderboardPublisher:

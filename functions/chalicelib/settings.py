@@ -40,6 +40,9 @@ class Settings(BaseModel):
     live_url: str | None = None
     # Where the live server's processes listen for "this event changed" (chalicelib.live_wake); "" = it only polls.
     live_wake_dir: str = ""
+    # On AWS: the secret the writer's POST to the live origin's /live/wake carries (chalicelib.live_wake_http); "" =
+    # no wake-ups over HTTP.
+    live_wake_secret: str = Field(default="", repr=False)
     # A scrutineering worker drives queued models although this process has no simulator: on AWS, the learning booth's
     # task runs one (drem_infra.booth_service), so the functions queue new models for it.
     scrutineering_worker: bool = False
@@ -66,6 +69,7 @@ class Settings(BaseModel):
             "token_key_file": token_key_file,
             "live_url": _http_origin_or_none(env.get("DREM_LIVE_URL") or ""),
             "live_wake_dir": env.get("DREM_LIVE_WAKE_DIR") or "",
+            "live_wake_secret": env.get("DREM_LIVE_WAKE_SECRET") or "",
             "scrutineering_worker": env.get(resources.SCRUTINEERING_WORKER_ENV) == "1",
             "assignment_recheck_s": env.get(resources.ASSIGNMENT_RECHECK_ENV) or 5.0,
         }
@@ -74,6 +78,13 @@ class Settings(BaseModel):
             # Absolute links (QR codes, landing and overlay addresses, activation commands) need the sub-path too.
             settings = settings.model_copy(update={"public_url": settings.public_url.rstrip("/") + settings.base_path})
         return settings
+
+    @field_validator("live_wake_secret")
+    @classmethod
+    def _long_wake_secret(cls, value: str) -> str:
+        if value and len(value) < 16:
+            raise ValueError("DREM_LIVE_WAKE_SECRET must be a secret of at least 16 characters")
+        return value
 
     @field_validator("base_path")
     @classmethod

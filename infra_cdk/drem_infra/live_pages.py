@@ -24,6 +24,11 @@ channel and pushes each change to every viewer, so a spectator costs data transf
 - Only this stage's distribution gets through the load balancer: CloudFront adds a secret header (ORIGIN_SECRET_HEADER,
   a value generated in Secrets Manager at deploy time) to every origin request, and the listener forwards only requests
   that carry it (anything else: 403), so even something else inside the VPC is refused.
+- The writer wakes the tasks: the functions (outside the VPC, so they cannot reach a task) POST each changed event id
+  to the public origin's WAKE_PATH, through CloudFront (its own uncached POST behaviour) and the load balancer, to one
+  task, with the stage's wake secret (Secrets Manager, handed to both); that task wakes its own viewers' channels and
+  relays the wake-up to the other tasks on the peer port (drem_live.wake_route, drem_live.video_peers). Woken, a task
+  polls storage only as the fallback (every 250 ms instead of 100 ms; bench/aws_cost.py).
 - Scaling: on CPU and on the streams each task carries (the server publishes its open streams as a CloudWatch metric
   through its log, embedded metric format), so a task full of quiet streams scales out too.
 """
@@ -113,15 +118,19 @@ PEER_DNS_TTL = cdk.Duration.seconds(10)  # a new task is found within this plus 
 PEERS_ENV = "DREM_LIVE_VIDEO_PEERS"
 PEER_LISTEN_ENV = "DREM_LIVE_VIDEO_PEER_LISTEN"
 PEER_SECRET_ENV = "DREM_LIVE_VIDEO_PEER_SECRET"
+# chalicelib.live_wake reads these (tests/infra/test_live_pages.py checks the names match).
+WAKE_PATH = "/live/wake"
+WAKE_SECRET_ENV = "DREM_LIVE_WAKE_SECRET"
 
 
 class LivePages(Construct):
     """The live-page service of one stage. `environment` is the app's (the same DREM_* settings the functions get);
-    `tables` the stack's tables by logical name (the task role may read only those in permissions.LIVE_TABLE_ACTIONS).
+    `tables` the stack's tables by logical name (the task role may read only those in permissions.LIVE_TABLE_ACTIONS);
+    `wake_secret` the one the writer's wake-ups carry (the stack gives the functions the same).
     Context `live_max_tasks` raises the autoscaling ceiling (`make deploy LIVE_MAX_TASKS=8`)."""
 
     def __init__(self, scope: Construct, construct_id: str, *, stage: str, environment: Mapping[str, str],
-                 tables: Mapping[str, dynamodb.Table]) -> None:
+                 tables: Mapping[str, dynamodb.Table], wake_secret: secretsmanager.ISecret) -> None:
         super().__init__(scope, construct_id)
         stack = cdk.Stack.of(self)
         self.vpc = ec2.Vpc(
@@ -153,7 +162,8 @@ class LivePages(Construct):
                          "DREM_LIVE_METRICS_NAMESPACE": STREAMS_METRIC_NAMESPACE, "DREM_LIVE_METRICS_STAGE": stage,
                          PEERS_ENV: f"{PEER_SERVICE_NAME}.{PEER_NAMESPACE}:{PEER_PORT}",
                          PEER_LISTEN_ENV: f"0.0.0.0:{PEER_PORT}"},
-            secrets={PEER_SECRET_ENV: ecs.Secret.from_secrets_manager(self.peer_secret)},
+            secrets={PEER_SECRET_ENV: ecs.Secret.from_secrets_manager(self.peer_secret),
+                     WAKE_SECRET_ENV: ecs.Secret.from_secrets_manager(wake_secret)},
             port_mappings=[ecs.PortMapping(container_port=CONTAINER_PORT), ecs.PortMapping(container_port=PEER_PORT)],
             logging=ecs.LogDrivers.aws_logs(stream_prefix="live", log_group=self.log_group),
         )
@@ -282,6 +292,11 @@ class LivePages(Construct):
         distribution.add_behavior(
             CAR_UPLOAD_PATH_PATTERN, self.origin,
             viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.REDIRECT_TO_HTTPS,
+            allowed_methods=cloudfront.AllowedMethods.ALLOW_ALL,
+            cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=policy, compress=False)
+        # The writer's wake-ups: a POST, never cached, with every viewer header (the wake secret) passed on.
+        distribution.add_behavior(
+            WAKE_PATH, self.origin, viewer_protocol_policy=cloudfront.ViewerProtocolPolicy.HTTPS_ONLY,
             allowed_methods=cloudfront.AllowedMethods.ALLOW_ALL,
             cache_policy=cloudfront.CachePolicy.CACHING_DISABLED, origin_request_policy=policy, compress=False)
         distribution.add_behavior(

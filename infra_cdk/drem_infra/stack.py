@@ -28,6 +28,7 @@ from aws_cdk import aws_iam as iam
 from aws_cdk import aws_lambda as lambda_
 from aws_cdk import aws_logs as logs
 from aws_cdk import aws_s3 as s3
+from aws_cdk import aws_secretsmanager as secretsmanager
 from aws_cdk import aws_sns as sns
 from aws_cdk import aws_sns_subscriptions as sns_subscriptions
 from aws_cdk import aws_ssm as ssm
@@ -35,7 +36,7 @@ from constructs import Construct
 
 from drem_infra import permissions, resources
 from drem_infra.booth_service import BoothService
-from drem_infra.live_pages import LivePages
+from drem_infra.live_pages import WAKE_SECRET_ENV, LivePages
 from drem_infra.resources import BucketSpec, TableSpec
 
 # How long the functions' logs are kept (CloudWatch keeps them forever, and bills for them, unless told otherwise).
@@ -112,13 +113,16 @@ class DremStack(cdk.Stack):
         self.tables = {spec.logical: self._table(spec) for spec in resources.TABLES}
         self.buckets = {spec.logical: self._bucket(spec) for spec in resources.BUCKETS}
         self.user_pool, self.user_pool_client = self._user_pool()
+        # The writer (the functions) wakes the live tasks through CloudFront with this secret (drem_infra.live_pages).
+        self.live_wake_secret = self._live_wake_secret() if functions_dir is not None else None
         self.app = self._chalice_app(functions_dir) if functions_dir is not None else None
         self.distribution = self._distribution(certificate_arn) if self.app is not None else None
         if self.distribution is not None:
             self._public_url_parameter(self.distribution)
         # The live pages' push server (Fargate behind an ALB) at /live/* of the same distribution (same origin).
-        self.live = (LivePages(self, "Live", stage=stage, environment=self.app_environment(), tables=self.tables)
-                     if self.distribution is not None else None)
+        self.live = (LivePages(self, "Live", stage=stage, environment=self.app_environment(), tables=self.tables,
+                               wake_secret=self.live_wake_secret)
+                     if self.distribution is not None and self.live_wake_secret is not None else None)
         if self.live is not None and self.distribution is not None:
             self.live.serve_through(self.distribution)
         # The learning booth (drives, training) in a container beside the live pages: opt-in, it costs by the hour.
@@ -288,6 +292,19 @@ class DremStack(cdk.Stack):
         env[resources.ASSIGNMENT_RECHECK_ENV] = "1"
         return env
 
+    def _live_wake_secret(self) -> secretsmanager.Secret:
+        return secretsmanager.Secret(
+            self, "LiveWakeSecret", description=f"drem {self.stage}: the writer's wake-up of the live pages' tasks",
+            generate_secret_string=secretsmanager.SecretStringGenerator(exclude_punctuation=True, password_length=40))
+
+    def _writer_wakes_the_live_pages(self, env: dict[str, str]) -> dict[str, str]:
+        """The functions POST each changed event to the public origin's /live/wake with the wake secret
+        (chalicelib.live_wake_http): a CloudFormation dynamic reference, resolved at deploy time (the same pattern as
+        the origin secret). Whoever can read the functions' configuration can read the tables too, and the secret
+        only makes the live server re-read public data (at most once per wake window per channel)."""
+        assert self.live_wake_secret is not None
+        return {**env, WAKE_SECRET_ENV: self.live_wake_secret.secret_value.unsafe_unwrap()}
+
     def _public_url_parameter(self, distribution: cloudfront.Distribution) -> ssm.StringParameter:
         """The public URL where the functions read it at run time (CloudFront's domain is known only now)."""
         return ssm.StringParameter(
@@ -354,7 +371,7 @@ class DremStack(cdk.Stack):
         from chalice.cdk import Chalice
         from chalice.utils import to_cfn_resource_name
 
-        env = self.app_environment(public_url_parameter=True)
+        env = self._writer_wakes_the_live_pages(self.app_environment(public_url_parameter=True))
         with _packaging_leaves_no_trace():
             app = Chalice(self, "App", source_dir=str(functions_dir),
                           stage_config={"environment_variables": env, "lambda_timeout": API_FUNCTION_TIMEOUT_S})

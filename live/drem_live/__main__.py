@@ -7,14 +7,17 @@ the polls; the first process starts the others and stops them when it stops (the
 from __future__ import annotations
 
 import argparse
+import atexit
 import ctypes
 import gc
 import logging
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 
 DEFAULT_POLL_MS = 100
 WOKEN_POLL_MS = 250
@@ -35,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s drem_live %(message)s")
     hub = _video_hub_socket() if args.workers > 1 and not args.reuse_port else None
+    if args.workers > 1 and not args.reuse_port:
+        _share_wake_ups()
     others = [_start_worker(args) for _ in range(max(0, args.workers - 1))]
     try:
         _serve(args.host, args.port, reuse_port=args.workers > 1 or args.reuse_port, hub=hub)
@@ -47,6 +52,15 @@ def main(argv: list[str] | None = None) -> int:
             except subprocess.TimeoutExpired:
                 worker.kill()
     return 0
+
+
+def _share_wake_ups() -> None:
+    """Several workers woken over HTTP (DREM_LIVE_WAKE_SECRET, on AWS) without a wake directory: give them a private
+    one, so the worker a wake-up reaches wakes the others through their wake sockets (drem_live.wake_route)."""
+    if os.environ.get("DREM_LIVE_WAKE_SECRET") and not os.environ.get("DREM_LIVE_WAKE_DIR"):
+        directory = tempfile.mkdtemp(prefix="drem-live-wake-")  # owner-only
+        os.environ["DREM_LIVE_WAKE_DIR"] = directory  # for this process and the workers it starts
+        atexit.register(shutil.rmtree, directory, ignore_errors=True)
 
 
 def _video_hub_socket() -> socket.socket:
@@ -72,23 +86,27 @@ def _start_worker(args: argparse.Namespace) -> subprocess.Popen[bytes]:
 def _serve(host: str, port: int, *, reuse_port: bool, hub: socket.socket | None = None) -> None:
     from aiohttp import web
 
-    from drem_live.app_code import AppCode
+    from drem_live.app_code import MIN_WAKE_SECRET_CHARS, WAKE_SECRET_ENV, AppCode
     from drem_live.limits import env_limits
     from drem_live.server import make_app
 
     wake_dir = os.environ.get("DREM_LIVE_WAKE_DIR") or ""
+    wake_secret = os.environ.get(WAKE_SECRET_ENV) or ""
+    if wake_secret and len(wake_secret) < MIN_WAKE_SECRET_CHARS:
+        raise SystemExit(f"{WAKE_SECRET_ENV} must be a secret of at least {MIN_WAKE_SECRET_CHARS} characters.")
     # An idle poller's connection is not kept long locally; behind a load balancer the server must keep it longer
     # than the balancer does (DREM_LIVE_KEEPALIVE_S), or the balancer may send a request onto a closing one (a 502).
     keepalive_s = float(os.environ.get("DREM_LIVE_KEEPALIVE_S") or DEFAULT_KEEPALIVE_S)
     # Woken by the writer, the poll is only the fallback (and times a race's phases): it can be slower.
-    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if wake_dir else DEFAULT_POLL_MS))
+    woken = bool(wake_dir or wake_secret)
+    poll_ms = int(os.environ.get("DREM_LIVE_POLL_MS") or (WOKEN_POLL_MS if woken else DEFAULT_POLL_MS))
     namespace = os.environ.get("DREM_LIVE_METRICS_NAMESPACE") or ""
     metrics = (namespace, os.environ.get("DREM_LIVE_METRICS_STAGE") or "") if namespace else None
     if hub is not None:
         os.environ.pop("DREM_LIVE_VIDEO_HUB", None)  # this process is the hub itself
     poll_s = max(10, poll_ms) / 1000
     app = make_app(AppCode.from_settings(poll_s), poll_s=poll_s, limits=env_limits(), wake_dir=wake_dir,
-                   metrics=metrics)
+                   wake_secret=wake_secret, metrics=metrics)
     _quiet_collector()
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)

@@ -18,6 +18,14 @@ if importlib.util.find_spec("chalicelib") is None:
 
 from chalicelib import services  # noqa: E402  (after functions/ is on sys.path)
 from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicView, PublicViewCache  # noqa: E402
+from chalicelib.live_wake import (  # noqa: E402
+    MAX_WAKE_BODY_BYTES,
+    MIN_WAKE_SECRET_CHARS,
+    WAKE_PATH,
+    WAKE_SECRET_ENV,
+    WAKE_SECRET_HEADER,
+    LiveWaker,
+)
 from chalicelib.live_wake import socket_path as wake_socket_path  # noqa: E402
 from chalicelib.routes.responses import etag_matches  # noqa: E402
 from chalicelib.views import live_options, live_regions  # noqa: E402
@@ -26,7 +34,8 @@ from drem_leaderboard.models import Race  # noqa: E402
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
-__all__ = ["AppCode", "PublicView", "etag_matches", "live_regions", "wake_socket_path"]
+__all__ = ["MAX_WAKE_BODY_BYTES", "MIN_WAKE_SECRET_CHARS", "WAKE_PATH", "WAKE_SECRET_ENV", "WAKE_SECRET_HEADER",
+           "AppCode", "LiveWaker", "PublicView", "etag_matches", "live_regions", "wake_socket_path"]
 
 QUERY_MODELS: Mapping[str, type[BaseModel]] = {
     "leaderboard": live_regions.LeaderboardQuery, "overlay": live_regions.OverlayQuery}

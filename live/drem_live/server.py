@@ -35,6 +35,7 @@ from drem_live.prepared import PreparedResponse, takes_prepared
 from drem_live.sse import GZIP_HEADER, HEARTBEAT, Message, accepts_gzip, clock_message
 from drem_live.video_routes import add_video_routes
 from drem_live.wake import WAKE, listen_for_wakes
+from drem_live.wake_route import HTTP_WAKES, add_wake_route
 
 log = logging.getLogger("drem_live")
 
@@ -88,7 +89,8 @@ async def healthz(request: web.Request) -> web.Response:
     return web.json_response({"ok": True, "pid": os.getpid(), "channels": len(app[CHANNELS]),
                               "streams": app[STREAMS].total, "message_bytes": app[CHANNELS].sizes.as_dict(),
                               "poll_ms": round(app[CHANNELS].poll_s * 1000),
-                              "wakes": wake.received if wake is not None else None},
+                              "wakes": wake.received if wake is not None else None,
+                              "http_wakes": app[HTTP_WAKES][0] if HTTP_WAKES in app else None},
                              headers={**CORS, **NO_SNIFF})
 
 
@@ -243,8 +245,10 @@ def poll_handler(kind: str) -> Handler:
 
 
 def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
-             wake_dir: str = "", metrics: tuple[str, str] | None = None) -> web.Application:
-    """`metrics` (namespace, stage): publish the open streams to CloudWatch (drem_live.metrics)."""
+             wake_dir: str = "", wake_secret: str = "", metrics: tuple[str, str] | None = None) -> web.Application:
+    """`wake_dir`: this task's processes' wake sockets (drem_live.wake); `wake_secret`: take the writer's wake-ups over
+    HTTP too (drem_live.wake_route). `metrics` (namespace, stage): publish the open streams to CloudWatch
+    (drem_live.metrics)."""
     executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="drem-live")
 
     def read_view(kind: str, event_id: str, track: str) -> tuple[int, str]:
@@ -260,12 +264,12 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
     app[POLLS] = PollViews(read_view, poll_s, executor)
     app[KNOWN_EVENTS] = {}
     app[UNKNOWN_EVENTS] = {}
-    if wake_dir:
-        def woken(event_id: str) -> None:
-            code.changed(event_id)  # first: no channel may be handed what was read before the write
-            app[CHANNELS].wake(event_id)
-            app[POLLS].expire(event_id)
+    def woken(event_id: str) -> None:
+        code.changed(event_id)  # first: no channel may be handed what was read before the write
+        app[CHANNELS].wake(event_id)
+        app[POLLS].expire(event_id)
 
+    if wake_dir:
         listen_for_wakes(app, wake_dir, woken)
     if metrics is not None:
         publish_streams(app, *metrics, streams=lambda: app[STREAMS].total)
@@ -274,6 +278,8 @@ def make_app(code: AppCode, *, poll_s: float, limits: Limits, threads: int = 8,
         app.router.add_get(f"/live/{kind}/{{event_id}}", public(stream_handler(kind)))
         app.router.add_get(f"/live/api/{kind}/{{event_id}}", public(poll_handler(kind)))
     add_video_routes(app)  # the cars' cameras (docs/racing.md "The car's eye")
+    if wake_secret:
+        add_wake_route(app, wake_secret, woken, wake_dir)
     app.router.add_route("OPTIONS", "/live/{tail:.*}", preflight)
 
     async def beat(_app: web.Application) -> AsyncIterator[None]:

@@ -6,7 +6,9 @@ On AWS the load balancer sends a car's frames to one live task and each viewer t
     dead peer costs dropped frames, never memory or the car's upload;
   - tells the other tasks which cars its own viewers watch (`POST /peer/interest`, on every change and every
     INTEREST_EVERY_S), so a car is asked to send while any task has a viewer for it (drem_live.video_feeds).
-Frames received from a peer are shown, never forwarded again (no loops).
+Frames received from a peer are shown, never forwarded again (no loops). The same path carries the writer's wake-ups
+(drem_live.wake_route): the task the writer reached relays each to the others (`POST /peer/wake`, the event id), which
+wake their own channels and relay nothing.
 
 Peers listen on their own port (PEER_LISTEN_ENV), never behind the load balancer; every request carries the shared
 secret (PEER_SECRET_ENV) and is refused without it. Who the peers are (PEERS_ENV): `host:port` entries, each resolved
@@ -24,7 +26,7 @@ import os
 import re
 import secrets
 import socket
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 
 import aiohttp
@@ -47,6 +49,7 @@ SEND_TIMEOUT_S = 2.0
 MAX_NAMES = 1000
 CAR_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 PEER_ID = re.compile(r"[0-9a-f]{16}")
+EVENT_ID = re.compile(rb"[A-Za-z0-9_.-]{1,128}")
 
 log = logging.getLogger("drem_live.video_peers")
 Address = tuple[str, int]
@@ -97,7 +100,9 @@ class Peers:
         self._sending: set[Address] = set()
         self._interest_changed = asyncio.Event()
         self.session: aiohttp.ClientSession | None = None
-        self.forwarded = self.dropped = 0
+        self.forwarded = self.dropped = self.wakes_relayed = self.wakes_taken = 0
+        # What a peer's relayed wake-up does here (drem_live.wake_route sets it); None: nothing to wake.
+        self.on_wake: Callable[[str], None] | None = None
         feeds.on_interest_change = self._interest_changed.set
 
     def others(self) -> set[Address]:
@@ -113,6 +118,14 @@ class Peers:
             else:
                 self._sending.add(address)
                 asyncio.get_running_loop().create_task(self._send_frames(address, upload))
+
+    def relay_wake(self, event_id: str) -> None:
+        """Tell every other task that `event_id` changed, without waiting for any of them (each post is bounded)."""
+        body = event_id.encode()
+        loop = asyncio.get_running_loop()
+        for address in self.others():
+            self.wakes_relayed += 1
+            loop.create_task(self._post(address, "/peer/wake", body, {"Content-Type": "text/plain"}))
 
     async def _send_frames(self, address: Address, upload: Upload | None) -> None:
         try:
@@ -224,10 +237,25 @@ class Peers:
         self.feeds.watched_by_peer(sender, frozenset(names), INTEREST_TTL_S)
         return web.Response(status=204, headers=answer)
 
+    async def take_wake(self, request: web.Request) -> web.Response:
+        if not self._trusted(request):
+            return web.json_response({"message": "Only the other live tasks send here."}, status=403)
+        answer = {ID_HEADER: self.id}
+        if request.headers.get(FROM_HEADER) == self.id:
+            return web.Response(status=204, headers=answer)  # this task reached itself: woken already
+        body = await request.read()  # bounded by the peer app's client_max_size
+        if not EVENT_ID.fullmatch(body):
+            return web.json_response({"message": "The body is an event id."}, status=400, headers=answer)
+        self.wakes_taken += 1
+        if self.on_wake is not None:
+            self.on_wake(body.decode())
+        return web.Response(status=204, headers=answer)
+
     def peer_app(self) -> web.Application:
         app = web.Application(client_max_size=MAX_FRAME_BYTES + 1024)
         app.router.add_post("/peer/frame", self.take_frame)
         app.router.add_post("/peer/interest", self.take_interest)
+        app.router.add_post("/peer/wake", self.take_wake)
         return app
 
 

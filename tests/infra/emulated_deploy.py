@@ -21,6 +21,11 @@ What a real deploy does, and what stands in for each step here:
    user pool is what sign-in needs: `provide_cognito()` creates the pool, its client and groups from the template's
    own properties through the Cognito API (the names CloudFormation's Cognito resources pass to CreateUserPool,
    CreateUserPoolClient and CreateGroup) and substitutes their ids wherever the template refers to them.
+6. Nor for Secrets Manager (moto/secretsmanager/models.py defines no CloudFormationModel), whose generated secrets the
+   functions and the live tasks share: `provide_secrets()` creates each through the API with a value GetRandomPassword
+   makes from the template's own GenerateSecretString (what CloudFormation's AWS::SecretsManager::Secret does; its Ref
+   is the ARN), and `substitute` resolves the `{{resolve:secretsmanager:<arn>:SecretString:::}}` dynamic references
+   to its value, as CloudFormation does at deploy time.
 """
 from __future__ import annotations
 
@@ -28,6 +33,7 @@ import copy
 import io
 import json
 import re
+import uuid
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -146,6 +152,15 @@ class Provided:
     refs: dict[str, str] = field(default_factory=dict)
     attributes: dict[str, dict[str, str]] = field(default_factory=dict)
     types: dict[str, str] = field(default_factory=dict)
+    secret_values: dict[str, str] = field(default_factory=dict)  # ARN -> the secret's string
+
+
+_SECRET_REFERENCE = re.compile(r"\{\{resolve:secretsmanager:(arn:[^:]+:secretsmanager:[^:]+:[^:]+:secret:[^:}]+)"
+                               r":SecretString:::\}\}")
+
+
+def _resolved(text: str, provided: Provided) -> str:
+    return _SECRET_REFERENCE.sub(lambda m: provided.secret_values.get(m.group(1), m.group(0)), text)
 
 
 def substitute(node: Any, provided: Provided) -> Any:
@@ -165,10 +180,37 @@ def substitute(node: Any, provided: Provided) -> Any:
                     return match.group(0)
                 return provided.attributes[name][attribute] if attribute else provided.refs[name]
             return {"Fn::Sub": re.sub(r"\$\{[A-Za-z0-9.]+\}", value, node["Fn::Sub"])}
+        if set(node) == {"Fn::Join"}:
+            separator, parts = node["Fn::Join"]
+            parts = substitute(parts, provided)
+            if isinstance(parts, list) and all(isinstance(part, str) for part in parts):
+                return _resolved(separator.join(parts), provided)  # a dynamic reference is resolved once joined
+            return {"Fn::Join": [separator, parts]}
         return {key: substitute(value, provided) for key, value in node.items()}
     if isinstance(node, list):
         return [substitute(item, provided) for item in node]
+    if isinstance(node, str):
+        return _resolved(node, provided)
     return node
+
+
+def provide_secrets(secretsmanager: Any, resources: dict[str, Any], provided: Provided) -> Provided:
+    """Create the template's generated secrets through the API, into `provided` (which it returns)."""
+    for logical_id, resource in resources.items():
+        if resource["Type"] != "AWS::SecretsManager::Secret":
+            continue
+        props = resource.get("Properties", {})
+        generate = dict(props.get("GenerateSecretString", {}))
+        assert not {"SecretStringTemplate", "GenerateStringKey"} & set(generate), "only plain generated strings"
+        value = secretsmanager.get_random_password(**generate)["RandomPassword"]
+        # Without a name in the template CloudFormation names it after the logical id with a unique suffix.
+        arn = secretsmanager.create_secret(Name=f"{logical_id}-{uuid.uuid4().hex[:12]}", SecretString=value,
+                                           Description=props.get("Description", ""))["ARN"]
+        provided.refs[logical_id] = arn
+        provided.attributes[logical_id] = {}
+        provided.types[logical_id] = resource["Type"]
+        provided.secret_values[arn] = value
+    return provided
 
 
 def provide_cognito(cognito: Any, resources: dict[str, Any], region: str) -> Provided:

@@ -33,7 +33,8 @@ def storage_stack_with_live_pages(cdk_out: Path, stage: str):  # noqa: ANN201 - 
 
     app = cdk.App(outdir=str(cdk_out))
     stack = DremStack(app, f"drem-{stage}", stage=stage)
-    live = live_pages.LivePages(stack, "Live", stage=stage, environment=stack.app_environment(), tables=stack.tables)
+    live = live_pages.LivePages(stack, "Live", stage=stage, environment=stack.app_environment(), tables=stack.tables,
+                                wake_secret=stack._live_wake_secret())
     live.serve_through(cloudfront.Distribution(stack, "Distribution", default_behavior=cloudfront.BehaviorOptions(
         origin=origins.HttpOrigin("example.org"))))
     return app, stack, live

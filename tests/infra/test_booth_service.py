@@ -55,8 +55,11 @@ def test_one_task_runs_the_app_server_the_trainer_and_the_scrutineer_never_two_a
     function_env = next(iter(functions))["Properties"]["Environment"]["Variables"]
     # With the booth's scrutineering worker running, the functions queue every new model for a test drive.
     assert function_env["DREM_SCRUTINEERING_WORKER"] == "1"
+    # All but the writer's wake-up secret of the live pages: the booth writes no board (drem_infra.live_pages).
+    function_env = {k: v for k, v in function_env.items() if k != live_pages.WAKE_SECRET_ENV}
     for container in containers.values():
         env = {e["Name"]: e["Value"] for e in container["Environment"]}
+        assert live_pages.WAKE_SECRET_ENV not in env and not container.get("Secrets")
         assert {k: v for k, v in env.items() if k in function_env} == function_env
         assert "AWS_DEFAULT_REGION" in env
 

@@ -30,7 +30,7 @@ import pytest
 import requests
 from botocore.exceptions import ClientError
 
-from drem_infra import resources
+from drem_infra import live_pages, resources
 from tests.infra import emulated_deploy
 from tests.infra.conftest import PUBLIC_URL, STAGE
 from tests.infra.lambda_runtime import LambdaFunction, runtime_dir
@@ -79,6 +79,7 @@ def deployed(app_template, cloud_assembly, durable_server_factory):
 
 def _deploy(server: Any, client: Any, template: dict[str, Any], published: dict[str, Path]) -> Deployed:
     provided = emulated_deploy.provide_cognito(client("cognito-idp"), template["Resources"], REGION)
+    emulated_deploy.provide_secrets(client("secretsmanager"), template["Resources"], provided)
     subset = emulated_deploy.deployable_subset(template, provided, emulated_deploy.moto_supported_types())
     cloudformation = client("cloudformation")
     cloudformation.create_stack(StackName=STACK, TemplateBody=json.dumps(subset.template),
@@ -106,7 +107,8 @@ def test_the_stack_creates_everything_the_app_needs_and_says_what_moto_cannot(de
     print(f"\nLeft out of the emulated deploy ({len(subset.skipped)} of {len(template)} resources):")
     for logical_id, reason in sorted(subset.skipped.items()):
         print(f"  {logical_id:55} {template[logical_id]['Type']:40} {reason}")
-    print(f"Created through the Cognito API (no moto CloudFormation model): {sorted(provided.refs)}")
+    print(f"Created through the Cognito and Secrets Manager APIs (no moto CloudFormation model): "
+          f"{sorted(provided.refs)}")
     print(f"Outputs not available: {subset.dropped_outputs}")
 
     supported = emulated_deploy.moto_supported_types()
@@ -159,6 +161,11 @@ def test_the_functions_run_the_uploaded_bundle_with_the_stacks_names(deployed):
             assert variables[resources.bucket_env_var(spec.logical)] == \
                 deployed.outputs[f"{spec.logical.capitalize()}BucketName"]
         assert variables["DREM_PUBLIC_URL"] == PUBLIC_URL
+        # The writer's wake-up secret, resolved at deploy time: the very one the live tasks take from Secrets Manager.
+        [wake_secret] = [lid for lid, r in deployed.template["Resources"].items()
+                         if r["Type"] == "AWS::SecretsManager::Secret" and "LiveWakeSecret" in lid]
+        shared = deployed.client("secretsmanager").get_secret_value(SecretId=deployed.provided.refs[wake_secret])
+        assert variables[live_pages.WAKE_SECRET_ENV] == shared["SecretString"] and len(shared["SecretString"]) >= 32
         assert configuration["Role"].endswith(f"/{deployed.physical['DefaultRole']}")
         # moto keeps no LoggingConfig, so the function's log group is checked where the template names it.
         log_group = deployed.template["Resources"][logical_id]["Properties"]["LoggingConfig"]["LogGroup"]["Ref"]

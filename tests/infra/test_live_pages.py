@@ -127,7 +127,8 @@ def test_booth_and_live_requests_cross_no_plain_hop(app_template):
         "VpcOriginEndpointConfig"]
     assert endpoint["Arn"] == {"Ref": alb_id}
     config = _one(app_template, "AWS::CloudFront::Distribution")[1]["Properties"]["DistributionConfig"]
-    assert all(b["ViewerProtocolPolicy"] == "redirect-to-https"
+    assert all(b["ViewerProtocolPolicy"] == ("https-only" if b.get("PathPattern") == live_pages.WAKE_PATH
+                                             else "redirect-to-https")
                for b in [config["DefaultCacheBehavior"], *config["CacheBehaviors"]])
     others = [o for o in config["Origins"] if o["Id"] != origin["Id"]]
     assert others and all(o["CustomOriginConfig"]["OriginProtocolPolicy"] == "https-only" for o in others)
@@ -166,7 +167,7 @@ def test_the_container_gets_the_apps_settings_and_the_app_links_live_pages_to_it
 
     assert all(v["DREM_LIVE_URL"] == "" for v in lambda_env), "same origin: CloudFront routes /live/* to the server"
     assert all(v["DREM_ASSIGNMENT_RECHECK_S"] == "1" for v in lambda_env), "no wake-up between Lambdas: re-read often"
-    for name in (n for n in lambda_env[0] if n.startswith("DREM_")):
+    for name in (n for n in lambda_env[0] if n.startswith("DREM_") and n != live_pages.WAKE_SECRET_ENV):
         assert env[name] == lambda_env[0][name], name
     assert "AWS_DEFAULT_REGION" in env
     assert env["DREM_LIVE_CLIENT_ADDRESS_HEADER"] == "CloudFront-Viewer-Address", "caps count viewers, not CloudFront"
@@ -320,6 +321,60 @@ def test_every_live_task_finds_the_others_by_one_name_and_only_they_reach_its_pe
         f"{live_pages.PEER_SERVICE_NAME}.{namespace['Properties']['Name']}:{live_pages.PEER_PORT}"
     assert env[video_peers.PEER_LISTEN_ENV] == f"0.0.0.0:{live_pages.PEER_PORT}"
     # The shared secret comes from Secrets Manager at start, never as plain text in the template.
-    [secret] = container["Secrets"]
-    assert secret["Name"] == video_peers.PEER_SECRET_ENV and "Ref" in secret["ValueFrom"]
+    [secret] = [s for s in container["Secrets"] if s["Name"] == video_peers.PEER_SECRET_ENV]
+    assert "Ref" in secret["ValueFrom"]
     assert video_peers.PEER_SECRET_ENV not in env
+
+
+def _wake_secret_id(app_template) -> str:
+    _, task = _one(app_template, "AWS::ECS::TaskDefinition")
+    [container] = task["Properties"]["ContainerDefinitions"]
+    [secret] = [s for s in container["Secrets"] if s["Name"] == live_pages.WAKE_SECRET_ENV]
+    return secret["ValueFrom"]["Ref"]
+
+
+def test_the_names_the_writer_and_the_live_server_read_match_the_stacks():
+    from chalicelib import live_wake
+
+    assert (live_pages.WAKE_PATH, live_pages.WAKE_SECRET_ENV) == (live_wake.WAKE_PATH, live_wake.WAKE_SECRET_ENV)
+
+
+def test_every_function_gets_the_wake_secret_the_live_tasks_get_and_the_public_url_to_post_to(app_template,
+                                                                                              cloudfront_template):
+    """The writer (the functions, outside the VPC) wakes the live tasks with a POST to the public origin's /live/wake,
+    carrying the secret the tasks take from Secrets Manager at start; the public URL is the deploy's (or, without a
+    domain, the stack's SSM parameter that the functions read at run time)."""
+    for template in (app_template, cloudfront_template):
+        secret_id = _wake_secret_id(template)
+        secret = template.find_resources("AWS::SecretsManager::Secret")[secret_id]["Properties"]
+        assert secret["GenerateSecretString"]["PasswordLength"] >= 32
+        _, task = _one(template, "AWS::ECS::TaskDefinition")
+        [container] = task["Properties"]["ContainerDefinitions"]
+        assert live_pages.WAKE_SECRET_ENV not in {e["Name"] for e in container["Environment"]}, "not as plain text"
+        functions = template.find_resources("AWS::Serverless::Function").values()
+        for variables in (f["Properties"]["Environment"]["Variables"] for f in functions):
+            reference = json.dumps(variables[live_pages.WAKE_SECRET_ENV])
+            # A dynamic reference to that same secret, resolved at deploy time: the value is in no template.
+            assert "{{resolve:secretsmanager:" in reference and f'{{"Ref": "{secret_id}"}}' in reference
+            assert variables.get("DREM_PUBLIC_URL") or variables.get("DREM_PUBLIC_URL_PARAMETER")
+
+
+def test_the_wake_up_post_reaches_the_live_tasks_uncached_over_https_only(app_template):
+    behaviours = _behaviours(app_template)
+    order = [b["PathPattern"] for b in behaviours]
+    by_path = {b["PathPattern"]: b for b in behaviours}
+    wake, public = by_path[live_pages.WAKE_PATH], by_path[live_pages.PATH_PATTERN]
+    assert order.index(live_pages.WAKE_PATH) < order.index(live_pages.PATH_PATTERN), "matched before /live/*"
+    assert wake["TargetOriginId"] == public["TargetOriginId"], "the live load balancer, through the VPC origin"
+    assert wake["CachePolicyId"] == CACHING_DISABLED, "every wake-up reaches a task; none is collapsed"
+    assert "POST" in wake["AllowedMethods"]
+    assert wake["ViewerProtocolPolicy"] == "https-only", "the secret never travels a plain hop, not even once"
+    headers = _request_policy(app_template, wake)["HeadersConfig"]["HeaderBehavior"]
+    assert headers.startswith("allViewer"), "the wake secret header reaches the server"
+    assert _request_policy(app_template, wake)["CookiesConfig"] == {"CookieBehavior": "none"}
+    # The load balancer's rule for /live/* (with CloudFront's origin secret) covers it: no rule of its own.
+    rules = app_template.find_resources("AWS::ElasticLoadBalancingV2::ListenerRule").values()
+    live_rules = [r for r in rules if any(c.get("Field") == "path-pattern" and live_pages.PATH_PATTERN in
+                                          c["PathPatternConfig"]["Values"] for c in r["Properties"]["Conditions"])]
+    assert len(live_rules) == 1
+    assert any(c.get("Field") == "http-header" for c in live_rules[0]["Properties"]["Conditions"])

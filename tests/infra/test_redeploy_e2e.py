@@ -75,6 +75,7 @@ def test_every_deploy_after_the_first_serves_the_public_url_from_its_first_reque
     emulated_deploy.bootstrap(client("ssm"), client("s3"), account, REGION)
     published = emulated_deploy.publish_assets(client("s3"), cloud_assembly, "drem-cloudfront", account, REGION)
     provided = emulated_deploy.provide_cognito(client("cognito-idp"), template["Resources"], REGION)
+    emulated_deploy.provide_secrets(client("secretsmanager"), template["Resources"], provided)
     subset = emulated_deploy.deployable_subset(template, provided, emulated_deploy.moto_supported_types())
     parameters = [lid for lid, r in template["Resources"].items() if r["Type"] == "AWS::SSM::Parameter"]
     assert parameters and all(lid in subset.skipped for lid in parameters)  # it needs the distribution

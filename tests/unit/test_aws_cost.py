@@ -94,7 +94,17 @@ def test_every_lap_pays_its_writes_whatever_the_design_and_the_crowd(aws_cost, s
     assert aws_cost.dollars(aws_cost.push(profile, sizes))["DynamoDB writes"] > 0
 
 
-def test_the_live_server_polls_at_its_real_interval(aws_cost):
-    from drem_live.__main__ import DEFAULT_POLL_MS
+def test_the_live_server_polls_at_its_real_interval_on_aws_where_the_writer_wakes_it(aws_cost):
+    from drem_live.__main__ import WOKEN_POLL_MS
 
-    assert aws_cost.Profile().server_poll_every_s == DEFAULT_POLL_MS / 1000
+    assert aws_cost.Profile().server_poll_every_s == WOKEN_POLL_MS / 1000
+
+
+def test_every_write_that_changes_a_live_page_pays_its_wake_up_post(aws_cost, sizes):
+    profile = aws_cost.Profile()
+    silent = replace(profile, wakes_per_lap=0)
+    woken, unwoken = aws_cost.push(profile, sizes), aws_cost.push(silent, sizes)
+    assert woken.cloudfront_requests - unwoken.cloudfront_requests == profile.laps * 3
+    assert woken.lambda_gb_seconds > unwoken.lambda_gb_seconds
+    assert aws_cost.push(replace(profile, spectators=20_000), sizes).cloudfront_requests - \
+        aws_cost.push(replace(silent, spectators=20_000), sizes).cloudfront_requests == profile.laps * 3
