@@ -37,8 +37,6 @@ _PR_SET_PDEATHSIG = 1
 LEASE_VARIABLE = "DREM_SCRUTINEER_LEASE_S"  # how long a taken job is the worker's (default 5 minutes)
 # How often the worker looks for model checks a crash cut short (uploads left UPLOADED); see resume_model_checks.
 RESUME_CHECKS_EVERY_S = float(os.environ.get("DREM_RESUME_CHECKS_EVERY_S", "30"))
-# How often the worker looks for uploads the app asked it to check (a racer's `/complete` waits for it).
-CHECK_POLL_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -184,9 +182,10 @@ def league_verifier(drive: BoundedClipDrive) -> Any:
                           lambda folder, track, laps: drive(folder, [], laps, track=track))
 
 
-def check_uploads_forever(poll_s: float = CHECK_POLL_S) -> None:
+def check_uploads_forever(poll_s: float) -> None:
     """The checks of arrived uploads the app hands over (chalicelib.domain.model_checks), one at a time, in this
-    process at its lowest priority: the app's threads keep serving pages meanwhile."""
+    process at its lowest priority: the app's threads keep serving pages meanwhile. It looks every `poll_s` (the
+    worker's --poll-s, as for its queues: a racer's `/complete` waits that much longer, storage sees fewer reads)."""
     from chalicelib import logs, services
 
     checks = services.worker_checks()
@@ -230,7 +229,7 @@ def serve(poll_s: float, once: bool = False) -> int:
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
     # Beside the drives, not between them: a drive takes up to 90 s, and a check cut short must not wait for a queue.
     threading.Thread(target=_resume_checks_forever, name="resume-model-checks", daemon=True).start()
-    threading.Thread(target=check_uploads_forever, name="model-checks", daemon=True).start()
+    threading.Thread(target=check_uploads_forever, args=(poll_s,), name="model-checks", daemon=True).start()
     try:
         while True:
             try:
