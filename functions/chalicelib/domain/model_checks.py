@@ -29,9 +29,10 @@ from chalicelib.domain.scrutineer_queue import ScrutineerQueue
 
 # The queue's jobs name the tracks a drive is for; a check has none, so its jobs carry this word instead.
 CHECK_JOB = "upload-check"
-# The console conversion alone may take 60 s (ConversionLimits.wall_seconds): a racer's `/complete` waits that long
-# and a little more for the verdict, then answers "Checking…" (the page and the CLI then read the model again).
-WAIT_S = 90.0
+# Most checks end within seconds; a racer's `/complete` waits this long for the verdict, then answers the model as it
+# stands ("Checking…": the console conversion alone may take 60 s), before clients' request timeouts (the CLI's is
+# 30 s), and the page or `drem models upload` reads the model again until its check ends.
+WAIT_S = 25.0
 TAKEOVER_S = 10.0
 POLL_S = 0.2
 
