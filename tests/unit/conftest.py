@@ -28,7 +28,8 @@ from moto import mock_aws
 from moto.core.base_backend import BackendDict
 
 from drem_infra.resources import TOKEN_SIGNING_KEY_ENV
-from drem_local.bootstrap import StackOutputs, clients_for, ensure_stack
+from drem_local.bootstrap import StackOutputs, clients_for
+from tests.unit.stack_snapshot import fresh_stack
 
 if TYPE_CHECKING:
     from tests.unit.authz_principals import World
@@ -104,8 +105,9 @@ def aws_clients() -> Any:
 @pytest.fixture
 def stack(aws_clients: Any, monkeypatch: pytest.MonkeyPatch, installation_key_file: Path) -> StackOutputs:
     """Tables, buckets, user pool, app client and groups, with the app's env pointing at them (tokens pinned to the
-    installation key, as a local stack runs)."""
-    outputs = ensure_stack(aws_clients, STAGE)
+    installation key, as a local stack runs). Bootstrapped once per process, then restored from a copy
+    (tests/unit/stack_snapshot.py)."""
+    outputs = fresh_stack(aws_clients, STAGE)
     for name, value in outputs.to_env().items():
         monkeypatch.setenv(name, value)
     monkeypatch.setenv(TOKEN_SIGNING_KEY_ENV, str(installation_key_file))

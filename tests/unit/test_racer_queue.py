@@ -1,6 +1,7 @@
 """The racer queue beside the timekeeper ("on deck"): staff line racers up with their model, reorder, take them off;
 "Ready race" on the head creates the race on the car holding their model and gives the next racer's model to a free
-car of the track's fleet, whose load the panel follows from the car's reports and heartbeat."""
+car of the track's fleet, whose load the panel follows from the car's reports and heartbeat. The queue's own rules
+(order, limits, which model, two screens at once) are tried without HTTP in tests/domain/test_racer_queue_rules.py."""
 from __future__ import annotations
 
 import hashlib
@@ -239,30 +240,6 @@ def test_a_refused_race_leaves_the_head_in_the_queue(console):
     refused = track.press("start", "alice")
     assert refused.status_code == 409 and field_error(refused.body.decode(), "form")
     assert track.on_deck() == ["alice"]
-
-
-def test_two_screens_changing_the_queue_at_once_lose_neither_change(console, monkeypatch):
-    from chalicelib.storage.racer_queue import DynamoQueueStore
-
-    track = _track(console, racers=("alice", "bob"))
-    track.add("alice")
-    track.add("bob")
-    bob = track.entry_of("bob")
-    real_put, raced = DynamoQueueStore.put, []
-
-    def put_after_another_screen(store, queue, *, expected_version):
-        if not raced:  # the other tablet takes bob off between this request's read and its write
-            raced.append(True)
-            current = store.get(queue.event_id, queue.track_id)
-            real_put(store, current.model_copy(update={"entries": [e for e in current.entries if e.entry_id != bob],
-                                                       "version": current.version + 1}),
-                     expected_version=current.version)
-        real_put(store, queue, expected_version=expected_version)
-
-    monkeypatch.setattr(DynamoQueueStore, "put", put_after_another_screen)
-    moved = track.press("move", "alice", direction="down")
-    assert moved.status_code == 200 and raced
-    assert track.on_deck() == ["alice"]  # bob stays removed: the stale write was refused and the move re-applied
 
 
 def test_a_model_that_has_not_passed_scrutineering_is_queued_only_after_staff_say_yes(console):
