@@ -43,9 +43,8 @@ def app_and_worker(stack: Any, **waiting: Any) -> tuple[ModelService, ModelServi
     return app, worker, checks, checked_by
 
 
-def uploaded(service: ModelService, aws_clients: Any, stack: Any, name: str = "fast.tar.gz",
-             racer: User = ALICE) -> ModelRecord:
-    ticket = service.request_upload(racer, UploadRequest(filename=name))
+def uploaded(service: ModelService, aws_clients: Any, stack: Any, name: str = "fast.tar.gz") -> ModelRecord:
+    ticket = service.request_upload(ALICE, UploadRequest(filename=name))
     aws_clients.s3.put_object(Bucket=stack.buckets["models"], Key=ticket.model.upload_key, Body=onnx_archive())
     return ticket.model
 
@@ -132,26 +131,3 @@ def test_a_check_of_a_model_deleted_before_the_worker_came_is_dropped(stack: Any
     assert checks.queue.state_of(model.model_id) is None
     with pytest.raises(NotFound):  # still gone: the check did not bring it back
         app.get(ALICE, model.model_id)
-
-
-def test_an_upload_rush_never_holds_more_than_a_few_request_threads_waiting(stack: Any, aws_clients: Any,
-                                                                           worker_running: Any) -> None:
-    """Six racers finish an upload at once while no worker runs: two wait (the cap here), the other four get their
-    model as it stands ("Checking…") at once; once a worker runs, every one of the six gets its verdict."""
-    checks = WorkerChecks(check_queue(stack), poll_s=0.02, takeover_s=600, wait_s=600, max_waiting=2)
-    app, worker = services.model_service(checks=checks), services.model_service()
-    racers = [User(sub=f"sub-rush-{n}", username=f"rush-{n}", groups=frozenset({"racer"})) for n in range(6)]
-    models = [uploaded(app, aws_clients, stack, "rush.tar.gz", racer) for racer in racers]
-    answers: dict[str, ModelRecord] = {}
-    threads = [threading.Thread(target=lambda m=m, r=r: answers.__setitem__(m.model_id, app.complete(r, m.model_id)),
-                                daemon=True) for m, r in zip(models, racers, strict=True)]
-    for thread in threads:
-        thread.start()
-    wait_until(lambda: len(answers) == 4, 30, "the four beyond the cap answered at once")
-    assert all(answer.status is ModelStatus.UPLOADED for answer in answers.values())
-    worker_running(checks, worker)
-    wait_until(lambda: len(answers) == 6, 60, "the two waiting got their verdicts once a worker ran")
-    for thread in threads:
-        thread.join(10)
-    wait_until(lambda: all(app.reread(m).status is ModelStatus.AVAILABLE for m in models), 60,
-               "the worker checked the four that did not wait too")

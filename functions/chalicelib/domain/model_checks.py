@@ -18,7 +18,6 @@ before, rather than leave the racer waiting.
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import Literal
@@ -36,10 +35,6 @@ CHECK_JOB = "upload-check"
 WAIT_S = 25.0
 TAKEOVER_S = 10.0
 POLL_S = 0.2
-# A waiting `/complete` holds one of the app's request threads (16 under drem up) while it waits. However many racers
-# finish an upload at once, at most this many wait; the others get the model as it stands ("Checking…") at once and
-# their page or CLI reads it again, so an upload rush never leaves the board's readers without threads.
-MAX_WAITING = 4
 
 
 class WorkerChecks:
@@ -47,9 +42,8 @@ class WorkerChecks:
 
     def __init__(self, queue: ScrutineerQueue, *, wait_s: float = WAIT_S, takeover_s: float = TAKEOVER_S,
                  poll_s: float = POLL_S, sleep: Callable[[float], None] = time.sleep,
-                 clock: Callable[[], float] = time.monotonic, max_waiting: int = MAX_WAITING) -> None:
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.queue = queue
-        self._waiting = threading.BoundedSemaphore(max_waiting)
         self.wait_s = wait_s
         self.takeover_s = takeover_s
         self.poll_s = poll_s
@@ -57,17 +51,8 @@ class WorkerChecks:
         self._clock = clock
 
     def request(self, models: ModelService, record: ModelRecord) -> ModelRecord:
-        """App side: queue the check (once per model) and wait for its verdict, reading the record (no CPU work); the
-        record as it stands at once when MAX_WAITING requests already wait."""
+        """App side: queue the check (once per model) and wait for its verdict, reading the record (no CPU work)."""
         self.queue.enqueue(record.model_id, record.owner_sub, [CHECK_JOB])
-        if not self._waiting.acquire(blocking=False):
-            return models.reread(record)
-        try:
-            return self._wait(models, record)
-        finally:
-            self._waiting.release()
-
-    def _wait(self, models: ModelService, record: ModelRecord) -> ModelRecord:
         started = self._clock()
         while True:
             latest = models.reread(record)
