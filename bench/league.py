@@ -31,7 +31,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "functions"))
 
 from bench import _stack  # noqa: E402
 from bench.scrutineer_load import retagged_samples, upload  # noqa: E402
-from drem_infra import resources  # noqa: E402
 
 CONSOLE_ARCHIVE = _stack.ROOT.parent / "shared" / "deepracer-models" / "console-discrete-shallow-ppo" / \
     "console-discrete-shallow-ppo.tar.gz"
@@ -150,8 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     load_before = _stack.machine_load()
     timings: dict[str, list[float]] = {"console": [], "drem": []}
     outcomes: list[str] = []
-    # The worker started below checks the uploads, as under `drem up` (drem_local.stack.start_stack sets the same).
-    with _stack.bench_stack({resources.MODEL_CHECKS_IN_WORKER_ENV: "1"}) as stack:
+    with _stack.bench_stack() as stack:
         bearer = "Bearer " + _stack.call(stack.url, "POST", "/api/auth/token", {
             "username": stack.admin_username, "password": stack.admin_password})["access_token"]
         reader = BoardReader(stack.url)

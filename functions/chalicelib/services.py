@@ -34,7 +34,6 @@ from chalicelib.domain.fleets import FleetService
 from chalicelib.domain.leaderboards import LeaderboardPublisher, PublicViewCache
 from chalicelib.domain.league import LeagueService
 from chalicelib.domain.league_intake import LeagueIntake
-from chalicelib.domain.model_checks import WorkerChecks
 from chalicelib.domain.model_conversion import ConsoleConverter
 from chalicelib.domain.model_registry import RegistryService, lineage_from_archive
 from chalicelib.domain.model_scrutiny import ScrutineerService, ScrutinyEnqueuer, upcoming_track_types
@@ -68,7 +67,7 @@ from chalicelib.storage.race_stats import DynamoStatsDigestStore
 from chalicelib.storage.racer_models import DynamoModelStore, EventTrackTypes
 from chalicelib.storage.racer_queue import DynamoQueueStore
 from chalicelib.storage.races import DynamoRaceStore
-from chalicelib.storage.scrutineer_queue import CHECK_QUEUE_PK, LEAGUE_QUEUE_PK, DynamoJobStore
+from chalicelib.storage.scrutineer_queue import LEAGUE_QUEUE_PK, DynamoJobStore
 from chalicelib.storage.sessions import DynamoSessionStore
 from chalicelib.storage.users import CognitoUserDirectory
 
@@ -259,19 +258,8 @@ def model_service(settings: Settings | None = None, **options: Any) -> ModelServ
     settings = settings or get_settings()
     options.setdefault("converter", console_converter())
     options.setdefault("scrutineer_queue", scrutiny_enqueuer(settings))
-    options.setdefault("checks", worker_checks(settings))
     return ModelService(DynamoModelStore(clients.dynamodb(), settings.table("models")),
                         S3ModelFiles(clients.s3(), settings.bucket("models"), clients.s3_presigner()), **options)
-
-
-def worker_checks(settings: Settings | None = None) -> WorkerChecks | None:
-    """Where the scrutineering worker checks arrived uploads (the local stack): the queue the app hands them to. None
-    on AWS (and wherever no worker runs): the process that completes an upload checks it."""
-    settings = settings or get_settings()
-    if not settings.model_checks_in_worker:
-        return None
-    return WorkerChecks(ScrutineerQueue(DynamoJobStore(clients.dynamodb(), settings.table("models"),
-                                                       queue_pk=CHECK_QUEUE_PK), now_ms))
 
 
 def registry_service(settings: Settings | None = None) -> RegistryService:

@@ -46,9 +46,6 @@ class Settings(BaseModel):
     # A scrutineering worker drives queued models although this process has no simulator: on AWS, the learning booth's
     # task runs one (drem_infra.booth_service), so the functions queue new models for it.
     scrutineering_worker: bool = False
-    # The local stack: arrived model uploads are checked by the scrutineering worker, not in the app's own process,
-    # whose threads serve the public pages (chalicelib.domain.model_checks). False on AWS.
-    model_checks_in_worker: bool = False
     # How often a car's long poll re-reads its assignment from storage, for writes its own process did not make (a
     # write in the same process wakes it at once: chalicelib.domain.assignment_signals). On AWS every write is made
     # elsewhere (another Lambda), so this interval is how late a car hears of a change there.
@@ -74,7 +71,6 @@ class Settings(BaseModel):
             "live_wake_dir": env.get("DREM_LIVE_WAKE_DIR") or "",
             "live_wake_secret": env.get("DREM_LIVE_WAKE_SECRET") or "",
             "scrutineering_worker": env.get(resources.SCRUTINEERING_WORKER_ENV) == "1",
-            "model_checks_in_worker": env.get(resources.MODEL_CHECKS_IN_WORKER_ENV) == "1",
             "assignment_recheck_s": env.get(resources.ASSIGNMENT_RECHECK_ENV) or 5.0,
         }
         settings = cls.model_validate(values)

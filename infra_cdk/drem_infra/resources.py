@@ -212,11 +212,6 @@ def stage_environment(stage: str, user_pool_id: str, user_pool_client_id: str,
 # AWS, when the stage has the learning booth's task (drem_infra.booth_service), which runs that worker.
 SCRUTINEERING_WORKER_ENV = "DREM_SCRUTINEERING_WORKER"
 
-# Local stacks only ("1", set by `drem up`, which always runs the scrutineering worker): the app hands the check of an
-# arrived model upload (inspection, the console conversion, the copy) to that worker instead of running it beside the
-# requests it serves (chalicelib.domain.model_checks). Unset on AWS, where the checking Lambda is a process of its own.
-MODEL_CHECKS_IN_WORKER_ENV = "DREM_MODEL_CHECKS_IN_WORKER"
-
 # Seconds between a waiting car's storage re-reads of its assignment (chalicelib.domain.assignment_signals).
 ASSIGNMENT_RECHECK_ENV = "DREM_ASSIGNMENT_RECHECK_S"
 

@@ -24,8 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drem_infra import resources
-
 STACK_FILE = "stack.json"
 LOG_DIR = "logs"
 DEFAULT_HOST = "127.0.0.1"
@@ -531,8 +529,6 @@ def _start_stack(config: StackConfig, admin_username: str, admin_password: str |
         outputs, admin = bootstrap(config, admin_username, admin_password)
         bootstrapped = time.perf_counter()
         env = app_environment(config, outputs)
-        # The scrutineering worker below always runs: model uploads are checked there, not beside the app's pages.
-        env[resources.MODEL_CHECKS_IN_WORKER_ENV] = "1"
         write_stack_file(config, outputs, admin.username, storage_pid=storage.pid, app_pid=None)
         app = start_app(config, env, timeout, say)
         # After the app (not beside it: on two cores their imports would slow the app's start); until it answers the

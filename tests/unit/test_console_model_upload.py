@@ -3,7 +3,6 @@ contained worker, the original archive kept byte for byte for stock cars."""
 from __future__ import annotations
 
 import hashlib
-import json
 from typing import Any
 
 import numpy as np
@@ -74,29 +73,6 @@ def test_checking_a_console_upload_reads_its_archive_from_storage_once(stack: An
 
     assert model.status is ModelStatus.AVAILABLE and model.scrutiny == "ready", model.scrutiny_reason
     assert reads == [ticket.model.upload_key]
-
-
-def test_a_console_model_is_driven_from_its_conversion_without_fetching_its_archive(stack: Any, aws_clients: Any,
-                                                                                     tmp_path: Any) -> None:
-    """A re-drive or test drive reads the small ONNX conversion and the metadata its check kept: the storage server
-    (which also answers the public board) does not serve the 20+ MB archive again for each drive."""
-    original = console_fixture.require_fixture().read_bytes()
-    service, model = _upload(aws_clients, stack, original, "console-drive")
-    assert model.scrutiny == "ready", model.scrutiny_reason
-    reads: list[str] = []
-    real_download = service.files.download_bounded
-
-    def counted(key: str, *, limit: int) -> Any:
-        reads.append(key)
-        return real_download(key, limit=limit)
-
-    scrutineer = services.scrutineer_service()
-    scrutineer.models.files.download_bounded = counted  # type: ignore[method-assign]
-    scrutineer.model_files(model, tmp_path)
-
-    assert reads == [model.converted_key]
-    assert (tmp_path / "model.onnx").read_bytes() == _object(aws_clients, stack, model.converted_key or "")
-    assert json.loads((tmp_path / "model_metadata.json").read_text())["action_space"]
 
 
 def test_a_stereo_model_races_on_a_stock_car_but_cannot_be_scrutineered(stack: Any, aws_clients: Any) -> None:

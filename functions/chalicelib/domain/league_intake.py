@@ -95,9 +95,7 @@ class LeagueIntake:
         return record
 
     def _model_metadata(self, record: ModelRecord) -> bytes:
-        if record.metadata_json is not None:  # kept by the model's check: the archive is not fetched again
-            return record.metadata_json.encode("utf-8")
-        assert self.scrutineer is not None  # a model checked before drem kept the file: read it from the archive
+        assert self.scrutineer is not None
         with tempfile.TemporaryDirectory(prefix="league-model-") as folder:
             self.scrutineer.model_files(record, Path(folder))
             path = Path(folder) / "model_metadata.json"

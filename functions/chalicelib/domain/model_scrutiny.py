@@ -138,20 +138,15 @@ class ScrutineerService:
         return [doubt for m in found if (doubt := scrutiny_doubt(m, names.get(m.owner_sub)))]
 
     def model_files(self, record: ModelRecord, folder: Path) -> None:
-        """model_metadata.json from the archive; model.onnx from the archive or, for console models, the conversion.
-        A converted console model whose check kept its metadata is driven without fetching its archive (tens of MB
-        the storage server would serve beside the public pages)."""
+        """model_metadata.json from the archive; model.onnx from the archive or, for console models, the conversion."""
         files = self.models.files
-        if record.converted_key and record.metadata_json is not None:
-            found = {"model_metadata.json": record.metadata_json.encode("utf-8")}
-        else:
-            download = files.download_bounded(record.s3_key or "", limit=self.models.max_upload_bytes)
-            if download is None or download.too_large:
-                raise NotFound(f"The archive of model '{record.name}' is missing.", field="model_id")
-            with download.body:
-                found, _ = read_tar_gz(download.body, limits=_READ_LIMITS,
-                                       wanted=lambda name: name.removeprefix("./") in _MEMBERS)
-            found = {name.removeprefix("./"): data for name, data in found.items()}
+        download = files.download_bounded(record.s3_key or "", limit=self.models.max_upload_bytes)
+        if download is None or download.too_large:
+            raise NotFound(f"The archive of model '{record.name}' is missing.", field="model_id")
+        with download.body:
+            found, _ = read_tar_gz(download.body, limits=_READ_LIMITS,
+                                   wanted=lambda name: name.removeprefix("./") in _MEMBERS)
+        found = {name.removeprefix("./"): data for name, data in found.items()}
         if record.converted_key:
             converted = files.download_bounded(record.converted_key, limit=_READ_LIMITS.max_file_bytes)
             if converted is None or converted.too_large:

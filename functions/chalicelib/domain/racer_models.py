@@ -98,9 +98,6 @@ class ModelRecord(BaseModel):
     model_kind: str | None = None
     model_md5: str | None = None
     metadata_md5: str | None = None
-    # model_metadata.json's own text, kept by the check (a league push reads it here, not from the archive); never
-    # shown by the API (the racer has it, and listings stay small).
-    metadata_json: str | None = None
     archive_md5: str | None = None
     sensor: list[str] = Field(default_factory=list)
     action_space_type: str | None = None
@@ -183,7 +180,7 @@ class ModelRecord(BaseModel):
     def public(self, *, staff: bool = False) -> dict[str, Any]:
         """What API callers see (storage keys stay inside; a stopped drive's technical detail only for staff)."""
         shown = self.model_dump(mode="json", exclude={"upload_key", "s3_key", "converted_key",
-                                                      "scrutineer_clip_key", "metadata_json"})
+                                                      "scrutineer_clip_key"})
         if not staff and shown.get("scrutineer_result"):
             shown["scrutineer_result"].pop("detail", None)
         shown.update(scrutineer_status=self.scrutineer_status, scrutineer_status_reason=self.scrutineer_status_reason,
@@ -326,23 +323,15 @@ class ScrutinyEnqueuer(Protocol):
     def queue_for_scrutiny(self, record: ModelRecord) -> ModelRecord: ...  # the record marked "queued"
 
 
-class CheckRunner(Protocol):
-    """Runs the check of an arrived upload somewhere else than the calling process (chalicelib.domain.model_checks):
-    returns the record once judged, or still UPLOADED ("Checking…") if that takes longer than the caller waits."""
-    def request(self, models: ModelService, record: ModelRecord) -> ModelRecord: ...
-
-
 class ModelService:
     def __init__(self, store: ModelStore, files: ModelFiles, *, limits: ArchiveLimits = DEFAULT_LIMITS,
                  clock: Callable[[], str] = utc_now, new_id: Callable[[], str] = new_model_id,
-                 converter: Converter | None = None, scrutineer_queue: ScrutinyEnqueuer | None = None,
-                 checks: CheckRunner | None = None) -> None:
+                 converter: Converter | None = None, scrutineer_queue: ScrutinyEnqueuer | None = None) -> None:
         self.store = store
         self.files = files
         self.limits = limits
         self.converter = converter
         self.scrutineer_queue = scrutineer_queue
-        self.checks = checks
         self._clock = clock
         self._new_id = new_id
         # The worker's tests shorten it (DREM_CHECK_STALE_AFTER_S).
@@ -359,7 +348,7 @@ class ModelService:
 
     def request_upload(self, principal: Principal, request: UploadRequest) -> UploadTicket:
         owner_sub, username = _user_of(principal)
-        if self.converter is not None and self.checks is None:  # with `checks`, the worker keeps its own ready
+        if self.converter is not None:
             self.converter.warm_up()  # a console model's conversion will not wait for OpenVINO to load
         pending = self.purge_stale_uploads(owner_sub)
         if len(pending) >= MAX_PENDING_UPLOADS:
@@ -375,25 +364,7 @@ class ModelService:
 
     def complete(self, principal: Principal, model_id: str) -> ModelRecord:
         record = self._visible(principal, model_id)
-        if self.checks is not None and record.status is ModelStatus.UPLOADED:
-            if self.files.size_of(record.upload_key) is None:
-                self._raise_not_arrived(record)
-            return self.checks.request(self, record)
         return self._finish(record)
-
-    def check_now(self, principal: Principal, model_id: str) -> ModelRecord:
-        """Staff's "Check again now" on a check a crash cut short: run it in this process at once, not after the
-        worker's lease on it runs out."""
-        return self._finish(self._visible(principal, model_id))
-
-    def finish_check(self, record: ModelRecord) -> ModelRecord:
-        """Check an arrived upload here and store its verdict (what `complete` does without `checks`): the process a
-        CheckRunner hands the check to calls this. Idempotent, like `complete`."""
-        return self._finish(record)
-
-    def reread(self, record: ModelRecord) -> ModelRecord:
-        """The stored record now (NotFound once it is gone)."""
-        return self._reread(record)
 
     def complete_upload_key(self, key: str) -> ModelRecord | None:
         """The S3 "Object Created" path (EventBridge on AWS): same work as `complete`, found by key."""
@@ -503,7 +474,6 @@ class ModelService:
             if report.status is ArchiveStatus.NOT_VALID:
                 return self._verdict(record, ModelStatus.NOT_VALID, **facts)
             facts.update(model_kind=report.model_kind, model_md5=report.model_md5, metadata_md5=report.metadata_md5,
-                         metadata_json=report.metadata_json,
                          sensor=list(report.sensor), action_space_type=report.action_space_type,
                          training_algorithm=report.training_algorithm)
             earlier = [m for m in self.store.find_available_by_md5(record.owner_sub, report.model_md5 or "")

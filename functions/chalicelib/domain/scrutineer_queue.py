@@ -64,24 +64,14 @@ class ScrutineerQueue:
         with `attempts >= MAX_ATTEMPTS` so the caller can give it up (see `exhausted`)."""
         now = self.clock_ms()
         for job in self.store.waiting(scan):
-            if (leased := self._lease(job, now)) is not None:
-                return leased
+            if not job.takeable(now):
+                continue
+            token = self._new_token()
+            until = now + self.lease_ms
+            if self.store.lease(job, token=token, until_ms=until, now_ms=now):
+                return job.model_copy(update={"state": "driving", "attempts": job.attempts + 1,
+                                              "lease_until_ms": until, "lease_token": token})
         return None
-
-    def take_this(self, model_id: str) -> ScrutineerJob | None:
-        """Lease this model's job if it is takeable (queued, or its lease expired); None otherwise."""
-        job = self.store.get(model_id)
-        return self._lease(job, self.clock_ms()) if job is not None else None
-
-    def _lease(self, job: ScrutineerJob, now: int) -> ScrutineerJob | None:
-        if not job.takeable(now):
-            return None
-        token = self._new_token()
-        until = now + self.lease_ms
-        if not self.store.lease(job, token=token, until_ms=until, now_ms=now):
-            return None  # another worker leased it first
-        return job.model_copy(update={"state": "driving", "attempts": job.attempts + 1, "lease_until_ms": until,
-                                      "lease_token": token})
 
     @staticmethod
     def exhausted(job: ScrutineerJob) -> bool:

@@ -5,8 +5,7 @@ loses). The items carry no `gsi1pk`, so the operator listing of models never see
 a lease only lands on the job as it was read (state, lease and attempt count), and a finish or requeue only when the
 lease is still the caller's, so a worker whose lease expired cannot remove the job another worker now drives.
 The league's re-drives (domain/league_intake.py) are the same kind of queue under pk `LEAGUE#VERIFY` in the
-`league` table; the checks of arrived uploads the app hands to the worker (domain/model_checks.py) under pk
-`MODEL#CHECKS` in the `models` table.
+`league` table.
 """
 from __future__ import annotations
 
@@ -20,8 +19,6 @@ _QUEUE_PK = "SCRUTINEER#QUEUE"
 
 
 LEAGUE_QUEUE_PK = "LEAGUE#VERIFY"
-# Checks of arrived model uploads handed to the worker (chalicelib.domain.model_checks), in the `models` table.
-CHECK_QUEUE_PK = "MODEL#CHECKS"
 
 
 class DynamoJobStore:

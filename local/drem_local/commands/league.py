@@ -123,9 +123,7 @@ def upload_model(api: Any, path: Path) -> str:
                                files={"file": (path.name, handle)}, timeout=600)
     if posted.status_code not in (200, 201, 204):
         raise ApiError(posted.status_code, f"storage refused {path.name} (HTTP {posted.status_code})")
-    from drem_local.commands.models import completed
-
-    model = completed(api, ticket["model"]["model_id"])
+    model = api.post(f"/api/models/{ticket['model']['model_id']}/complete")["model"]
     duplicate = model.get("duplicate_of") or {}
     if model["status"] != "AVAILABLE" and duplicate.get("model_id"):
         # The racer uploaded this very model before (to push it to another track, say): push with that one.

@@ -10,9 +10,6 @@ from drem_web.labels import label
 
 # A scrutineering drive is synchronous: up to 3 laps with a per-lap time limit in the simulator.
 SCRUTINEER_TIMEOUT_S = 600.0
-# The server answers /complete once the upload is checked, or "still checking" after 25 s (a console model's
-# conversion alone may take 60 s): then the model is read again until its check ends.
-CHECK_TIMEOUT_S = 600.0
 HELP = "list, upload, delete, scrutineer model archives and assign them to cars (via the drem API)"
 
 
@@ -92,28 +89,13 @@ def _upload(api: Any, args: argparse.Namespace) -> int:
     if posted.status_code not in (200, 201, 204):
         print(f"drem models upload: storage refused the file (HTTP {posted.status_code})", file=sys.stderr)
         return 1
-    model = completed(api, model_id)
+    model = api.post(f"/api/models/{model_id}/complete")["model"]
     print(f"{model['name']} ({model['model_id']}): {label(model['status'])}")
     if model.get("reason"):
         print(f"reason: {model['reason']}")
     if model.get("scrutiny") == "cannot_scrutineer":
         print(f"cannot be scrutineered: {model.get('scrutiny_reason')}")
     return 0 if model["status"] == "AVAILABLE" else 3
-
-
-def completed(api: Any, model_id: str, *, timeout_s: float = CHECK_TIMEOUT_S) -> dict[str, Any]:
-    """Complete an upload whose file is stored: the model once its check ended (still UPLOADED only after
-    `timeout_s`)."""
-    import time
-
-    model: dict[str, Any] = api.post(f"/api/models/{model_id}/complete")["model"]
-    deadline = time.monotonic() + timeout_s
-    if model["status"] == "UPLOADED":
-        print(f"{model['name']}: checking the archive…", file=sys.stderr)
-    while model["status"] == "UPLOADED" and time.monotonic() < deadline:
-        time.sleep(1.0)
-        model = api.get(f"/api/models/{model_id}")["model"]
-    return model
 
 
 def _scrutineer(api: Any, args: argparse.Namespace) -> int:

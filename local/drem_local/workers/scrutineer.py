@@ -182,33 +182,6 @@ def league_verifier(drive: BoundedClipDrive) -> Any:
                           lambda folder, track, laps: drive(folder, [], laps, track=track))
 
 
-def check_uploads_forever(poll_s: float) -> None:
-    """The checks of arrived uploads the app hands over (chalicelib.domain.model_checks), one at a time, in this
-    process at its lowest priority: the app's threads keep serving pages meanwhile. It looks every `poll_s` (the
-    worker's --poll-s, as for its queues: a racer's `/complete` waits that much longer, storage sees fewer reads)."""
-    from chalicelib import logs, services
-
-    checks = services.worker_checks()
-    service = services.model_service()
-    if checks is None:  # the app checks uploads itself (DREM_MODEL_CHECKS_IN_WORKER unset)
-        return
-    if os.environ.get(LEASE_VARIABLE):
-        checks.queue.lease_ms = int(float(os.environ[LEASE_VARIABLE]) * 1000)
-    if service.converter is not None:
-        service.converter.warm_up()  # a console model's conversion will not wait for OpenVINO to load
-    while True:
-        try:
-            record = checks.run_one(service)
-        except Exception as error:  # storage briefly away (restarting): the job's lease runs out, it is taken again
-            logs.log(logging.WARNING, "a model check could not be run yet", error=repr(error)[:300])
-            record = False
-            time.sleep(poll_s * 10)
-        if record is False:
-            time.sleep(poll_s)
-        elif record is not None:
-            logs.log(logging.INFO, "model checked", model_id=record.model_id, status=record.status.value)
-
-
 def _resume_checks_forever() -> None:
     while True:
         resume_model_checks()
@@ -229,7 +202,6 @@ def serve(poll_s: float, once: bool = False) -> int:
     logs.log(logging.INFO, "scrutineering worker started", pid=os.getpid())
     # Beside the drives, not between them: a drive takes up to 90 s, and a check cut short must not wait for a queue.
     threading.Thread(target=_resume_checks_forever, name="resume-model-checks", daemon=True).start()
-    threading.Thread(target=check_uploads_forever, args=(poll_s,), name="model-checks", daemon=True).start()
     try:
         while True:
             try:

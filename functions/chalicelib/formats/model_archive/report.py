@@ -18,9 +18,6 @@ class ArchiveStatus(StrEnum):
 
 
 ModelKind = Literal["tensorflow", "onnx"]
-# model_metadata.json is kept on the model's record up to this size (a real one is 1-3 KB), so reading it later (a
-# league push that brings the model) does not fetch and unpack the whole archive again.
-METADATA_KEPT_BYTES = 16 * 1024
 
 
 class ArchiveReport(BaseModel):
@@ -34,7 +31,6 @@ class ArchiveReport(BaseModel):
     action_space_type: str | None = None
     training_algorithm: str | None = None
     metadata: ModelMetadata | None = None
-    metadata_json: str | None = None  # the file's own text (METADATA_KEPT_BYTES at most)
     member_count: int = 0
     total_size: int = 0
 

@@ -22,12 +22,7 @@ from chalicelib.formats.model_archive.layout import (
     read_metadata,
 )
 from chalicelib.formats.model_archive.limits import DEFAULT_LIMITS, ArchiveLimits
-from chalicelib.formats.model_archive.report import (
-    METADATA_KEPT_BYTES,
-    ArchiveProblem,
-    ArchiveReport,
-    ArchiveStatus,
-)
+from chalicelib.formats.model_archive.report import ArchiveProblem, ArchiveReport, ArchiveStatus
 from chalicelib.formats.model_archive.safe_tar import ArchiveSource, OpenOutput, SafeTarReader, TarFacts
 
 
@@ -64,18 +59,7 @@ def _judge(facts: TarFacts) -> ArchiveReport:
         action_space_type=metadata.action_space_type.value,
         training_algorithm=metadata.training_origin,
         metadata=metadata,
-        metadata_json=_kept_text(facts.kept[metadata_name]),
     )
-
-
-def _kept_text(data: bytes) -> str | None:
-    """The metadata file as the racer wrote it, if small enough to keep on the model's record."""
-    if len(data) > METADATA_KEPT_BYTES:
-        return None
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        return None
 
 
 def _report(facts: TarFacts, status: ArchiveStatus, reason: str | None, **found) -> ArchiveReport:

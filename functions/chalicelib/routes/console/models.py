@@ -65,7 +65,7 @@ def check_model_again(principal: User, model_id: str) -> Response:
     """Staff start a check a crash cut short at once (the scrutineering worker would within a few minutes)."""
     errors: dict[str, str] = {}
     try:
-        services.model_service().check_now(principal, model_id)
+        services.model_service().complete(principal, model_id)
     except SHOWN_ON_FORM as exc:
         errors = field_errors(exc, "model_id")
     listed = _listed(principal)
