@@ -137,7 +137,11 @@ def test_assigned_models_are_pulled_verified_loaded_and_reported(live_stack, adm
 
         commands = wait_until(settled_commands, 15, "the car acknowledges both commands")
         assert {c["type"]: c["status"] for c in commands} == {"SET_THROTTLE_CAP": "ok", "DELETE_ALL_MODELS": "ok"}
-        assert car.safety.throttle_cap_pct == 35 and car.driver.pilot.pilot is None
+        # What staff read: both models were deleted from the car. (Its assignment still names "runnable", so the car
+        # pulls and loads that one again within its 2 s model check: whether it is loaded now is a matter of timing.)
+        messages = {c["type"]: c["message"] for c in commands}
+        assert messages["DELETE_ALL_MODELS"] == "deleted 2 model(s)", messages
+        assert car.safety.throttle_cap_pct == 35
     finally:
         agent.stop()
 

@@ -74,13 +74,16 @@ def templates(tmp_path_factory, lambda_build):
     try:
         app = cdk.App(outdir=str(work / "cdk.out"))
         SYNTH_OUTDIR["app"] = work / "cdk.out"
-        storage_only = DremStack(app, "drem-storage", stage=STAGE)
-        # With the learning booth (`make deploy BOOTH=1`): every infra test, the emulated deploy included, sees it.
-        with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL,
-                             booth=True)
-        # `make deploy` without a domain: the public URL is CloudFront's, known only once the distribution exists.
-        cloudfront_only = DremStack(app, "drem-cloudfront", stage=STAGE, functions_dir=lambda_build)
-        with functions_dir_exclusively():  # the Chalice construct packages functions/ (its .chalice/ cache too)
+        # The Chalice construct runs `chalice package` over functions/ (its .chalice/deployments zip cache too) when
+        # the stack is built, not at synth: another worker packaging at the same time left a half-written zip
+        # ("File is not a zip file"), so the whole construction holds the lock.
+        with functions_dir_exclusively():
+            storage_only = DremStack(app, "drem-storage", stage=STAGE)
+            # With the learning booth (`make deploy BOOTH=1`): every infra test, the emulated deploy included, sees it.
+            with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL,
+                                 booth=True)
+            # `make deploy` without a domain: the public URL is CloudFront's, known only once the distribution exists.
+            cloudfront_only = DremStack(app, "drem-cloudfront", stage=STAGE, functions_dir=lambda_build)
             app.synth()
         return Template.from_stack(storage_only), Template.from_stack(with_app), Template.from_stack(cloudfront_only)
     finally:
