@@ -83,7 +83,7 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
     assert page.input_value("#username") == "" and page.input_value("#email") == ""
     assert page.input_value("#country_code") == "Germany (DE)"
     # htmx applies autofocus once it has settled the swapped form: wait for it, then it must be the username.
-    page.wait_for_function("document.activeElement && document.activeElement.id === 'username'", timeout=5_000)
+    page.wait_for_function("() => document.activeElement && document.activeElement.id === 'username'", timeout=5_000)
 
     # A taken name is refused next to the field, nothing typed is lost.
     page.keyboard.type(first)
@@ -96,7 +96,7 @@ def test_desk_staff_register_racers_who_then_choose_their_password(app_url, live
     assert page.input_value("#email") == "again@example.test"
     # As after a registration, the desk puts the cursor back in the username once the swap has settled: wait for it,
     # or that late refocus lands in the middle of the next racer's typing (the email's letters went into the name).
-    page.wait_for_function("document.activeElement && document.activeElement.id === 'username'", timeout=5_000)
+    page.wait_for_function("() => document.activeElement && document.activeElement.id === 'username'", timeout=5_000)
     page.fill("#username", "")
     page.focus("#username")
     second_password = create_at_desk(page, second)
