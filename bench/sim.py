@@ -188,7 +188,7 @@ def main() -> int:
 
     print(f"model        {archive.name} ({sum(p.numel() for p in torch_model.parameters())} parameters)")
     print(f"track        {args.track}: {steps} decisions = {env.sim_time:.1f} s simulated in {wall_s:.2f} s wall "
-          f"on 1 core; laps {env.laps}, resets {env.resets}")
+          f"on 1 core; laps {env.whole_laps.laps_completed} whole of {env.laps} driven, resets {env.resets}")
     print(f"per frame    sim+camera+ort {wall_s / steps * 1e3:.3f} ms wall, {cpu_s / steps * 1e3:.3f} ms CPU "
           f"(camera supersample {args.supersample}"
           f"{'' if args.supersample == default_frames else ': NOT the default frames'})")

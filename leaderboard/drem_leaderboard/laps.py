@@ -4,10 +4,12 @@ A lap attempt starts on the timing line (the standing start of an episode, or a 
 crossing (a completed lap, 100 %, timed crossing to crossing) or where the car leaves the track (the progress it had
 reached, below 100 %). After an off-track the car is put back where it left: the stretch from there to the line is no
 attempt at all, because the car never took the bend it left the track on, so it neither counts as a lap nor dilutes
-completion. Every figure of a drive uses this: `drem sim eval` and scrutineering (`drem_sim.learn.evaluate.drive`,
-stepping the simulator) and the booth's run metrics (`chalicelib.domain.booth_runs.compute_metrics`, reading a run's
-recorded rows). Pure Python (no numpy), with the race rules, so the app has it wherever it runs (the Lambda bundle
-vendors drem_leaderboard, not the simulator).
+completion. Every figure of a drive uses this: `drem sim eval`, scrutineering, DAgger and the league's re-drives
+(`drem_sim.learn.evaluate.drive`, stepping the simulator), the simulator's own count (`RaceEnv.whole_laps`: a run
+folder's metadata, `drem sim demo`/`record`, the `drem sim drive` page) and the booth's run metrics
+(`chalicelib.domain.booth_runs.compute_metrics`, reading a run's recorded rows, and the live drive's figures).
+Completion % is the mean of the attempts' progress (`ended`). Pure Python (no numpy), with the race rules, so the app
+has it wherever it runs (the Lambda bundle vendors drem_leaderboard, not the simulator).
 """
 from __future__ import annotations
 
@@ -60,3 +62,13 @@ class LapAttempts:
         """The progress of the attempt from the line still under way when the drive stopped (None after a put-back:
         that stretch is no attempt)."""
         return min(self._best, UNFINISHED_CAP) if self._line_s is not None else None
+
+    def ended(self, *, out_of_time: bool = False) -> list[float]:
+        """Every attempt's progress once the drive stopped: completion % is their mean. The attempt from the line
+        still under way counts with what it reached, if it reached anything (a drive stopped on the line, or in the
+        stretch after a put-back, adds no attempt). A drive stopped `out_of_time` before its attempts were driven (a
+        stuck car, also one stuck after a put-back) counts the attempt under way even at 0 %."""
+        unfinished = self.unfinished()
+        if out_of_time:
+            return [*self.attempts, unfinished or 0.0]
+        return [*self.attempts, unfinished] if unfinished else list(self.attempts)

@@ -116,7 +116,7 @@ def _demo(args: argparse.Namespace) -> int:
 
         save_track_png(track, args.png, path)
         print(f"map          {args.png}")
-    return 0 if env.laps >= args.laps else 1
+    return 0 if env.whole_laps.laps_completed >= args.laps else 1  # a lap finished after a put-back is no lap
 
 
 def _path_of(run_dir: Path) -> list[tuple[float, float]]:
@@ -126,8 +126,12 @@ def _path_of(run_dir: Path) -> list[tuple[float, float]]:
 
 
 def _print_laps(track_id: str, env) -> None:  # noqa: ANN001 - RaceEnv, imported lazily
-    times = ", ".join(f"{t:.3f}s" for t in env.lap_times_s) or "none"
-    print(f"{track_id}: {env.laps} lap(s), resets {env.resets}, lap times {times}")
+    """The laps that count (drem_leaderboard.laps: whole, from the line, no off-track), and what else came round."""
+    whole = env.whole_laps
+    times = ", ".join(f"{t:.3f}s" for t in whole.lap_times_s) or "none"
+    after_put_back = env.laps - whole.laps_completed
+    more = f" ({after_put_back} more finished after a put-back: not laps)" if after_put_back > 0 else ""
+    print(f"{track_id}: {whole.laps_completed} lap(s), resets {env.resets}, lap times {times}{more}")
 
 
 def _record(args: argparse.Namespace) -> int:

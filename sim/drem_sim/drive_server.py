@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from drem_sim.env import RaceEnv
-from drem_sim.runs import RunRecorder
+from drem_sim.runs import RunRecorder, whole_lap_figures
 from drem_sim.tracks import Track
 
 PAGE = Path(__file__).with_name("drive_page.html")
@@ -75,7 +75,8 @@ class DriveSession:
         self._control = Control()
         self._control_at = time.monotonic()
         self._recorder: RunRecorder | None = None
-        self._record_from: tuple[int, int, float] = (0, 0, 0.0)  # laps, resets, sim time when recording began
+        # laps, resets, sim time and whole laps when recording began
+        self._record_from: tuple[int, int, float, int] = (0, 0, 0.0, 0)
         self.last_run: dict[str, Any] | None = None
         with self._lock:
             self._obs, info = self.env.reset(seed=seed)
@@ -142,7 +143,8 @@ class DriveSession:
                     self.runs_root, track.track_id, direction="reverse" if track.is_reversed else "forward",
                     driver="human", seed=None, camera=self.env.camera.config if self.env.camera else None,
                     extra={"track_direction": track.direction, "decision_hz": self.env.config.decision_hz})
-                self._record_from = (self.env.laps, self.env.resets, self.env.sim_time)
+                self._record_from = (self.env.laps, self.env.resets, self.env.sim_time,
+                                     self.env.whole_laps.laps_completed)
             finished = None if on else self._finish_recording()
         self._upload(finished)
         return self.state()
@@ -152,10 +154,8 @@ class DriveSession:
         recorder, self._recorder = self._recorder, None
         if recorder is None:
             return None
-        laps_from, resets_from, _ = self._record_from
-        run_dir = recorder.close(laps=self.env.laps - laps_from,
-                                 lap_times_ms=[round(t * 1000) for t in self.env.lap_times_s[laps_from:]],
-                                 resets=self.env.resets - resets_from)
+        _, resets_from, _, whole_from = self._record_from
+        run_dir = recorder.close(**whole_lap_figures(self.env, since_lap=whole_from, since_resets=resets_from))
         self.last_run = {"run_dir": str(run_dir), "frames": recorder.frames, "uploaded": None, "upload_error": None}
         return run_dir
 
@@ -179,7 +179,9 @@ class DriveSession:
 
     def _state(self) -> dict[str, Any]:
         env, params = self.env, self._params
-        return {"track": env.track.track_id, "laps": env.laps, "lap_times_s": [round(t, 3) for t in env.lap_times_s],
+        whole = env.whole_laps  # the laps that count (drem_leaderboard.laps): none finished after a put-back
+        return {"track": env.track.track_id, "laps": whole.laps_completed,
+                "lap_times_s": [round(t, 3) for t in whole.lap_times_s],
                 "progress": round(float(params["progress"]), 2), "speed": round(float(params["speed"]), 2),
                 "steering_angle": round(float(params["steering_angle"]), 1), "resets": env.resets,
                 "steps": env.steps, "sim_time": round(env.sim_time, 2),

@@ -8,8 +8,11 @@ racing sim has no single reward, the caller scores `params` however it likes).
 Each decision (15 Hz) holds the action for `physics_substeps` fixed physics steps. Leaving the
 track (all four wheels outside the borders) puts the car back on the centre line at the nearest
 point, at rest, and counts a reset; the lap goes on, as in a DREM race. Laps are counted from the
-spawn point by distance travelled along the centre line; the virtual timing strip reports its own
-interpolated crossings in `info["strip_events"]`. All randomness comes from `self.np_random`.
+spawn point by distance travelled along the centre line (`laps`, `lap_times_s`: every time the car came
+round, also after a put-back); `whole_laps` holds the laps that count by the one whole-lap rule
+(`drem_leaderboard.laps`: driven whole from the spawn or a crossing to the next crossing without an
+off-track). The virtual timing strip reports its own interpolated crossings in `info["strip_events"]`.
+All randomness comes from `self.np_random`.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from drem_leaderboard.laps import LapAttempts
 from drem_sim.camera import Camera, CameraConfig
 from drem_sim.physics import CarPhysics, CarSpec
 from drem_sim.timing import TimingConfig, TimingLine
@@ -105,6 +109,7 @@ class RaceEnv:
         self.steps = 0
         self.laps = 0
         self.lap_times_s: list[float] = []
+        self.whole_laps = LapAttempts()  # the laps that count: `laps` also counts one finished after a put-back
         self.resets = 0
         self._lap_start_t = 0.0
         self._lap_distance = 0.0  # centre-line metres driven since the lap (or episode) began
@@ -158,11 +163,15 @@ class RaceEnv:
                 self._lap_start_t = done_at
                 self._lap_distance -= length
                 lap_done = True
+                self.whole_laps.crossed(done_at, 100.0 * self.laps)
             if not self._any_wheel_on_track():
                 went_off = True
                 self.resets += 1
+                self.whole_laps.moved(100.0 * (self.laps + self._lap_distance / length))
+                self.whole_laps.left_track()
                 self._place_front_at(self._s)
         self.steps += 1
+        self.whole_laps.moved(100.0 * (self.laps + self._lap_distance / length))
         self._params = self._make_params(went_off)
         cfg = self.config
         terminated = ((cfg.max_resets is not None and self.resets >= cfg.max_resets)

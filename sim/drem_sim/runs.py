@@ -7,7 +7,8 @@ Layout `runs/{track_id}/{date}/{run_id}/` (the same keys under the runs bucket):
   the speed the car really reached by the end of that decision (what a person did, whatever key they held);
   `offtrack` is true when the action taken on that frame ended off the track, so a dataset can leave
   those bad examples out;
-- `metadata.json`: track, direction, driver, start/end, frames, laps, lap times, seed, camera.
+- `metadata.json`: track, direction, driver, start/end, frames, laps and lap times (the whole laps only, by the one
+  rule of `drem_leaderboard.laps`: none finished after a put-back), resets, seed, camera.
 In a bucket the frames travel as one object, `frames.tar` (an uncompressed tar of `frames/{index:06d}.png`: PNGs are
 compressed already), so a run of 1,800 frames is three objects, not 1,800; `download_run` unpacks it (and still reads
 runs stored frame by frame).
@@ -124,7 +125,14 @@ def record_run(env: RaceEnv, policy: Policy, root: Path, *, laps: int, driver: s
         # once a row has recorded the last lap (stopping on the crossing step itself would lose that lap).
         if lap >= laps or terminated or truncated:
             break
-    return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
+    return recorder.close(**whole_lap_figures(env))
+
+
+def whole_lap_figures(env: RaceEnv, *, since_lap: int = 0, since_resets: int = 0) -> dict[str, Any]:
+    """A run's `laps`, `lap_times_ms` and `resets` for its metadata: the laps that count (`env.whole_laps`), not every
+    time the car came round (`env.laps` also counts a lap finished from where the car was put back)."""
+    times = env.whole_laps.lap_times_s[since_lap:]
+    return {"laps": len(times), "lap_times_ms": [round(t * 1000) for t in times], "resets": env.resets - since_resets}
 
 
 # ---- S3 ---------------------------------------------------------------------------------------

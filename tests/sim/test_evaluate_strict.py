@@ -96,6 +96,26 @@ def test_a_clean_driver_completes_every_lap_with_its_lap_times() -> None:
     assert len(metrics.lap_times_s) == 2 and all(7.0 < t < 12.0 for t in metrics.lap_times_s)
 
 
+def test_a_recorded_run_and_drem_sim_record_count_no_lap_finished_after_a_put_back(tmp_path: Path) -> None:
+    """The simulator goes on counting the car round after a put-back (`env.laps`, the lap its rows are on), but a
+    run's laps and lap times (metadata.json, `drem sim record`/`demo`, the drive page) are the whole laps only."""
+    from drem_sim.runs import record_run
+
+    track = load_track("reinvent_base")
+    env = RaceEnv(track)
+    run = record_run(env, OnceALapSaboteur(track), tmp_path, laps=2, driver="saboteur", max_steps=15 * 60)
+    meta = json.loads((run / "metadata.json").read_text())
+    assert env.laps == 2 and env.resets >= 2  # it came round twice, leaving the track at 80 % each time
+    assert (meta["laps"], meta["lap_times_ms"], meta["resets"]) == (0, [], env.resets)
+
+    teacher = Demonstrator(track)
+    clean = RaceEnv(track)
+    run = record_run(clean, lambda _o, p: teacher.act(p), tmp_path, laps=2, driver="demonstrator")
+    meta = json.loads((run / "metadata.json").read_text())
+    assert clean.resets == 0 and meta["laps"] == 2
+    assert meta["lap_times_ms"] == [round(t * 1000) for t in clean.lap_times_s]  # from the line, crossing to crossing
+
+
 def test_track_specs_expand_directions_and_hold_out_by_name() -> None:
     closed = closed_track_names()
     assert "reinvent_base" in closed and "Straight_track" not in closed  # open routes are never raced

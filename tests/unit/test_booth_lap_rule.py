@@ -15,6 +15,7 @@ from drem_sim.runs import record_run
 pytestmark = pytest.mark.unit
 
 TRACK = "reinvent_base"
+SAMPLE = Path(__file__).resolve().parents[2] / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
 CAREFUL = DemonstratorConfig(lateral_accel=9.0, max_speed=4.0, min_speed=2.0)
 TOO_FAST = DemonstratorConfig(lateral_accel=15.0, max_speed=3.5, min_speed=1.0)  # slides off in the hairpin
 
@@ -44,3 +45,35 @@ def test_completion_after_an_off_track_is_what_evaluation_and_scrutineering_say(
     assert metrics.attempts == evaluated.attempts
     assert metrics.completion_pct == pytest.approx(evaluated.completion_pct, abs=0.5)
     assert metrics.completion_pct < 50
+
+
+def test_a_one_lap_autonomous_run_of_a_model_that_laps_shows_one_of_one(tmp_path: Path) -> None:
+    """The booth worker's autonomous run of a model (the shipped sample ONNX model, which `drem sim eval` laps on its
+    track) shows the lap it drove: 1 of 1, not 0 of 1."""
+    from drem_sim.learn.pilot import OnnxPilot
+
+    pilot = OnnxPilot.from_archive(SAMPLE)
+    run = record_run(RaceEnv(TRACK), lambda observation, _params: pilot.act(observation), tmp_path, laps=1,
+                     driver="model:sample", max_steps=15 * 40)
+    metrics = compute_metrics(parse_controls((run / "controls.jsonl").read_bytes()))
+    assert (metrics.laps_completed, metrics.attempts, metrics.completion_pct) == (1, 1, 100.0)
+    assert metrics.best_lap_s is not None and 7.0 < metrics.best_lap_s < 12.0
+
+
+def test_a_model_that_leaves_at_the_same_bend_gets_the_same_figures_on_the_run_page_and_from_scrutineering(
+        tmp_path: Path) -> None:
+    """The shipped sample model leaves reInvent2019_track at the same bend near the finish on every lap (docs/
+    learning.md §6): its booth run and its scrutineering on that track say the same laps (none) and completion."""
+    from drem_sim.learn.pilot import OnnxPilot
+    from drem_sim.learn.scrutineer import scrutineer
+
+    pilot = OnnxPilot.from_archive(SAMPLE)
+    run = record_run(RaceEnv("reInvent2019_track"), lambda observation, _params: pilot.act(observation), tmp_path,
+                     laps=2, driver="model:sample", max_steps=15 * 40 * 2)
+    shown = compute_metrics(parse_controls((run / "controls.jsonl").read_bytes()))
+    report = scrutineer(SAMPLE, "reInvent2019_track", laps=shown.attempts)
+
+    assert shown.offtrack_count >= 2 and shown.laps_completed == report.laps_completed == 0
+    assert report.attempts == shown.attempts == 2
+    assert report.completion_pct is not None and report.completion_pct < 100.0
+    assert shown.completion_pct == pytest.approx(report.completion_pct, abs=1.0)

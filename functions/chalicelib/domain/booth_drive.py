@@ -116,11 +116,10 @@ class LiveDrive:
 
     def state(self, *, frame: bool = False) -> dict[str, Any]:
         env, params, laps = self.env, self.params, self.laps
-        unfinished = laps.unfinished()
         answer: dict[str, Any] = {
             "run_id": self.record.run_id, "track_id": self.record.track_id, "frames": self.recorder.frames,
             "laps": env.laps, "laps_completed": laps.laps_completed,
-            "attempts": len(laps.attempts) + (1 if unfinished else 0),
+            "attempts": len(laps.ended()),
             "lap_times_s": [round(t, 3) for t in laps.lap_times_s], "resets": env.resets,
             "progress": round(float(params["progress"]), 1), "speed": round(env.car_state()["speed"], 2),
             "steering_angle": round(float(params["steering_angle"]), 1), "offtrack": bool(params["is_offtrack"]),
@@ -135,8 +134,9 @@ class LiveDrive:
 
     def close(self) -> Path:
         with self.lock:
-            return self.recorder.close(laps=self.env.laps, lap_times_ms=[round(t * 1000) for t in self.env.lap_times_s],
-                                       resets=self.env.resets)
+            from drem_sim.runs import whole_lap_figures
+
+            return self.recorder.close(**whole_lap_figures(self.env))  # finalising writes the authoritative one
 
 
 class LiveDrives:

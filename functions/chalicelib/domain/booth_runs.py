@@ -360,10 +360,7 @@ def compute_metrics(rows: list[dict[str, Any]]) -> RunMetrics:
             laps.left_track()
         elif after is not None and after["lap"] > row["lap"]:
             laps.crossed(crossing_s(row["t_ms"], before, after["t_ms"], reached, after["lap"]), 100.0 * after["lap"])
-    attempts = list(laps.attempts)
-    unfinished = laps.unfinished()
-    if unfinished:  # the attempt under way when the run stopped counts with what it reached
-        attempts.append(unfinished)
+    attempts = laps.ended()  # the attempt under way when the run stopped counts with what it reached
     lap_times = [round(t, 3) for t in laps.lap_times_s]
     steering = [r["steering_angle"] for r in rows]
     changes = [b - a for a, b in zip(steering, steering[1:], strict=False)]

@@ -103,7 +103,7 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
     from drem_sim.demonstrator import Demonstrator
     from drem_sim.env import RaceEnv
     from drem_sim.learn.pilot import OnnxPilot
-    from drem_sim.runs import RunRecorder
+    from drem_sim.runs import RunRecorder, whole_lap_figures
 
     track = direction.load()
     env = RaceEnv(track)
@@ -129,7 +129,7 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
         obs = next_obs
         if env.laps >= laps or terminated or truncated:
             break
-    return recorder.close(laps=env.laps, lap_times_ms=[round(t * 1000) for t in env.lap_times_s], resets=env.resets)
+    return recorder.close(**whole_lap_figures(env))
 
 
 def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any,

@@ -1,12 +1,12 @@
 """Drive a model (or any policy) round a track in the simulator and measure how it races.
 
-A *lap attempt* starts at the start line (or where the car was put back after leaving the track)
-and ends either with a completed lap or with the car leaving the track. Completion % is the mean
-progress of the attempts (100 for a completed lap), as in a DeepRacer evaluation.
-
-A completed lap is a clean one: when the car leaves the track the attempt ends there, and the next
-attempt starts afresh (lap distance and lap clock at zero) from where the car was put back. A lap
-stitched together across a reset therefore never counts as completed, and its time is never a lap time.
+The whole-lap rule is `drem_leaderboard.laps` (the one copy every figure uses). A *lap attempt* starts on the
+timing line (the standing start of an episode, or a crossing) and ends either at the next crossing (a completed
+lap, 100 %, timed crossing to crossing) or where the car leaves the track (the progress it had reached from the
+line). The simulator then puts the car back; the stretch from there to the next crossing is no attempt: it is
+neither a lap (the car never took the bend it left the track on) nor counted in completion (it would lift it with
+progress measured from the wrong place). Completion % is the mean progress of the attempts, as in a DeepRacer
+evaluation; an attempt from the line still under way when the drive stops counts with what it reached.
 """
 from __future__ import annotations
 
@@ -93,10 +93,7 @@ def drive(env: Any, policy: Policy, attempts: int, seed: int, label: str, track_
             params = dict(info.get("params", {})) if isinstance(info, dict) else {}
             resets_before = _resets(info)
             laps.restart_on_line(0.0)
-    progress_log = list(laps.attempts)
-    if len(progress_log) < attempts:  # out of time: the unfinished attempt counts with what it reached
-        progress_log.append(laps.unfinished() or 0.0)
-    progress_log = progress_log[:attempts]
+    progress_log = laps.ended(out_of_time=len(laps.attempts) < attempts)[:attempts]
     lap_times = laps.lap_times_s
     completed = sum(1 for p in progress_log if p >= 100.0)
     deltas = np.diff(np.asarray(steering)) if len(steering) > 1 else np.zeros(1)

@@ -51,7 +51,8 @@ class ScrutineerReport(BaseModel):
     detail: str | None = None  # what the software said, for staff only
     track_type: str | None = None
     note: str | None = None
-    completion_pct: float | None = None
+    completion_pct: float | None = None  # mean progress per lap attempt (drem_sim.learn.evaluate)
+    attempts: int | None = None
     laps_completed: int = 0
     lap_times_s: list[float] = []
     mean_lap_time_s: float | None = None
@@ -105,7 +106,7 @@ def scrutineer(archive: str | Path, track: str, laps: int = 1, seed: int = 0) ->
         **base, verdict="passed" if passed else "failed",
         message=f"{metrics.laps_completed}/{metrics.attempts} laps completed on {track}, "
                 f"completion {metrics.completion_pct:.1f}%{lap}",
-        completion_pct=metrics.completion_pct, laps_completed=metrics.laps_completed,
+        completion_pct=metrics.completion_pct, attempts=metrics.attempts, laps_completed=metrics.laps_completed,
         lap_times_s=metrics.lap_times_s, mean_lap_time_s=metrics.mean_lap_time_s,
         best_lap_time_s=metrics.best_lap_time_s, offtrack_count=metrics.offtrack_count,
     )
