@@ -157,7 +157,7 @@ def test_cli_eval_of_a_track_file_driven_the_other_way_writes_its_metrics(tmp_pa
 
     from drem_sim.tracks import PACKAGE_TRACKS_DIR
 
-    venue = tmp_path / "venue tracks"
+    venue = tmp_path / "venue:2 tracks"  # a colon in a folder's name is no direction
     venue.mkdir()
     shutil.copy(PACKAGE_TRACKS_DIR / "reinvent_base.npy", venue / "hall_b.npy")
     out = tmp_path / "out"

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from drem_sim.learn.evaluate import EvalMetrics, drive
-from drem_sim.learn.track_sets import TrackDirection
+from drem_sim.learn.track_sets import TrackDirection, parse_spec
 
 
 def evaluate_directions(policy_factory: Callable[[], Callable[[Any, dict[str, Any]], dict[str, float]]],
@@ -53,10 +53,12 @@ def table(rows: Sequence[EvalMetrics], reference: dict[str, EvalMetrics] | None 
 
 def file_label(track: str) -> str:
     """A track spec as one safe file-name part: `tracks/venue.npy:reverse` → `venue-reverse` (a path in the spec
-    must not become folders under --out)."""
-    base, _, direction = track.partition(":")
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(base).name.removesuffix(".npy").removesuffix(".yaml")) or "track"
-    return f"{name}-{direction}" if direction else name
+    must not become folders under --out). Only the spec's end says the direction: a folder may have a colon in its
+    name (`/media/venue:2/hall.npy:reverse` → `hall-reverse`)."""
+    spec = parse_spec(track)
+    stem = Path(spec.name).name.removesuffix(".npy").removesuffix(".yaml")
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip(".") or "track"
+    return f"{name}-reverse" if spec.reverse else name
 
 
 def write_suite(rows: Sequence[EvalMetrics], folder: Path) -> Path:
