@@ -37,6 +37,7 @@ def test_a_model_that_laps_gets_its_figures_and_a_bounded_animated_clip(tmp_path
     assert outcome.failure is None and len(outcome.reports) == 1
     report = outcome.reports[0]
     assert report.verdict == "passed" and report.track == "reinvent_base" and report.laps_completed == 2
+    assert (report.attempts, report.completion_pct) == (2, 100.0)  # what a league re-drive's board entry shows
     assert report.best_lap_time_s is not None and report.offtrack_count == 0
     assert outcome.clip is not None and len(outcome.clip) <= MAX_CLIP_BYTES
     clip = Image.open(io.BytesIO(outcome.clip))

@@ -88,6 +88,21 @@ def test_a_pushed_model_is_re_driven_and_ranked_on_what_drem_measured(stack: Any
     assert verifier(drive).run_one() is False  # the queue is empty
 
 
+def test_a_verified_entry_shows_the_completion_scrutineering_measured(stack: Any, aws_clients: Any,
+                                                                     tmp_path: Path) -> None:
+    """A model that leaves the track at the same bend on every lap: the board's completion for drem's re-drive is the
+    scrutineering figure of that drive (mean progress per lap attempt), as a self-reported trial's is, not the share
+    of laps completed (0 %, which would rank it with a car that never left the line)."""
+    model = upload_model(stack, aws_clients, ALICE)
+    push(ALICE, drem_sim_export(tmp_path / "m", track=TRACK, progress=[60.0], lap_times=[]), model)
+    three_bends = report(None, completed=0).model_copy(update={"attempts": 3, "completion_pct": 62.4})
+    verifier(FakeDrive(DriveOutcome(reports=[three_bends]))).run_one()
+
+    entry = board()[0]
+    assert entry.source == "verified by drem"
+    assert (entry.laps_completed, entry.trials, entry.average_completion_pct) == (0, 3, 62.4)
+
+
 def test_logs_much_faster_than_drems_re_drive_are_not_believed(stack: Any, aws_clients: Any, tmp_path: Path) -> None:
     model = upload_model(stack, aws_clients, ALICE)
     logs = drem_sim_export(tmp_path / "edited", track=TRACK, progress=[100], lap_times=[9.5])  # edited down

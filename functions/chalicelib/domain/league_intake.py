@@ -27,7 +27,7 @@ from chalicelib.core.principals import Principal
 from chalicelib.domain.league import NAME_PATTERN, LeagueService, Submission, VerifiedDrive
 from chalicelib.domain.league_assembler import assemble
 from chalicelib.domain.model_scrutiny import DriveOutcome, ScrutineerService
-from chalicelib.domain.racer_models import ModelRecord, ModelStatus
+from chalicelib.domain.racer_models import ModelRecord, ModelStatus, ScrutineerResult
 from chalicelib.domain.scrutineer_queue import MAX_ATTEMPTS, ScrutineerJob, ScrutineerQueue
 from chalicelib.formats.league_export import ExportFiles, ExportLimits, MiB, read_tar_gz
 
@@ -159,10 +159,9 @@ class LeagueVerifier:
         report = outcome.reports[0] if outcome.reports else None
         drive = None
         if report is not None and report.verdict in ("passed", "failed"):
-            completion = 100.0 * report.laps_completed / max(report.laps, 1)
-            drive = VerifiedDrive(laps=report.laps, laps_completed=report.laps_completed,
+            drive = VerifiedDrive(laps=redrive_attempts(report), laps_completed=report.laps_completed,
                                   best_lap_s=report.best_lap_time_s, mean_lap_s=report.mean_lap_time_s,
-                                  offtrack_count=report.offtrack_count, completion_pct=completion,
+                                  offtrack_count=report.offtrack_count, completion_pct=redrive_completion(report),
                                   message=report.message[:500], at=self.league.now())
         failure = outcome.failure or (report.message if report is not None else "no report")
         updated = self.league.record_drive(track, record.owner_username, record.model_id, drive, failure)
@@ -170,3 +169,17 @@ class LeagueVerifier:
         logs.log(logging.INFO, "league entry re-driven", model_id=record.model_id, track=track,
                  verification=updated.verification if updated else None)
         return updated
+
+
+def redrive_attempts(report: ScrutineerResult) -> int:
+    """The re-drive's trials: the lap attempts that ended (the laps asked for, from a report that predates them)."""
+    return report.attempts if report.attempts is not None else report.laps
+
+
+def redrive_completion(report: ScrutineerResult) -> float:
+    """The re-drive's completion as scrutineering measured it (mean progress per lap attempt, by the whole-lap rule
+    of drem_leaderboard.laps), the measure a self-reported trial's completion is in too. Only a report that predates
+    it falls back on the share of laps completed."""
+    if report.completion_pct is not None:
+        return report.completion_pct
+    return 100.0 * report.laps_completed / max(report.laps, 1)

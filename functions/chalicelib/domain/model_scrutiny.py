@@ -108,7 +108,9 @@ class ScrutineerService:
             verdict=report.verdict, message=report.message, detail=detail, track=report.track,
             track_type=report.track_type,
             laps=report.laps, laps_completed=report.laps_completed, best_lap_time_s=report.best_lap_time_s,
-            mean_lap_time_s=report.mean_lap_time_s, offtrack_count=report.offtrack_count, at=self.models.now())
+            mean_lap_time_s=report.mean_lap_time_s, offtrack_count=report.offtrack_count,
+            attempts=getattr(report, "attempts", None), completion_pct=getattr(report, "completion_pct", None),
+            at=self.models.now())
         stored = self.update(record, scrutineer_result=result, scrutineer_state=None)
         if self.queue is not None:  # driven by hand: a background drive still waiting has nothing left to add
             self.queue.drop(record.model_id)

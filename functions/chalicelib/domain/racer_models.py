@@ -74,11 +74,13 @@ class ScrutineerResult(BaseModel):
     track: str
     detail: str | None = None  # what the software said when a drive stopped without a verdict: staff only
     track_type: str | None = None
-    laps: int = 0
-    laps_completed: int = 0
+    laps: int = 0  # lap attempts asked for
+    laps_completed: int = 0  # whole laps (drem_leaderboard.laps), the same count as `drem sim eval`
     best_lap_time_s: float | None = None
     mean_lap_time_s: float | None = None
     offtrack_count: int = 0
+    attempts: int | None = Field(default=None, ge=0)  # lap attempts that ended (None: a report from before they were)
+    completion_pct: float | None = Field(default=None, ge=0, le=100, allow_inf_nan=False)  # mean progress per attempt
     at: str = ""
 
 

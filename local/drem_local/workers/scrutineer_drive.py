@@ -96,7 +96,8 @@ def drive_track(folder: Path, track_type: str, laps: int, *,
     report = {**base, "verdict": "passed" if passed else "failed",
               "message": f"{metrics.laps_completed}/{metrics.attempts} laps completed on {event_track.track}, "
                          f"completion {metrics.completion_pct:.1f}%{lap}{note}",
-              "laps_completed": metrics.laps_completed, "best_lap_time_s": metrics.best_lap_time_s,
+              "laps_completed": metrics.laps_completed, "attempts": metrics.attempts,
+              "completion_pct": metrics.completion_pct, "best_lap_time_s": metrics.best_lap_time_s,
               "mean_lap_time_s": metrics.mean_lap_time_s, "offtrack_count": metrics.offtrack_count}
     return report, track, env.path
 
