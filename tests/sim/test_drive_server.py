@@ -173,3 +173,42 @@ def test_a_failed_upload_is_reported_and_the_run_stays_on_disk(tmp_path: Path) -
     assert state["last_run"]["uploaded"] is None
     assert state["last_run"]["upload_error"] == "ConnectionError: local stack is not running"
     assert (Path(state["last_run"]["run_dir"]) / "metadata.json").is_file()
+
+
+def test_the_drive_page_counts_no_lap_finished_from_where_the_car_was_put_back(tmp_path: Path) -> None:
+    """A person leaves the track at 80 % of their first lap and finishes it from where the car was put back: the
+    page's Laps stays 0 (that was no whole lap); the next lap, driven whole from the line, is lap 1, and the recorded
+    run says the same."""
+    from drem_sim.demonstrator import Demonstrator
+
+    session = drive_server.DriveSession(load_track("reinvent_base"), tmp_path / "runs")
+    teacher = Demonstrator(session.env.track)
+    max_steering = session.env.physics.spec.max_steering_deg
+    session.set_recording(True)
+
+    def drive_one_lap(leave_at: float | None = None) -> None:
+        laps_before, resets_before = session.env.laps, session.env.resets
+        for _ in range(15 * 60):
+            params = session.env.params
+            if leave_at is not None and session.env.resets == resets_before and params["progress"] > leave_at:
+                action = {"steering_angle": -30.0, "speed": 2.0}  # hard right, off the track
+            else:
+                action = teacher.act(params)
+            session.set_control(drive_server.Control(
+                steering=max(-1.0, min(1.0, action["steering_angle"] / max_steering)),
+                throttle=min(1.0, action["speed"] / drive_server.FULL_THROTTLE_SPEED)))
+            session.step()
+            if session.env.laps > laps_before:
+                return
+        raise AssertionError("the car did not come round in a minute")
+
+    drive_one_lap(leave_at=80.0)
+    state = session.state()
+    assert state["resets"] >= 1 and (state["laps"], state["lap_times_s"]) == (0, [])
+    drive_one_lap()
+    state = session.state()
+    assert state["laps"] == 1 and len(state["lap_times_s"]) == 1 and state["lap_times_s"][0] > 5.0
+    session.set_recording(False)
+    assert session.last_run is not None
+    meta = json.loads((Path(session.last_run["run_dir"]) / "metadata.json").read_text())
+    assert (meta["laps"], len(meta["lap_times_ms"]), meta["resets"]) == (1, 1, state["resets"])
