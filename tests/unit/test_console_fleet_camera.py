@@ -78,6 +78,18 @@ def test_a_fleet_whose_cars_differ_says_so_and_one_car_is_named_as_one(console):
     assert "saved for the 1 car of Lone car;" in text_of(reply.body.decode())
 
 
+def test_a_setting_made_over_the_api_that_the_forms_do_not_offer_is_shown_as_it_is(console):
+    """7 fps and 400×300 are within bounds (the API takes them) but not among the options: both pages show them
+    selected rather than the first option, which saving the form unchanged would have put on the cars."""
+    fleet, _cars = _fleet_with_two_cars_and_a_timer(console)
+    set_over_api = console.desk.call("PUT", f"/api/fleets/{fleet}/video", {"fps": 7, "width": 400, "height": 300})
+    assert set_over_api.status_code == 200, set_over_api.body
+    console.sign_in("op-web", "operator")
+    shown = {"fps": "7", "size": "400x300", "view": "camera"}
+    assert _selected(console.web.get("/console/fleets").body.decode(), f"fleet-video-{fleet}") == shown
+    assert _selected(console.web.get("/console/cars").body.decode(), "video-car-1") == shown
+
+
 def test_racers_anonymous_visitors_and_forged_posts_may_not_set_a_fleets_camera(console):
     fleet, cars = _fleet_with_two_cars_and_a_timer(console)
     racer = console.sign_in("rita", "racer")
