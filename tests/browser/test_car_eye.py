@@ -1,6 +1,7 @@
 """Issue 35 in Chromium: the racing car's camera on the stream overlay (picture in picture, clear of the lower third)
 and on the staff's Cars page, fed end to end by a stock DeepRacer (the tests' fake console, its MJPEG route) through
-the car's video relay and the live server. Screenshots at 1920×1080 and 390×844 go to docs/screenshots/."""
+the car's video relay and the live server; staff set a car's camera on the Cars page and a fleet's on the Fleets page.
+Screenshots at 1920×1080 and 390×844 go to docs/screenshots/."""
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -45,7 +46,8 @@ def racing_car(live_stack: Any) -> Iterator[dict[str, Any]]:
         try:
             call(url, "POST", f"/api/events/{eid}/races/{race['race_id']}/commands", token=token,
                  body={"kind": "start"})
-            yield {"event_id": eid, "race_id": race["race_id"], "token": token, "operator": operator}
+            yield {"event_id": eid, "race_id": race["race_id"], "token": token, "operator": operator,
+                   "fleet_id": fleet["fleet_id"]}
         finally:
             relay.stop()
 
@@ -163,4 +165,25 @@ def test_staff_set_a_cars_camera_on_the_cars_page_and_the_car_sends_at_it(chromi
         "() => { const i = document.querySelector('[data-testid=camera-eye-car] img');"
         " return i && i.naturalWidth === 160 && i.naturalHeight === 120; }", timeout=60_000)
     shoot(page, "car-eye-cars-page-settings")
+    page.context.close()
+
+
+def test_staff_set_a_whole_fleets_camera_on_the_fleets_page_and_its_car_shows_it_on_the_cars_page(
+        chromium: Any, racing_car: dict[str, Any], app_url: str) -> None:
+    page = chromium.new_context(viewport=SIZES[0]).new_page()
+    sign_in(page, app_url, racing_car["operator"])
+    page.goto(f"{app_url}/console/fleets")
+    form = page.locator(f"[data-testid=fleet-video-{racing_car['fleet_id']}]")
+    form.locator("select[name=fps]").select_option("20")
+    form.locator("select[name=size]").select_option("640x480")
+    form.locator("select[name=view]").select_option("camera")
+    form.locator("button[type=submit]").click()
+    page.get_by_text("saved for the 1 car of Eye fleet").wait_for()
+    assert page.get_by_text("Its car is set to 20 fps, 640×480, camera.").is_visible()
+    shoot(page, "car-eye-fleets-page")
+    page.goto(f"{app_url}/console/cars")
+    form = page.locator("[data-testid=video-eye-car]")  # the fleet's car shows what was chosen for the fleet
+    assert form.locator("select[name=fps]").input_value() == "20"
+    assert form.locator("select[name=size]").input_value() == "640x480"
+    assert form.locator("select[name=view]").input_value() == "camera"
     page.context.close()

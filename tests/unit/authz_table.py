@@ -341,6 +341,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("POST", "/console/events/{event_id}/logo/remove"): Case(allow("admin", "operator"), event_only),
     ("GET", "/console/fleets"): ADMIN_OPERATOR,
     ("POST", "/console/fleets"): ADMIN_OPERATOR,
+    ("POST", "/console/fleets/{fleet_id}/video"): Case(allow("admin", "operator"), fleet_video),
     ("GET", "/console/cars"): ADMIN_OPERATOR,
     ("GET", "/console/cars/live"): ADMIN_OPERATOR,
     ("GET", "/console/cars/activate"): ADMIN_OPERATOR,

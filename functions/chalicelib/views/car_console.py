@@ -56,11 +56,6 @@ class CarLine(BaseModel):
     video: CarVideoSettings = CarVideoSettings()  # the camera on the stream (the defaults until staff choose)
 
 
-# The Cars page offers these sizes (the API takes any in CarVideoSettings' bounds).
-VIDEO_SIZES = ((320, 240), (480, 360), (640, 480))
-VIDEO_RATES = (5, 10, 15, 20, 30)
-
-
 class ModelChoice(BaseModel):
     model_id: str
     owner_sub: str

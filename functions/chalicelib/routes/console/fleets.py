@@ -24,8 +24,10 @@ from chalicelib.routes.console.forms import (
 )
 from chalicelib.routes.console.notices import done_notice
 from chalicelib.settings import get_settings
-from chalicelib.views.car_console import COMMAND_LABELS, VIDEO_RATES, VIDEO_SIZES, CarsOverview, cars_overview
+from chalicelib.views.camera_choice import VIDEO_RATES, VIDEO_SIZES
+from chalicelib.views.car_console import COMMAND_LABELS, CarsOverview, cars_overview
 from chalicelib.views.car_video import preview_video_url
+from chalicelib.views.fleet_console import fleet_lines, fleet_video_notice
 from drem_web import render
 
 bp = Blueprint(__name__)
@@ -46,6 +48,21 @@ def create_fleet(principal: User) -> Response:
     except SHOWN_ON_FORM as exc:
         return _fleets_page(field_errors(exc), values, error_status(exc))
     return redirect("/console/fleets", done="fleet-created")
+
+
+@route(bp, "/console/fleets/{fleet_id}/video", methods=["POST"], allow=DEVICE_STAFF)
+def fleet_video(principal: User, fleet_id: str) -> Response:
+    """Every car of the fleet gets the same camera settings; the page says how many cars got them. Bad input is
+    refused before any car is changed (a size that does not parse is the size's fault)."""
+    values = submitted(bp.current_request, "fps", "size", "view")
+    try:
+        video = CarVideoSettings.model_validate(values)
+        cars = services.device_service().set_fleet_video(fleet_id, video)
+    except SHOWN_ON_FORM as exc:
+        errors = {f"{fleet_id}-{name}": message for name, message in field_errors(exc, "size").items()}
+        return _fleets_page(errors, {}, error_status(exc))
+    name = services.fleet_service().get_fleet(fleet_id).name
+    return _fleets_page({}, {}, notice=fleet_video_notice(name, len(cars), video))
 
 
 @route(bp, "/console/cars", allow=DEVICE_STAFF)
@@ -131,9 +148,12 @@ def _car_action(principal: User, device_id: str, action, sent: str = "",  # noqa
     return redirect(f"/console/cars{query}#car-{device_id}", done=done)
 
 
-def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 200) -> Response:
-    return render.page("console/fleets", status=status, fleets=services.fleet_service().list_fleets(), errors=errors,
-                       values=values, flash=done_notice(bp.current_request) if status == 200 else "")
+def _fleets_page(errors: dict[str, str], values: dict[str, str], status: int = 200, notice: str = "") -> Response:
+    """The page after a post answers it directly (a fleet's camera: the count of cars is the one just set)."""
+    fleets = fleet_lines(services.fleet_service().list_fleets(), services.device_service().list_devices())
+    return render.page("console/fleets", status=status, fleets=fleets, errors=errors, values=values,
+                       flash=notice or (done_notice(bp.current_request) if status == 200 else ""),
+                       video_sizes=VIDEO_SIZES, video_rates=VIDEO_RATES)
 
 
 def _sent_notice(query: dict[str, str]) -> str:
