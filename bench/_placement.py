@@ -4,7 +4,8 @@ At a venue the event laptop runs the live server, the app and storage; the car i
 viewers are phones and OBS PCs. A bench that runs all of them on this machine's 2 shared cores measures contention
 that does not exist at a venue (the viewers' stand-in reading 500 streams competing with the live server writing
 them). So the laptop's processes get one core, the car's the other, and the stand-ins for the crowd of other machines
-run SCHED_IDLE (only on CPU time neither wants). The same placement holds for both halves of a side-by-side run.
+run SCHED_IDLE (only on CPU time neither wants): the viewers' crowd and the OBS PC's browser alike. The same placement
+holds for both halves of a side-by-side run.
 """
 from __future__ import annotations
 
@@ -57,6 +58,19 @@ def idle(pid: int) -> None:
                 pass
 
 
+def processes_running(program: str, root: int) -> list[int]:
+    """The processes under `root` whose executable file is named `program` (from /proc/<pid>/exe: Chromium rewrites
+    its command line): a browser and every helper it started."""
+    found = []
+    for pid in process_tree(root):
+        try:
+            if Path(os.readlink(f"/proc/{pid}/exe")).name == program:
+                found.append(pid)
+        except OSError:
+            continue
+    return found
+
+
 def describe() -> str:
     return (f"laptop (storage, live server, app) on core {sorted(LAPTOP_CORES)}, car (drive loop, video relay) on "
-            f"core {sorted(CAR_CORES)}, viewers' stand-in SCHED_IDLE")
+            f"core {sorted(CAR_CORES)}, viewers' stand-in and the OBS PC's browser SCHED_IDLE")

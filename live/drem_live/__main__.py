@@ -25,6 +25,10 @@ DEFAULT_KEEPALIVE_S = 15.0
 # The cyclic collector's first threshold: Python's default (700) is crossed dozens of times a second by the objects of
 # the requests in flight, which are freed by reference counting anyway (see _quiet_collector).
 YOUNG_COLLECTION_THRESHOLD = 10_000
+# How long a thread may hold the GIL while another waits for it. The event loop fans frames and fragments out in
+# Python while the channels read storage and render on executor threads: at CPython's default (5 ms) a channel's
+# read, which needs the GIL back after each socket wait, queued behind the loop's work 5 ms at a time.
+SWITCH_INTERVAL_S = 0.0005
 _PR_SET_PDEATHSIG = 1
 
 
@@ -108,6 +112,7 @@ def _serve(host: str, port: int, *, reuse_port: bool, hub: socket.socket | None 
     app = make_app(AppCode.from_settings(poll_s), poll_s=poll_s, limits=env_limits(), wake_dir=wake_dir,
                    wake_secret=wake_secret, metrics=metrics)
     _quiet_collector()
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     logging.getLogger("drem_live").info("listening on http://%s:%d (pid %d, poll %d ms)", host, port, os.getpid(),
                                         poll_ms)
     web.run_app(app, host=host, port=port, reuse_port=reuse_port or None, shutdown_timeout=2.0, print=None,

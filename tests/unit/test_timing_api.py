@@ -116,7 +116,7 @@ def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
     desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
     assert _board_laps(desk, eid) == 1
     with monkeypatch.context() as crash:
-        crash.setattr(RaceService, "publish", lambda *args: None)  # dies between the race write and the board write
+        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)  # dies between the race write and the board write
         desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
     assert len(_race(desk, eid, rid)["laps"]) == 2 and _board_laps(desk, eid) == 1
     replay = desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
@@ -132,7 +132,7 @@ def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
     eid, rid, timer = timed_track
     desk.ok(desk.strip(timer, eid, T0, "s"))
     with monkeypatch.context() as crash:
-        crash.setattr(RaceService, "publish", lambda *args: None)
+        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)
         desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
     assert _board_laps(desk, eid) == 0
     assert services.race_service().complete_pending_publishes() == 1  # what the app server's sweeper runs
@@ -140,7 +140,7 @@ def test_a_left_over_publish_is_finished_by_the_sweeper_and_by_the_next_lap(
     assert services.race_service().complete_pending_publishes() == 0  # finished intents are gone
     # A left-over row is also brought up to date by the racer's next lap (its rebuild reads every race).
     with monkeypatch.context() as crash:
-        crash.setattr(RaceService, "publish", lambda *args: None)
+        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)
         desk.ok(desk.strip(timer, eid, T0 + 20_000, "l2"))
     desk.ok(desk.strip(timer, eid, T0 + 29_000, "l3"))
     assert _board_laps(desk, eid) == 3

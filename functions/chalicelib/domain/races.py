@@ -370,14 +370,15 @@ class RaceService:
 
     # --- publishing --------------------------------------------------------------------------------------------
 
-    def publish(self, event: Event, race: Race, now_ms: int) -> None:
+    def publish(self, event: Event, race: Race, now_ms: int, *, live_race_id: str | None = None) -> None:
         """After a change: publish it (`_publish_change`), then drop the publish intent the write stored, and finish
-        any other write's intent a crash left behind.
+        any other write's intent a crash left behind. `live_race_id`: the track's live race when the caller has just
+        read it (a timing crossing), so the lap's way to the board reads it once.
 
         The race change is already stored (with its intent) when this runs, so a storage failure here does not fail
         the request: the change is acknowledged and the intent makes sure the board catches up."""
         try:
-            self._publish_change(event, race.track_id, race.racer, now_ms, race)
+            self._publish_change(event, race.track_id, race.racer, now_ms, race, live_race_id)
             self._finish(PublishIntent.of(race))
             self.complete_pending_publishes(STALE_INTENT_MS)
         except DremError as exc:
@@ -398,7 +399,8 @@ class RaceService:
             self._races.complete_publish(intent)
         return finished
 
-    def _publish_change(self, event: Event, track_id: str, racer: Racer, now_ms: int, race: Race | None) -> None:
+    def _publish_change(self, event: Event, track_id: str, racer: Racer, now_ms: int, race: Race | None,
+                        known_live_race_id: str | None = None) -> None:
         """The one owner of "a race changed": the racer's board row (their submitted races + `race` if live), the
         track's overlay (when `race` is the track's current race), the combined board, then the statistics once a
         race is submitted or gone. `race` None: the race was deleted (its row is rebuilt without it).
@@ -409,7 +411,7 @@ class RaceService:
         if race is not None:  # the race just written wins over any older copy the listing returned
             races = [r for r in races if r.race_id != race.race_id] + [race]
         profile = self._profiles.racer_profile(racer.sub, racer.username)
-        live = self._races.live_race_id(event.event_id, track_id) if race is not None else None
+        live = (known_live_race_id or self._races.live_race_id(event.event_id, track_id)) if race is not None else None
         self._boards.publish_change(event.event_id, track_id, racer.sub, self._row(races, profile),
                                     event.race_config.ranking_method, [t.track_id or "" for t in event.tracks],
                                     race=race, now_ms=now_ms, display_name=profile.username or racer.username,

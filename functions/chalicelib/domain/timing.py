@@ -117,7 +117,7 @@ class TimingService:
                               "have been stored. Post it again with the same idempotency_key once storage is back: a "
                               "repeated key is never counted twice.") from exc
         if updated is not None:
-            self._races.publish(event, updated.race, now)
+            self._races.publish(event, updated.race, now, live_race_id=updated.race.race_id)
         return answer
 
     def _keep(self, device: Device, answer: StripAnswer, record: RaceRecord | None,

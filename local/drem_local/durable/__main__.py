@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MOTO_PORT", str(args.port))
     upload_guard = PostPolicyGuard({keys.access_key_id: keys.secret_access_key}.get,
                                    max_body_bytes=args.max_post_bytes)
+    _list_moto_modules_once()
     app = DurableApp(DomainDispatcherApplication(create_backend_app), state, StorageGuard(keys), upload_guard)
     try:
         report = app.recover()
@@ -123,6 +124,16 @@ def main(argv: list[str] | None = None) -> int:
                         "next start", exc.strerror or exc)
         state.close()
     return 0
+
+
+def _list_moto_modules_once() -> None:
+    """moto's dispatcher asks `moto.backends.list_of_moto_modules()` on every request, which lists moto's package
+    directory and stats each entry (about 60 system calls a DynamoDB request, profiled); the package does not change
+    while the server runs, so it is listed once."""
+    from moto import backends
+
+    modules = tuple(backends.list_of_moto_modules())
+    backends.list_of_moto_modules = lambda: modules
 
 
 if __name__ == "__main__":

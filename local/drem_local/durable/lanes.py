@@ -41,7 +41,9 @@ def request_ids_outside_the_seeded_source() -> None:
     alphabet = string.ascii_letters + string.digits  # what moto draws from
 
     def request_id(headerdict: dict[str, Any] | None = None) -> str:
-        req_id = "".join(secrets.choice(alphabet) for _ in range(52))
+        # One read of the system's randomness per id, not one per character: 52 `secrets.choice` calls cost more
+        # than moto's whole GetItem (profiled). The slight modulo bias does not matter: an id is never a secret.
+        req_id = "".join(alphabet[byte % len(alphabet)] for byte in secrets.token_bytes(52))
         if isinstance(headerdict, dict):
             headerdict["x-amzn-requestid"] = req_id
         return req_id
