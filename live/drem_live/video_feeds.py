@@ -88,12 +88,16 @@ class CarFeed:
     hostname: str = ""
     latest: Frame | None = None
     sinks: set[Sink] = field(default_factory=set)
+    # Set when a worker process writes the frames to the viewers (drem_live.video_fanout): each frame goes to it once.
+    remote: Callable[[str, Frame], None] | None = None
     _next: asyncio.Event = field(default_factory=asyncio.Event)
 
     def publish(self, jpeg: bytes, taken_ms: float) -> Frame:
         seq = (self.latest.seq + 1) if self.latest else 1
         part = mjpeg_part(jpeg, taken_ms, seq)
         frame = self.latest = Frame(seq, taken_ms, time.time() * 1000, part, b"%x\r\n%b\r\n" % (len(part), part))
+        if self.remote is not None:
+            self.remote(self.device_id, frame)
         self._fan_out(frame, list(self.sinks), 0)
         woken, self._next = self._next, asyncio.Event()
         woken.set()
@@ -139,6 +143,7 @@ class Feeds:
         self._demand_changed: dict[str, asyncio.Event] = {}
         self._remote: dict[str, tuple[float, frozenset[str]]] = {}  # peer id → (expires, the car names it watches)
         self.on_interest_change: Callable[[], None] | None = None  # the peers are told (drem_live.video_peers)
+        self.remote: Callable[[str, Frame], None] | None = None  # a fan-out worker's (drem_live.video_fanout)
         self.viewers = 0
         self.frames_in = 0
 
@@ -146,6 +151,7 @@ class Feeds:
         feed = self._feeds.get(device_id)
         if feed is None:
             feed = self._feeds[device_id] = CarFeed(device_id, hostname)
+        feed.remote = self.remote
         if hostname:
             feed.hostname = hostname
             self._names[hostname] = device_id

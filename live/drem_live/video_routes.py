@@ -22,6 +22,7 @@ from typing import Any
 
 from aiohttp import web
 
+from drem_live import video_fanout
 from drem_live.video_feeds import MAX_FRAME_BYTES, MJPEG_CONTENT_TYPE, Feeds, Sink, looks_like_jpeg
 from drem_live.video_peers import Peers, PeerSettings, Upload, serve_peers
 
@@ -29,6 +30,7 @@ FEEDS: web.AppKey[Feeds] = web.AppKey("video_feeds", Feeds)
 ACCESS: web.AppKey[Any] = web.AppKey("video_access", object)
 VIDEO_EXECUTOR: web.AppKey[ThreadPoolExecutor] = web.AppKey("video_executor", ThreadPoolExecutor)
 PEERS: web.AppKey[Peers | None] = web.AppKey("video_peers", object)  # type: ignore[arg-type]
+FANOUT: web.AppKey[video_fanout.FanOutWorker] = web.AppKey("video_fanout", video_fanout.FanOutWorker)
 EVENT_ID = re.compile(r"[A-Za-z0-9_.-]{1,128}")
 TRACK_ID = re.compile(r"[A-Za-z0-9_-]{1,32}")
 DEVICE_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
@@ -136,21 +138,30 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
         response.enable_chunked_encoding()  # the feed writes whole HTTP/1.1 chunks to the connection itself
     watching, feed = car, None
     feeds.watch(watching)
+    worker = request.app.get(FANOUT)
+    viewer: int | None = None  # this connection's number at the fan-out worker, once it writes to it
     try:
         await response.prepare(request)
         if request.transport is None:
             return response
-        # From here the feed writes each frame to this connection as it arrives (CarFeed.publish); this coroutine
-        # only follows which car to show, and notices the viewer leaving.
-        sink = Sink(request.transport, chunked=chunked)
+        # From here the feed writes each frame to this connection as it arrives (CarFeed.publish; or the fan-out
+        # worker, drem_live.video_fanout); this coroutine only follows which car to show, and notices the viewer leave.
+        transport = request.transport
+        sink = Sink(transport, chunked=chunked)
+        closed = sink.closed  # the worker sets it when it drops the viewer
         loop = asyncio.get_running_loop()
         checked = loop.time()
-        while not sink.closed.is_set():
+        while not closed.is_set():
             if feed is None and (feed := feeds.find(watching)) is not None:
-                feed.attach(sink)
+                if worker is None:
+                    feed.attach(sink)
+                elif viewer is None:
+                    viewer = worker.attach(transport, chunked, feed.device_id, closed.set)
+                else:
+                    worker.follow(viewer, feed.device_id)
             try:  # a car not heard from yet is looked for every 0.1 s; the race is re-read every RECHECK_S
                 async with asyncio.timeout(RECHECK_S if feed is not None else 0.1):
-                    await sink.closed.wait()
+                    await closed.wait()
             except TimeoutError:
                 pass
             if loop.time() - checked < RECHECK_S:
@@ -171,6 +182,12 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
         if feed is not None:
             feed.sinks.discard(sink)
         feeds.unwatch(watching)
+        if viewer is not None and worker is not None:
+            # The race ended with the viewer still there: the worker ends the stream after the frame it may be writing
+            # (this process must not write after it); else it lets go at once.
+            worker.detach(viewer, end=not closed.is_set() and request.transport is not None)
+            if request.transport is not None:
+                request.transport.close()  # this process's copy of the connection; the worker's ends the stream
     return response
 
 
@@ -238,6 +255,8 @@ def add_video_routes(app: web.Application, access: Any | None = None, *, threads
         serve_peers(app, shared)
     executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="drem-video")
     app[VIDEO_EXECUTOR] = executor
+    if video_fanout.wanted():
+        _add_fan_out_worker(app, feeds)
     app.router.add_post("/live/video/car/frame", car_frame)
     app.router.add_get("/live/video/car/demand", car_demand)
     app.router.add_get("/live/video/cars/{device_id}", preview_video)
@@ -247,6 +266,22 @@ def add_video_routes(app: web.Application, access: Any | None = None, *, threads
         executor.shutdown(wait=False, cancel_futures=True)
 
     app.on_shutdown.append(close)
+
+
+def _add_fan_out_worker(app: web.Application, feeds: Feeds) -> None:
+    """The viewers' frames are written by a worker process at the lowest CPU priority (drem_live.video_fanout)."""
+
+    async def start(_app: web.Application) -> None:
+        worker = app[FANOUT] = video_fanout.FanOutWorker()
+        worker.start(asyncio.get_running_loop())
+        feeds.remote = worker.frame
+
+    async def stop(_app: web.Application) -> None:
+        feeds.remote = None
+        app[FANOUT].stop()
+
+    app.on_startup.append(start)
+    app.on_cleanup.append(stop)
 
 
 def _add_hub_proxy(app: web.Application, hub_url: str) -> None:

@@ -45,7 +45,7 @@ def test_a_crash_replay_of_an_older_race_publishes_its_row_but_leaves_the_curren
     scenario.add_racers("vera", "omar").add_event()
     eid = scenario.event_id
     with monkeypatch.context() as crash:
-        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)  # dies between the race write and the board write
+        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)  # dies before the board write
         scenario.submitted_race("vera", [10_000, 11_000])
     newer = scenario.submitted_race("omar", [9_000])  # its publish may already finish vera's (2 s old) intent
 

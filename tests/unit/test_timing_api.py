@@ -116,7 +116,7 @@ def test_a_retry_after_a_crash_before_the_board_write_publishes_the_stored_lap(
     desk.ok(desk.strip(timer, eid, T0 + 10_000, "l1"))
     assert _board_laps(desk, eid) == 1
     with monkeypatch.context() as crash:
-        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)  # dies between the race write and the board write
+        crash.setattr(RaceService, "publish", lambda *args, **kwargs: None)  # dies before the board write
         desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
     assert len(_race(desk, eid, rid)["laps"]) == 2 and _board_laps(desk, eid) == 1
     replay = desk.ok(desk.strip(timer, eid, T0 + 19_000, "l2"))
