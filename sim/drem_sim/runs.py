@@ -145,11 +145,18 @@ def run_key_prefix(run_dir: Path) -> str:
     return f"runs/{track_id}/{date}/{run_id}/"
 
 
-def pack_frames(run_dir: Path) -> bytes:
-    """The run folder's frames as one uncompressed tar (`frames/{index:06d}.png` members, in order)."""
+def pack_frames(run_dir: Path, rows: int | None = None) -> bytes:
+    """The run folder's frames as one uncompressed tar (`frames/{index:06d}.png` members, in order).
+
+    With `rows` (how many whole controls rows the run has) only the frames those rows name go in: a process killed
+    while it wrote a frame leaves that frame empty or cut, with no row yet (the frame is written first), and a bundle
+    holding it would be refused whole by `read_frames`, losing every answered decision with it."""
+    paths = sorted((Path(run_dir) / "frames").glob("*.png"))
+    if rows is not None:
+        paths = [path for path in paths if path.stem.isdigit() and int(path.stem) < rows]
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w", format=tarfile.USTAR_FORMAT) as bundle:
-        for path in sorted((Path(run_dir) / "frames").glob("*.png")):
+        for path in paths:
             data = path.read_bytes()
             info = tarfile.TarInfo(f"frames/{path.name}")
             info.size, info.mode = len(data), 0o600
@@ -188,11 +195,15 @@ def unpack_frames(data: bytes, run_dir: Path) -> int:
     return frames
 
 
-def run_objects(run_dir: Path) -> dict[str, bytes]:
-    """What a finished run folder stores in a bucket, metadata aside: the controls, the frames bundle and the first
-    frame on its own (the run page links to it)."""
+def run_objects(run_dir: Path, controls: bytes | None = None) -> dict[str, bytes]:
+    """What a run folder stores in a bucket, metadata aside: the controls (`controls`, when given, instead of the
+    file: a lost drive's whole rows), the frames those rows name in one bundle, and the first frame on its own (the
+    run page links to it)."""
     run_dir = Path(run_dir)
-    objects = {FRAMES_BUNDLE: pack_frames(run_dir), "controls.jsonl": (run_dir / "controls.jsonl").read_bytes()}
+    if controls is None:
+        controls = (run_dir / "controls.jsonl").read_bytes()
+    rows = controls.count(b"\n") + (0 if controls.endswith(b"\n") or not controls else 1)
+    objects = {FRAMES_BUNDLE: pack_frames(run_dir, rows), "controls.jsonl": controls}
     first = run_dir / "frames" / "000000.png"
     if first.is_file():
         objects["frames/000000.png"] = first.read_bytes()

@@ -74,6 +74,17 @@ def test_an_uploaded_logo_shows_on_the_big_screen_the_overlay_and_the_event_page
     assert Image.open(io.BytesIO(image.body)).getpixel((300, 100)) == (255, 153, 0)
 
 
+def test_the_big_screen_fetched_by_htmx_shows_its_header_too(console, event_id):
+    """htmx asks for a page's content only (HX-Request): the big screen's header parts come from an imported macro
+    file, which that request used to miss (a 500, "'screen' is undefined")."""
+    _upload(console, event_id, _png((300, 100), (255, 0, 0, 255)))
+    reply = console.web.client.http.get(f"/leaderboard/{event_id}", headers={"HX-Request": "true",
+                                                                             "Accept": "text/html"})
+    assert reply.status_code == 200, reply.body[:300]
+    html = reply.body.decode()
+    assert 'data-testid="board-title"' in html and _logo_src(html, "board-logo") and "<html" not in html
+
+
 def test_a_new_logo_gets_a_new_address_so_screens_show_it_at_once(console, event_id):
     _upload(console, event_id, _png((300, 100), (255, 0, 0, 255)))
     first = _logo_src(console.web.get(f"/leaderboard/{event_id}").body.decode(), "board-logo")

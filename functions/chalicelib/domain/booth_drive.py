@@ -237,16 +237,17 @@ class DriveService:
             whole = data[:data.rfind(b"\n") + 1]  # a row cut by the kill is not a decision anyone saw answered
             if not whole:
                 return self.runs.mark(record, RunStatus.FAILED, "nothing was driven")
-            self._upload(record, found[0].parent, {"controls.jsonl": whole})
+            self._upload(record, found[0].parent, whole)
             return self.runs.finalise_record(record)
         finally:
             shutil.rmtree(folder, ignore_errors=True)
 
-    def _upload(self, record: RunRecord, folder: Path, replaced: dict[str, bytes] | None = None) -> None:
-        """The controls, the frames as one bundle and the first frame: three objects however long the drive."""
+    def _upload(self, record: RunRecord, folder: Path, controls: bytes | None = None) -> None:
+        """The controls (`controls`: a lost drive's whole rows), the frames they name as one bundle and the first
+        frame: three objects however long the drive."""
         from drem_sim.runs import run_objects
 
-        objects = {**run_objects(folder), **(replaced or {})}
+        objects = run_objects(folder, controls)
         with ThreadPoolExecutor(UPLOAD_THREADS) as pool:
             list(pool.map(lambda item: self.runs.files.put(record.prefix + item[0], item[1]), objects.items()))
 

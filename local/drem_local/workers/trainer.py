@@ -319,8 +319,11 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     trainer = Trainer(say)
-    if trainer.can_train:  # PyTorch takes seconds to import: once here, not in the first visitor's wait
+    if trainer.can_train:  # PyTorch takes seconds to load: once here, not in the first visitor's wait
         import drem_sim.learn.pipeline  # noqa: F401
+        from drem_sim.learn.train import warm_up
+
+        warm_up()
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
     # Jobs a dead trainer left RUNNING (or this one, when storage went away under it) go back to the queue once

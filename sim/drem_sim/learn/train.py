@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drem_sim.learn.dataset import Augmentation, DatasetSnapshot, augment_batch
+from drem_sim.learn.dataset import ActionScale, Augmentation, DatasetSnapshot, augment_batch
 from drem_sim.learn.model import BehaviourCloningCNN
 
 STEERING_LOSS_WEIGHT = 2.0  # steering errors crash the car; speed errors only cost time
@@ -53,6 +53,15 @@ class TrainResult:
     @property
     def final_validation_loss(self) -> float | None:
         return self.validation_losses[-1] if self.validation_losses else None
+
+
+def warm_up(num_threads: int = 1) -> None:
+    """Train once on a few blank frames, so this process has loaded what a first training loads on the way: PyTorch
+    imports its compiler (~800 modules: 4-5 s of CPU on a 2-core machine) when determinism is switched on, and more
+    on the first optimiser step. A long-lived trainer calls this at start, so no visitor waits for it."""
+    blank = DatasetSnapshot(np.zeros((2, 120, 160), np.uint8), np.zeros(2, np.float32), np.ones(2, np.float32),
+                            ActionScale())
+    train_behaviour_cloning(blank, TrainConfig(epochs=1, num_threads=num_threads), progress=None)
 
 
 def seed_everything(seed: int, num_threads: int) -> None:
