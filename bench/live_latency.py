@@ -341,8 +341,9 @@ def main(argv: list[str] | None = None) -> int:
                        f"{_stack.percentile(r['latencies']['overlay'], 95):.0f}ms"
                        + (f",errors={r['load']['errors']},backwards={r['load']['backwards']}" if r["load"] else "")
                        for r in results)
+    crowd = "idle" if not args.capacity and args.crowd_priority == "idle" else "normal"
     print(f"RESULT live_latency: {figures} bytes/msg={sizes['plain_bytes_avg']:.0f}plain/"
-          f"{sizes['gzip_bytes_avg']:.0f}gzip crowd={'idle' if not args.capacity and args.crowd_priority == 'idle' else 'normal'} "
+          f"{sizes['gzip_bytes_avg']:.0f}gzip crowd={crowd} "
           f"load={_stack.machine_load()} | goal p95<=300ms at N=500 and <=500ms at "
           f"N=2000 on both pages, 0 errors, 0 backwards | {'met' if met else 'not met'}")
     return 0
