@@ -1,6 +1,7 @@
 """What the learning booth's pages show: the racer's runs, jobs, model versions and the tracks to drive."""
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -9,9 +10,9 @@ from markupsafe import Markup
 
 from chalicelib.core.errors import DremError
 from chalicelib.core.principals import Principal
-from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_runs import ListRunsQuery, RunRecord, RunService
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
-from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
+from chalicelib.domain.booth_training import DEFAULT_EPOCHS, MAX_EPOCHS, VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
@@ -19,6 +20,24 @@ from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
+EPOCHS_RANGE = f"Epochs are a whole number from 1 to {MAX_EPOCHS}."
+
+
+@dataclass(frozen=True)
+class TrainAction:
+    """The Train button for the epochs in the field, and why it is off (shown beside it); None: it is on."""
+    drives: int  # the finished manual runs a job would learn from (the newest 50)
+    epochs: str  # as the field holds it
+    why_not: str | None
+
+
+def train_action(principal: Principal, training: TrainingService, epochs: str = str(DEFAULT_EPOCHS)) -> TrainAction:
+    """Asked again as the epochs change and as a job ends, so the button says what pressing it would do now."""
+    drives = training.drives_to_train(principal)
+    number = int(epochs) if re.fullmatch(r"[0-9]{1,3}", epochs.strip()) else 0
+    why_not = training.why_not_train(principal, epochs=number, drives=drives) if 1 <= number <= MAX_EPOCHS else \
+        EPOCHS_RANGE
+    return TrainAction(drives=len(drives), epochs=epochs.strip()[:3], why_not=why_not)
 
 
 @dataclass(frozen=True)
@@ -30,8 +49,7 @@ class BoothView:
     versions: list[ModelRecord]
     active_model_id: str | None
     aggregates: list[dict[str, Any]]
-    trainable: int  # finished manual runs of the caller
-    why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
+    train: TrainAction  # the Train button, off with its reason when pressing it could only fail
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
     racer_names: dict[str, str]  # staff: {sub: display name, told apart among the racers the page lists}
@@ -47,12 +65,10 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     models = training.models.store.list_owner(owner, limit=100, next_token=None).models
     versions = sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
                       key=lambda m: m.name, reverse=True)
-    trainable = sum(1 for r in mine if r.owner_sub == owner and r.mode is RunMode.MANUAL
-                    and r.status is RunStatus.FINALISED)
     jobs = jobs_view(principal, training, everyone=everyone)
     return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs, versions=versions,
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable, why_not_train=training.why_not_train(principal),
+                     train=train_action(principal, training),
                      active_versions=_active_versions(training, mine) if everyone else [],
                      cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [],
                      racer_names=shown_racer_names({(r.owner_sub, r.owner_username) for r in mine}, profiles)
