@@ -106,10 +106,12 @@ class RunInspection:
     run: RunRecord
     steering_plot: Markup
     speed_plot: Markup
+    speed_measured: bool  # the rows carry the car's own speed (a person's drive); else only the speed commanded
 
 
 def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
-    """The run with its controls over time: steering (+ = left) and the car's speed, off-track moments marked. A long
+    """The run with its controls over time: steering (+ = left) and the car's speed (the speed commanded, and named
+    so, where the run did not record the car's own), off-track moments marked. A long
     run is drawn in buckets of frames, each by its lowest and highest value in the order they came, so a burst of
     full-lock frames between two samples still shows."""
     size = max(1, -(-len(rows) // PLOT_POINTS))
@@ -118,15 +120,17 @@ def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
     labels = [f"{bucket[0]['t_ms'] / 1000:.{decimals}f}s" if index % 10 == 0 else ""
               for index, bucket in enumerate(buckets)]
     steering = svg_plots.Series("steering °", _extremes(buckets, lambda r: r["steering_angle"]))
-    speed = svg_plots.Series("speed m/s", _extremes(buckets, _car_speed))
+    measured = bool(rows) and all("car_speed" in row for row in rows)
+    speed_name = "car's speed" if measured else "speed commanded"
+    speed = svg_plots.Series(f"{speed_name} m/s", _extremes(buckets, _car_speed))
     off = svg_plots.Series("off track", [(i, max(_car_speed(r) for r in bucket)) for i, bucket in enumerate(buckets)
                                          if any(r["offtrack"] for r in bucket)])
     return RunInspection(
-        run=run,
+        run=run, speed_measured=measured,
         steering_plot=svg_plots.line_chart([steering], labels, title="Steering over the run", y_label="degrees",
                                            testid="plot-steering"),
-        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels, title="Speed over the run",
-                                        y_label="m/s", testid="plot-speed"))
+        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels,
+                                        title=f"The {speed_name} over the run", y_label="m/s", testid="plot-speed"))
 
 
 def _car_speed(row: dict[str, Any]) -> float:
