@@ -64,7 +64,7 @@
       const mark = document.createElementNS("http://www.w3.org/2000/svg", "circle");
       mark.setAttribute("cx", state.x);
       mark.setAttribute("cy", state.y);
-      mark.setAttribute("r", "0.09");
+      mark.setAttribute("r", mapOff.dataset.markRadius);
       mark.setAttribute("class", "map-off");
       mapOff.appendChild(mark);
     }
