@@ -73,6 +73,7 @@ def test_drive_train_race_and_see_v0001_with_its_metrics(app_url, live_stack, pa
     train, why = page.get_by_test_id("train"), page.get_by_test_id("train-why")
     why.filter(has_text="Nothing changed since v0001: it learned from this same drive with 2 epochs.").wait_for()
     assert train.is_disabled()
+    assert page.locator('[data-testid=version-row][data-version="v0001"]').is_visible()  # no reload needed
     reason, button = why.bounding_box(), train.bounding_box()
     assert reason["x"] > button["x"] + button["width"] - 1 and abs(reason["y"] - button["y"]) < 30  # beside it
     page.set_viewport_size({"width": 1920, "height": 1080})

@@ -302,6 +302,7 @@ def test_train_is_off_with_the_reason_when_nothing_changed_since_the_last_versio
     job = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 3}).json_body["job"]
     waiting = train_action(get("/booth"))  # pressing again while it waits could only be refused: off
     assert "disabled" in waiting and "still in the queue or running" in waiting
+    assert 'id="booth-versions"' not in get("/booth/jobs?epochs=3")  # the versions ride only on the job's end
 
     training = services.training_service()  # the worker makes v0001 from that drive with 3 epochs
     claimed = training.claim_next()
@@ -312,6 +313,9 @@ def test_train_is_off_with_the_reason_when_nothing_changed_since_the_last_versio
     why = "Nothing changed since v0001: it learned from this same drive with 3 epochs."
     polled = get("/booth/jobs?epochs=3")  # the jobs poll that sees the job end brings the button along, off
     assert 'hx-swap-oob="true"' in train_action(polled) and why in train_action(polled)
+    versions = polled[polled.index('id="booth-versions"'):]  # and the new version, without a reload
+    assert versions.startswith('id="booth-versions" data-testid="booth-versions-section" hx-swap-oob="true"')
+    assert 'data-version="v0001"' in versions and "No trained versions yet" not in versions
     assert 'disabled aria-describedby="train-why"' in train_action(get("/booth/train-action?epochs=3"))
     again = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 3})
     assert again.status_code == 409 and why in again.json_body["error"]["message"]  # at once, not after training

@@ -48,12 +48,14 @@ def booth(principal: User, query: ListRunsQuery) -> Response:
 
 @route(bp, "/booth/jobs", allow=SIGNED_IN, query=JobsQuery)
 def booth_jobs(principal: User, query: JobsQuery) -> Response:
-    """Your training jobs (htmx fragment, polled while one is queued or running), with the Train button as it is now"""
+    """Your training jobs (htmx fragment, polled while one is queued or running), with the Train button as it is now
+    and, once no job is busy, your versions"""
     everyone, training = query.everyone and bool(principal.roles & MODEL_STAFF), services.training_service()
     jobs = booth_views.jobs_view(principal, training, everyone=query.everyone)
     names = booth_views.job_racer_names(jobs, services.profile_service().public_by_subs) if everyone else {}
     return render.fragment("booth_jobs", jobs=jobs, everyone=everyone, job_names=names,
-                           train_action=booth_views.train_action(principal, training, query.epochs))
+                           train_action=booth_views.train_action(principal, training, query.epochs),
+                           **booth_views.versions_when_idle(principal, training, jobs))
 
 
 @route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)

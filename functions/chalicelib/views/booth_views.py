@@ -62,11 +62,9 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     query = ListRunsQuery(everyone=everyone)
     mine = runs.list_runs(principal, query)
     owner = principal.sub or ""
-    models = training.models.store.list_owner(owner, limit=100, next_token=None).models
-    versions = sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
-                      key=lambda m: m.name, reverse=True)
     jobs = jobs_view(principal, training, everyone=everyone)
-    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs, versions=versions,
+    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs,
+                     versions=my_versions(principal, training),
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
                      train=train_action(principal, training),
                      active_versions=_active_versions(training, mine) if everyone else [],
@@ -74,6 +72,21 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
                      racer_names=shown_racer_names({(r.owner_sub, r.owner_username) for r in mine}, profiles)
                      if everyone else {},
                      job_names=job_racer_names(jobs, profiles) if everyone else {})
+
+
+def my_versions(principal: Principal, training: TrainingService) -> list[ModelRecord]:
+    """The caller's trained versions (v0001 …), newest first."""
+    models = training.models.store.list_owner(principal.sub or "", limit=100, next_token=None).models
+    return sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
+                  key=lambda m: m.name, reverse=True)
+
+
+def versions_when_idle(principal: Principal, training: TrainingService, jobs: list[JobView]) -> dict[str, Any]:
+    """For the jobs answer: the versions once no listed job waits or runs (the answer that sees the last one end,
+    after which the list stops polling), so a new version shows without a reload; nothing while one is busy."""
+    if any(view.job.status.value in ("QUEUED", "RUNNING") for view in jobs):
+        return {}
+    return {"versions": my_versions(principal, training), "active_model_id": training.active_of(principal.sub or "")}
 
 
 def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
