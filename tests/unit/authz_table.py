@@ -411,6 +411,7 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/booth"): SIGNED_IN,
     ("GET", "/booth/jobs"): SIGNED_IN,
     ("POST", "/booth/train"): SIGNED_IN,
+    ("GET", "/booth/train-action"): SIGNED_IN,
     ("GET", "/booth/drive/{track_id}"): SIGNED_IN,
     ("GET", "/booth/runs/{run_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
     ("POST", "/booth/versions/{model_id}/active"): Case(allow("racer_a", "operator", "admin"), racer_a_model),

@@ -277,33 +277,61 @@ def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsAp
     assert not (tmp_path / "drives" / run_id).exists()
 
 
+def train_action(html: str) -> str:
+    """The Train button and what is beside it, as the page (or an htmx answer) shows them."""
+    start = html.index('id="train-action"')
+    return html[start:html.index("</span>", html.index("</button>", start))]
+
+
 def test_train_is_off_with_the_reason_when_nothing_changed_since_the_last_version(alice: ModelsApi,
                                                                                   client: Any) -> None:
     from chalicelib import services
-    from chalicelib.domain.booth_training import JobStatus
+    from chalicelib.core.principals import User
 
-    def booth_page() -> str:
-        return client.http.get("/booth", headers={"Authorization": alice.headers["Authorization"]}).body.decode()
+    headers = {"Authorization": alice.headers["Authorization"]}
 
-    assert "drive a lap first" in booth_page()  # no drive yet: off, and says why
+    def get(path: str) -> str:
+        answer = client.http.get(path, headers=headers)
+        assert answer.status_code == 200, answer.body
+        return answer.body.decode()
+
+    assert "drive a lap first" in train_action(get("/booth"))  # no drive yet: off, and says why
     first = drive(alice, steps=10)
-    page = booth_page()
-    assert 'data-testid="train-why"' not in page and 'data-testid="train" >' in page.replace("  ", " ")
-    job = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 1}).json_body["job"]
-    training = services.training_service()  # the worker made v0001 from that drive
+    shown = train_action(get("/booth"))
+    assert "train-why" not in shown and "disabled" not in shown and "Train on my 1 finished drive<" in shown
+    job = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 3}).json_body["job"]
+    waiting = train_action(get("/booth"))  # pressing again while it waits could only be refused: off
+    assert "disabled" in waiting and "still in the queue or running" in waiting
+    assert 'id="booth-versions"' not in get("/booth/jobs?epochs=3")  # the versions ride only on the job's end
+
+    training = services.training_service()  # the worker makes v0001 from that drive with 3 epochs
     claimed = training.claim_next()
     assert claimed is not None and claimed.job_id == job["job_id"]
-    training.store.replace_job(claimed.model_copy(update={"status": JobStatus.DONE, "model_name": "v0001",
-                                                          "finished_at": "2026-11-27T00:00:00Z"}),
-                               expected_status="RUNNING")
+    model = services.model_service().submit_archive(claimed.owner_sub, "alice", "v0001", onnx_archive(0.7))
+    training.finish(claimed, model)
 
-    page = booth_page()
-    why = "Nothing changed since v0001: it learned from these same 1 drive."
-    assert why in page and "disabled" in page[page.index('data-testid="train"'):][:80]
-    again = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]]})  # at once, not after training
-    assert again.status_code == 409 and why in again.json_body["error"]["message"]
+    why = "Nothing changed since v0001: it learned from this same drive with 3 epochs."
+    polled = get("/booth/jobs?epochs=3")  # the jobs poll that sees the job end brings the button along, off
+    assert 'hx-swap-oob="true"' in train_action(polled) and why in train_action(polled)
+    versions = polled[polled.index('id="booth-versions"'):]  # and the new version, without a reload
+    assert versions.startswith('id="booth-versions" data-testid="booth-versions-section" hx-swap-oob="true"')
+    assert 'data-version="v0001"' in versions and "No trained versions yet" not in versions
+    assert 'disabled aria-describedby="train-why"' in train_action(get("/booth/train-action?epochs=3"))
+    again = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"]], "epochs": 3})
+    assert again.status_code == 409 and why in again.json_body["error"]["message"]  # at once, not after training
+    assert client.http.post("/booth/train", headers={**headers, "Content-Type": "application/x-www-form-urlencoded"},
+                            body="epochs=3").status_code == 409
+
+    # Other epochs make another model: on, as the field changes (and the API agrees); nonsense epochs: off, and why.
+    assert "disabled" not in train_action(get("/booth/train-action?epochs=4"))
+    assert "Epochs are a whole number from 1 to 30." in train_action(get("/booth/train-action?epochs=0"))
+    assert "Epochs are a whole number from 1 to 30." in train_action(get("/booth/train-action?epochs="))
+    # v0001 deleted: the same drives would be accepted again, so Train is on.
+    services.model_service().delete(User(sub=model.owner_sub, username="alice", groups=frozenset({"racer"})),
+                                    model.model_id)
+    assert "disabled" not in train_action(get("/booth/train-action?epochs=3"))
 
     second = drive(alice, steps=10)  # something new to learn from: Train is on again
-    assert "Nothing changed" not in booth_page()
-    both = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"], second["run_id"]], "epochs": 1})
+    assert "Nothing changed" not in get("/booth")
+    both = alice.call("POST", "/api/training-jobs", {"run_ids": [first["run_id"], second["run_id"]], "epochs": 3})
     assert both.status_code == 201, both.json_body

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from html import unescape
 from pathlib import Path
 from typing import Any
 
@@ -55,11 +56,27 @@ def rows_of(count: int, steering: Any, speed: float = 3.0) -> list[dict[str, Any
              "x": 0.0, "y": 0.0, "lap": 0, "offtrack": False} for i in range(count)]
 
 
-def test_a_constant_speed_has_ticks_that_say_different_things() -> None:
+def test_a_constant_speed_has_ticks_that_say_different_things_where_they_are() -> None:
     plots = run_inspection(record(), rows_of(1787, lambda _i: 0.0, speed=3.0))
-    ticks = re.findall(r'class="plot-tick">([^<]*)</text>', str(plots.speed_plot))
-    values = [t for t in ticks if not t.endswith("s") and t]
-    assert len(values) == 5 and len(set(values)) == 5, values
+    ticks = re.findall(r'<text x="52" y="([0-9.]+)" text-anchor="end" class="plot-tick">([^<]*)</text>',
+                       str(plots.speed_plot))
+    values = [float(label) for _, label in ticks]
+    assert len(values) >= 4 and len({label for _, label in ticks}) == len(ticks), ticks  # never all "3"
+    assert min(values) < 3.0 < max(values)
+    # Each label is the value its gridline stands at: the heights fall on one straight line through the values.
+    (y0, v0), (y1, v1) = (float(ticks[0][0]), values[0]), (float(ticks[-1][0]), values[-1])
+    for (y, _), value in zip(ticks, values, strict=True):
+        assert abs(y0 + (y1 - y0) * (value - v0) / (v1 - v0) - float(y)) < 0.2, ticks
+
+
+def test_the_speed_plot_names_the_speed_commanded_when_the_run_did_not_measure_it() -> None:
+    autonomous = run_inspection(record(), rows_of(60, lambda _i: 0.0, speed=2.0))  # a model's run: commands only
+    assert "The speed commanded over the run" in str(autonomous.speed_plot) and not autonomous.speed_measured
+    rows = rows_of(60, lambda _i: 0.0, speed=2.0)
+    for row in rows:
+        row["car_speed"] = 1.5
+    measured = run_inspection(record(), rows)
+    assert "The car&#39;s speed over the run" in str(measured.speed_plot) and measured.speed_measured
 
 
 def test_the_steering_plot_shows_a_burst_between_samples() -> None:
@@ -78,3 +95,15 @@ def test_the_speed_plot_shows_the_cars_speed_when_the_run_recorded_it() -> None:
                                            str(run_inspection(record(), json.loads(json.dumps(rows))).speed_plot))]
     assert min(shown) == 0.0 and max(shown) == 3.0
     assert np.isclose(compute_metrics(rows).mean_speed, np.mean([r["car_speed"] for r in rows]), atol=0.001)
+
+
+def test_the_drive_and_run_pages_name_the_speed_they_show_as_the_cars(alice: Any, client: Any) -> None:
+    headers = {"Authorization": alice.headers["Authorization"]}
+    driving = unescape(client.http.get("/booth/drive/drem_oval", headers=headers).body.decode())
+    assert "<dt>Car's speed</dt>" in driving  # measured, not the 3 m/s that ↑ commands
+    run_id = alice.call("POST", "/api/drive", {"track_id": "drem_oval"}).json_body["run_id"]
+    for _ in range(20):
+        assert alice.call("POST", f"/api/runs/{run_id}/drive", {"steering": 0.0, "throttle": 0.6}).status_code == 200
+    assert alice.call("POST", f"/api/runs/{run_id}/drive/finish").status_code == 200
+    page = unescape(client.http.get(f"/booth/runs/{run_id}", headers=headers).body.decode())
+    assert "<dt>Car's mean speed</dt>" in page and "The car's speed over the run" in page

@@ -31,7 +31,9 @@ JOB_ID_PATTERN = r"^[a-f0-9]{12,40}$"
 VERSION_NAME = re.compile(r"^v(\d{4})$")
 MAX_RUNS_PER_JOB = 50
 MAX_EPOCHS = 30
+DEFAULT_EPOCHS = 8
 NO_DRIVES = "You have no finished drive to learn from yet: drive a lap first."
+JOB_WAITING = "Your training job is still in the queue or running: wait for it to finish."
 
 
 class JobStatus(StrEnum):
@@ -44,7 +46,7 @@ class JobStatus(StrEnum):
 class NewJob(BaseModel):
     model_config = ConfigDict(extra="forbid")
     run_ids: list[str] = Field(min_length=1, max_length=MAX_RUNS_PER_JOB, description="your FINALISED manual runs")
-    epochs: int = Field(default=8, ge=1, le=MAX_EPOCHS)
+    epochs: int = Field(default=DEFAULT_EPOCHS, ge=1, le=MAX_EPOCHS)
 
 
 class TrainingJob(BaseModel):
@@ -112,12 +114,9 @@ class TrainingService:
             if run.status is not RunStatus.FINALISED or run.mode is not RunMode.MANUAL or run.metrics is None:
                 raise InvalidInput(f"Run {run.run_id} is not a finished manual run ({run.status.value}).",
                                    field="run_ids")
-        waiting = [j for j in self.store.jobs_of(sub) if j.status in (JobStatus.QUEUED, JobStatus.RUNNING)]
-        if waiting:
-            raise Conflict("You already have a training job in the queue; wait for it to finish.", field="run_ids")
-        unchanged = self._unchanged_since(sub, [r.run_id for r in runs])
-        if unchanged:
-            raise Conflict(unchanged, field="run_ids")
+        refused = self._waiting(sub) or self._unchanged_since(sub, [r.run_id for r in runs], request.epochs)
+        if refused:
+            raise Conflict(refused, field="run_ids")
         job = TrainingJob(job_id=self._new_id(), owner_sub=sub, owner_username=username,
                           run_ids=[r.run_id for r in runs], track_id=runs[0].track_id,
                           frames=sum(r.metrics.frames for r in runs if r.metrics), epochs=request.epochs,
@@ -127,30 +126,45 @@ class TrainingService:
 
     def train_on_my_runs(self, principal: Principal, *, epochs: int) -> JobView:
         """The booth's Train button: every finished manual run of the caller (the newest 50)."""
-        ids = self._my_drives(principal)
+        ids = self.drives_to_train(principal)
         if not ids:
             raise InvalidInput(NO_DRIVES, field="run_ids")
         return self.create(principal, NewJob(run_ids=ids, epochs=epochs))
 
-    def why_not_train(self, principal: Principal) -> str | None:
-        """Why the Train button is off, in words (None: it is on): no drive yet, or nothing new since the last
-        version (training again on the same drives makes the same model, which the upload check refuses)."""
-        ids = self._my_drives(principal)
-        return NO_DRIVES if not ids else self._unchanged_since(principal.sub or "", ids)
+    def why_not_train(self, principal: Principal, *, epochs: int = DEFAULT_EPOCHS,
+                      drives: list[str] | None = None) -> str | None:
+        """Why the Train button is off for training on all the caller's drives (`drives_to_train`, if the caller has
+        not just read them) with these epochs, in words (None: it is on). The same reasons `create` refuses with, so
+        the page and the API never disagree."""
+        ids = self.drives_to_train(principal) if drives is None else drives
+        if not ids:
+            return NO_DRIVES
+        return self._waiting(principal.sub or "") or self._unchanged_since(principal.sub or "", ids, epochs)
 
-    def _my_drives(self, principal: Principal) -> list[str]:
+    def drives_to_train(self, principal: Principal) -> list[str]:
+        """What Train learns from: the caller's finished manual runs, the newest 50."""
         runs = self.runs.list_runs(principal, ListRunsQuery())
         return [r.run_id for r in runs if r.owner_sub == principal.sub and r.mode is RunMode.MANUAL
                 and r.status is RunStatus.FINALISED][:MAX_RUNS_PER_JOB]
 
-    def _unchanged_since(self, owner_sub: str, run_ids: list[str]) -> str | None:
-        done = [j for j in self.store.jobs_of(owner_sub) if j.status is JobStatus.DONE and j.model_name]
-        last = max(done, key=lambda j: (j.finished_at or "", j.created_at), default=None)
-        if last is None or set(last.run_ids) != set(run_ids):
-            return None
-        drives = f"{len(run_ids)} drive{'s' if len(run_ids) != 1 else ''}"
-        return (f"Nothing changed since {last.model_name}: it learned from these same {drives}. "
-                "Drive again to give the next version something new to learn.")
+    def _waiting(self, owner_sub: str) -> str | None:
+        busy = any(j.status in (JobStatus.QUEUED, JobStatus.RUNNING) for j in self.store.jobs_of(owner_sub))
+        return JOB_WAITING if busy else None
+
+    def _unchanged_since(self, owner_sub: str, run_ids: list[str], epochs: int) -> str | None:
+        """Nothing changed: a version the racer still has learned from exactly these drives with these settings.
+        Training is seeded (local/drem_local/workers/trainer.py: seed 0, one thread), so it would make that model
+        file again, and the upload check refuses an identical file while the earlier one is AVAILABLE — after the
+        whole training (~170 s). A deleted version does not count: its copy would be accepted."""
+        same = [j for j in self.store.jobs_of(owner_sub) if j.status is JobStatus.DONE and j.model_id
+                and set(j.run_ids) == set(run_ids) and j.epochs == epochs]
+        for job in sorted(same, key=lambda j: (j.finished_at or "", j.created_at), reverse=True):
+            model = self.models.store.get(owner_sub, job.model_id or "")
+            if model is not None and model.status is ModelStatus.AVAILABLE:
+                drives = "this same drive" if len(run_ids) == 1 else f"these same {len(run_ids)} drives"
+                return (f"Nothing changed since {model.name}: it learned from {drives} with {_epochs(epochs)}. "
+                        "Drive again, or change the epochs, to give the next version something new.")
+        return None
 
     def list_jobs(self, principal: Principal, *, everyone: bool = False) -> list[JobView]:
         jobs = self.store.all_jobs() if everyone and principal.roles & MODEL_STAFF else \
@@ -268,6 +282,10 @@ class TrainingService:
 
     def _view(self, job: TrainingJob) -> JobView:
         return JobView(job=job, queue_position=_position(self._queue(), job))
+
+
+def _epochs(epochs: int) -> str:
+    return f"{epochs} epoch{'s' if epochs != 1 else ''}"
 
 
 def _position(queue: list[TrainingJob], job: TrainingJob) -> int | None:

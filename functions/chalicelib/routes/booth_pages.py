@@ -13,6 +13,7 @@ from chalicelib import services
 from chalicelib.auth.access import SIGNED_IN, route
 from chalicelib.core.principals import User
 from chalicelib.domain.booth_runs import ListRunsQuery
+from chalicelib.domain.booth_training import DEFAULT_EPOCHS, MAX_EPOCHS
 from chalicelib.domain.racer_models import MODEL_STAFF
 from chalicelib.views import booth_views
 from chalicelib.views.track_map import track_map
@@ -23,7 +24,17 @@ bp = Blueprint(__name__)
 
 class TrainForm(BaseModel):
     model_config = ConfigDict(extra="ignore")
-    epochs: int = Field(default=8, ge=1, le=30)
+    epochs: int = Field(default=DEFAULT_EPOCHS, ge=1, le=MAX_EPOCHS)
+
+
+class TrainActionQuery(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    epochs: str = Field(default=str(DEFAULT_EPOCHS), max_length=12, description="as the Train form's field holds it")
+
+
+class JobsQuery(TrainActionQuery):
+    """The jobs list's poll; it brings the epochs field along, so the Train button it also answers fits them."""
+    everyone: bool = Field(default=False, description="admins and operators: every racer's jobs")
 
 
 @route(bp, "/booth", allow=SIGNED_IN, query=ListRunsQuery)
@@ -35,21 +46,33 @@ def booth(principal: User, query: ListRunsQuery) -> Response:
     return render.page("booth", view=view)
 
 
-@route(bp, "/booth/jobs", allow=SIGNED_IN, query=ListRunsQuery)
-def booth_jobs(principal: User, query: ListRunsQuery) -> Response:
-    """Your training jobs (htmx fragment, polled while one is queued or running)"""
-    everyone = query.everyone and bool(principal.roles & MODEL_STAFF)
-    jobs = booth_views.jobs_view(principal, services.training_service(), everyone=query.everyone)
+@route(bp, "/booth/jobs", allow=SIGNED_IN, query=JobsQuery)
+def booth_jobs(principal: User, query: JobsQuery) -> Response:
+    """Your training jobs (htmx fragment, polled while one is queued or running), with the Train button as it is now
+    and, once no job is busy, your versions"""
+    everyone, training = query.everyone and bool(principal.roles & MODEL_STAFF), services.training_service()
+    jobs = booth_views.jobs_view(principal, training, everyone=query.everyone)
     names = booth_views.job_racer_names(jobs, services.profile_service().public_by_subs) if everyone else {}
-    return render.fragment("booth_jobs", jobs=jobs, everyone=everyone, job_names=names)
+    return render.fragment("booth_jobs", jobs=jobs, everyone=everyone, job_names=names,
+                           train_action=booth_views.train_action(principal, training, query.epochs),
+                           **booth_views.versions_when_idle(principal, training, jobs))
 
 
 @route(bp, "/booth/train", methods=["POST"], allow=SIGNED_IN, body=TrainForm)
 def booth_train(principal: User, body: TrainForm) -> Response:
-    """Queue a training job on all your finished manual runs (htmx; answers the jobs fragment)"""
+    """Queue a training job on all your finished manual runs (htmx; answers the jobs fragment and the Train button,
+    off while the job waits)"""
     training = services.training_service()
     training.train_on_my_runs(principal, epochs=body.epochs)
-    return render.fragment("booth_jobs", jobs=booth_views.jobs_view(principal, training))
+    return render.fragment("booth_jobs", jobs=booth_views.jobs_view(principal, training),
+                           train_action=booth_views.train_action(principal, training, str(body.epochs)))
+
+
+@route(bp, "/booth/train-action", allow=SIGNED_IN, query=TrainActionQuery)
+def booth_train_action(principal: User, query: TrainActionQuery) -> Response:
+    """The Train button and why it is off, for these epochs (htmx: the epochs field asks as it changes)"""
+    action = booth_views.train_action(principal, services.training_service(), query.epochs)
+    return render.fragment("booth_train_action", action=action)
 
 
 @route(bp, "/booth/drive/{track_id}", allow=SIGNED_IN)

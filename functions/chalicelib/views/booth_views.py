@@ -1,6 +1,7 @@
 """What the learning booth's pages show: the racer's runs, jobs, model versions and the tracks to drive."""
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -9,9 +10,9 @@ from markupsafe import Markup
 
 from chalicelib.core.errors import DremError
 from chalicelib.core.principals import Principal
-from chalicelib.domain.booth_runs import ListRunsQuery, RunMode, RunRecord, RunService, RunStatus
+from chalicelib.domain.booth_runs import ListRunsQuery, RunRecord, RunService
 from chalicelib.domain.booth_tracks import TrackInfo, TrackService
-from chalicelib.domain.booth_training import VERSION_NAME, JobView, TrainingService
+from chalicelib.domain.booth_training import DEFAULT_EPOCHS, MAX_EPOCHS, VERSION_NAME, JobView, TrainingService
 from chalicelib.domain.devices import DeviceKind, DeviceService, DeviceView
 from chalicelib.domain.racer_models import MODEL_STAFF, ModelRecord, ModelStatus
 from chalicelib.views import svg_plots
@@ -19,6 +20,24 @@ from chalicelib.views.racer_names import ProfilesBySub, shown_racer_names
 from chalicelib.views.track_map import track_map
 
 PLOT_POINTS = 60  # a run's controls, thinned: the shape of the drive, not every decision
+EPOCHS_RANGE = f"Epochs are a whole number from 1 to {MAX_EPOCHS}."
+
+
+@dataclass(frozen=True)
+class TrainAction:
+    """The Train button for the epochs in the field, and why it is off (shown beside it); None: it is on."""
+    drives: int  # the finished manual runs a job would learn from (the newest 50)
+    epochs: str  # as the field holds it
+    why_not: str | None
+
+
+def train_action(principal: Principal, training: TrainingService, epochs: str = str(DEFAULT_EPOCHS)) -> TrainAction:
+    """Asked again as the epochs change and as a job ends, so the button says what pressing it would do now."""
+    drives = training.drives_to_train(principal)
+    number = int(epochs) if re.fullmatch(r"[0-9]{1,3}", epochs.strip()) else 0
+    why_not = training.why_not_train(principal, epochs=number, drives=drives) if 1 <= number <= MAX_EPOCHS else \
+        EPOCHS_RANGE
+    return TrainAction(drives=len(drives), epochs=epochs.strip()[:3], why_not=why_not)
 
 
 @dataclass(frozen=True)
@@ -30,8 +49,7 @@ class BoothView:
     versions: list[ModelRecord]
     active_model_id: str | None
     aggregates: list[dict[str, Any]]
-    trainable: int  # finished manual runs of the caller
-    why_not_train: str | None  # why Train is off (no drive yet, nothing new since the last version); None: it is on
+    train: TrainAction  # the Train button, off with its reason when pressing it could only fail
     active_versions: list[tuple[str, ModelRecord]]  # staff: each driver's active version, to send to a car
     cars: list[DeviceView]  # staff: the cars an active version can be sent to
     racer_names: dict[str, str]  # staff: {sub: display name, told apart among the racers the page lists}
@@ -44,20 +62,31 @@ def booth_view(principal: Principal, runs: RunService, training: TrainingService
     query = ListRunsQuery(everyone=everyone)
     mine = runs.list_runs(principal, query)
     owner = principal.sub or ""
-    models = training.models.store.list_owner(owner, limit=100, next_token=None).models
-    versions = sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
-                      key=lambda m: m.name, reverse=True)
-    trainable = sum(1 for r in mine if r.owner_sub == owner and r.mode is RunMode.MANUAL
-                    and r.status is RunStatus.FINALISED)
     jobs = jobs_view(principal, training, everyone=everyone)
-    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs, versions=versions,
+    return BoothView(everyone=everyone, tracks=tracks.all_tracks(), runs=mine, jobs=jobs,
+                     versions=my_versions(principal, training),
                      active_model_id=training.active_of(owner), aggregates=runs.aggregates(principal, query),
-                     trainable=trainable, why_not_train=training.why_not_train(principal),
+                     train=train_action(principal, training),
                      active_versions=_active_versions(training, mine) if everyone else [],
                      cars=[d for d in devices.list_devices() if d.kind is DeviceKind.CAR] if everyone else [],
                      racer_names=shown_racer_names({(r.owner_sub, r.owner_username) for r in mine}, profiles)
                      if everyone else {},
                      job_names=job_racer_names(jobs, profiles) if everyone else {})
+
+
+def my_versions(principal: Principal, training: TrainingService) -> list[ModelRecord]:
+    """The caller's trained versions (v0001 …), newest first."""
+    models = training.models.store.list_owner(principal.sub or "", limit=100, next_token=None).models
+    return sorted((m for m in models if VERSION_NAME.match(m.name) and m.status is not ModelStatus.DELETED),
+                  key=lambda m: m.name, reverse=True)
+
+
+def versions_when_idle(principal: Principal, training: TrainingService, jobs: list[JobView]) -> dict[str, Any]:
+    """For the jobs answer: the versions once no listed job waits or runs (the answer that sees the last one end,
+    after which the list stops polling), so a new version shows without a reload; nothing while one is busy."""
+    if any(view.job.status.value in ("QUEUED", "RUNNING") for view in jobs):
+        return {}
+    return {"versions": my_versions(principal, training), "active_model_id": training.active_of(principal.sub or "")}
 
 
 def _active_versions(training: TrainingService, runs: list[RunRecord]) -> list[tuple[str, ModelRecord]]:
@@ -90,10 +119,12 @@ class RunInspection:
     run: RunRecord
     steering_plot: Markup
     speed_plot: Markup
+    speed_measured: bool  # the rows carry the car's own speed (a person's drive); else only the speed commanded
 
 
 def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
-    """The run with its controls over time: steering (+ = left) and the car's speed, off-track moments marked. A long
+    """The run with its controls over time: steering (+ = left) and the car's speed (the speed commanded, and named
+    so, where the run did not record the car's own), off-track moments marked. A long
     run is drawn in buckets of frames, each by its lowest and highest value in the order they came, so a burst of
     full-lock frames between two samples still shows."""
     size = max(1, -(-len(rows) // PLOT_POINTS))
@@ -102,15 +133,17 @@ def run_inspection(run: RunRecord, rows: list[dict[str, Any]]) -> RunInspection:
     labels = [f"{bucket[0]['t_ms'] / 1000:.{decimals}f}s" if index % 10 == 0 else ""
               for index, bucket in enumerate(buckets)]
     steering = svg_plots.Series("steering °", _extremes(buckets, lambda r: r["steering_angle"]))
-    speed = svg_plots.Series("speed m/s", _extremes(buckets, _car_speed))
+    measured = bool(rows) and all("car_speed" in row for row in rows)
+    speed_name = "car's speed" if measured else "speed commanded"
+    speed = svg_plots.Series(f"{speed_name} m/s", _extremes(buckets, _car_speed))
     off = svg_plots.Series("off track", [(i, max(_car_speed(r) for r in bucket)) for i, bucket in enumerate(buckets)
                                          if any(r["offtrack"] for r in bucket)])
     return RunInspection(
-        run=run,
+        run=run, speed_measured=measured,
         steering_plot=svg_plots.line_chart([steering], labels, title="Steering over the run", y_label="degrees",
                                            testid="plot-steering"),
-        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels, title="Speed over the run",
-                                        y_label="m/s", testid="plot-speed"))
+        speed_plot=svg_plots.line_chart([s for s in (speed, off) if s.points], labels,
+                                        title=f"The {speed_name} over the run", y_label="m/s", testid="plot-speed"))
 
 
 def _car_speed(row: dict[str, Any]) -> float:

@@ -5,6 +5,7 @@ racer-chosen model name can never inject markup.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from markupsafe import Markup, escape
@@ -20,7 +21,7 @@ class Series:
     points: list[tuple[int, float]]  # (x index into the chart's x labels, value)
 
 
-MIN_SPAN = 0.5  # of the y axis, in the plotted unit: a constant 3.0 m/s draws as a flat line on ticks 2.75 … 3.25
+MIN_SPAN = 0.5  # of the y axis, in the plotted unit: a constant 3.0 m/s draws as a flat line on ticks 2.6 … 3.4
 
 
 def _scale(values: list[float]) -> tuple[float, float]:
@@ -32,16 +33,29 @@ def _scale(values: list[float]) -> tuple[float, float]:
     return max(low - pad, 0.0) if low >= 0 else low - pad, high + pad
 
 
+def nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
+    """Round values (steps of 1, 2, 2.5 or 5 × 10^k) from at or below `low` to at or above `high`, about `count` of
+    them: each gridline sits exactly at the number its label says (a line at 2.855 labelled "2.9" misleads)."""
+    high = high if high > low else low + 1.0
+    raw = (high - low) / (count - 1)
+    magnitude = 10 ** math.floor(math.log10(raw))
+    step = next(m * magnitude for m in (1, 2, 2.5, 5, 10) if m * magnitude >= raw * (1 - 1e-9))
+    first, last = math.floor(low / step + 1e-9), math.ceil(high / step - 1e-9)
+    return [round(k * step, 10) for k in range(first, max(last, first + 1) + 1)]
+
+
 def tick_labels(values: list[float]) -> list[str]:
-    """The fewest decimals (up to 3) that tell every tick apart: never five ticks all reading "3"."""
-    for decimals in range(4):
+    """The fewest decimals (up to 6) that tell every tick apart and say each exactly: never five ticks all reading
+    "3", nor 2.75 shown as "2.8"."""
+    for decimals in range(7):
         labels = [f"{value:.{decimals}f}" for value in values]
-        if len(set(labels)) == len(labels):
+        exact = all(abs(float(label) - value) < 1e-9 for label, value in zip(labels, values, strict=True))
+        if len(set(labels)) == len(labels) and exact:
             return labels
-    return labels
+    return [f"{value:.4g}" for value in values]
 
 
-def _frame(title: str, y_label: str, low: float, high: float, y_of) -> list[str]:
+def _frame(title: str, y_label: str, ticks: list[float], y_of) -> list[str]:
     parts = [f'<text x="{LEFT}" y="16" class="plot-title">{escape(title)}</text>',
              # Turned to read upwards, its glyphs hang to the right of x=4 (a baseline at x=12 let the page's
              # font push them past the chart's left edge, issue 31: the axis label cut at 1920).
@@ -50,7 +64,6 @@ def _frame(title: str, y_label: str, low: float, high: float, y_of) -> list[str]
              f'font-size="13" class="plot-axis">{escape(y_label)}</text>',
              f'<line x1="{LEFT}" y1="{HEIGHT - BOTTOM}" x2="{WIDTH - RIGHT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>',
              f'<line x1="{LEFT}" y1="{TOP}" x2="{LEFT}" y2="{HEIGHT - BOTTOM}" stroke="#888"/>']
-    ticks = [low + (high - low) * step / 4 for step in range(5)]
     for value, label in zip(ticks, tick_labels(ticks), strict=True):
         y = y_of(value)
         parts.append(f'<line x1="{LEFT}" y1="{y:.1f}" x2="{WIDTH - RIGHT}" y2="{y:.1f}" stroke="#eee"/>')
@@ -69,7 +82,8 @@ def line_chart(series: list[Series], x_labels: list[str], *, title: str, y_label
     values = [v for s in series for _, v in s.points]
     if not values or not x_labels:
         return Markup(f'<p class="plot-empty" data-testid="{escape(testid)}">{escape(title)}: no data yet.</p>')
-    low, high = _scale(values)
+    ticks = nice_ticks(*_scale(values))
+    low, high = ticks[0], ticks[-1]
     span = max(len(x_labels) - 1, 1)
 
     def x_of(index: int) -> float:
@@ -78,7 +92,7 @@ def line_chart(series: list[Series], x_labels: list[str], *, title: str, y_label
     def y_of(value: float) -> float:
         return TOP + (HEIGHT - TOP - BOTTOM) * (1 - (value - low) / (high - low))
 
-    parts = _frame(title, y_label, low, high, y_of)
+    parts = _frame(title, y_label, ticks, y_of)
     for index, label in enumerate(x_labels):
         parts.append(f'<text x="{x_of(index):.1f}" y="{HEIGHT - BOTTOM + 14}" text-anchor="middle" '
                      f'class="plot-tick">{escape(label[:14])}</text>')
@@ -97,12 +111,13 @@ def line_chart(series: list[Series], x_labels: list[str], *, title: str, y_label
 def bar_chart(bars: list[tuple[str, float]], *, title: str, y_label: str, testid: str) -> Markup:
     if not bars:
         return Markup(f'<p class="plot-empty" data-testid="{escape(testid)}">{escape(title)}: no data yet.</p>')
-    low, high = 0.0, max(v for _, v in bars) * 1.1 or 1.0
+    ticks = nice_ticks(0.0, max(v for _, v in bars) * 1.1 or 1.0)
+    low, high = ticks[0], ticks[-1]
 
     def y_of(value: float) -> float:
         return TOP + (HEIGHT - TOP - BOTTOM) * (1 - (value - low) / (high - low))
 
-    parts = _frame(title, y_label, low, high, y_of)
+    parts = _frame(title, y_label, ticks, y_of)
     slot = (WIDTH - LEFT - RIGHT) / len(bars)
     for index, (label, value) in enumerate(bars):
         x = LEFT + slot * index + slot * 0.15

@@ -15,8 +15,8 @@ from markupsafe import Markup, escape
 from chalicelib.domain.booth_tracks import TrackDetail
 
 MAX_TRAIL_POINTS = 1500  # a five-minute drive is 4,500 frames; every third still draws the line the car took
-CAR_RADIUS_M = 0.12
-OFF_RADIUS_M = 0.09
+CAR_RADIUS_M = 0.18  # about the real car's length across: a 0.12 m dot was lost under the marks at 420 px
+OFF_RADIUS_M = 0.28  # a ring, wider than the car: seen around the car when it is put back where it left the track
 
 
 def track_map(track: TrackDetail, rows: Sequence[dict[str, Any]] = (), *, testid: str) -> Markup:
@@ -41,9 +41,9 @@ def track_map(track: TrackDetail, rows: Sequence[dict[str, Any]] = (), *, testid
         f'<circle cx="{start_x:.3f}" cy="{start_y:.3f}" r="{track.width_m / 2:.3f}" class="map-start">'
         f'<title>start and timing line</title></circle>'
         f'<polyline points="{trail}" class="map-trail" data-map="trail"/>'
+        f'<g data-map="off" data-mark-radius="{OFF_RADIUS_M}">{off}</g>'
         f'<circle cx="{car_x:.3f}" cy="{car_y:.3f}" r="{CAR_RADIUS_M}" class="map-car" data-map="car">'
-        f'<title>the car</title></circle>'
-        f'<g data-map="off">{off}</g>'  # above the car: it is put back right where it left the track
+        f'<title>the car</title></circle>'  # last, so on top: never hidden under the marks
         f'</g></svg>')
 
 

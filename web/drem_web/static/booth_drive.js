@@ -13,6 +13,7 @@
   const finishButton = document.getElementById("drive-finish");
   let runId = null;
   let driving = false;
+  let stepping = Promise.resolve();  // the decision in flight: Finish waits for it (one sent after would find no drive)
 
   function csrfToken() {
     try { return JSON.parse(document.body.getAttribute("hx-headers") || "{}")["X-CSRF-Token"] || ""; }
@@ -64,7 +65,7 @@
       const mark = document.createElementNS("http://www.w3.org/2000/svg", "circle");
       mark.setAttribute("cx", state.x);
       mark.setAttribute("cy", state.y);
-      mark.setAttribute("r", "0.09");
+      mark.setAttribute("r", mapOff.dataset.markRadius);
       mark.setAttribute("class", "map-off");
       mapOff.appendChild(mark);
     }
@@ -85,7 +86,9 @@
     while (driving) {
       const started = performance.now();
       try {
-        show(await post("/api/runs/" + runId + "/drive", control()));
+        const step = post("/api/runs/" + runId + "/drive", control());
+        stepping = step.catch(() => null);
+        show(await step);
       } catch (error) {
         status.textContent = "Driving stopped: " + error.message;
         driving = false;
@@ -120,6 +123,7 @@
     finishButton.disabled = true;
     status.textContent = "Saving the run …";
     try {
+      await stepping;
       const answer = await post("/api/runs/" + runId + "/drive/finish");
       window.location.href = window.dremUrl("/booth/runs/" + answer.run.run_id);
     } catch (error) {
