@@ -11,6 +11,7 @@ import pytest
 
 from chalicelib.core.errors import InvalidInput
 from chalicelib.domain.booth_runs import compute_metrics, parse_controls
+from tests.unit.booth_helpers import drive_lost_by_a_kill
 from tests.unit.models_helpers import ModelsApi, activate_device, bearer, make_fleet, onnx_archive
 
 pytestmark = pytest.mark.unit
@@ -257,20 +258,8 @@ def test_a_racer_may_hold_only_a_few_open_runs(alice: ModelsApi, bob: ModelsApi)
 def test_a_lost_drive_is_saved_up_to_its_last_whole_controls_row(alice: ModelsApi, tmp_path: Any) -> None:
     """A kill -9 can cut the controls row being written: the saved run ends at the last whole row (the decisions
     the racer saw answered), and the half row neither fails the save nor becomes a decision."""
-    from chalicelib import services
-    from chalicelib.core.principals import User
-    from chalicelib.domain.booth_drive import DriveControl, DriveService, LiveDrives, StartDrive
-
-    live = LiveDrives()
-    service = DriveService(live, services.run_service(), tmp_path / "drives")
-    racer = User(sub="alice-sub", username="alice", groups=frozenset({"racer"}))
-    run_id = service.start(racer, StartDrive(track_id="drem_oval"))["run_id"]
-    for _ in range(7):
-        service.step(racer, run_id, DriveControl(throttle=1.0))
-    lost = live.pop(run_id)  # the process forgets it, as a killed app does; its folder stays
-    assert lost is not None
-    written = next((tmp_path / "drives" / run_id).rglob("controls.jsonl"))
-    with written.open("a") as handle:
+    service, racer, run_id, folder = drive_lost_by_a_kill(tmp_path / "drives")
+    with (folder / "controls.jsonl").open("a") as handle:
         handle.write('{"index": 7, "frame": "frames/000007.png", "t_ms": 4')  # cut mid-row
     saved = service.finish(racer, run_id)
     assert saved.status.value == "FINALISED" and saved.metrics is not None and saved.metrics.frames == 7

@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from tests.unit.booth_helpers import drive_lost_by_a_kill
 from tests.unit.models_helpers import ModelsApi
 
 pytestmark = pytest.mark.unit
@@ -87,22 +88,12 @@ def test_train_fetches_the_drive_in_a_few_requests_and_the_job_says_each_step(
 def test_a_drive_saved_after_a_kill_that_cut_a_frame_is_still_trainable(alice: ModelsApi, tmp_path: Path) -> None:
     """The app writes a decision's frame, then its row: a kill -9 between them leaves a cut (here empty) frame that no
     row names. The saved drive holds every answered decision, and the trainer reads it."""
-    from chalicelib import services
-    from chalicelib.core.principals import User
-    from chalicelib.domain.booth_drive import DriveControl, DriveService, LiveDrives, StartDrive
     from chalicelib.settings import get_settings
     from chalicelib.storage import clients
     from drem_sim.learn.dataset import load_snapshot
     from drem_sim.runs import download_run
 
-    live = LiveDrives()
-    service = DriveService(live, services.run_service(), tmp_path / "drives")
-    racer = User(sub="alice-sub", username="alice", groups=frozenset({"racer"}))
-    run_id = service.start(racer, StartDrive(track_id="drem_oval"))["run_id"]
-    for _ in range(7):
-        service.step(racer, run_id, DriveControl(throttle=1.0))
-    assert live.pop(run_id) is not None  # the process forgets it, as a killed app does; its folder stays
-    run_folder = next((tmp_path / "drives" / run_id).rglob("controls.jsonl")).parent
+    service, racer, run_id, run_folder = drive_lost_by_a_kill(tmp_path / "drives")
     (run_folder / "frames" / "000007.png").write_bytes(b"")  # the frame the kill cut; its row was never written
 
     saved = service.finish(racer, run_id)
