@@ -8,8 +8,9 @@ API, sent as `Authorization: Device <id>.<secret>`).
 
 The matrix makes ~900 calls; bootstrapping the stack for each would take minutes, so a module using `world` is
 marked `one_stack_per_module` (tests/unit/conftest.py): moto is wiped once per module instead of before every test.
-Every scenario creates its own objects, and a call that uses up its caller (deleting one's own account, rotating a
-device secret) runs as a freshly minted principal of the same kind.
+Every allowed call's scenario creates its own objects (a route's refused callers share one), and an allowed call
+that uses up its caller (deleting one's own account, rotating a device secret) runs as a freshly minted principal of
+the same kind.
 """
 from __future__ import annotations
 
@@ -82,6 +83,7 @@ class World:
     usernames: dict[str, str] = field(default_factory=dict)
     device_ids: dict[str, str] = field(default_factory=dict)
     fleet_id: str = ""
+    refused_scenarios: dict[tuple[str, str], Any] = field(default_factory=dict)  # see test_authz_matrix.scenario_for
     _minted: int = 0
 
     def call(self, method: str, path: str, principal: str, body: Any = None,

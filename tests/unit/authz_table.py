@@ -4,9 +4,11 @@ Outcomes per principal: "allow" (answer is not 401/403), "deny" (401 or 403), "d
 hides other people's objects). A route added to the app without an entry here fails test_authz_matrix, and so does
 an entry for a route that no longer exists.
 
-`build(world, caller)` prepares what one call needs (objects owned by someone, path parameters, a body) and runs for
-every call, so each principal meets a fresh object. `consumes_caller` runs the call as a freshly minted principal of
-the same kind (the call deletes the account or rotates the secret it is made with).
+`build(world, caller)` prepares what one call needs (objects owned by someone, path parameters, a body). It runs for
+every allowed call, so each principal that may act meets a fresh object; the principals a route refuses share one
+object built for them (a refused call changes nothing; see test_authz_matrix.scenario_for). `consumes_caller` runs an
+allowed call as a freshly minted principal of the same kind (the call deletes the account or rotates the secret it
+is made with).
 """
 from __future__ import annotations
 
@@ -46,6 +48,8 @@ class Case:
     expect: dict[str, str]
     build: Callable[[World, str], Call] | None = None
     consumes_caller: bool = False
+    # The refused callers may not share one scenario: building the next one ends it (a racer drives one live drive).
+    fresh_for_each_caller: bool = False
     content_type: str = "application/json"  # what the route takes (others are refused with 415 before anything)
 
 
@@ -402,8 +406,9 @@ TABLE: dict[tuple[str, str], Case] = {
     ("GET", "/api/runs/{run_id}/artifacts/{name}"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
     ("POST", "/api/runs/{run_id}/finalise"): Case(allow("racer_a", "operator", "admin"), racer_a_run),
     ("POST", "/api/drive"): SIGNED_IN,
-    ("POST", "/api/runs/{run_id}/drive"): Case(allow("racer_a"), racer_a_live_drive),
-    ("POST", "/api/runs/{run_id}/drive/finish"): Case(allow("racer_a"), racer_a_live_drive),
+    ("POST", "/api/runs/{run_id}/drive"): Case(allow("racer_a"), racer_a_live_drive, fresh_for_each_caller=True),
+    ("POST", "/api/runs/{run_id}/drive/finish"): Case(allow("racer_a"), racer_a_live_drive,
+                                                      fresh_for_each_caller=True),
     ("POST", "/api/training-jobs"): SIGNED_IN,
     ("GET", "/api/training-jobs"): SIGNED_IN,
     ("GET", "/api/training-jobs/{job_id}"): Case(allow("racer_a", "operator", "admin"), racer_a_training_job),
