@@ -1,7 +1,7 @@
 """Racers' model records in memory: the port ModelService (ModelStore) takes.
 
 Copies chalicelib/storage/racer_models.py (DynamoModelStore): a record is kept as the adapter writes and reads it
-back (its JSON; `scrutiny_detail` is not among the attributes the adapter stores, so it does not come back);
+back (its JSON);
 `create` needs the model id free, else the transaction is refused (UpstreamError, as `call` words a cancelled
 transaction); `replace` needs the stored status to be the one the writer read and, given `result_as_in`, the stored
 scrutineering result to be that record's (a missing record fails too), else ModelChanged, storing nothing. An
@@ -72,7 +72,7 @@ class InMemoryModelStore:
 
 
 def _as_stored(record: ModelRecord) -> str:
-    return record.model_copy(update={"scrutiny_detail": None}).model_dump_json()
+    return record.model_dump_json()
 
 
 def _page(records: list[ModelRecord], keys: list[str], listing: str, limit: int, next_token: str | None,

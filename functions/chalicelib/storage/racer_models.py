@@ -148,7 +148,7 @@ def decode_token(token: str, *, required: dict[str, str], key_names: tuple[str, 
 
 _FACT_FIELDS = ("reason", "model_kind", "model_md5", "metadata_md5", "archive_md5", "action_space_type",
                 "training_algorithm", "s3_key", "converted_key", "converted_md5", "scrutiny", "scrutiny_reason",
-                "conversion_max_diff", "scrutineer_state", "scrutineer_clip_key", "check_started_at")
+                "scrutiny_detail", "conversion_max_diff", "scrutineer_state", "scrutineer_clip_key", "check_started_at")
 
 
 def _to_item(record: ModelRecord) -> dict[str, Any]:
