@@ -72,11 +72,21 @@ class User(BaseModel):
         return True
 
 
+class RegistryEntry(BaseModel):
+    """What the device registry said of a device when its credential was checked, in this request."""
+    model_config = ConfigDict(frozen=True)
+    hostname: str
+    fleet_id: str | None = None
+
+
 class Device(BaseModel):
     model_config = ConfigDict(frozen=True)
     kind: Literal["device"] = "device"
     device_id: str
     device_kind: Literal["car", "timer"]
+    # Set by the credential check (domain.activation): the request's later rules read the registry entry it read
+    # moments ago instead of reading the registry again (a timing crossing's way to the board is one read shorter).
+    registry: RegistryEntry | None = None
 
     @property
     def id(self) -> str:

@@ -28,7 +28,7 @@ from typing import Protocol
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.core.errors import InvalidInput, NotAuthenticated
-from chalicelib.core.principals import Device, User
+from chalicelib.core.principals import Device, RegistryEntry, User
 from chalicelib.domain.devices import HOSTNAME_PATTERN, DeviceKind, DeviceRecord, StatusEntry
 
 DEFAULT_CODE_TTL_MINUTES = 60
@@ -210,7 +210,8 @@ class ActivationService:
         expected = record.secret_hash if record else sha256_hex(new_secret())
         if record is None or not hmac.compare_digest(presented, expected):
             raise NotAuthenticated("This device credential is not valid (wrong, rotated or deregistered).")
-        return Device(device_id=record.device_id, device_kind=record.kind.value)
+        return Device(device_id=record.device_id, device_kind=record.kind.value,
+                      registry=RegistryEntry(hostname=record.hostname, fleet_id=record.fleet_id))
 
 
 def _check_binding(stored: ActivationRecord, exchange: ActivationExchange, now_ms: int) -> None:
