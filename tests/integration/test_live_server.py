@@ -245,6 +245,14 @@ def child_pids(pid: int) -> list[int]:
     return [int(child) for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
 
 
+def worker_pids(pid: int) -> list[int]:
+    """The live server's worker processes: `pid` and the workers it started (not its cameras' fan-out worker,
+    drem_live.video_fanout, which serves no page and has no wake socket)."""
+    def is_worker(child: int) -> bool:
+        return b"drem_live.video_fanout" not in Path(f"/proc/{child}/cmdline").read_bytes()
+    return [pid, *(child for child in child_pids(pid) if is_worker(child))]
+
+
 def running(pid: int) -> bool:
     """Whether the process exists and has not exited (a zombie waiting to be reaped has exited)."""
     try:
@@ -277,7 +285,7 @@ def test_a_lap_wakes_every_live_worker_without_waiting_for_a_poll(live_stack: An
         while len(workers) < 2 or not all((wake_dir / f"{pid}.sock").exists() for pid in workers):
             assert time.monotonic() < deadline, f"workers {workers}, wake sockets {sorted(wake_dir.iterdir())}"
             time.sleep(0.05)
-            workers = [process.popen.pid, *child_pids(process.popen.pid)]
+            workers = worker_pids(process.popen.pid)
         url = f"http://127.0.0.1:{port}/live/leaderboard/{eid}?track=1&lang=en&tracks=1&summary_seconds=0"
         streams = [open_stream(url, **{"Accept-Encoding": "identity"}) for _ in range(6)]
         shown = [stream.next_fragment()["id"] for stream in streams]
