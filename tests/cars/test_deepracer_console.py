@@ -17,6 +17,7 @@ from chalicelib.domain.devices import Telemetry
 from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole, DeepRacerConsoleDriver, csrf_meta_token
 from drem_cars.model_files import ModelError
 from drem_cars.model_store import ARCHIVE_COPY, InstalledModel
+from tests import user_processes
 from tests.cars.fake_deepracer_console import AUTONOMOUS, CALIBRATION, MANUAL, FakeConsole
 from tests.waiting import wait_until
 
@@ -353,7 +354,7 @@ def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake
         return subprocess.Popen([drem, "car", "--config-dir", str(config), "run", "--deepracer", fake.url,
                                  "--seconds", "60"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": password,
-                                                "DREM_CAR_NO_REEXEC": "1"})
+                                                "DREM_CAR_NO_REEXEC": "1"}, preexec_fn=user_processes.from_a_shell)
 
     refused = start("wrong")
     _out, err = refused.communicate(timeout=60)
@@ -364,7 +365,10 @@ def test_the_installed_cli_drives_a_deepracer_console_or_says_why_it_cannot(fake
                    "the heartbeat reads the car's battery (API unreachable)")
         assert running.poll() is None, running.communicate()[1]
         running.send_signal(signal.SIGINT)  # Ctrl-C, as a user stops it
-        _out, err = running.communicate(timeout=30)
+        try:
+            _out, err = running.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"drem car run did not stop on Ctrl-C within 30 s: {user_processes.state(running.pid)}")
     finally:
         if running.poll() is None:
             running.kill()

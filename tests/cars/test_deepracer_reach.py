@@ -15,6 +15,7 @@ import pytest
 from drem_cars.car_tls import CarTrust, CertificateProblem, fingerprint_of_file, pretty
 from drem_cars.credentials import CredentialStore, StoredCredential
 from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole
+from tests import user_processes
 from tests.cars.fake_deepracer_console import FakeConsole
 from tests.cars.self_signed import self_signed, server_context
 from tests.waiting import wait_until
@@ -90,7 +91,8 @@ class RunningAgent:
         self.process = subprocess.Popen(
             [drem, "car", "--config-dir", str(config), "run", "--deepracer", url, "--seconds", "120"],
             cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-            env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": "car-password", "DREM_CAR_NO_REEXEC": "1"})
+            env={"PATH": "/usr/bin:/bin", "DEEPRACER_PASSWORD": "car-password", "DREM_CAR_NO_REEXEC": "1"},
+            preexec_fn=user_processes.from_a_shell)
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -108,6 +110,8 @@ class RunningAgent:
             self.process.send_signal(signal.SIGINT)  # Ctrl-C, as a user stops it
         try:
             code = self.process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"drem car run did not stop on Ctrl-C within 30 s: {user_processes.state(self.process.pid)}")
         finally:
             if self.process.poll() is None:
                 self.process.kill()

@@ -15,6 +15,7 @@ import pytest
 from chalicelib.formats.model_archive.report import ArchiveStatus
 from chalicelib.formats.model_archive.verdict import inspect_archive
 from drem_local.cli import main
+from tests import user_processes
 from tests.waiting import wait_until
 
 pytestmark = pytest.mark.sim
@@ -47,7 +48,7 @@ def test_drive_serves_the_page_until_interrupted(tmp_path: Path) -> None:
     command = [sys.executable, "-m", "drem_local.cli", "sim", "drive", "--track", "drem_oval", "--port", str(port),
                "--out", str(tmp_path)]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                               env={**os.environ, "PYTHONUNBUFFERED": "1"}, preexec_fn=user_processes.from_a_shell)
     try:
         assert f"driving drem_oval at http://127.0.0.1:{port}/" in process.stdout.readline()
         def steps() -> int:
@@ -58,7 +59,10 @@ def test_drive_serves_the_page_until_interrupted(tmp_path: Path) -> None:
         wait_until(lambda: steps() > first, 60, "the simulation to step on by itself (it runs in real time)")
     finally:
         process.send_signal(signal.SIGINT)
-        _, err = process.communicate(timeout=10)
+        try:
+            _, err = process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"drem sim drive did not stop on Ctrl-C within 30 s: {user_processes.state(process.pid)}")
     assert process.returncode == 0, err
 
 
