@@ -67,14 +67,18 @@ class FanOutWorker:
         loop.add_reader(self._control.fileno(), self._read_control)
 
     def attach(self, transport: asyncio.BaseTransport, chunked: bool, device_id: str,
-               on_dropped: Callable[[], None]) -> int:
-        """The worker writes `device_id`'s frames to this connection from now on; returns the viewer's number."""
+               on_dropped: Callable[[], None]) -> int | None:
+        """The worker writes `device_id`'s frames to this connection from now on; returns the viewer's number, or
+        None when the worker cannot take it (gone, or its control queue full): the server then writes itself."""
         sock = transport.get_extra_info("socket")
         self._next_viewer += 1
         viewer = self._next_viewer
-        self._dropped[viewer] = on_dropped
         message = json.dumps({"attach": viewer, "device": device_id, "chunked": chunked}).encode()
-        socket.send_fds(self._control, [message], [sock.fileno()])  # the worker gets its own copy of the socket
+        try:
+            socket.send_fds(self._control, [message], [sock.fileno()])  # the worker gets its own copy of the socket
+        except OSError:
+            return None
+        self._dropped[viewer] = on_dropped
         return viewer
 
     def follow(self, viewer: int, device_id: str) -> None:
@@ -87,11 +91,11 @@ class FanOutWorker:
         self._send({"detach": viewer, "end": end})
 
     def frame(self, device_id: str, frame: Frame) -> None:
+        if self._pending:
+            return  # the worker has not taken the last frame yet: this one is skipped (latest frame wins)
         header = json.dumps({"device": device_id, "seq": frame.seq, "chunk": len(frame.chunk),
                              "part": len(frame.part)}).encode()
         message = _HEADER.pack(len(header)) + header + frame.chunk + frame.part
-        if self._pending:
-            return  # the worker has not taken the last frame yet: this one is skipped (latest frame wins)
         try:
             sent = self._frames.send(message)
         except BlockingIOError:
@@ -194,6 +198,7 @@ class _Worker:
             frame = Frame(header["seq"], 0.0, time.time() * 1000, part, chunk)
             device = header["device"]
             self.latest[device] = frame
+            self._report_dropped()  # once a frame, not once a slice
             self._fan_out(device, frame, [sink for sink, followed in self.viewers.values() if followed == device], 0)
 
     def _fan_out(self, device: str, frame: Frame, sinks: list[Sink], start: int) -> None:
@@ -205,7 +210,6 @@ class _Worker:
         rest = start + FAN_OUT_SLICE
         if rest < len(sinks):
             asyncio.get_running_loop().call_soon(self._fan_out, device, frame, sinks, rest)
-        self._report_dropped()
 
     def _read_control(self) -> None:
         while True:

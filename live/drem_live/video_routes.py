@@ -153,12 +153,11 @@ async def _watch(request: web.Request, car: str, racing: Callable[[], Awaitable[
         checked = loop.time()
         while not closed.is_set():
             if feed is None and (feed := feeds.find(watching)) is not None:
-                if worker is None:
-                    feed.attach(sink)
-                elif viewer is None:
-                    viewer = worker.attach(transport, chunked, feed.device_id, closed.set)
-                else:
+                if viewer is not None and worker is not None:
                     worker.follow(viewer, feed.device_id)
+                elif worker is None or (viewer := worker.attach(transport, chunked, feed.device_id,
+                                                                closed.set)) is None:
+                    feed.attach(sink)  # this process writes the frames (no worker, or it could not take the viewer)
             try:  # a car not heard from yet is looked for every 0.1 s; the race is re-read every RECHECK_S
                 async with asyncio.timeout(RECHECK_S if feed is not None else 0.1):
                     await closed.wait()
