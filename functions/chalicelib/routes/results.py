@@ -13,7 +13,6 @@ from chalicelib.core.errors import NotFound
 from chalicelib.core.principals import User
 from chalicelib.domain.results import EventResults, event_results
 from chalicelib.formats.race_export import slug
-from chalicelib.views.results_pdf import render_document
 
 bp = Blueprint(__name__)
 
@@ -38,6 +37,8 @@ def load_results(event_id: str) -> EventResults:
        summary="The event's race summary, podium sheet or certificates as a PDF (summary.pdf, podium.pdf, "
                "certificates.pdf); ?track= for one board")
 def results_pdf(principal: User, event_id: str, file_name: str, query: ResultsQuery) -> Response:
+    from chalicelib.views.results_pdf import render_document  # fpdf2 loads when a PDF is asked for, not at start
+
     results = load_results(event_id)
     body = render_document(results, file_name, query.track or None)
     suffix = f"-track-{query.track}" if query.track else ""
