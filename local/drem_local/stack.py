@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -251,9 +252,29 @@ def port_in_use(host: str, port: int) -> bool:
 
 
 def free_port(host: str = DEFAULT_HOST) -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind((host, 0))
-        return probe.getsockname()[1]
+    """A port nothing listens on now, for a server that must be able to restart on it (tests, benches).
+
+    Drawn below the kernel's ephemeral range: a port the kernel hands out (bind to 0) is also where it puts the local
+    end of outgoing connections, so a server restarted on one could find a client's connection holding it ("Address
+    already in use", seen once in a full test run)."""
+    low, _ = _ephemeral_ports()
+    for _ in range(200):
+        port = random.randrange(max(1024, low - 20000), low)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            try:
+                probe.bind((host, port))
+            except OSError:
+                continue
+            return port
+    raise StackError(f"no free port on {host} below {low}")
+
+
+def _ephemeral_ports() -> tuple[int, int]:
+    try:
+        low, high = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()
+        return int(low), int(high)
+    except (OSError, ValueError):
+        return 32768, 60999  # Linux's default; macOS and Windows start at 49152, above it
 
 
 _NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))

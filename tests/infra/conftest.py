@@ -3,6 +3,7 @@ wheels of requirements/lambda.txt into functions/vendor/ (the only step that dow
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import subprocess
 import sys
@@ -56,40 +57,75 @@ OFFLINE = {"PIP_NO_INDEX": "1", "PIP_INDEX_URL": "http://127.0.0.1:9/simple", "P
            "PIP_FIND_LINKS": "", "UV_OFFLINE": "1"}
 
 
-@pytest.fixture(scope="session")
-def templates(tmp_path_factory, lambda_build):
-    """The storage-only stack and the real app's stack (functions/ as `drem build` left it), synthesised offline."""
+STACKS = ("drem-storage", "drem-app", "drem-cloudfront")
+
+
+def _synthesise(outdir: Path, lambda_build: Path) -> None:
+    """The storage-only stack and the real app's stack (functions/ as `drem build` left it), synthesised offline into
+    `outdir`, in this process (as `cdk synth` runs the CDK app: the tests check it leaves the process untouched)."""
     import aws_cdk as cdk
-    from aws_cdk.assertions import Template
 
     from drem_infra.stack import DremStack
 
     assert not (lambda_build / "requirements.txt").exists(), "Chalice would download requirements at synth"
     import app as app_before_synth  # as any earlier test of the session would have (the synth must not disturb it)
     BEFORE_SYNTH["app"] = app_before_synth
-    work = tmp_path_factory.mktemp("cdk")
+    work = outdir.parent
+    work.mkdir(parents=True, exist_ok=True)
     cwd, saved_env = os.getcwd(), dict(os.environ)
     os.chdir(work)  # the Chalice construct writes chalice.out/ into the working directory
     os.environ.update(OFFLINE)
     try:
-        app = cdk.App(outdir=str(work / "cdk.out"))
-        SYNTH_OUTDIR["app"] = work / "cdk.out"
+        app = cdk.App(outdir=str(outdir))
         # The Chalice construct runs `chalice package` over functions/ (its .chalice/deployments zip cache too) when
         # the stack is built, not at synth: another worker packaging at the same time left a half-written zip
         # ("File is not a zip file"), so the whole construction holds the lock.
         with functions_dir_exclusively():
-            storage_only = DremStack(app, "drem-storage", stage=STAGE)
+            DremStack(app, STACKS[0], stage=STAGE)
             # With the learning booth (`make deploy BOOTH=1`): every infra test, the emulated deploy included, sees it.
-            with_app = DremStack(app, "drem-app", stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL,
-                                 booth=True)
+            DremStack(app, STACKS[1], stage=STAGE, functions_dir=lambda_build, public_url=PUBLIC_URL, booth=True)
             # `make deploy` without a domain: the public URL is CloudFront's, known only once the distribution exists.
-            cloudfront_only = DremStack(app, "drem-cloudfront", stage=STAGE, functions_dir=lambda_build)
+            DremStack(app, STACKS[2], stage=STAGE, functions_dir=lambda_build)
             app.synth()
-        return Template.from_stack(storage_only), Template.from_stack(with_app), Template.from_stack(cloudfront_only)
     finally:
         os.chdir(cwd)
         os.environ.clear()
         os.environ.update(saved_env)
+
+
+def _run_dir(tmp_path_factory) -> Path:
+    """A folder every pytest-xdist worker of this run shares (pytest removes it with the run's other old temp dirs)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+@pytest.fixture(scope="session")
+def synthesised_in_this_process(tmp_path_factory, lambda_build) -> None:
+    """For the tests of what a synth leaves behind in its process: synthesise here unless this process already did."""
+    if "app" not in BEFORE_SYNTH:
+        _synthesise(tmp_path_factory.mktemp("cdk-here") / "cdk.out", lambda_build)
+
+
+@pytest.fixture(scope="session")
+def templates(tmp_path_factory, lambda_build):
+    """The three stacks' templates, synthesised once per test run: the first worker to get here synthesises into a
+    folder all workers share (a synth costs ~20 s of CPU; each worker used to make its own), the others read it."""
+    from aws_cdk.assertions import Template
+
+    shared = _run_dir(tmp_path_factory) / "infra-synth"
+    outdir = shared / "cdk.out"
+    with open(_run_lock_path(), "w") as handle:  # not the functions/ lock: the synth itself takes that one
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        if not (shared / "done").exists():
+            _synthesise(outdir, lambda_build)
+            (shared / "done").touch()
+    SYNTH_OUTDIR["app"] = outdir
+    return tuple(Template.from_json(json.loads((outdir / f"{name}.template.json").read_text())) for name in STACKS)
+
+
+def _run_lock_path() -> Path:
+    _RUN.mkdir(exist_ok=True)
+    return _RUN / "synth.lock"
 
 
 @pytest.fixture(scope="session")

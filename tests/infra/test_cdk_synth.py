@@ -163,7 +163,7 @@ def test_synth_reads_no_local_name_overrides(monkeypatch):
     assert resources.table_name(STAGE, "events") == "my-local-events"
 
 
-def test_synth_leaves_the_apps_modules_and_blueprints_as_they_were(app_template):
+def test_synth_leaves_the_apps_modules_and_blueprints_as_they_were(synthesised_in_this_process):
     # Packaging imports the app; Chalice consumes a blueprint's route options when registering it, so had the synth
     # reused this process's modules, a later `import app` would register POST routes as GET (duplicate routes).
     import sys
@@ -175,7 +175,7 @@ def test_synth_leaves_the_apps_modules_and_blueprints_as_they_were(app_template)
     assert set(before.app.routes["/login"]) == {"GET", "POST"}
 
 
-def test_synth_leaves_this_process_as_it_found_it(app_template):
+def test_synth_leaves_this_process_as_it_found_it(synthesised_in_this_process):
     # The Chalice construct packaged an app in this process; later tests must not see its tokens or its modules.
     import sys
     leaked = {k: v for k, v in os.environ.items() if "${Token[" in v}

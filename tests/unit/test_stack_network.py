@@ -42,3 +42,20 @@ def test_a_named_address_is_bound_and_announced_and_must_belong_to_this_machine(
 def test_a_tls_proxy_url_is_what_people_get():
     config = lan_config(StackConfig(state_dir=Path("s"), app_port=8000), None, "https://drem.example.org/")
     assert config.app_url == "https://drem.example.org" and config.app_host == "0.0.0.0"
+
+
+def test_test_servers_get_ports_no_outgoing_connection_can_hold():
+    # A durable server restarted on its port once found it held by another test's client connection: the kernel puts
+    # the local end of outgoing connections in its ephemeral range, so free_port draws below it, and the port binds.
+    import socket
+
+    from drem_local.stack import _ephemeral_ports, free_port
+
+    low, _ = _ephemeral_ports()
+    with socket.create_server(("127.0.0.1", 0)) as listener, \
+            socket.create_connection(listener.getsockname()) as client:
+        assert client.getsockname()[1] >= low  # where outgoing connections live
+        ports = [free_port() for _ in range(50)]
+    assert all(1024 <= port < low for port in ports)
+    with socket.create_server(("127.0.0.1", ports[0])):
+        pass
