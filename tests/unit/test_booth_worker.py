@@ -55,6 +55,27 @@ def test_without_torch_the_job_fails_saying_what_to_install(alice: ModelsApi) ->
     assert job["status"] == "FAILED" and job["reason"] == NO_TORCH and "train extra" in NO_TORCH
 
 
+def test_pytorch_loads_when_a_visitor_starts_driving_not_on_every_laptop(alice: ModelsApi, monkeypatch: Any) -> None:
+    # drem up starts the trainer on every laptop: loading PyTorch there cost 7.5 s of CPU at every start, booth or not.
+    import drem_sim.learn.train
+
+    warm_ups: list[int] = []
+    monkeypatch.setattr(drem_sim.learn.train, "warm_up", lambda: warm_ups.append(1))
+    said: list[str] = []
+    trainer = Trainer(said.append)
+    for _ in range(3):  # the worker's loop: idle polls of an event nobody drives at
+        assert trainer.work_once() is False
+        trainer.warm_up_once_the_booth_is_in_use()
+    assert warm_ups == [] and not any("PyTorch" in line for line in said)
+
+    alice.call("POST", "/api/drive", {"track_id": "drem_oval"})  # a visitor starts their first drive
+    for _ in range(3):
+        trainer.work_once()
+        trainer.warm_up_once_the_booth_is_in_use()
+    assert warm_ups == [1]
+    assert any("a visitor is driving; loading PyTorch" in line for line in said)
+
+
 class Job:
     def __init__(self, epoch: int, loss: float | None) -> None:
         self.epoch, self.loss = epoch, loss

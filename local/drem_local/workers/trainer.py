@@ -109,6 +109,8 @@ class Trainer:
         self.training = services.training_service()
         self.runs = self.training.runs
         self.can_train = torch_installed()
+        self.booth_in_use = False  # a visitor has driven (a run exists): training may be asked for from now on
+        self.warmed_up = False
 
     # -- the loop ----------------------------------------------------------------------------------------------------
 
@@ -116,14 +118,30 @@ class Trainer:
         """Do one piece of work (a training job, else one autonomous run); False when there was nothing to do."""
         job = self.training.claim_next()
         if job is not None:
+            self.booth_in_use = True
             self.train(job)
+            self.warmed_up = self.can_train  # training loaded all a warm-up would
             return True
-        run = next((r for r in sorted(self.runs.store.all_runs(), key=lambda r: r.created_at)
-                    if r.status.value == "QUEUED"), None)
+        runs = self.runs.store.all_runs()
+        self.booth_in_use = self.booth_in_use or bool(runs)
+        run = next((r for r in sorted(runs, key=lambda r: r.created_at) if r.status.value == "QUEUED"), None)
         if run is not None:
             self.drive(run)
             return True
         return False
+
+    def warm_up_once_the_booth_is_in_use(self) -> None:
+        """Load PyTorch (~800 modules and a first optimiser step: 5-7 s of CPU, ~300 MB) when a visitor starts their
+        first drive, minutes before they can press Train, so no visitor waits for it; an event that never uses the
+        booth never pays it (drem up starts this worker on every laptop)."""
+        if self.warmed_up or not self.can_train or not self.booth_in_use:
+            return
+        self.say("trainer: a visitor is driving; loading PyTorch so their first training starts at once")
+        import drem_sim.learn.pipeline  # noqa: F401
+        from drem_sim.learn.train import warm_up
+
+        warm_up()
+        self.warmed_up = True
 
     # -- training ----------------------------------------------------------------------------------------------------
 
@@ -319,11 +337,6 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     trainer = Trainer(say)
-    if trainer.can_train:  # PyTorch takes seconds to load: once here, not in the first visitor's wait
-        import drem_sim.learn.pipeline  # noqa: F401
-        from drem_sim.learn.train import warm_up
-
-        warm_up()
     say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
     # Jobs a dead trainer left RUNNING (or this one, when storage went away under it) go back to the queue once
@@ -342,6 +355,7 @@ def main(argv: list[str] | None = None) -> int:
             requeued = False  # the job it had (if any) is RUNNING with nobody training it: queued again
         if args.once and not busy:
             return 0
+        trainer.warm_up_once_the_booth_is_in_use()
         if not busy:
             deadline = time.monotonic() + args.poll
             while not stopping and time.monotonic() < deadline:
