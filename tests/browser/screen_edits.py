@@ -23,11 +23,30 @@ def raced_event(live_stack: Any, app_url: str, staff: str, racer: str, name: str
     return str(event_id)
 
 
+# Each swap of a live region: whether the stream pushed it (live.js passes dremPushedAt with a pushed fragment) or a
+# poll brought it, and what the page then showed.
+RECORD_SWAPS = """window.dremSwaps = [];
+document.addEventListener("htmx:afterSwap", function (event) {
+  window.dremSwaps.push({pushed: !!event.detail && "dremPushedAt" in event.detail, text: document.body.innerText});
+});"""
+
+
+def first_shown_by_push(page: Any, text: str, polls: list[str]) -> None:
+    """The first swap that showed `text` on `page` came by push. A poll or two of a loaded machine's stream reconnect
+    is no failure (the stream is what is tested, and what it brought first)."""
+    swaps = page.evaluate("() => window.dremSwaps")
+    first = next((swap for swap in swaps if text in swap["text"]), None)
+    assert first is not None and first["pushed"], (
+        f"{text!r} first came by {'no swap' if first is None else 'poll'}; swaps pushed: "
+        f"{[swap['pushed'] for swap in swaps]}, polls: {polls}")
+
+
 def pushed_and_polled(chromium: Any, url: str, kind: str, browser_errors: Any,
                       polled_viewport: dict[str, int]) -> tuple[Any, list[str], Any]:
     """`url` open twice: on the live server's stream (with the app polls it makes, which should be none), and with its
     stream refused (503) so it polls the app instead."""
     pushed = chromium.new_context(viewport=BIG_SCREEN).new_page()
+    pushed.add_init_script(RECORD_SWAPS)
     polls: list[str] = []
     pushed.on("request", lambda request: polls.append(request.url) if "/live?" in request.url else None)
     pushed.goto(url)
