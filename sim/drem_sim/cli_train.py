@@ -70,6 +70,16 @@ def run(args: argparse.Namespace) -> int:
         print("drem train: give --runs (recorded run folders) or --tracks (the demonstrator records them)",
               file=sys.stderr)
         return 2
+    if args.balance_cap < 1.0:
+        print("drem train: --balance-cap is at least 1 (a multiple of the commonest steering bin's weight)",
+              file=sys.stderr)
+        return 2
+    if args.drift and not args.tracks:
+        print("drem train: --drift records recovery laps on --tracks; give --tracks", file=sys.stderr)
+        return 2
+    if args.drift < 0 or args.drift > 30 or args.drift_laps < 0:
+        print("drem train: --drift is 0..30 degrees and --drift-laps at least 0", file=sys.stderr)
+        return 2
     runs: list[str | Path] = []
     for run in args.runs or []:
         path = Path(run)
@@ -86,16 +96,6 @@ def run(args: argparse.Namespace) -> int:
         augmentation = Augmentation.from_names(args.augment.split(",")) if args.augment else None
     except DatasetError as error:
         print(f"drem train: {error}", file=sys.stderr)
-        return 2
-    if args.balance_cap < 1.0:
-        print("drem train: --balance-cap is at least 1 (a multiple of the commonest steering bin's weight)",
-              file=sys.stderr)
-        return 2
-    if args.drift and not args.tracks:
-        print("drem train: --drift records recovery laps on --tracks; give --tracks", file=sys.stderr)
-        return 2
-    if args.drift < 0 or args.drift > 30 or args.drift_laps < 0:
-        print("drem train: --drift is 0..30 degrees and --drift-laps at least 0", file=sys.stderr)
         return 2
     no_augment = args.no_augment or (args.augment or "").strip() == "none"
     config = TrainConfig(epochs=args.epochs, seed=args.seed, batch_size=args.batch_size,
