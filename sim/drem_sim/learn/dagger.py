@@ -17,7 +17,8 @@ ever show the car well off the line and pointing the wrong way, which is exactly
 hairpin finds itself. In a recovery lap the demonstrator drives, but now and then, for a fraction of a second, its
 steering is pushed `drift_deg` to one side (the car's heading and line drift off), then it steers back; every
 frame is labelled with the demonstrator's own action for the state the car is in, so the drifts teach the
-corrections. A push is likelier where the track bends (that is where the model's mistakes happen).
+corrections. A push is likelier where the track bends, and there it is outwards (that is where a model's mistakes
+put the car: wide, facing the outer border).
 
 A DAgger (or recovery) run folder is an ordinary run folder (driver `dagger-round-<r>` or `recovery`): its
 `steering_angle`/`speed` are the demonstrator's labels and `offtrack` is false (the label did not leave the track,
@@ -144,7 +145,11 @@ def record_recovery_laps(directions: Sequence[TrackDirection], root: Path, laps:
                 in_bend = bool(bend[int(params["closest_waypoints"][0]) % len(bend)])
                 gap_left -= step * (4.0 if in_bend else 1.0)
                 if gap_left <= 0:
-                    push = drift_deg * (1.0 if rng.random() < 0.5 else -1.0)
+                    # In a bend the push is outwards (against the demonstrator's steering): a car gone wide, facing
+                    # the outer border with the exit out of the camera's view, is the state a model must recover
+                    # from; an inward push would mostly be lost to the steering limit anyway.
+                    outward = -1.0 if label["steering_angle"] > 0 else 1.0
+                    push = drift_deg * (outward if in_bend else (1.0 if rng.random() < 0.5 else -1.0))
                     push_left, gap_left = float(rng.uniform(*DRIFT_SECONDS)), float(rng.uniform(*DRIFT_GAP_SECONDS))
             executed = dict(label)
             if push_left > 0:
