@@ -30,7 +30,7 @@ def _lineage(archive: Path) -> dict:
 
 
 def test_drift_records_recovery_laps_labelled_with_the_demonstrators_correction(tmp_path: Path) -> None:
-    done = _drem("train", "--tracks", "drem_oval", "--demo-laps", "1", "--drift", "12", "--drift-laps", "1",
+    done = _drem("train", "--tracks", "drem_chicane", "--demo-laps", "1", "--drift", "12", "--drift-laps", "1",
                  "--balance-steering", "--balance-cap", "4", "--epochs", "1", "--out", str(tmp_path / "m"),
                  "--name", "recovery", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
@@ -45,6 +45,10 @@ def test_drift_records_recovery_laps_labelled_with_the_demonstrators_correction(
     # The car was really pushed aside for a good share of the lap, and what it learns is the unpushed action.
     assert len(pushed) > len(rows) // 10
     assert all(abs(r["executed_steering_angle"] - r["steering_angle"]) <= 12.0 + 1e-3 for r in rows)
+    # In the chicane's tight bends the pushes send the car wide (against the demonstrator's steering).
+    in_bends = [r for r in pushed if abs(r["steering_angle"]) >= 15.0]
+    outwards = [r for r in in_bends if (r["executed_steering_angle"] - r["steering_angle"]) * r["steering_angle"] < 0]
+    assert in_bends and len(outwards) >= 0.8 * len(in_bends)
 
     lineage = _lineage(tmp_path / "m" / "recovery.tar.gz")
     assert lineage["dagger"]["recovery"] == {"drift_deg": 12.0, "laps_per_track": 1}
