@@ -17,7 +17,7 @@ track (`--racer-track`, its own way round only; mirrored frames stand in for the
 >= 80 % of laps completed on that track in BOTH directions; its held-out figures are reported beside it (no goal).
 
     .venv/bin/python bench/lfd.py                 # the goal's configuration (about 12 minutes on a quiet machine)
-    .venv/bin/python bench/lfd.py --reduced       # a 2-3 minute smoke version; it can never report the goal met
+    .venv/bin/python bench/lfd.py --reduced       # a smoke version (seconds); it can never report the goal met
     .venv/bin/python bench/lfd.py --hold-out hamption_pro,red_star_pro --dagger-rounds 3 --no-racer
 """
 from __future__ import annotations
