@@ -27,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--augment", default=None, metavar="LIST",
                         help="comma-separated augmentations: brightness,noise,flip,shift,blur (default "
                              "brightness,noise,flip); 'none' = --no-augment")
+    parser.add_argument("--balance-steering", action="store_true",
+                        help="draw each epoch's frames evenly over |steering| (3-degree bins), so a long track's "
+                             "straights do not drown the few frames of its hairpins")
+    parser.add_argument("--balance-cap", type=float, default=8.0, metavar="X",
+                        help="with --balance-steering: a frame is drawn at most X times as often as one of the "
+                             "commonest bin (default 8)")
     dagger = parser.add_argument_group("demonstrations and DAgger rounds on chosen tracks")
     dagger.add_argument("--tracks", action="append", metavar="SPEC",
                         help="train on these tracks (NAME, NAME:reverse, all; repeat or comma-separate): the "
@@ -38,6 +44,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                      "demonstrator labels (default 0)")
     dagger.add_argument("--demo-laps", type=int, default=2, help="demonstrator laps per track and direction (max 10)")
     dagger.add_argument("--noise", type=float, default=6.0, help="demonstrator steering noise in degrees")
+    dagger.add_argument("--drift", type=float, default=0.0, metavar="DEG",
+                        help="also record recovery laps: the demonstrator's steering is pushed DEG degrees to one "
+                             "side now and then, every frame labelled with its correction (default 0: none)")
+    dagger.add_argument("--drift-laps", type=int, default=1, help="recovery laps per track and direction (--drift)")
     dagger.add_argument("--dagger-laps", type=int, default=1,
                         help="laps the model drives per track and direction per round")
     dagger.add_argument("--round-epochs", type=int, default=4,
@@ -60,6 +70,16 @@ def run(args: argparse.Namespace) -> int:
         print("drem train: give --runs (recorded run folders) or --tracks (the demonstrator records them)",
               file=sys.stderr)
         return 2
+    if args.balance_cap < 1.0:
+        print("drem train: --balance-cap is at least 1 (a multiple of the commonest steering bin's weight)",
+              file=sys.stderr)
+        return 2
+    if args.drift and not args.tracks:
+        print("drem train: --drift records recovery laps on --tracks; give --tracks", file=sys.stderr)
+        return 2
+    if args.drift < 0 or args.drift > 30 or args.drift_laps < 0:
+        print("drem train: --drift is 0..30 degrees and --drift-laps at least 0", file=sys.stderr)
+        return 2
     runs: list[str | Path] = []
     for run in args.runs or []:
         path = Path(run)
@@ -80,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     no_augment = args.no_augment or (args.augment or "").strip() == "none"
     config = TrainConfig(epochs=args.epochs, seed=args.seed, batch_size=args.batch_size,
                          learning_rate=args.learning_rate, num_threads=args.threads, augment=not no_augment,
-                         augmentation=augmentation)
+                         augmentation=augmentation, balance_steering=args.balance_steering,
+                         balance_cap=args.balance_cap)
     try:
         if args.tracks:
             return _run_dagger(args, runs, config)
@@ -117,7 +138,8 @@ def _run_dagger(args: argparse.Namespace, runs: list, config) -> int:  # noqa: A
         return 2
     dagger = DaggerConfig(train_tracks=kept, eval_tracks=held, rounds=args.dagger_rounds, demo_laps=args.demo_laps,
                           demo_noise_deg=args.noise, dagger_laps=args.dagger_laps, first_epochs=args.epochs,
-                          round_epochs=args.round_epochs, eval_laps=args.eval_laps, seed=args.seed)
+                          round_epochs=args.round_epochs, eval_laps=args.eval_laps, seed=args.seed,
+                          drift_deg=args.drift, drift_laps=args.drift_laps)
     print(f"training on  {', '.join(d.label for d in kept)}")
     print(f"held out     {', '.join(d.label for d in held) or '-'}")
     reports = run_dagger(dagger, args.out, args.name, config, seed_runs=list(runs), progress=sys.stderr)

@@ -3,8 +3,8 @@
 Behaviour cloning only sees the states the demonstrator visits; a model that drifts a little wide meets
 frames it never learned from and drifts further. DAgger (Ross, Gordon & Bagnell 2011) closes that gap:
 
-    round 0   the demonstrator laps every training track and direction (with steering noise) → runs
-              train model 0 on them
+    round 0   the demonstrator laps every training track and direction (with steering noise) → runs;
+              with `drift_deg`, recovery laps too (below); train model 0 on them
     round r   model r-1 drives every training track and direction (with probability beta_r per decision
               the demonstrator's action is executed instead, beta_r = beta · 0.5^(r-1)); every frame is
               labelled with the demonstrator's action for the state the *model* reached → more runs;
@@ -12,9 +12,18 @@ frames it never learned from and drifts further. DAgger (Ross, Gordon & Bagnell 
     each round the model is evaluated on the held-out tracks (never trained on), so the rounds show
     whether it generalises, not only whether it fits.
 
-A DAgger run folder is an ordinary run folder (driver `dagger-round-<r>`): its `steering_angle`/`speed` are
-the demonstrator's labels and `offtrack` is false (the label did not leave the track, the executed action may
-have: `executed_steering_angle`, `executed_speed` and `model_offtrack` keep what really happened).
+Recovery laps (`drift_deg` > 0): noise of a few degrees a frame averages out, so the demonstrator's runs hardly
+ever show the car well off the line and pointing the wrong way, which is exactly where a model that misjudged a
+hairpin finds itself. In a recovery lap the demonstrator drives, but now and then, for a fraction of a second, its
+steering is pushed `drift_deg` to one side (the car's heading and line drift off), then it steers back; every
+frame is labelled with the demonstrator's own action for the state the car is in, so the drifts teach the
+corrections. A push is likelier where the track bends, and there it is outwards (that is where a model's mistakes
+put the car: wide, facing the outer border).
+
+A DAgger (or recovery) run folder is an ordinary run folder (driver `dagger-round-<r>` or `recovery`): its
+`steering_angle`/`speed` are the demonstrator's labels and `offtrack` is false (the label did not leave the track,
+the executed action may have: `executed_steering_angle`, `executed_speed` and `model_offtrack` keep what really
+happened).
 """
 from __future__ import annotations
 
@@ -47,6 +56,8 @@ class DaggerConfig:
     round_epochs: int = 4
     eval_laps: int = 2
     seed: int = 0
+    drift_deg: float = 0.0  # > 0: round 0 also records `drift_laps` recovery laps per track and direction
+    drift_laps: int = 1
 
 
 @dataclass
@@ -93,6 +104,66 @@ def record_demonstrations(directions: Sequence[TrackDirection], root: Path, laps
             runs.append(record_run(RaceEnv(track), _teacher_policy(teacher), root, laps=1,
                                    driver="demonstrator", seed=run_seed))
     _bar(progress, "round 0 recording", len(directions), len(directions), "done")
+    return runs
+
+
+DRIFT_SECONDS = (0.2, 0.7)  # how long one push lasts (uniform)
+DRIFT_GAP_SECONDS = (0.6, 2.5)  # driving clean between pushes on a straight (uniform); a quarter of it in a bend
+
+
+def record_recovery_laps(directions: Sequence[TrackDirection], root: Path, laps: int, drift_deg: float,
+                         seed: int, progress: TextIO | None = None) -> list[Path]:
+    """One recovery run of `laps` laps per track and direction: the demonstrator drives with pushes of
+    `drift_deg` on its steering now and then, every frame labelled with its unpushed action (the correction)."""
+    from drem_sim.demonstrator import Demonstrator
+    from drem_sim.env import RaceEnv
+    from drem_sim.runs import RunRecorder, whole_lap_figures
+
+    runs = []
+    for number, direction in enumerate(directions):
+        _bar(progress, "round 0 recovery laps", number, len(directions), direction.label)
+        track = direction.load()
+        env = RaceEnv(track)
+        teacher = Demonstrator(track)
+        bend = teacher.curvature() > 1.0  # tighter than 1 m radius: where pushes come four times as often
+        run_seed = seed * 1000 + 700 + number
+        rng = np.random.default_rng(run_seed)
+        recorder = RunRecorder(root, track.track_id, direction="reverse" if track.is_reversed else "forward",
+                               driver="recovery", seed=run_seed, camera=env.camera.config if env.camera else None,
+                               extra={"track_direction": track.direction, "decision_hz": env.config.decision_hz,
+                                      "recovery": {"drift_deg": drift_deg}})
+        obs, info = env.reset(seed=run_seed)
+        params = info["params"]
+        step = 1.0 / env.config.decision_hz
+        push, push_left, gap_left = 0.0, 0.0, float(rng.uniform(*DRIFT_GAP_SECONDS))
+        for _ in range(int(laps * SECONDS_PER_LAP_LIMIT * env.config.decision_hz)):
+            assert obs is not None  # the env observes (its camera makes the frames)
+            label = teacher.act(params)
+            if push_left > 0:
+                push_left -= step
+            else:
+                in_bend = bool(bend[int(params["closest_waypoints"][0]) % len(bend)])
+                gap_left -= step * (4.0 if in_bend else 1.0)
+                if gap_left <= 0:
+                    # In a bend the push is outwards (against the demonstrator's steering): a car gone wide, facing
+                    # the outer border with the exit out of the camera's view, is the state a model must recover
+                    # from; an inward push would mostly be lost to the steering limit anyway.
+                    outward = -1.0 if label["steering_angle"] > 0 else 1.0
+                    push = drift_deg * (outward if in_bend else (1.0 if rng.random() < 0.5 else -1.0))
+                    push_left, gap_left = float(rng.uniform(*DRIFT_SECONDS)), float(rng.uniform(*DRIFT_GAP_SECONDS))
+            executed = dict(label)
+            if push_left > 0:
+                limit = teacher.car.max_steering_deg
+                executed["steering_angle"] = max(-limit, min(limit, label["steering_angle"] + push))
+            t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
+            next_obs, params, terminated, truncated, _info = env.step(executed)
+            recorder.add_labelled(obs, label, executed, seen, t_ms=t_ms, lap=lap,
+                                  executed_offtrack=bool(params["is_offtrack"]))
+            obs = next_obs
+            if env.laps >= laps or terminated or truncated:
+                break
+        runs.append(recorder.close(**whole_lap_figures(env)))
+    _bar(progress, "round 0 recovery laps", len(directions), len(directions), "done")
     return runs
 
 
@@ -147,6 +218,11 @@ def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any
                        f"track direction(s)")
         runs += record_demonstrations(config.train_tracks, runs_root / "round-0", config.demo_laps,
                                       config.demo_noise_deg, config.seed, progress)
+    if config.drift_deg > 0 and config.drift_laps > 0:
+        _say(progress, f"round 0: recovery laps, {config.drift_laps} lap(s) with {config.drift_deg:g} degree pushes "
+                       f"on each of {len(config.train_tracks)} track direction(s)")
+        runs += record_recovery_laps(config.train_tracks, runs_root / "round-0-recovery", config.drift_laps,
+                                     config.drift_deg, config.seed, progress)
     scale = load_snapshot(runs).scale  # fixed from round 0 on: later rounds' targets keep their meaning
     reports: list[RoundReport] = []
     state = None
@@ -167,6 +243,8 @@ def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any
                               "held_out_tracks": [d.label for d in config.eval_tracks],
                               "demo_laps_per_track": config.demo_laps, "demo_noise_deg": config.demo_noise_deg,
                               "dagger_laps_per_track": config.dagger_laps, "beta": config.beta,
+                              "recovery": ({"drift_deg": config.drift_deg, "laps_per_track": config.drift_laps}
+                                           if config.drift_deg > 0 else None),
                               "previous_rounds": [r.as_dict() for r in reports]}}
         trained = train_to_archive(runs, out_dir / f"round-{round_number}", name,
                                    replace(train_config, epochs=epochs, seed=config.seed + round_number),

@@ -61,6 +61,7 @@ def train_to_archive(runs: Sequence[str | Path], out_dir: Path, name: str, confi
         "learning_rate": config.learning_rate,
         "augment": config.augment,
         "augmentation": aug.as_dict() if (aug := config.effective_augmentation) is not None else None,
+        "balance_steering": {"cap": config.balance_cap} if config.balance_steering else None,
         "train_frames": result.train_frames,
         "validation_frames": result.validation_frames,
         "train_losses": [round(v, 6) for v in result.train_losses],

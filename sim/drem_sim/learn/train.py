@@ -16,6 +16,7 @@ from drem_sim.learn.dataset import ActionScale, Augmentation, DatasetSnapshot, a
 from drem_sim.learn.model import BehaviourCloningCNN
 
 STEERING_LOSS_WEIGHT = 2.0  # steering errors crash the car; speed errors only cost time
+STEERING_BIN_DEG = 3.0  # --balance-steering counts frames per 3 degrees of |steering| (mirroring makes sign moot)
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,8 @@ class TrainConfig:
     flip: bool = True
     augmentation: Augmentation | None = None  # None: brightness, noise and (if flip) mirroring, as before
     max_seconds: float | None = None  # stop early (after a whole batch) when a time budget is spent
+    balance_steering: bool = False  # draw each epoch's frames so sharp-steer frames are not drowned by straights
+    balance_cap: float = 8.0  # a frame is drawn at most this many times as often as one of the commonest bin
 
     @property
     def effective_augmentation(self) -> Augmentation | None:
@@ -94,9 +97,11 @@ def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
     weights = torch.tensor([STEERING_LOSS_WEIGHT, 1.0])
     started = time.monotonic()
     batches_per_epoch = max(1, int(np.ceil(len(train_idx) / config.batch_size)))
+    draw = steering_balance(snapshot.steering[train_idx], config.balance_cap) if config.balance_steering else None
     for epoch in range(1, config.epochs + 1):
         model.train()
-        order = rng.permutation(train_idx)
+        # Balanced: as many draws as frames (an epoch costs the same), with replacement, rare bins drawn more often.
+        order = rng.choice(train_idx, size=len(train_idx), p=draw) if draw is not None else rng.permutation(train_idx)
         total, seen = 0.0, 0
         for batch_number, start in enumerate(range(0, len(order), config.batch_size), 1):
             batch = order[start:start + config.batch_size]
@@ -128,6 +133,18 @@ def train_behaviour_cloning(snapshot: DatasetSnapshot, config: TrainConfig,
     model.eval()
     result.seconds = time.monotonic() - started
     return result
+
+
+def steering_balance(steering_deg: np.ndarray, cap: float) -> np.ndarray:
+    """Per-frame draw probabilities that even out |steering| bins: a long track is mostly straights, so the few
+    frames of a hairpin's full lock would otherwise be a rounding error in the loss. A frame's weight is the most
+    common bin's count over its own bin's count, at most `cap` (a bin of three frames must not be learned by heart)."""
+    if cap < 1.0:
+        raise ValueError("the balance cap is a multiple of the commonest bin's weight: at least 1")
+    bins = np.floor(np.abs(np.asarray(steering_deg, dtype=np.float64)) / STEERING_BIN_DEG).astype(np.int64)
+    counts = np.bincount(bins)
+    weights = np.minimum(counts.max() / counts[bins], cap)
+    return weights / weights.sum()
 
 
 def evaluate_loss(model: nn.Module, snapshot: DatasetSnapshot, indices: np.ndarray,
