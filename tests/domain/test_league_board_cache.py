@@ -53,7 +53,8 @@ def push(service: LeagueService, name: str, best_s: float, model_id: str | None 
     body = SubmissionInput(
         racer=name, track=TRACK, model_name=f"{name}-model", layout="drfc", sensor=["FRONT_FACING_CAMERA"],
         algorithm="clipped_ppo", action_space_type="discrete", action_space="10 actions", hyperparameters={},
-        training_episodes=10, top_speed_m_s=2.0, evidence_digest=hashlib.sha256(f"{name}-{best_s}".encode()).hexdigest(),
+        training_episodes=10, top_speed_m_s=2.0,
+        evidence_digest=hashlib.sha256(f"{name}-{best_s}".encode()).hexdigest(),
         model_id=model_id, trials=[EvaluationTrial(trial=1, time_s=best_s, completion_pct=100)])
     service.push(User(sub=f"{name}-sub", username=name, groups=frozenset({"racer"})), TRACK, body)
 
