@@ -10,7 +10,9 @@ event's track type, then re-drives it on the board's track, 3 laps). Console mod
 model: the shipped sample (its ONNX graph re-tagged per sample so each upload is its own model). Meanwhile a
 reader GETs the public board (/api/league/{track}) back to back, in a process of its own (the bench's own work
 cannot slow it through the GIL); the same reader process runs alone first (idle). The logs uploads are packed before
-the clock runs.
+the clock runs. Besides the RESULT line it prints the board's latency per step of a push (model upload, logs push,
+until verified) and once more after the worker stopped (the same board and entries, nothing verifying), to tell what
+slows the board from what the entries cost.
 
 Goal (issue #32): p95 of push -> ranked verified <= 60 s, and the board's GET p95 while verifying within 1.2x of
 idle.
@@ -45,6 +47,11 @@ def board_get_ms(url: str) -> float:
     if status != 200:
         raise SystemExit(f"the public board answered {status}")
     return (time.perf_counter() - started) * 1000
+
+
+def timed_board_get(url: str) -> tuple[float, float]:
+    """(when it was sent, on the machine's monotonic clock that every process shares; its latency in ms)."""
+    return time.monotonic(), board_get_ms(url)
 
 
 def _get(url: str) -> tuple[int, str]:
@@ -111,7 +118,8 @@ class BoardReader:
         """GETs back to back until `stop`."""
         self._commands.send("until stopped")
 
-    def stop(self) -> list[float]:
+    def stop(self) -> list[tuple[float, float]]:
+        """Each GET since `start`: (when it was sent, its latency in ms)."""
         self._commands.send("stop")
         return list(self._commands.recv())
 
@@ -127,7 +135,7 @@ def _read_board(url: str, commands: Any) -> None:
             continue
         samples = []
         while not commands.poll():
-            samples.append(board_get_ms(url))
+            samples.append(timed_board_get(url))
         commands.recv()  # "stop"
         commands.send(samples)
 
@@ -149,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     load_before = _stack.machine_load()
     timings: dict[str, list[float]] = {"console": [], "drem": []}
     outcomes: list[str] = []
+    steps: list[tuple[str, float, float]] = []  # (step of a push, began, ended): the board's latency per step
     with _stack.bench_stack() as stack:
         bearer = "Bearer " + _stack.call(stack.url, "POST", "/api/auth/token", {
             "username": stack.admin_username, "password": stack.admin_password})["access_token"]
@@ -171,19 +180,26 @@ def main(argv: list[str] | None = None) -> int:
                         started = time.monotonic()
                         model_id = upload(stack.url, stack.storage_url, bearer, f"{name}.tar.gz",
                                           models[kind][sample])
+                        uploaded = time.monotonic()
                         push(stack.url, bearer, logs[index - 1], model_id, name)
+                        pushed = time.monotonic()
                         outcome = wait_verified(stack.url, name)
+                        steps += [(f"{kind} model upload", started, uploaded), (f"{kind} logs push", uploaded, pushed),
+                                  (f"{kind} until verified", pushed, time.monotonic())]
                         timings[kind].append(time.monotonic() - started)
                         outcomes.append(outcome)
                         print(f"  {name}: {outcome} after {timings[kind][-1]:.1f} s", flush=True)
                         if kind == "console":
                             _stack.call(stack.url, "DELETE", f"/api/models/{model_id}", authorization=bearer)
             finally:
-                busy = reader.stop()
+                busy_timed = reader.stop()
         finally:
-            reader.close()
             worker.terminate()
             worker.wait(30)
+            # The same board, its entries shown, nothing verifying: what the entries alone cost a reader.
+            quiet_again = reader.read(2000)
+            reader.close()
+    busy = [ms for _, ms in busy_timed]
     every = timings["console"] + timings["drem"]
     verified = sum(outcome == "verified" for outcome in outcomes)
     idle_p95, busy_p95 = _stack.percentile(idle, 95), _stack.percentile(busy, 95)
@@ -194,6 +210,16 @@ def main(argv: list[str] | None = None) -> int:
               f"p95 {_stack.percentile(values, 95):6.1f} s  ({len(values)} samples)")
     print(f"board GET: idle p95 {idle_p95:.1f} ms ({len(idle)}), while verifying p95 {busy_p95:.1f} ms "
           f"({len(busy)}), ratio {ratio:.2f}x")
+    print(f"board GET with the entries shown and nothing verifying: p50 {_stack.percentile(quiet_again, 50):.1f} ms "
+          f"p95 {_stack.percentile(quiet_again, 95):.1f} ms ({len(quiet_again)})")
+    print(f"board GET per step of a push (idle p50 {_stack.percentile(idle, 50):.1f} ms):")
+    for step in dict.fromkeys(name for name, _, _ in steps):
+        during = [ms for sent, ms in busy_timed
+                  if any(name == step and began <= sent < ended for name, began, ended in steps)]
+        seconds = sum(ended - began for name, began, ended in steps if name == step)
+        if during:
+            print(f"  {step:26s} {seconds:6.1f} s  p50 {_stack.percentile(during, 50):6.1f} ms  "
+                  f"p95 {_stack.percentile(during, 95):6.1f} ms  ({len(during)} GETs)")
     met = verified == len(outcomes) and _stack.percentile(every, 95) <= GOAL_S and ratio <= GOAL_RATIO
     console_p95, drem_p95 = _stack.percentile(timings["console"], 95), _stack.percentile(timings["drem"], 95)
     print(f"RESULT league: verified={verified}/{len(outcomes)} console_p95={console_p95:.1f}s drem_p95={drem_p95:.1f}s "

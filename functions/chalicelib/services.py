@@ -310,8 +310,12 @@ def assignment_signals() -> AssignmentSignals:
 
 
 def league_service(settings: Settings | None = None) -> LeagueService:
+    """Boards are kept per process for a second (domain/league_board_cache.py); a write through it drops them."""
+    from chalicelib.domain.league_board_cache import PROCESS_LEAGUE_BOARDS
+
     settings = settings or get_settings()
-    return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")))
+    return LeagueService(DynamoLeagueStore(clients.dynamodb(), settings.table("league")),
+                         boards=PROCESS_LEAGUE_BOARDS)
 
 
 def league_verify_queue(settings: Settings | None = None) -> ScrutineerQueue | None:

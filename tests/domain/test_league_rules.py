@@ -12,6 +12,7 @@ import pytest
 from chalicelib.core.errors import Forbidden, InvalidInput, NotFound
 from chalicelib.core.principals import User
 from chalicelib.domain.league import (
+    Board,
     BoardQuery,
     EvaluationTrial,
     EvidenceTaken,
@@ -22,6 +23,7 @@ from chalicelib.domain.league import (
     SubmissionInput,
     VerifiedDrive,
 )
+from chalicelib.domain.league_board_cache import LeagueBoardCache
 from chalicelib.domain.league_tracks import RegisteredTrack
 from tests.in_memory.league import InMemoryLeagueStore
 
@@ -61,11 +63,15 @@ def _digest(name: str, laps: list[float]) -> str:
     return hashlib.sha256(repr((name, laps)).encode()).hexdigest()
 
 
-@pytest.fixture
-def league() -> League:
+@pytest.fixture(params=["read every time", "boards kept"])
+def league(request: pytest.FixtureRequest) -> League:
+    """Each rule holds with the app's board cache too: its clock never moves, so a board read after a write shows the
+    write only because the write dropped it (domain/league_board_cache.py)."""
     store = InMemoryLeagueStore()
     ticks = iter(range(10, 60))
-    service = LeagueService(store, clock=lambda: f"2026-05-14T10:00:{next(ticks):02d}.000000Z")
+    boards: LeagueBoardCache[Board] | None = (
+        LeagueBoardCache(monotonic=lambda: 0.0) if request.param == "boards kept" else None)
+    service = LeagueService(store, clock=lambda: f"2026-05-14T10:00:{next(ticks):02d}.000000Z", boards=boards)
     return League(service, store)
 
 

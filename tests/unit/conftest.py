@@ -51,6 +51,7 @@ def _reset_app_caches() -> None:
     from chalicelib.auth import rate_limits
     from chalicelib.auth.revocation import REVOKED
     from chalicelib.auth.tokens import JWKS, PINNED
+    from chalicelib.domain.league_board_cache import PROCESS_LEAGUE_BOARDS
     from chalicelib.domain.shown_names_cache import PROCESS_SHOWN_NAMES
     from chalicelib.settings import get_settings
     from chalicelib.storage.clients import reset_clients
@@ -58,6 +59,7 @@ def _reset_app_caches() -> None:
     get_settings.cache_clear()
     reset_clients()
     PROCESS_SHOWN_NAMES.clear()
+    PROCESS_LEAGUE_BOARDS.clear()
     JWKS.clear()
     PINNED.clear()
     REVOKED.clear()

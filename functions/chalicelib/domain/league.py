@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from chalicelib.core.errors import Conflict, Forbidden, InvalidInput, NotFound
 from chalicelib.core.principals import Principal, Role
+from chalicelib.domain.league_board_cache import LeagueBoardCache
 from chalicelib.domain.league_tracks import DREM_TRACK_LENGTHS_M, RegisteredTrack, TrackSet
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
@@ -214,14 +215,19 @@ class BoardQuery(BaseModel):
 
 
 class RankedEntry(BaseModel):
+    model_config = ConfigDict(frozen=True)  # boards are shared between requests (domain/league_board_cache.py)
+
     rank: int
     entry: BoardEntry
 
 
 class Board(BaseModel):
+    # Boards are shared between requests (domain/league_board_cache.py): none may be changed by the one that reads it.
+    model_config = ConfigDict(frozen=True)
+
     track: str
     sort: SortKey
-    entries: list[RankedEntry]
+    entries: tuple[RankedEntry, ...]
     racer_names: dict[str, str] = Field(
         default_factory=dict, description="{sign-in name: the racer's display name, told apart where two collide}")
 
@@ -256,7 +262,8 @@ class LeaguePolicy(BaseModel):
     self_reported: SelfReported = SelfReported.SHOWN
 
 
-def rank(entries: list[BoardEntry], sort: SortKey, policy: SelfReported = SelfReported.SHOWN) -> list[RankedEntry]:
+def rank(entries: list[BoardEntry], sort: SortKey,
+         policy: SelfReported = SelfReported.SHOWN) -> tuple[RankedEntry, ...]:
     """Racers with a completed lap first, by the chosen time (ties: the other time, then who submitted first);
     then racers without one, by average completion. With BELOW_VERIFIED, every verified entry comes first."""
     def key(entry: BoardEntry) -> tuple[Any, ...]:
@@ -266,7 +273,7 @@ def rank(entries: list[BoardEntry], sort: SortKey, policy: SelfReported = SelfRe
         if primary is None:
             return (tier, 1, -entry.average_completion_pct, 0.0, entry.submitted_at)
         return (tier, 0, primary, secondary or 0.0, entry.submitted_at)
-    return [RankedEntry(rank=index, entry=entry) for index, entry in enumerate(sorted(entries, key=key), start=1)]
+    return tuple(RankedEntry(rank=index, entry=entry) for index, entry in enumerate(sorted(entries, key=key), start=1))
 
 
 class LeagueStore(Protocol):
@@ -302,10 +309,17 @@ def utc_now() -> str:
 
 class LeagueService:
     def __init__(self, store: LeagueStore, tracks: TrackSet | None = None, *,
-                 clock: Callable[[], str] = utc_now) -> None:
+                 clock: Callable[[], str] = utc_now, boards: LeagueBoardCache[Board] | None = None) -> None:
+        """`boards`: the process's ranked boards (domain/league_board_cache.py), dropped by every write made here;
+        None reads storage on every board view."""
         self.store = store
         self.tracks = tracks or TrackSet(store)
         self._clock = clock
+        self._boards = boards
+
+    def _written(self) -> None:
+        if self._boards is not None:
+            self._boards.clear()
 
     def now(self) -> str:
         return self._clock()
@@ -344,11 +358,21 @@ class LeagueService:
         submission = Submission(**body.model_dump(), submitted_at=submitted_at, submitted_by=username,
                                 submission_id=submitted_at,
                                 verification="pending" if body.model_id else "self_reported")
-        self.store.record(submission)
+        try:
+            self.store.record(submission)
+        finally:
+            self._written()
         return submission
 
     def board(self, track: str, query: BoardQuery) -> Board:
+        """The ranked board, as read at most a second ago (and after every write made through this process) when the
+        service keeps boards."""
         track = checked_track(track)
+        if self._boards is None:
+            return self._ranked(track, query)
+        return self._boards.get((track, query.model_dump_json()), lambda: self._ranked(track, query))
+
+    def _ranked(self, track: str, query: BoardQuery) -> Board:
         policy = self.store.policy(track).self_reported
         kept = [entry for entry in self.store.board(track).values() if query.keeps(entry) and shown(entry, policy)]
         return Board(track=track, sort=query.sort, entries=rank(kept, query.sort, policy))
@@ -359,7 +383,10 @@ class LeagueService:
             raise Forbidden("Only admins register league tracks.")
         if checked_track(track) in DREM_TRACK_LENGTHS_M:
             raise InvalidInput(f"{track} is one of drem's own tracks; its length is drem's.", field="track")
-        self.store.register_track(track, body)
+        try:
+            self.store.register_track(track, body)
+        finally:
+            self._written()
         return body
 
     def set_policy(self, principal: Principal, track: str, policy: LeaguePolicy) -> LeaguePolicy:
@@ -367,7 +394,10 @@ class LeagueService:
             raise Forbidden("Only admins (the league's organisers) choose what the board does with self-reported "
                             "entries.")
         self.track_length_m(track)
-        self.store.set_policy(track, policy)
+        try:
+            self.store.set_policy(track, policy)
+        finally:
+            self._written()
         return policy
 
     def record_drive(self, track: str, racer: str, model_id: str, drive: VerifiedDrive | None,
@@ -379,7 +409,11 @@ class LeagueService:
         if not current or current.model_id != model_id:
             return None
         updated = current.with_drive(drive, failure, self._clock())
-        return updated if self.store.replace(updated) else None
+        try:
+            replaced = self.store.replace(updated)
+        finally:
+            self._written()
+        return updated if replaced else None
 
     def latest(self, track: str, racer: str) -> Submission:
         track, racer = checked_track(track), checked_racer(racer)
@@ -392,7 +426,10 @@ class LeagueService:
     def delete(self, principal: Principal, track: str, racer: str) -> int:
         if Role.ADMIN not in principal.roles:
             raise Forbidden("Only admins delete league submissions.")
-        removed = self.store.remove_racer(checked_track(track), checked_racer(racer))
+        try:
+            removed = self.store.remove_racer(checked_track(track), checked_racer(racer))
+        finally:
+            self._written()
         if not removed:
             raise NotFound(f"{racer} has no submission on {track}.", field="racer")
         return removed
