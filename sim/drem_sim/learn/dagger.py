@@ -155,12 +155,8 @@ def record_recovery_laps(directions: Sequence[TrackDirection], root: Path, laps:
             if push_left > 0:
                 limit = teacher.car.max_steering_deg
                 executed["steering_angle"] = max(-limit, min(limit, label["steering_angle"] + push))
-            t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
-            next_obs, params, terminated, truncated, _info = env.step(executed)
-            recorder.add_labelled(obs, label, executed, seen, t_ms=t_ms, lap=lap,
-                                  executed_offtrack=bool(params["is_offtrack"]))
-            obs = next_obs
-            if env.laps >= laps or terminated or truncated:
+            obs, params, done = _step_and_record(env, recorder, obs, params, label, executed)
+            if done or env.laps >= laps:
                 break
         runs.append(recorder.close(**whole_lap_figures(env)))
     _bar(progress, "round 0 recovery laps", len(directions), len(directions), "done")
@@ -193,14 +189,21 @@ def collect_dagger_run(archive: Path, direction: TrackDirection, root: Path, lap
         assert obs is not None  # the env observes (its camera makes the frames the pilot reads)
         label = teacher.act(params)
         executed = label if rng.random() < beta else pilot.act(obs)
-        t_ms, lap, seen = round(env.sim_time * 1000), env.laps, params
-        next_obs, params, terminated, truncated, _info = env.step(executed)
-        recorder.add_labelled(obs, label, executed, seen, t_ms=t_ms, lap=lap,
-                              executed_offtrack=bool(params["is_offtrack"]))
-        obs = next_obs
-        if env.laps >= laps or terminated or truncated:
+        obs, params, done = _step_and_record(env, recorder, obs, params, label, executed)
+        if done or env.laps >= laps:
             break
     return recorder.close(**whole_lap_figures(env))
+
+
+def _step_and_record(env: Any, recorder: Any, obs: Any, params: dict[str, Any], label: dict[str, float],
+                     executed: dict[str, float]) -> tuple[Any, dict[str, Any], bool]:
+    """Drive one step with `executed`, record the frame labelled with the demonstrator's `label`; the next
+    observation and params, and whether the episode ended."""
+    t_ms, lap = round(env.sim_time * 1000), env.laps
+    next_obs, next_params, terminated, truncated, _info = env.step(executed)
+    recorder.add_labelled(obs, label, executed, params, t_ms=t_ms, lap=lap,
+                          executed_offtrack=bool(next_params["is_offtrack"]))
+    return next_obs, next_params, bool(terminated or truncated)
 
 
 def run_dagger(config: DaggerConfig, out_dir: Path, name: str, train_config: Any,
