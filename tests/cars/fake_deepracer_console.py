@@ -78,6 +78,8 @@ from flask import (
 from flask_wtf.csrf import CSRFProtect
 from werkzeug.serving import make_server
 
+from drem_local.stack import free_port
+
 # [webserver constants.py]
 LED_SCALING_FACTOR = 39215
 MAX_AUTO_THROTTLE_VAL = 100.0
@@ -552,8 +554,10 @@ class FakeConsole:
         self.clock = ConsoleClock()
         self.state = CarState(password=password, clock=self.clock, load_seconds=load_seconds)
         self.tls = tls
-        self.server = make_server("127.0.0.1", port, create_app(self.state), threaded=True, ssl_context=tls)
-        self.port = self.server.server_port
+        # Below the kernel's ephemeral range, as a car's fixed port is: restart() binds it again, and a port the
+        # kernel handed out could meanwhile be the local end of some test's outgoing connection (seen once in CI).
+        self.port = port or free_port("127.0.0.1")
+        self.server = make_server("127.0.0.1", self.port, create_app(self.state), threaded=True, ssl_context=tls)
         self.url = f"{'https' if tls else 'http'}://127.0.0.1:{self.port}"
         self.thread = self._serving_thread()
         self._real_clock = itsdangerous.timed.time

@@ -3,7 +3,6 @@ on first use (tests/cars/fake_deepracer_console.py served over HTTPS, as the car
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -15,18 +14,13 @@ import pytest
 from drem_cars.car_tls import CarTrust, CertificateProblem, fingerprint_of_file, pretty
 from drem_cars.credentials import CredentialStore, StoredCredential
 from drem_cars.drivers.deepracer_console import ConsoleError, DeepRacerConsole
+from drem_local.stack import free_port
 from tests import user_processes
 from tests.cars.fake_deepracer_console import FakeConsole
 from tests.cars.self_signed import self_signed, server_context
 from tests.waiting import wait_until
 
 pytestmark = pytest.mark.unit
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def battery_polls(fake: FakeConsole) -> int:
