@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 from tests.browser.console_api import access_token, call, create_user
+from tests.browser.painted import painted
 
 pytestmark = pytest.mark.browser
 
@@ -75,7 +76,7 @@ def shot(page: Any, name: str) -> None:
     before = page.viewport_size
     for size in (BIG_SCREEN, PHONE):
         page.set_viewport_size(size)
-        page.wait_for_timeout(300)  # a screenshot only: let the resized layout settle
+        painted(page)  # the resized layout (and a board's paging) on screen before the screenshot
         page.screenshot(path=str(SCREENSHOTS / f"{name}-{size['width']}x{size['height']}.png"))
     page.set_viewport_size(before)
 

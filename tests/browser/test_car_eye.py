@@ -14,6 +14,7 @@ from drem_cars.drivers.deepracer_console import DeepRacerConsole
 from drem_cars.video_relay import VideoRelay, VideoSettings
 from drem_cars.video_sources import ConsoleCamera
 from tests.browser.console_api import access_token, call, create_user, sign_in
+from tests.browser.painted import painted
 from tests.cars.fake_deepracer_console import FakeConsole
 
 pytestmark = pytest.mark.browser
@@ -59,7 +60,7 @@ def frames_painted(page: Any) -> int:
 def shoot(page: Any, name: str) -> None:
     for size in SIZES:
         page.set_viewport_size(size)
-        page.wait_for_timeout(300)  # a screenshot only: let the resized layout settle
+        painted(page)  # the resized layout (and a board's paging) on screen before the screenshot
         page.screenshot(path=str(SCREENSHOTS / f"{name}-{size['width']}x{size['height']}.png"))
 
 

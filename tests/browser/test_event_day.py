@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 from tests.browser.console_api import PASSWORD, access_token, call, create_user, running_race, sign_in, submitted_race
+from tests.browser.painted import painted
 
 pytestmark = pytest.mark.browser
 
@@ -72,7 +73,7 @@ def shot(page: Any, name: str, *, sizes: tuple[dict[str, int], ...] = (BIG_SCREE
     before = page.viewport_size
     for size in sizes:
         page.set_viewport_size(size)
-        page.wait_for_timeout(300)  # a screenshot only: let the resized layout (and the board's paging) settle
+        painted(page)  # the resized layout (and a board's paging) on screen before the screenshot
         page.screenshot(path=str(SCREENSHOTS / f"{name}-{size['width']}.png"))
     page.set_viewport_size(before)
 

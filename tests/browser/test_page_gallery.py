@@ -70,6 +70,16 @@ def staff_pages(event: dict[str, str]) -> dict[str, str]:
             "commentator": f"/commentator/{event_id}", "registry": "/models/registry"}
 
 
+# Settled: loaded, no htmx request in flight, a live page's event stream open (live.js keeps it in
+# window.dremLiveStream), and two frames painted since.
+SETTLED = """() => new Promise(done => requestAnimationFrame(() => requestAnimationFrame(() => {
+    const holder = document.querySelector('[data-live-stream]');
+    const live = holder && holder.dataset.liveStream;
+    done(document.readyState === 'complete' && !document.querySelector('.htmx-request') &&
+         (!live || (window.dremLiveStream !== undefined && window.dremLiveStream.readyState === EventSource.OPEN)));
+})))"""
+
+
 RACER_PAGES = {"home-racer": "/", "my-models": "/console/my-models", "my-races": "/console/my-races",
                "profile": "/console/profile", "booth": "/booth"}
 
@@ -119,7 +129,7 @@ def look_at_every_page(chromium: Any, url: str, pages: dict[str, str], *, user: 
                 continue
             errors.clear()
             answer = page.goto(url + path, wait_until="load")
-            page.wait_for_timeout(400)  # live regions subscribe and swap in; the screenshot shows the settled page
+            page.wait_for_function(SETTLED)  # what is checked and photographed is the page as it settles
             where = f"{name} at {size['width']}x{size['height']}"
             if answer is None or answer.status != 200:
                 problems.append(f"{where}: answered {answer.status if answer else 'nothing'}")
