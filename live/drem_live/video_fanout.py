@@ -20,6 +20,7 @@ as `<length of header><header JSON><chunk><part>`: once per frame, whatever the 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ctypes
 import json
 import logging
@@ -107,6 +108,9 @@ class FanOutWorker:
             asyncio.get_running_loop().add_writer(self._frames.fileno(), self._flush)
 
     def stop(self) -> None:
+        # At SCHED_IDLE the worker runs only when nothing else wants the CPU: beside three busy processes it took
+        # 1.3-2.3 s to act on SIGTERM while this waited in the server's event loop. At normal priority: 7-32 ms.
+        _normal_priority(self._process.pid)
         self._process.terminate()
         try:
             self._process.wait(5)
@@ -158,6 +162,14 @@ def _idle_child() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     except (OSError, AttributeError):
         pass
+
+
+def _normal_priority(pid: int) -> None:
+    """Undo `_idle_child` for a worker about to be stopped, so it is scheduled to act on the signal at once."""
+    with contextlib.suppress(AttributeError, OSError):  # not Linux, already gone, or not allowed: it ends later
+        os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+    with contextlib.suppress(OSError):
+        os.setpriority(os.PRIO_PROCESS, pid, 0)
 
 
 # --- the worker --------------------------------------------------------------------------------------------------
