@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import io
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -14,6 +13,7 @@ import pytest
 import requests
 from PIL import Image
 
+from drem_local import stack as local_stack
 from tests.browser.console_api import access_token, call, create_user, upload_model
 
 pytestmark = pytest.mark.integration
@@ -76,13 +76,14 @@ def access_token_admin(live_stack) -> str:
     return reply["AuthenticationResult"]["AccessToken"]
 
 
-def _worker(live_stack, lease_s: float) -> subprocess.Popen:
+def _worker(live_stack, lease_s: float, log: Path) -> local_stack.ManagedProcess:
+    """A scrutineer worker started (and later stopped) as `drem up` starts its own."""
     env = {**live_stack.env, "DREM_SCRUTINEER_LEASE_S": str(lease_s)}
-    return subprocess.Popen([sys.executable, "-m", "drem_local.workers.scrutineer", "--poll-s", "0.2"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return local_stack.spawn("scrutineer", [sys.executable, "-m", "drem_local.workers.scrutineer", "--poll-s", "0.2"],
+                             log, env=env)
 
 
-def test_a_worker_killed_mid_drive_leaves_a_job_the_next_worker_drives(live_stack) -> None:
+def test_a_worker_killed_mid_drive_leaves_a_job_the_next_worker_drives(live_stack, tmp_path: Path) -> None:
     url = live_stack.url
     create_user(live_stack, "scr-kill", "racer")
     token = access_token(live_stack, "scr-kill")
@@ -92,23 +93,22 @@ def test_a_worker_killed_mid_drive_leaves_a_job_the_next_worker_drives(live_stac
     try:
         model = upload_model(url, token, "scr-kill.tar.gz", SAMPLE.read_bytes())
         model_id = model["model_id"]
-        first = _worker(live_stack, lease_s=6)
+        first = _worker(live_stack, lease_s=6, log=tmp_path / "first.log")
         deadline = time.monotonic() + 60
         while call(url, "GET", f"/api/models/{model_id}", token=token)["model"]["scrutineer_status"] != "driving":
             assert time.monotonic() < deadline, "the first worker never started driving"
             time.sleep(0.1)
-        first.send_signal(signal.SIGKILL)  # a crash mid-drive: nothing is given back
-        first.wait(10)
+        first.popen.send_signal(signal.SIGKILL)  # a crash mid-drive: nothing is given back
+        first.popen.wait(30)
         assert call(url, "GET", f"/api/models/{model_id}", token=token)["model"]["scrutineer_status"] == "driving"
 
-        second = _worker(live_stack, lease_s=6)
+        second = _worker(live_stack, lease_s=6, log=tmp_path / "second.log")
         done = wait_until_scrutineered(url, token, model_id, timeout=120)
         assert done["scrutineer_status"] in ("passed", "failed") and done["scrutineer_clip"], done
-        second.send_signal(signal.SIGTERM)
-        assert second.wait(20) == 0  # stops cleanly when asked
+        assert second.stop(timeout=60) == 0, second.log_tail()  # stops cleanly when asked, as drem up asks it
     finally:
         for worker in (first, second):
-            if worker is not None and worker.poll() is None:
-                worker.kill()
-                worker.wait(10)
+            if worker is not None and worker.alive():
+                worker.popen.kill()
+                worker.popen.wait(30)
         running.restart_scrutineer()
