@@ -176,3 +176,24 @@ def test_a_job_cut_off_by_storage_going_away_is_taken_again_not_failed(alice: Mo
     assert trainer.work_once() is True
     job = alice.call("GET", f"/api/training-jobs/{job_id}").json_body["job"]
     assert job["status"] == "DONE" and job["model_name"] == "v0001", job
+
+
+def test_the_trainer_takes_only_the_cpu_the_live_pages_do_not_want() -> None:
+    """Training fills a core for as long as it runs; on a 2-core venue laptop a spectator's poll or a lap crossing
+    must take that core from it at once (SCHED_IDLE, niced, as the scrutineering worker), not wait for its share."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.user_processes import from_a_shell
+
+    probe = ("import os; from drem_local.app_source import use_app_source; use_app_source(); "
+             "from drem_local.workers.trainer import bound_cpu; cores = bound_cpu(); "
+             "print(os.sched_getscheduler(0), os.getpriority(os.PRIO_PROCESS, 0), len(os.sched_getaffinity(0)))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120,
+                          preexec_fn=from_a_shell)  # noqa: PLW1509 - a normal-priority start, as drem up's
+    assert done.returncode == 0, done.stderr
+    policy, nice, cores = (int(word) for word in done.stdout.split())
+    assert policy == os.SCHED_IDLE
+    assert nice >= 10
+    assert cores == 1  # the last of several, with all background work: the other cores stay free for the pages

@@ -13,9 +13,12 @@ gets. Per job (chalicelib.domain.booth_training):
    whose metrics are computed like any run's and recorded as the version's evaluation in the model registry.
 
 Autonomous runs a racer asks for (`POST /api/runs` with mode autonomous) are driven between jobs.
-Bounded CPU, so live pages keep their latency: the process is nice'd (+10), pinned to one core when the machine has
-more than one, and torch, OpenCV and onnxruntime each use one thread. Training needs torch (the `train` extra); when
-it is not installed the worker says so at start and fails each job with that reason instead of a traceback.
+Bounded CPU, so live pages keep their latency: the process runs at the lowest priority (nice +10, and SCHED_IDLE on
+Linux, as the scrutineering worker: only on CPU time nothing else wants, so a spectator's request or a lap takes the
+core from it at once; nice alone left training its share of the core, and the pages waited on it), pinned to one
+core when the machine has more than one, and torch, OpenCV and onnxruntime each use one thread. Training needs torch
+(the `train` extra); when it is not installed the worker says so at start and fails each job with that reason
+instead of a traceback.
 
     python -m drem_local.workers.trainer [--poll 1.0] [--once]
 """
@@ -50,18 +53,17 @@ _EPOCH = re.compile(r"epoch (\d+)/(\d+) train ([0-9.]+)")
 
 
 def bound_cpu() -> list[int]:
-    """Nice the process and pin it to one core (the last) when there are several; one thread per library."""
-    os.nice(NICENESS)
+    """The lowest priority (nice and SCHED_IDLE) on one core, the last of several, as all background work
+    (chalicelib.contained); one thread per library. Returns the cores it may use."""
+    from chalicelib.contained import background_core, lowest_priority
+
+    lowest_priority(NICENESS)
     for variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[variable] = "1"
-    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    if len(cores) > 1:
-        os.sched_setaffinity(0, {cores[-1]})
-        cores = [cores[-1]]
     import cv2
 
     cv2.setNumThreads(1)
-    return cores
+    return background_core()
 
 
 def torch_installed() -> bool:
@@ -337,7 +339,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     trainer = Trainer(say)
-    say(f"trainer: ready (nice +{NICENESS}, cores {cores or 'all'}, one thread); "
+    idle_class = getattr(os, "SCHED_IDLE", None) is not None and os.sched_getscheduler(0) == os.SCHED_IDLE
+    say(f"trainer: ready (nice +{NICENESS}{', SCHED_IDLE' if idle_class else ''}, cores {cores or 'all'}, one thread); "
         + ("training with PyTorch" if trainer.can_train else f"NOT training: {NO_TORCH}"))
     # Jobs a dead trainer left RUNNING (or this one, when storage went away under it) go back to the queue once
     # storage answers. drem up runs one trainer per stack, so a RUNNING job this idle one holds is nobody's.
