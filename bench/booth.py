@@ -1,25 +1,34 @@
-"""The learning booth: from "train" pressed to v0001 AVAILABLE and scrutineered, and what training costs live pages.
+"""The learning booth: from "train" pressed to the new version AVAILABLE and scrutineered, and what training costs
+live pages.
 
 Starts a durable moto server and the real app server (bench/_stack.py) plus the booth trainer exactly as `drem up`
-starts it (`python -m drem_local.workers.trainer`: nice'd, one core, one thread). A visitor's drive is 3 laps of
-`reinvent_base` at a visitor's pace (~40 s a lap, so ~1,800 frames): the demonstrator, slowed down and with 3° steering
-noise (the driving data a visitor would give, but repeatable). The run goes in through the booth's own artifact API as
-the booth's live drive stores it (`PUT /api/runs/{id}/artifacts/frames.tar`, one object for every frame, and
-`controls.jsonl`, then `finalise`). Then:
+starts it (`python -m drem_local.workers.trainer`: the lowest priority on one core, one thread). A visitor's drive is
+3 laps of `reinvent_base` at a visitor's pace (~40 s a lap, so ~1,800 frames): the demonstrator, slowed down and with
+3° steering noise (the driving data a visitor would give, but repeatable). The run goes in through the booth's own
+artifact API as the booth's live drive stores it (`PUT /api/runs/{id}/artifacts/frames.tar`, one object for every
+frame, and `controls.jsonl`, then `finalise`).
 
-1. idle: a live race on an event with 49 seeded racers, 100 spectators (bench/_crowd.py, keep-alive, each with its
-   own version token) polling the leaderboard's live fragment; a probe posts a lap crossing from the race's timer
-   and polls the same fragment every 50 ms until the lap is there: that wait is the live latency (no browser, so it
-   is the server's share: the poll cycle plus the render);
-2. training: the same, while `POST /api/training-jobs` (t0, "train pressed", the booth's 8 epochs) is downloaded,
-   trained, exported, submitted, validated and scrutineered by the worker; t1 is the first moment the API shows v0001
-   AVAILABLE with a scrutineering result. The job's stages seen on the way are printed (honest progress).
+A live race on an event with 49 seeded racers and 100 spectators (bench/_crowd.py, keep-alive, each with its own
+version token) polling the leaderboard's live fragment throughout; a probe posts a lap crossing from the race's timer
+and polls the same fragment every 50 ms until the lap is there: that wait is the live latency (no browser, so it is
+the server's share: the poll cycle plus the render). Rounds (4 by default), each:
 
-Goal: t1 - t0 <= 60 s for a 1,800-frame drive (on a quiet 2-core machine: say the load with the figure); live-latency
-p95 while training <= 1.2x idle at 100 spectators.
+1. a new visitor's drive (its own noise seed) is recorded and uploaded;
+2. idle: `--samples` laps timed, nothing training;
+3. training: laps timed while `POST /api/training-jobs` (t0, "train pressed", the booth's 8 epochs) is downloaded,
+   trained, exported, submitted, validated and scrutineered by the worker; t1 is the first moment the API shows the
+   new version (v0001, v0002 …) AVAILABLE with a scrutineering result. The job's stages seen on the way are printed
+   (honest progress).
+
+Training takes ~10 s on a quiet machine, so one round times only 5-6 laps while training: a p95 of those is their
+slowest lap, which one noisy lap decides (three runs of one round on the same code gave 0.82x, 1.10x and 1.25x). The
+rounds alternate the two phases, so both p95s come from 20-30 laps and a change in the machine's load falls on both.
+
+Goal: t1 - t0 <= 60 s for a 1,800-frame drive, every round (on a quiet 2-core machine: say the load with the figure);
+live-latency p95 while training <= 1.2x idle at 100 spectators.
 Self-contained on purpose (bench/live_latency.py measures in browsers and is being rewritten).
 
-    .venv/bin/python bench/booth.py [--frames 1800] [--epochs 8] [--samples 12] [--spectators 100]
+    .venv/bin/python bench/booth.py [--frames 1800] [--epochs 8] [--rounds 4] [--samples 6] [--spectators 100]
 """
 from __future__ import annotations
 
@@ -60,7 +69,7 @@ def get_text(url: str) -> str:
         return reply.read().decode()
 
 
-def visitor_run(frames: int, folder: Path) -> Path:
+def visitor_run(frames: int, folder: Path, seed: int = 1) -> Path:
     import numpy as np
 
     from drem_sim.demonstrator import Demonstrator, DemonstratorConfig
@@ -70,7 +79,7 @@ def visitor_run(frames: int, folder: Path) -> Path:
 
     track = load_track(TRACK)
     teacher = Demonstrator(track, DemonstratorConfig(steering_noise_deg=3.0, **VISITOR_PACE),
-                           rng=np.random.default_rng(1))
+                           rng=np.random.default_rng(seed))
     return record_run(RaceEnv(track), lambda _obs, params: teacher.act(params), folder, laps=100, driver="bench",
                       max_steps=frames)
 
@@ -145,17 +154,51 @@ def stop_crowd(crowd: tuple[Any, Any, Any]) -> dict[str, Any]:
     return figures
 
 
+def press_train(url: str, bearer: str, run_id: str, epochs: int, version: str) -> tuple[float, dict[str, Any], Any]:
+    """POST the job (t0, "train pressed"); returns t0, what the API showed when `version` was AVAILABLE with a
+    scrutineering result, and a `ready()` check that also records the job's stages as the page would show them."""
+    pressed = time.perf_counter()
+    job = _stack.call(url, "POST", "/api/training-jobs", {"run_ids": [run_id], "epochs": epochs},
+                      authorization=bearer)["job"]
+    ready: dict[str, Any] = {"stages": []}
+
+    def check() -> bool:
+        if "at" in ready:
+            return True
+        models = _stack.call(url, "GET", "/api/models?limit=100", authorization=bearer)["models"]
+        found = [m for m in models if m["name"] == version]
+        if found and found[0]["status"] == "AVAILABLE" and found[0]["scrutineer_result"]:
+            ready.update(at=time.perf_counter(), model=found[0])
+            return True
+        state = _stack.call(url, "GET", f"/api/training-jobs/{job['job_id']}", authorization=bearer)
+        shown = state["job"]["stage"] or state["job"]["status"]
+        if state["job"]["stage"] == "training":
+            shown = f"training: epoch {state['job']['epoch']}/{state['job']['epochs']}"
+        stages = ready["stages"]
+        if not stages or stages[-1][1] != shown:
+            stages.append((time.perf_counter() - pressed, shown))
+        if state["job"]["status"] == "FAILED":
+            raise SystemExit(f"training failed: {state['job']['reason']}")
+        return False
+
+    return pressed, ready, check
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--frames", type=int, default=1800, help="frames of the visitor's drive (15 a second)")
     parser.add_argument("--epochs", type=int, default=8, help="the booth's default")
-    parser.add_argument("--samples", type=int, default=12, help="live-latency samples while idle (at least)")
+    parser.add_argument("--rounds", type=int, default=4, help="idle and training phases, alternating")
+    parser.add_argument("--samples", type=int, default=6, help="live-latency samples in each idle phase")
     parser.add_argument("--spectators", type=int, default=100)
     args = parser.parse_args(argv)
     from drem_local import stack as local_stack
 
     rng = random.Random(11)
     load_before = _stack.machine_load()
+    idle: list[float] = []
+    training: list[float] = []
+    train_times: list[float] = []
     with _stack.bench_stack() as stack, tempfile.TemporaryDirectory(prefix="drem-booth-") as tmp:
         trainer = local_stack.spawn("booth trainer", [sys.executable, "-m", "drem_local.workers.trainer"],
                                     stack.tmp / "trainer.log", env=stack.env)
@@ -172,72 +215,45 @@ def main(argv: list[str] | None = None) -> int:
             trigger = re.search(r'hx-trigger="every (\d+)(ms|s)"', tag.group(0))
             period_s = int(trigger.group(1)) / (1000 if trigger.group(2) == "ms" else 1) if trigger else 0.5
             probe = Probe(stack.url, race, fragment.rpartition("&v=")[0] + "&v=none")
-
-            started = time.perf_counter()
-            run_dir = visitor_run(args.frames, Path(tmp))
-            recorded_s = time.perf_counter() - started
-            started = time.perf_counter()
-            run_id, metrics = upload_run(stack.url, bearer, run_dir)
-            upload_s = time.perf_counter() - started
-            print(f"driving data: {metrics['laps_completed']} laps of {TRACK}, {metrics['frames']} frames "
-                  f"(recorded {recorded_s:.1f}s, uploaded and finalised {upload_s:.1f}s)", flush=True)
-
             crowd = start_crowd(stack.port, fragment, args.spectators, period_s)
             time.sleep(3.0)
-            idle = measure(probe, rng, samples=args.samples)
-            idle_crowd = stop_crowd(crowd)
-            print(f"idle:     live p50 {_stack.percentile(idle, 50):.0f} ms p95 {_stack.percentile(idle, 95):.0f} ms "
-                  f"({len(idle)} laps; spectators' polls p99 {idle_crowd['p99_ms']:.0f} ms)", flush=True)
-
-            crowd = start_crowd(stack.port, fragment, args.spectators, period_s)
-            time.sleep(3.0)
-            pressed = time.perf_counter()
-            job = _stack.call(stack.url, "POST", "/api/training-jobs", {"run_ids": [run_id], "epochs": args.epochs},
-                              authorization=bearer)["job"]
-            ready: dict[str, Any] = {}
-            stages: list[tuple[float, str]] = []
-
-            def v0001_ready() -> bool:
-                if "at" in ready:
-                    return True
-                models = _stack.call(stack.url, "GET", "/api/models?limit=100", authorization=bearer)["models"]
-                found = [m for m in models if m["name"] == "v0001"]
-                if found and found[0]["status"] == "AVAILABLE" and found[0]["scrutineer_result"]:
-                    ready.update(at=time.perf_counter(), model=found[0])
-                    return True
-                state = _stack.call(stack.url, "GET", f"/api/training-jobs/{job['job_id']}", authorization=bearer)
-                shown = state["job"]["stage"] or state["job"]["status"]
-                if state["job"]["stage"] == "training":
-                    shown = f"training: epoch {state['job']['epoch']}/{state['job']['epochs']}"
-                if not stages or stages[-1][1] != shown:
-                    stages.append((time.perf_counter() - pressed, shown))
-                if state["job"]["status"] == "FAILED":
-                    raise SystemExit(f"training failed: {state['job']['reason']}")
-                return False
-
-            training = measure(probe, rng, until=v0001_ready)
-            while not v0001_ready():
-                time.sleep(0.5)
-            train_s = ready["at"] - pressed
-            busy_crowd = stop_crowd(crowd)
-            scrutineer = ready["model"]["scrutineer_result"]
-            print(f"training: live p50 {_stack.percentile(training, 50):.0f} ms "
-                  f"p95 {_stack.percentile(training, 95):.0f} ms ({len(training)} laps; spectators' polls p99 "
-                  f"{busy_crowd['p99_ms']:.0f} ms)", flush=True)
-            print("progress shown: " + "; ".join(f"{at:.0f}s {stage}" for at, stage in stages), flush=True)
-            print(f"train pressed -> v0001 AVAILABLE and scrutineered: {train_s:.1f}s "
-                  f"({args.epochs} epochs; scrutineering {scrutineer['verdict']}: {scrutineer['message']})", flush=True)
+            for index in range(args.rounds):
+                # Each round a new visitor's drive (its own seed: Train is refused for an unchanged set of drives),
+                # uploaded before the round's idle phase, so neither phase pays for it.
+                started = time.perf_counter()
+                run_dir = visitor_run(args.frames, Path(tmp) / f"drive-{index}", seed=index + 1)
+                run_id, metrics = upload_run(stack.url, bearer, run_dir)
+                print(f"round {index + 1}/{args.rounds}: the visitor's drive, {metrics['laps_completed']} laps of "
+                      f"{TRACK}, {metrics['frames']} frames (recorded and uploaded in "
+                      f"{time.perf_counter() - started:.1f}s)", flush=True)
+                idle += measure(probe, rng, samples=args.samples)
+                version = f"v{index + 1:04d}"
+                pressed, ready, check = press_train(stack.url, bearer, run_id, args.epochs, version)
+                training += measure(probe, rng, until=check)
+                while not check():
+                    time.sleep(0.5)
+                train_times.append(ready["at"] - pressed)
+                scrutineer = ready["model"]["scrutineer_result"]
+                print(f"  train pressed -> {version} AVAILABLE and scrutineered: {train_times[-1]:.1f}s "
+                      f"(scrutineering {scrutineer['verdict']}: {scrutineer['message']}); progress shown: "
+                      + "; ".join(f"{at:.0f}s {stage}" for at, stage in ready["stages"]), flush=True)
+                print(f"  load {_stack.machine_load()}", flush=True)
+            crowd_figures = stop_crowd(crowd)
         finally:
             trainer.stop(10)
             print(f"trainer log: {trainer.log_tail(6)}", flush=True)
     idle_p95, busy_p95 = _stack.percentile(idle, 95), _stack.percentile(training, 95)
+    print(f"idle:     live p50 {_stack.percentile(idle, 50):.0f} ms p95 {idle_p95:.0f} ms ({len(idle)} laps)")
+    print(f"training: live p50 {_stack.percentile(training, 50):.0f} ms p95 {busy_p95:.0f} ms ({len(training)} laps; "
+          f"spectators' polls p99 {crowd_figures['p99_ms']:.0f} ms over the whole run)")
     ratio = busy_p95 / idle_p95 if idle_p95 else float("inf")
-    met = train_s <= GOAL_TRAIN_S and ratio <= GOAL_RATIO
+    slowest = max(train_times)
+    met = slowest <= GOAL_TRAIN_S and ratio <= GOAL_RATIO
     print(f"machine load before {load_before}, after {_stack.machine_load()}")
-    print(f"RESULT booth: train_to_v0001={train_s:.0f}s frames={metrics['frames']} "
+    print(f"RESULT booth: train_to_version={'/'.join(f'{t:.0f}' for t in train_times)}s frames={args.frames} "
           f"epochs={args.epochs} live_p95_idle={idle_p95:.0f}ms live_p95_training={busy_p95:.0f}ms "
-          f"ratio={ratio:.2f}x spectators={args.spectators} | goal <={GOAL_TRAIN_S:.0f}s, <={GOAL_RATIO}x | "
-          f"{'met' if met else 'not met'}")
+          f"ratio={ratio:.2f}x rounds={args.rounds} spectators={args.spectators} | goal <={GOAL_TRAIN_S:.0f}s each, "
+          f"<={GOAL_RATIO}x | {'met' if met else 'not met'}")
     return 0
 
 
