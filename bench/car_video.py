@@ -17,9 +17,11 @@ both halves), so a change in the shared machine's load falls on both alike:
 Where things run (bench/_placement.py), the same in both halves: at a venue the car and the 500 phones are other
 machines than the event laptop, so on this 2-core machine the laptop's processes (storage, live server, app) are
 pinned to core 1, the car's (its drive loop and its relay) to core 0, and the viewers' stand-in
-runs SCHED_IDLE (only on CPU time neither wants), and so does Chromium, the OBS PC's stand-in: unplaced, its decoding
-and painting of the car's eye ran on the car's core ahead of the drive loop's ticks, a cost no venue has (the car and
-the OBS PC are separate machines). This process (the timer, the browser driver) is not placed. Other engineers' work on
+runs SCHED_IDLE (only on CPU time neither wants) on the laptop's core, and so does Chromium, the OBS PC's stand-in:
+unplaced, the viewers' reading and the browser's decoding of the car's eye ran on the car's core between the drive
+loop's ticks, a cost no venue has (the car, the phones and the OBS PC are separate machines); on the laptop's core
+they make the laptop's share of lap-to-screen heavier than a venue's. This process (the timer, the browser driver)
+is not placed. Other engineers' work on
 the shared machine is not placed either: say the load.
 
 In each half: lap-to-screen (a timer's strip crossing → the lap painted in the overlay; bench/live_latency.py's
@@ -89,10 +91,12 @@ def overlay(browser: Any, stack: _stack.BenchStack, event_id: str, car_eye: bool
 
 
 def obs_pc_idle() -> None:
-    """Chromium (the OBS PC's stand-in) and every process it started, SCHED_IDLE (bench/_placement.py)."""
+    """Chromium (the OBS PC's stand-in) and every process it started, SCHED_IDLE and off the car's core
+    (bench/_placement.py)."""
     if _placement.two_cores():
         for pid in _placement.processes_running(Path(CHROMIUM).name, os.getpid()):
             _placement.idle(pid)
+            _placement.pin(pid, _placement.STAND_IN_CORES)
 
 
 def place(stack: _stack.BenchStack, car_pid: int) -> str:
