@@ -69,8 +69,10 @@ def _power_cut(up: subprocess.Popen) -> None:
 
 
 def _throttle(up_pid: int, stop: threading.Event) -> None:
-    """Let the starting app server run a twentieth of the time until `stop` (a loaded laptop, for that process), from
-    its first moment: until it is seen the children are looked up every few milliseconds, not every cycle."""
+    """Let the starting app server run a fortieth of the time until `stop` (a loaded laptop, for that process), from
+    its first moment: until it is seen the children are looked up every few milliseconds, not every cycle. A
+    twentieth was not always slow enough: a start that needed 0.4 s of CPU was ready before drem up's first report
+    (10 s), and the test saw no "still waiting"."""
     while not stop.is_set():
         apps = [pid for pid in _children_of(up_pid) if "drem_local.appserver" in _cmdline(pid)]
         if not apps:
@@ -81,13 +83,13 @@ def _throttle(up_pid: int, stop: threading.Event) -> None:
                 os.kill(pid, signal.SIGSTOP)
             except ProcessLookupError:
                 pass
-        stop.wait(0.38)
+        stop.wait(0.39)
         for pid in apps:
             try:
                 os.kill(pid, signal.SIGCONT)
             except ProcessLookupError:
                 pass
-        stop.wait(0.02)
+        stop.wait(0.01)
 
 
 def test_after_a_power_cut_drem_up_waits_for_a_slow_app_and_keeps_storage_running(tmp_path):
