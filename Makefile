@@ -45,13 +45,10 @@ up: install
 demo: install
 	$(BIN)/drem up --demo $(ARGS)
 
-# pytest-xdist workers for `make test`: one more than the cores (CI has two, so three). A quarter of the suite's time
-# is spent waiting (on the drem processes, servers and browsers the tests start), so one worker per core left the
-# CPUs 26 % idle: on a quiet 2-core machine 4,471 tests took 625 s in two workers and 541 s in three (2026-11-29).
-# Each test file runs whole in one worker (--dist loadfile), handed out in collection order (--no-loadscope-reorder),
-# which tests/conftest.py makes slowest tiers first; the infra tests take turns on functions/
-# (tests/infra/conftest.py). TEST_WORKERS=0: one process.
-TEST_WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
+# pytest-xdist workers for `make test`: one per core (CI has two). Each test file runs whole in one worker
+# (--dist loadfile), handed out in collection order (--no-loadscope-reorder), which tests/conftest.py makes slowest
+# tiers first; the infra tests take turns on functions/ (tests/infra/conftest.py). TEST_WORKERS=0: one process.
+TEST_WORKERS ?= auto
 # Python compiles each module once, into .pycache/, and every later process reuses it: the workers and the many drem
 # subprocesses the tests start. A shell's PYTHONDONTWRITEBYTECODE would otherwise make each of them compile everything
 # it imports again (the app, moto and botocore: 3-5 s per process on a busy 2-core machine).
