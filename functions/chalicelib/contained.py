@@ -29,9 +29,10 @@ BACKGROUND_NICENESS = 10  # below the app server and the live server (0): the pa
 
 def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> None:
     """In the calling process: `nice`, then SCHED_IDLE where Linux offers it, on one core only (`background_core`).
-    SCHED_IDLE runs the process only on CPU time nothing else wants, and any other task that wakes up (the app server
-    answering a spectator) takes the CPU from it at once; `nice` alone still leaves a niced task its small share and a
-    wait for the scheduler's wake-up granularity. The nice value stands where SCHED_IDLE is refused (not Linux)."""
+    SCHED_IDLE runs the process only on CPU time nothing else wants, and another task that wakes up (the app server
+    answering a spectator) takes the CPU from it, mostly at once (on a PREEMPT_NONE kernel, 250 Hz, some waited up to
+    a tick: docs/league.md); `nice` alone still leaves a niced task its small share and a wait for the scheduler's
+    wake-up granularity. The nice value stands where SCHED_IDLE is refused (not Linux)."""
     os.nice(niceness)
     try:
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
@@ -43,7 +44,7 @@ def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> None:
 def background_core() -> list[int]:
     """Keep the calling process (and every child it starts from now on) to the last core when it may use several, and
     say which cores it has. Idle-class work on every core still cost the pages: on the 2-core laptop, the public board
-    (one reader, back to back) went from p95 0.65 ms to 2.5 ms beside two idle-class simulator drives, and stayed at
+    (one reader, back to back) went from p95 0.65 ms to 2.0-3.0 ms beside two idle-class simulator drives, and stayed at
     0.7-0.9 ms with the same drives held to one core (docs/league.md). The scrutineer, its drives, the console
     converter and the booth's trainer all run there, taking turns; the other cores stay free for serving."""
     if not hasattr(os, "sched_getaffinity"):

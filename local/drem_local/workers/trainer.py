@@ -14,9 +14,9 @@ gets. Per job (chalicelib.domain.booth_training):
 
 Autonomous runs a racer asks for (`POST /api/runs` with mode autonomous) are driven between jobs.
 Bounded CPU, so live pages keep their latency: the process runs at the lowest priority (nice +10, and SCHED_IDLE on
-Linux, as the scrutineering worker: only on CPU time nothing else wants, so a spectator's request or a lap takes the
-core from it at once; nice alone left training its share of the core, and the pages waited on it), pinned to one
-core when the machine has more than one, and torch, OpenCV and onnxruntime each use one thread. Training needs torch
+Linux, as the scrutineering worker: only on CPU time nothing else wants; nice alone left training a share of the
+core), on the last core when the machine has more than one (with all background work, chalicelib.contained), and
+torch, OpenCV and onnxruntime each use one thread. Training needs torch
 (the `train` extra); when it is not installed the worker says so at start and fails each job with that reason
 instead of a traceback.
 
