@@ -27,8 +27,9 @@ def limit_resources(memory_bytes: int, cpu_seconds: int) -> None:
 BACKGROUND_NICENESS = 10  # below the app server and the live server (0): the pages win every contest for the CPU
 
 
-def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> None:
-    """In the calling process: `nice`, then SCHED_IDLE where Linux offers it, on one core only (`background_core`).
+def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> list[int]:
+    """In the calling process: `nice`, then SCHED_IDLE where Linux offers it, on one core only (`background_core`,
+    whose cores it returns).
     SCHED_IDLE runs the process only on CPU time nothing else wants, and another task that wakes up (the app server
     answering a spectator) takes the CPU from it, mostly at once (on a PREEMPT_NONE kernel, 250 Hz, some waited up to
     a tick: docs/league.md); `nice` alone still leaves a niced task its small share and a wait for the scheduler's
@@ -38,7 +39,7 @@ def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> None:
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     except (AttributeError, OSError):
         pass
-    background_core()
+    return background_core()
 
 
 def background_core() -> list[int]:

@@ -55,15 +55,15 @@ _EPOCH = re.compile(r"epoch (\d+)/(\d+) train ([0-9.]+)")
 def bound_cpu() -> list[int]:
     """The lowest priority (nice and SCHED_IDLE) on one core, the last of several, as all background work
     (chalicelib.contained); one thread per library. Returns the cores it may use."""
-    from chalicelib.contained import background_core, lowest_priority
+    from chalicelib.contained import lowest_priority
 
-    lowest_priority(NICENESS)
+    cores = lowest_priority(NICENESS)
     for variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[variable] = "1"
     import cv2
 
     cv2.setNumThreads(1)
-    return background_core()
+    return cores
 
 
 def torch_installed() -> bool:
