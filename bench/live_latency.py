@@ -150,7 +150,9 @@ class Lapper:
 
 
 def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lapper, samples: int,
-                 rng: random.Random) -> dict[str, list[float]]:
+                 rng: random.Random, in_dom: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
+    """Each lap's crossing -> painted (the first animation frame after the lap reached the page's DOM), per page;
+    `in_dom`, if given, also gets crossing -> in the DOM, so a bench can tell delivery from painting."""
     latencies: dict[str, list[float]] = {name: [] for name in pages}
     for index in range(samples):
         # A random pause lands each lap at a random point of the pages' poll cycle. A lap every ~2.6 s is still
@@ -169,6 +171,8 @@ def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lappe
             page.wait_for_function("key => window.__seen[key] && window.__seen[key].frame", arg=key, timeout=15_000)
             seen = page.evaluate("key => window.__seen[key]", key)
             latencies[name].append(seen["frame"] - offsets[name] - sent)
+            if in_dom is not None:
+                in_dom.setdefault(name, []).append(seen["dom"] - offsets[name] - sent)
     return latencies
 
 
