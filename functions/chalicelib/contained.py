@@ -31,9 +31,10 @@ def lowest_priority(niceness: int = BACKGROUND_NICENESS) -> list[int]:
     """In the calling process: `nice`, then SCHED_IDLE where Linux offers it, on one core only (`background_core`,
     whose cores it returns).
     SCHED_IDLE runs the process only on CPU time nothing else wants, and another task that wakes up (the app server
-    answering a spectator) takes the CPU from it, mostly at once (on a PREEMPT_NONE kernel, 250 Hz, some waited up to
-    a tick: docs/league.md); `nice` alone still leaves a niced task its small share and a wait for the scheduler's
-    wake-up granularity. The nice value stands where SCHED_IDLE is refused (not Linux)."""
+    answering a spectator) takes the CPU from it at once (bench/idle_preemption.py: p99 0.03 ms beside a busy loop,
+    rarely up to a 4 ms tick on a PREEMPT_NONE 250 Hz kernel; docs/league.md); `nice` alone gave way as fast in that
+    probe, but still takes its small share of a core that normal tasks keep busy. The nice value stands where
+    SCHED_IDLE is refused (not Linux)."""
     os.nice(niceness)
     try:
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
