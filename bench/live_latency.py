@@ -133,6 +133,7 @@ class Lapper:
         self.device_ms = int(time.time() * 1000)
         self.next_lap_ms = FIRST_LAP_MS
         self.count = 0
+        self.acknowledged_after_ms = 0.0
         reply = self.post()
         if reply.get("action") != "seed":
             raise SystemExit(f"the first crossing did not seed the lap: {reply}")
@@ -146,13 +147,16 @@ class Lapper:
         self.next_lap_ms -= 10
         self.device_ms += lap_ms
         sent = time.time() * 1000
-        return lap_ms, sent, self.post()
+        reply = self.post()
+        self.acknowledged_after_ms = time.time() * 1000 - sent  # the app answered the crossing (the lap is stored)
+        return lap_ms, sent, reply
 
 
 def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lapper, samples: int,
                  rng: random.Random, in_dom: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
     """Each lap's crossing -> painted (the first animation frame after the lap reached the page's DOM), per page;
-    `in_dom`, if given, also gets crossing -> in the DOM, so a bench can tell delivery from painting."""
+    `in_dom`, if given, also gets crossing -> in the DOM, so a bench can tell delivery from painting, and under
+    "acknowledged" crossing -> the app's answer (the lap stored; what follows is its way to the page)."""
     latencies: dict[str, list[float]] = {name: [] for name in pages}
     for index in range(samples):
         # A random pause lands each lap at a random point of the pages' poll cycle. A lap every ~2.6 s is still
@@ -165,6 +169,8 @@ def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lappe
         for name, page in pages.items():
             page.evaluate("want => { window.__want = want; window.__check(); }", wants[name])
         posted_ms, sent, reply = lapper.next_lap()
+        if in_dom is not None:
+            in_dom.setdefault("acknowledged", []).append(lapper.acknowledged_after_ms)
         if reply.get("lap", {}).get("time_ms") != posted_ms:
             raise SystemExit(f"sample {index}: the crossing did not give a {posted_ms} ms lap: {reply}")
         for name, page in pages.items():
