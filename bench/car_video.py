@@ -26,7 +26,8 @@ the shared machine is not placed either: say the load.
 
 In each half: lap-to-screen (a timer's strip crossing → the lap painted in the overlay; bench/live_latency.py's
 observer and clock calibration), with the part of it until the lap was in the overlay's DOM (the rest is the page's
-paint), and the car loop's jitter (how late each 15 Hz tick started). With video also:
+paint) and how long the app took to answer the crossing (the lap stored and the boards published), and the car loop's
+jitter (how late each 15 Hz tick started). With video also:
 glass-to-glass in the page (the frame's taken time → painted by car_eye.js, its data-delay-ms, sampled on each painted
 frame), the viewers' arrival delay, and stalls (> 1 s without a frame at a viewer; printed beside how long the viewers'
 stand-in itself got no CPU, as at SCHED_IDLE on a busy shared machine it may starve).
