@@ -87,7 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wakes", type=int, default=2000)
     args = parser.parse_args(argv)
     if not hasattr(os, "SCHED_IDLE") or len(os.sched_getaffinity(0)) < 2:
-        raise SystemExit("needs Linux (SCHED_IDLE) and at least 2 cores")
+        # `make bench` runs every bench: say why this one measured nothing, without stopping the others.
+        print("RESULT idle_preemption: not measured (needs Linux's SCHED_IDLE and 2 cores) | goal woken p99 <= alone "
+              f"+ {GOAL_EXTRA_MS} ms | not met")
+        return 0
     os.sched_setaffinity(0, set(os.sched_getaffinity(0)) - {LAST_CORE})  # the writer off the sleeper's core
     print(f"kernel {os.uname().release}; the woken task and the background work on core {LAST_CORE}")
     alone = measure(None, args.wakes)
