@@ -128,8 +128,8 @@ class Half:
 
     def __init__(self, name: str) -> None:
         self.name, self.laps, self.jitter, self.painted = name, [], [], []  # type: ignore[var-annotated]
-        # crossing -> the lap in the overlay's DOM (before its paint), and crossing -> the app's answer
-        self.in_dom: dict[str, list[float]] = {}
+        # sample_round's breakdown: "overlay" (crossing -> in its DOM), "acknowledged" (crossing -> the app's answer)
+        self.breakdown: dict[str, list[float]] = {}
         self.sent, self.skipped, self.seconds = 0, 0, 0.0
         self.crowd: dict[str, Any] = {"connected": [], "frames": 0, "stalls": 0, "max_gap_s": 0.0, "delays_ms": [],
                                       "errors": [], "starved_s": 0.0}
@@ -143,7 +143,7 @@ class Half:
             crowd[key] = max(crowd[key], stats[key])
 
     def row(self) -> str:
-        in_dom, acked = self.in_dom.get("overlay", []), self.in_dom.get("acknowledged", [])
+        in_dom, acked = self.breakdown.get("overlay", []), self.breakdown.get("acknowledged", [])
         return (f"{self.name:>14}: lap-to-screen p50 {_stack.percentile(self.laps, 50):.0f} ms p95 "
                 f"{_stack.percentile(self.laps, 95):.0f} ms over {len(self.laps)} laps (the app's answer: p50 "
                 f"{_stack.percentile(acked, 50):.0f} ms p95 {_stack.percentile(acked, 95):.0f} ms; in the page's DOM: "
@@ -196,7 +196,7 @@ class Bench:
     def _laps(self, half: Half, page: Any, offset: float, laps: int, seed: int) -> None:
         first_tick = ask(self.car, "mark")
         half.laps += sample_round({"overlay": page}, {"overlay": offset}, self.lapper, laps,
-                                  random.Random(seed), half.in_dom)["overlay"]
+                                  random.Random(seed), half.breakdown)["overlay"]
         half.jitter += ask(self.car, "jitter", first_tick)
 
 

@@ -153,10 +153,10 @@ class Lapper:
 
 
 def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lapper, samples: int,
-                 rng: random.Random, in_dom: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
+                 rng: random.Random, breakdown: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
     """Each lap's crossing -> painted (the first animation frame after the lap reached the page's DOM), per page;
-    `in_dom`, if given, also gets crossing -> in the DOM, so a bench can tell delivery from painting, and under
-    "acknowledged" crossing -> the app's answer (the lap stored; what follows is its way to the page)."""
+    `breakdown`, if given, also gets the parts of that way: per page crossing -> the lap in its DOM (the rest is
+    painting), and under "acknowledged" crossing -> the app's answer (the lap stored and the boards published)."""
     latencies: dict[str, list[float]] = {name: [] for name in pages}
     for index in range(samples):
         # A random pause lands each lap at a random point of the pages' poll cycle. A lap every ~2.6 s is still
@@ -169,16 +169,16 @@ def sample_round(pages: dict[str, Any], offsets: dict[str, float], lapper: Lappe
         for name, page in pages.items():
             page.evaluate("want => { window.__want = want; window.__check(); }", wants[name])
         posted_ms, sent, reply = lapper.next_lap()
-        if in_dom is not None:
-            in_dom.setdefault("acknowledged", []).append(lapper.acknowledged_after_ms)
+        if breakdown is not None:
+            breakdown.setdefault("acknowledged", []).append(lapper.acknowledged_after_ms)
         if reply.get("lap", {}).get("time_ms") != posted_ms:
             raise SystemExit(f"sample {index}: the crossing did not give a {posted_ms} ms lap: {reply}")
         for name, page in pages.items():
             page.wait_for_function("key => window.__seen[key] && window.__seen[key].frame", arg=key, timeout=15_000)
             seen = page.evaluate("key => window.__seen[key]", key)
             latencies[name].append(seen["frame"] - offsets[name] - sent)
-            if in_dom is not None:
-                in_dom.setdefault(name, []).append(seen["dom"] - offsets[name] - sent)
+            if breakdown is not None:
+                breakdown.setdefault(name, []).append(seen["dom"] - offsets[name] - sent)
     return latencies
 
 
