@@ -20,7 +20,12 @@ import multiprocessing
 import os
 import sys
 import time
+from pathlib import Path
 from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from bench._stack import percentile  # noqa: E402
 
 GOAL_EXTRA_MS = 0.1
 PERIOD_S = 0.002
@@ -76,10 +81,6 @@ def measure(kind: str | None, wakes: int) -> list[float]:
     os.close(read_end)
     os.close(write_end)
     return late
-
-
-def percentile(ordered: list[float], pct: float) -> float:
-    return ordered[min(len(ordered) - 1, int(len(ordered) * pct / 100))]
 
 
 def main(argv: list[str] | None = None) -> int:
