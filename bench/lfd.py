@@ -2,11 +2,12 @@
 
 The demonstrator records `--demo-laps` laps (steering noise) and `--drift-laps` recovery laps (its steering pushed
 `--drift` degrees aside now and then, labelled with its corrections) on every training track and direction (all
-closed tracks both ways round, minus the held-out ones), `--dagger-rounds` DAgger rounds follow (the model drives,
-the demonstrator labels), exactly as `drem train --tracks ... --drift ... --balance-steering --dagger-rounds ...`
-does. The final archive is then driven through onnxruntime for `--eval-laps` lap attempts on every held-out track
-and direction (never trained on); a lap with an off-track is not a completed lap. The noiseless demonstrator's laps
-on the same tracks, timed in the same run, give the lap-time ratio.
+closed tracks both ways round, minus the held-out ones, plus `--generated` random tracks with hairpins and coarse
+route files, drem_sim/generated_tracks.py), `--dagger-rounds` DAgger rounds follow (the model
+drives, the demonstrator labels), exactly as `drem train --tracks all,generated-1..10 --drift ... --balance-steering
+--dagger-rounds ...` does. The final archive is then driven through onnxruntime for `--eval-laps` lap attempts on
+every held-out track and direction (never trained on); a lap with an off-track is not a completed lap. The
+noiseless demonstrator's laps on the same tracks, timed in the same run, give the lap-time ratio.
 
 Goals (issues 17 and 33): on EVERY held-out track and direction >= 80 % of laps completed (no resets) and mean lap
 time <= 1.15x the demonstrator's; <= 10 demonstrator laps per track plus the DAgger rounds; the whole learning
@@ -42,13 +43,15 @@ GOAL_PCT, GOAL_RATIO, GOAL_SECONDS, MAX_DEMO_LAPS = 80.0, 1.15, 600.0, 10
 DEFAULT_HOLD_OUT = "2022_october_pro,hamption_pro,red_star_pro,Spain_track,AWS_track,thunder_hill_pro"
 REDUCED = {"train_tracks": "reinvent_base,drem_chicane", "hold_out": "reInvent2019_track", "demo_laps": 1,
            "drift_laps": 0, "dagger_rounds": 1, "epochs": 3, "round_epochs": 1, "eval_laps": 3,
-           "racer_demo_laps": 1, "racer_drift_laps": 0}
+           "racer_demo_laps": 1, "racer_drift_laps": 0, "generated": 0}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--train-tracks", default="all", help="track specs to train on (default: all closed tracks)")
     parser.add_argument("--hold-out", default=DEFAULT_HOLD_OUT, help="held-out track specs (evaluated, never trained)")
+    parser.add_argument("--generated", type=int, default=10,
+                        help="also train on this many generated tracks (drem_sim.generated_tracks), both ways round")
     parser.add_argument("--one-direction", action="store_true", help="only each track's own direction")
     parser.add_argument("--demo-laps", type=int, default=2)
     parser.add_argument("--noise", type=float, default=6.0, help="demonstrator steering noise, degrees")
@@ -81,12 +84,14 @@ def main() -> int:
     torch.set_num_threads(2)
     both = not args.one_direction
     kept, held = hold_out(expand([args.train_tracks], both), [args.hold_out], both)
+    if args.generated:
+        kept += expand([f"generated-1..{args.generated}"], both)
     work = args.keep or Path(tempfile.mkdtemp(prefix="drem-lfd-"))
     print(f"train on     {len(kept)} track directions: {', '.join(d.label for d in kept)}")
     print(f"held out     {', '.join(d.label for d in held)}")
     print(f"data         {args.demo_laps} demonstrator laps per track direction (noise {args.noise} deg), "
           f"{args.drift_laps if args.drift else 0} recovery lap(s) (push {args.drift} deg), "
-          f"{args.dagger_rounds} DAgger round(s) of {args.dagger_laps} lap(s); "
+          f"{args.dagger_rounds} DAgger round(s) of {args.dagger_laps} lap(s); {args.generated} generated track(s); "
           f"epochs {args.epochs}+{args.round_epochs}/round; steering balance "
           f"{'off' if args.no_balance else f'cap {args.balance_cap:g}'}; augment {args.augment}", flush=True)
     print(f"load         {_load()} (1, 5, 15 min) at the start", flush=True)

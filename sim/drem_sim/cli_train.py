@@ -35,8 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "commonest bin (default 8)")
     dagger = parser.add_argument_group("demonstrations and DAgger rounds on chosen tracks")
     dagger.add_argument("--tracks", action="append", metavar="SPEC",
-                        help="train on these tracks (NAME, NAME:reverse, all; repeat or comma-separate): the "
-                             "demonstrator records --demo-laps laps on each, then --dagger-rounds rounds run")
+                        help="train on these tracks (NAME, NAME:reverse, all, generated-1..10 for generated "
+                             "tracks with hairpins; repeat or comma-separate): the demonstrator records "
+                             "--demo-laps laps on each, then --dagger-rounds rounds run")
     dagger.add_argument("--both-directions", action="store_true", help="every track both ways round")
     dagger.add_argument("--hold-out", action="append", default=[], metavar="SPEC",
                         help="never train on these (a NAME holds out both directions); they are evaluated each round")

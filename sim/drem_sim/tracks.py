@@ -375,7 +375,7 @@ def _listed_sums(folder: Path) -> dict[str, str]:
 def track_from_spec(spec: TrackSpec, source: str = "") -> Track:
     centre = np.asarray(spec.centerline, dtype=np.float64)
     if spec.width is not None:
-        inner, outer = _offset_borders(centre, spec.width, spec.closed)
+        inner, outer = offset_borders(centre, spec.width, spec.closed)
     else:
         inner = np.asarray(spec.inner, dtype=np.float64)
         outer = np.asarray(spec.outer, dtype=np.float64)
@@ -386,7 +386,7 @@ def track_from_spec(spec: TrackSpec, source: str = "") -> Track:
                  spawn=spec.spawn, timing_line=spec.timing_line, zones=tuple(spec.zones), sim=spec.sim)
 
 
-def _offset_borders(centre: np.ndarray, width: float, closed: bool) -> tuple[np.ndarray, np.ndarray]:
+def offset_borders(centre: np.ndarray, width: float, closed: bool) -> tuple[np.ndarray, np.ndarray]:
     if closed:
         tangent = np.roll(centre, -1, axis=0) - np.roll(centre, 1, axis=0)
     else:
@@ -447,6 +447,12 @@ def default_track_name() -> str:
 def load_track(name_or_path: str | Path, *, reverse: bool = False) -> Track:
     """Load a track by file path, shipped YAML id, or `.npy` route name; `reverse` races it the other way."""
     path = Path(name_or_path)
+    if not path.is_file() and isinstance(name_or_path, str):
+        from drem_sim import generated_tracks  # drawn from its seed, never a file
+
+        if generated_tracks.is_generated(name_or_path):
+            track = generated_tracks.generated_track(name_or_path)
+            return track.reversed() if reverse else track
     if not path.is_file():
         path = available_tracks().get(str(name_or_path), Path())
         if not path.is_file():

@@ -1,16 +1,21 @@
 """Which tracks, in which direction, a model trains on and is evaluated on (leave-some-tracks-out).
 
 A *track spec* is a track name (raced its own way round) or `name:reverse` (the other way). `all` stands
-for every closed track this install knows (`drem sim tracks`, open routes left out). Holding a name out
-removes both of its directions; holding `name:reverse` out removes only that direction.
+for every closed track this install knows (`drem sim tracks`, open routes left out). `generated-A..B` stands for
+the generated tracks of seeds A to B (`drem_sim.generated_tracks`: random loops with hairpins and coarse route
+files, the same on every machine; `generated-7` alone is one of them). Holding a name out removes both of its
+directions; holding `name:reverse` out removes only that direction.
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 REVERSE_SUFFIX = ":reverse"
 ALL = "all"
+GENERATED_RANGE = re.compile(r"generated-(\d{1,6})\.\.(\d{1,6})")
+MOST_GENERATED = 200  # a range is a few dozen tracks; a typo like 1..10000 would record for hours
 
 
 class TrackSetError(ValueError):
@@ -66,6 +71,8 @@ def expand(specs: Iterable[str], both_directions: bool = False) -> list[TrackDir
         if spec == ALL:
             known = known if known is not None else closed_track_names()
             picked = [TrackDirection(name) for name in known]
+        elif (seeds := GENERATED_RANGE.fullmatch(spec)) is not None:
+            picked = [TrackDirection(f"generated-{seed}") for seed in _seed_range(spec, *seeds.groups())]
         else:
             picked = [parse_spec(spec)]
         for item in picked:
@@ -80,6 +87,15 @@ def expand(specs: Iterable[str], both_directions: bool = False) -> list[TrackDir
         except TrackError as error:
             raise TrackSetError(str(error)) from None
     return out
+
+
+def _seed_range(spec: str, first: str, last: str) -> range:
+    seeds = range(int(first), int(last) + 1)
+    if not seeds:
+        raise TrackSetError(f"{spec!r}: the range is empty (write generated-FIRST..LAST, FIRST <= LAST)")
+    if len(seeds) > MOST_GENERATED:
+        raise TrackSetError(f"{spec!r}: {len(seeds)} generated tracks; at most {MOST_GENERATED} in one range")
+    return seeds
 
 
 def hold_out(selection: list[TrackDirection], held: Iterable[str],
