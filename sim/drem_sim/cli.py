@@ -198,10 +198,11 @@ def _eval(args: argparse.Namespace) -> int:
     except ImportError as error:
         print(f"drem sim eval: model evaluation is not available in this build ({error})", file=sys.stderr)
         return 2
-    from drem_sim.learn.track_sets import split_specs
+    from drem_sim.learn.track_sets import GENERATED_RANGE, split_specs
 
     specs = split_specs(args.track)
-    if len(specs) == 1 and specs[0] != "all" and not specs[0].endswith(":reverse") and not args.both_directions:
+    one_track = specs[0] != "all" and not specs[0].endswith(":reverse") and not GENERATED_RANGE.fullmatch(specs[0])
+    if len(specs) == 1 and one_track and not args.both_directions:
         args.track = specs[0]
         return int(main_eval(args) or 0)
     from drem_sim.learn.suite import main_suite

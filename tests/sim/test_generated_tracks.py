@@ -107,3 +107,15 @@ def test_the_installed_cli_evaluates_a_model_on_a_generated_track(tmp_path: Path
     assert "generated-4" in done.stdout
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert metrics["track"] == "generated-4" and metrics["attempts"] == 1
+
+
+def test_the_installed_cli_evaluates_a_range_of_generated_tracks_one_line_each(tmp_path: Path) -> None:
+    archive = REPO / "sim" / "drem_sim" / "samples" / "drem-bc-sample.tar.gz"
+    done = subprocess.run([str(DREM), "sim", "eval", "--model", str(archive), "--track", "generated-4..5",
+                           "--laps", "1", "--out", str(tmp_path)], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode in (0, 1), done.stderr
+    assert [line.split()[0] for line in done.stdout.splitlines() if line.startswith("generated-")] == [
+        "generated-4", "generated-5"]
+    for name in ("generated-4", "generated-5"):
+        assert json.loads((tmp_path / f"metrics-{name}.json").read_text())["track"] == name
