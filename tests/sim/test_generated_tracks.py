@@ -84,6 +84,9 @@ def test_a_range_spec_names_each_generated_track_and_bad_ranges_are_refused() ->
                          "generated-3", "generated-3:reverse"]
     kept, held = hold_out(picked, ["generated-2"], both_directions=True)
     assert TrackDirection("generated-2") not in kept and TrackDirection("generated-2", True) in held
+    kept, held = hold_out(picked, ["generated-2..3"], both_directions=False)
+    assert [d.label for d in kept if d.name.startswith("generated-")] == ["generated-1", "generated-1:reverse"]
+    assert [d.label for d in held] == ["generated-2", "generated-3"]
     with pytest.raises(TrackSetError, match="the range is empty"):
         expand(["generated-5..2"])
     with pytest.raises(TrackSetError, match="at most 200"):

@@ -71,10 +71,8 @@ def expand(specs: Iterable[str], both_directions: bool = False) -> list[TrackDir
         if spec == ALL:
             known = known if known is not None else closed_track_names()
             picked = [TrackDirection(name) for name in known]
-        elif (seeds := GENERATED_RANGE.fullmatch(spec)) is not None:
-            picked = [TrackDirection(f"generated-{seed}") for seed in _seed_range(spec, *seeds.groups())]
         else:
-            picked = [parse_spec(spec)]
+            picked = _named(spec)
         for item in picked:
             for candidate in ([item, TrackDirection(item.name, not item.reverse)] if both_directions else [item]):
                 if candidate not in out:
@@ -87,6 +85,14 @@ def expand(specs: Iterable[str], both_directions: bool = False) -> list[TrackDir
         except TrackError as error:
             raise TrackSetError(str(error)) from None
     return out
+
+
+def _named(spec: str) -> list[TrackDirection]:
+    """A spec that names its tracks (not `all`): one track and direction, or each track of a generated range."""
+    seeds = GENERATED_RANGE.fullmatch(spec)
+    if seeds is None:
+        return [parse_spec(spec)]
+    return [TrackDirection(f"generated-{seed}") for seed in _seed_range(spec, *seeds.groups())]
 
 
 def _seed_range(spec: str, first: str, last: str) -> range:
@@ -102,7 +108,7 @@ def hold_out(selection: list[TrackDirection], held: Iterable[str],
              both_directions: bool = False) -> tuple[list[TrackDirection], list[TrackDirection]]:
     """(kept, held out). A plain name holds out both its directions, `name:reverse` only that one; the held-out
     list is what evaluation drives (also tracks the selection never had)."""
-    held_specs = [parse_spec(spec) for spec in split_specs(held)]
+    held_specs = [item for spec in split_specs(held) for item in _named(spec)]
     names = {spec.name for spec in held_specs if not spec.reverse}
     exact = set(held_specs)
     kept = [item for item in selection if item.name not in names and item not in exact]
